@@ -1,1 +1,11 @@
-//! placeholder
+//! GPU passes of PRM on wgpu: device selection and, one module per pass, the compute and render work.
+//!
+//! Every pass runs on lavapipe (Mesa's Vulkan on the CPU), so nothing here may rely on ray
+//! queries, binding arrays or storage bindings over 128 MiB.
+
+#![warn(missing_docs)]
+
+mod context;
+pub mod smoke;
+
+pub use context::{Backend, GpuContext, GpuError};

@@ -1,1 +1,44 @@
-//! placeholder
+//! Scene input for PRM: OBJ and glTF loaded into one flat triangle scene, plus its lightmap atlas.
+//!
+//! The flow is [`load`] (by file extension) → [`Scene`] → [`Atlas::build`]. A scene is a flat
+//! list of triangles with per-corner attributes (no index buffer), a material table, textures,
+//! lights and cameras, all in world space (right-handed, +Y up, metres by convention).
+//!
+//! Emissive materials (`Ke` in MTL, `emissiveFactor` in glTF) are treated as ordinary diffuse
+//! surfaces in this version: light comes only from punctual lights.
+
+#![warn(missing_docs)]
+
+mod atlas;
+mod error;
+mod gltf_load;
+mod obj;
+mod scene;
+mod texture;
+
+pub use atlas::{Atlas, AtlasParams, AtlasStats, ExitPoint, Sizing, EMPTY_TEXEL};
+pub use error::SceneError;
+pub use scene::{Aabb, Camera, Light, LoadReport, Material, Scene, Triangle};
+pub use texture::Texture;
+
+use std::path::Path;
+
+/// Loads a scene file, choosing the loader by extension (`.obj`, `.gltf`, `.glb`).
+///
+/// Recoverable problems (a missing MTL or texture, degenerate triangles) do not fail the load:
+/// they are listed in [`Scene::report`].
+pub fn load(path: &Path) -> Result<Scene, SceneError> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(|e| e.to_ascii_lowercase())
+        .unwrap_or_default();
+    if !path.exists() {
+        return Err(SceneError::NotFound(path.to_path_buf()));
+    }
+    match ext.as_str() {
+        "obj" => obj::load(path),
+        "gltf" | "glb" => gltf_load::load(path),
+        _ => Err(SceneError::UnsupportedFormat(path.to_path_buf())),
+    }
+}

@@ -1,1 +1,1 @@
-//! placeholder
+//! CPU light transport (placeholder until the transport issue lands).

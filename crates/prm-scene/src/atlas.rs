@@ -1,0 +1,788 @@
+//! Lightmap atlas: charts of connected, similarly oriented triangles, packed into one square
+//! texture with gutters; every covered texel centre becomes an *exit point*.
+//!
+//! Steps: (1) charts by flood fill over shared edges while a triangle's normal stays within
+//! [`AtlasParams::chart_angle_deg`] of the chart's seed; (2) each chart projected onto the plane
+//! of its seed normal; (3) charts shelf-packed, each in a cell with `gutter` empty texels on every
+//! side, so two charts are at least `2 × gutter` texels apart; (4) conservative rasterisation:
+//! a texel belongs to the triangle that contains its centre or, failing that, lies nearest to it,
+//! among the triangles that overlap it, and its exit point is the nearest point of that triangle;
+//! triangles left without a texel take one from a neighbour that has several; (5) gutter texels
+//! next to a chart copy their nearest covered texel (dilation), so bilinear filtering at chart
+//! borders reads no black.
+//!
+//! When the scene brings lightmap UVs (glTF `TEXCOORD_1`) steps 1–3 are skipped and the file's
+//! layout is rasterised as it is; its gutters are then the file's business.
+
+use glam::{Vec2, Vec3};
+use std::collections::HashMap;
+
+use crate::{Scene, SceneError};
+
+/// Marks a texel with no exit point in [`Atlas::texel_exit`].
+pub const EMPTY_TEXEL: u32 = u32::MAX;
+
+/// How big the atlas is.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Sizing {
+    /// Derived from the scene: enough texels that every triangle can own several.
+    Auto,
+    /// Square atlas of this many texels on a side; the texel size follows.
+    Resolution(u32),
+    /// Texel edge length in scene units; the resolution follows.
+    TexelSize(f32),
+}
+
+/// Atlas parameters.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AtlasParams {
+    /// How big the atlas is.
+    pub sizing: Sizing,
+    /// Empty texels on every side of a chart (two charts are at least twice this apart).
+    pub gutter: u32,
+    /// Largest angle between a triangle's normal and its chart's seed normal, degrees.
+    pub chart_angle_deg: f32,
+}
+
+impl AtlasParams {
+    /// Automatic size, 1-texel gutters per side (2 between charts), 44° charts.
+    pub const DEFAULT: AtlasParams = AtlasParams {
+        sizing: Sizing::Auto,
+        gutter: 1,
+        chart_angle_deg: 44.0,
+    };
+
+    /// The default parameters with the given sizing.
+    pub fn with_sizing(sizing: Sizing) -> Self {
+        AtlasParams {
+            sizing,
+            ..Self::DEFAULT
+        }
+    }
+}
+
+impl Default for AtlasParams {
+    fn default() -> Self {
+        Self::DEFAULT
+    }
+}
+
+/// The surface point behind one covered texel.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ExitPoint {
+    /// Texel index, `y * resolution + x`.
+    pub texel: u32,
+    /// World position (on the owning triangle).
+    pub position: Vec3,
+    /// Unit shading normal.
+    pub normal: Vec3,
+    /// Diffuse albedo there (texture included).
+    pub albedo: Vec3,
+    /// Owning triangle.
+    pub triangle: u32,
+    /// Fraction of the texel's square covered by its chart's triangles, in (0, 1].
+    pub coverage: f32,
+}
+
+/// Statistics for `prm-bake atlas`.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct AtlasStats {
+    /// Texels on a side.
+    pub resolution: u32,
+    /// Texel edge length in scene units (mean, for file-provided UVs).
+    pub texel_size: f32,
+    /// Number of charts.
+    pub charts: u32,
+    /// Covered texels / all texels.
+    pub utilization: f32,
+    /// Covered texels (exit points).
+    pub covered_texels: u32,
+    /// Gutter texels filled by dilation.
+    pub dilated_texels: u32,
+    /// Triangles whose lightmap footprint touches no covered texel (they would sample nothing).
+    pub uncovered_triangles: u32,
+    /// Triangles that touch covered texels but own none of their exit points (smaller than a
+    /// texel, crowded by neighbours): they are lit by the neighbours' exit points nearby.
+    pub triangles_without_exit: u32,
+    /// Fewest texels owned by a triangle.
+    pub texels_per_triangle_min: u32,
+    /// Median texels owned by a triangle.
+    pub texels_per_triangle_median: u32,
+    /// Texels whose centre lies inside two triangles of one chart (a folded projection).
+    pub overlapping_texels: u32,
+    /// Texels touched by two different charts (0 for generated atlases).
+    pub shared_texels: u32,
+}
+
+/// A lightmap atlas and its exit points.
+#[derive(Clone, Debug)]
+pub struct Atlas {
+    /// Texels on a side (the atlas is square).
+    pub resolution: u32,
+    /// Lightmap UVs per triangle corner, in [0, 1] (texel `(x, y)` spans `[x, x+1]/resolution`).
+    pub uvs: Vec<[Vec2; 3]>,
+    /// Chart of every triangle.
+    pub chart_of_triangle: Vec<u32>,
+    /// Exit points, in texel order.
+    pub exits: Vec<ExitPoint>,
+    /// For every texel, its index in `exits` or [`EMPTY_TEXEL`].
+    pub texel_exit: Vec<u32>,
+    /// Gutter texels and the covered texel each copies: `(gutter texel, source texel)`.
+    pub dilation: Vec<(u32, u32)>,
+    /// Chart of every texel touched by a chart (covered or dilated), else [`EMPTY_TEXEL`].
+    pub texel_chart: Vec<u32>,
+    /// Statistics.
+    pub stats: AtlasStats,
+}
+
+/// A chart during construction: its triangles and their projected corners (scene units).
+struct Chart {
+    triangles: Vec<u32>,
+    corners: Vec<[Vec2; 3]>,
+    min: Vec2,
+    max: Vec2,
+}
+
+impl Atlas {
+    /// Builds the atlas of `scene`.
+    pub fn build(scene: &Scene, params: &AtlasParams) -> Result<Atlas, SceneError> {
+        if params.gutter > 64 {
+            return Err(SceneError::Atlas(format!("gutter {} is over 64 texels", params.gutter)));
+        }
+        if let Sizing::Resolution(r) = params.sizing {
+            if !(4..=16384).contains(&r) {
+                return Err(SceneError::Atlas(format!("resolution {r} is outside 4..=16384")));
+            }
+        }
+        if let Sizing::TexelSize(s) = params.sizing {
+            if !(s.is_finite() && s > 0.0) {
+                return Err(SceneError::Atlas(format!("texel size {s} must be a positive number")));
+            }
+        }
+        match &scene.lightmap_uvs {
+            Some(uvs) => Self::from_file_uvs(scene, uvs, params),
+            None => Self::generate(scene, params),
+        }
+    }
+
+    fn generate(scene: &Scene, params: &AtlasParams) -> Result<Atlas, SceneError> {
+        let charts = make_charts(scene, params.chart_angle_deg.to_radians().cos());
+        let g = params.gutter as f32;
+        let (resolution, scale, cells) = match params.sizing {
+            Sizing::TexelSize(s) => {
+                let scale = 1.0 / s;
+                let r = fit_resolution(&charts, scale, g)?;
+                let cells = pack(&charts, scale, g, r).expect("fit_resolution found a fitting size");
+                (r, scale, cells)
+            }
+            Sizing::Resolution(r) => {
+                let (scale, cells) = fit_scale(&charts, g, r)?;
+                (r, scale, cells)
+            }
+            Sizing::Auto => {
+                let r = auto_resolution(scene.triangles.len());
+                let (scale, cells) = fit_scale(&charts, g, r)?;
+                (r, scale, cells)
+            }
+        };
+        let mut uvs = vec![[Vec2::ZERO; 3]; scene.triangles.len()];
+        let mut chart_of_triangle = vec![0u32; scene.triangles.len()];
+        for (ci, (chart, origin)) in charts.iter().zip(&cells).enumerate() {
+            let size = (chart.max - chart.min) * scale;
+            // Centre the chart in its whole-texel footprint, `gutter` texels in from the cell edge.
+            let pad = (size.ceil().max(Vec2::ONE) - size) * 0.5;
+            let offset = *origin + Vec2::splat(g) + pad;
+            for (&t, corners) in chart.triangles.iter().zip(&chart.corners) {
+                uvs[t as usize] = corners.map(|c| ((c - chart.min) * scale + offset) / resolution as f32);
+                chart_of_triangle[t as usize] = ci as u32;
+            }
+        }
+        Ok(rasterize(
+            scene,
+            resolution,
+            uvs,
+            chart_of_triangle,
+            charts.len() as u32,
+            1.0 / scale,
+            params.gutter,
+        ))
+    }
+
+    fn from_file_uvs(scene: &Scene, file_uvs: &[[Vec2; 3]], params: &AtlasParams) -> Result<Atlas, SceneError> {
+        if let Some(t) = file_uvs.iter().position(|c| c.iter().any(|u| !u.is_finite())) {
+            return Err(SceneError::Atlas(format!(
+                "lightmap UVs of triangle {t} are not finite"
+            )));
+        }
+        let uv_area: f64 = file_uvs
+            .iter()
+            .map(|c| 0.5 * ((c[1] - c[0]).perp_dot(c[2] - c[0])).abs() as f64)
+            .sum::<f64>()
+            .max(1e-12);
+        let resolution = match params.sizing {
+            Sizing::Resolution(r) => r,
+            Sizing::TexelSize(s) => ((scene.area() / uv_area).sqrt() / s as f64).ceil().clamp(4.0, 16384.0) as u32,
+            Sizing::Auto => auto_resolution(scene.triangles.len()),
+        };
+        let texel_size = ((scene.area() / uv_area).sqrt() / resolution as f64) as f32;
+        // Charts: triangles joined by edges whose two endpoints share position and lightmap UV.
+        let chart_of_triangle = connected_components(scene, |t, c| (scene.triangles[t].positions[c], file_uvs[t][c]));
+        let charts = chart_of_triangle.iter().max().map_or(0, |m| m + 1);
+        Ok(rasterize(
+            scene,
+            resolution,
+            file_uvs.to_vec(),
+            chart_of_triangle,
+            charts,
+            texel_size,
+            params.gutter,
+        ))
+    }
+
+    /// World-space texel edge length.
+    pub fn texel_size(&self) -> f32 {
+        self.stats.texel_size
+    }
+}
+
+/// Default resolution: 256 for small scenes, growing so that there are about 12 texels per
+/// triangle, rounded up to a multiple of 64 and capped at 4096.
+fn auto_resolution(triangles: usize) -> u32 {
+    let r = ((12.0 * triangles as f64).sqrt() / 64.0).ceil() as u32 * 64;
+    r.clamp(256, 4096)
+}
+
+/// Position key for adjacency: coordinates quantised to a grid fine enough to tell vertices apart.
+fn quantise(p: Vec3, cell: f32) -> [i64; 3] {
+    (p / cell).round().as_i64vec3().to_array()
+}
+
+/// Union of triangles over shared edges, where an edge's endpoints are keyed by `key(tri, corner)`.
+fn connected_components(scene: &Scene, key: impl Fn(usize, usize) -> (Vec3, Vec2)) -> Vec<u32> {
+    let cell = (scene.bounds().diagonal() * 1e-6).max(f32::MIN_POSITIVE);
+    let n = scene.triangles.len();
+    let mut parent: Vec<u32> = (0..n as u32).collect();
+    fn find(p: &mut [u32], mut x: u32) -> u32 {
+        while p[x as usize] != x {
+            p[x as usize] = p[p[x as usize] as usize];
+            x = p[x as usize];
+        }
+        x
+    }
+    let mut edges: HashMap<([i64; 5], [i64; 5]), u32> = HashMap::new();
+    for t in 0..n {
+        for c in 0..3 {
+            let k = |c: usize| {
+                let (p, uv) = key(t, c);
+                let q = quantise(p, cell);
+                let u = (uv * 1e6).round().as_i64vec2();
+                [q[0], q[1], q[2], u.x, u.y]
+            };
+            let (a, b) = (k(c), k((c + 1) % 3));
+            let e = if a < b { (a, b) } else { (b, a) };
+            match edges.get(&e) {
+                Some(&other) => {
+                    let (ra, rb) = (find(&mut parent, t as u32), find(&mut parent, other));
+                    parent[ra.max(rb) as usize] = ra.min(rb);
+                }
+                None => {
+                    edges.insert(e, t as u32);
+                }
+            }
+        }
+    }
+    // Renumber roots densely in order of first appearance.
+    let mut ids = HashMap::new();
+    (0..n as u32)
+        .map(|t| {
+            let r = find(&mut parent, t);
+            let next = ids.len() as u32;
+            *ids.entry(r).or_insert(next)
+        })
+        .collect()
+}
+
+/// Grows charts over shared edges from the largest unassigned triangle.
+fn make_charts(scene: &Scene, cos_max: f32) -> Vec<Chart> {
+    let tris = &scene.triangles;
+    let cell = (scene.bounds().diagonal() * 1e-6).max(f32::MIN_POSITIVE);
+    let mut edge_tris: HashMap<([i64; 3], [i64; 3]), Vec<u32>> = HashMap::new();
+    for (t, tri) in tris.iter().enumerate() {
+        for c in 0..3 {
+            let a = quantise(tri.positions[c], cell);
+            let b = quantise(tri.positions[(c + 1) % 3], cell);
+            edge_tris
+                .entry(if a < b { (a, b) } else { (b, a) })
+                .or_default()
+                .push(t as u32);
+        }
+    }
+    let normals: Vec<Vec3> = tris.iter().map(|t| t.normal()).collect();
+    let mut order: Vec<u32> = (0..tris.len() as u32).collect();
+    order.sort_by(|&a, &b| {
+        tris[b as usize]
+            .area()
+            .total_cmp(&tris[a as usize].area())
+            .then(a.cmp(&b))
+    });
+    let mut assigned = vec![false; tris.len()];
+    let mut charts = Vec::new();
+    for &seed in &order {
+        if assigned[seed as usize] {
+            continue;
+        }
+        let n = normals[seed as usize];
+        let mut members = vec![seed];
+        assigned[seed as usize] = true;
+        let mut i = 0;
+        while i < members.len() {
+            let t = members[i] as usize;
+            i += 1;
+            for c in 0..3 {
+                let a = quantise(tris[t].positions[c], cell);
+                let b = quantise(tris[t].positions[(c + 1) % 3], cell);
+                for &o in &edge_tris[&if a < b { (a, b) } else { (b, a) }] {
+                    if !assigned[o as usize] && normals[o as usize].dot(n) >= cos_max {
+                        assigned[o as usize] = true;
+                        members.push(o);
+                    }
+                }
+            }
+        }
+        // Orthonormal basis of the seed's plane, oriented so projected triangles keep their winding.
+        let (u, v) = n.any_orthonormal_pair();
+        let corners: Vec<[Vec2; 3]> = members
+            .iter()
+            .map(|&t| tris[t as usize].positions.map(|p| Vec2::new(p.dot(u), p.dot(v))))
+            .collect();
+        let (mut min, mut max) = (Vec2::INFINITY, Vec2::NEG_INFINITY);
+        for c in corners.iter().flatten() {
+            min = min.min(*c);
+            max = max.max(*c);
+        }
+        charts.push(Chart {
+            triangles: members,
+            corners,
+            min,
+            max,
+        });
+    }
+    charts
+}
+
+/// Cell size of a chart in texels at `scale` texels per scene unit: whole footprint plus gutters.
+fn cell_size(chart: &Chart, scale: f32, g: f32) -> Vec2 {
+    ((chart.max - chart.min) * scale).ceil().max(Vec2::ONE) + Vec2::splat(2.0 * g)
+}
+
+/// Shelf packing into a `r × r` square; the cell origin of every chart, or `None` when it overflows.
+fn pack(charts: &[Chart], scale: f32, g: f32, r: u32) -> Option<Vec<Vec2>> {
+    let sizes: Vec<Vec2> = charts.iter().map(|c| cell_size(c, scale, g)).collect();
+    let mut order: Vec<usize> = (0..charts.len()).collect();
+    order.sort_by(|&a, &b| {
+        sizes[b]
+            .y
+            .total_cmp(&sizes[a].y)
+            .then(sizes[b].x.total_cmp(&sizes[a].x))
+            .then(a.cmp(&b))
+    });
+    let r = r as f32;
+    let mut origins = vec![Vec2::ZERO; charts.len()];
+    let (mut x, mut y, mut shelf) = (0.0f32, 0.0f32, 0.0f32);
+    for i in order {
+        let s = sizes[i];
+        if s.x > r {
+            return None;
+        }
+        if x + s.x > r {
+            y += shelf;
+            x = 0.0;
+            shelf = 0.0;
+        }
+        if y + s.y > r {
+            return None;
+        }
+        origins[i] = Vec2::new(x, y);
+        x += s.x;
+        shelf = shelf.max(s.y);
+    }
+    Some(origins)
+}
+
+/// The largest scale (texels per scene unit) whose packing fits `r × r`.
+fn fit_scale(charts: &[Chart], g: f32, r: u32) -> Result<(f32, Vec<Vec2>), SceneError> {
+    let Some(mut best) = pack(charts, 0.0, g, r) else {
+        let min_side = ((charts.len() as f64).sqrt() * (1.0 + 2.0 * g as f64)).ceil();
+        return Err(SceneError::Atlas(format!(
+            "resolution {r} cannot hold {} charts even at one texel each (with gutters); use a resolution of at least about {min_side}",
+            charts.len()
+        )));
+    };
+    let area: f64 = charts
+        .iter()
+        .map(|c| ((c.max - c.min).x * (c.max - c.min).y) as f64)
+        .sum();
+    let longest = charts
+        .iter()
+        .map(|c| (c.max - c.min).max_element())
+        .fold(0.0f32, f32::max);
+    let (mut lo, mut hi) = (
+        0.0f32,
+        (r as f32 / longest).min((r as f64 / area.max(1e-30).sqrt()) as f32 * 1.01),
+    );
+    if !hi.is_finite() || hi <= 0.0 {
+        hi = r as f32;
+    }
+    for _ in 0..40 {
+        let mid = 0.5 * (lo + hi);
+        match pack(charts, mid, g, r) {
+            Some(cells) => {
+                lo = mid;
+                best = cells;
+            }
+            None => hi = mid,
+        }
+    }
+    if lo <= 0.0 {
+        return Err(SceneError::Atlas(format!(
+            "resolution {r} is too small to give the charts any size"
+        )));
+    }
+    Ok((lo, best))
+}
+
+/// The smallest multiple-of-8 resolution whose packing at `scale` fits.
+fn fit_resolution(charts: &[Chart], scale: f32, g: f32) -> Result<u32, SceneError> {
+    let area: f64 = charts
+        .iter()
+        .map(|c| (cell_size(c, scale, g).x * cell_size(c, scale, g).y) as f64)
+        .sum();
+    let mut r = ((area.sqrt() / 8.0).ceil() as u32 * 8).max(8);
+    loop {
+        if r > 16384 {
+            return Err(SceneError::Atlas(format!(
+                "texel size {} needs an atlas larger than 16384² texels; choose a larger texel size",
+                1.0 / scale
+            )));
+        }
+        if pack(charts, scale, g, r).is_some() {
+            return Ok(r);
+        }
+        r = ((r as f32 * 1.03) as u32 / 8 + 1) * 8;
+    }
+}
+
+/// Signed distance-ish helper: barycentric coordinates of `p` in triangle `t` (2D).
+fn barycentric(t: &[Vec2; 3], p: Vec2) -> Option<(f32, f32, f32)> {
+    let d = (t[1] - t[0]).perp_dot(t[2] - t[0]);
+    if d == 0.0 || !d.is_finite() {
+        return None;
+    }
+    let b1 = (p - t[0]).perp_dot(t[2] - t[0]) / d;
+    let b2 = (t[1] - t[0]).perp_dot(p - t[0]) / d;
+    Some((1.0 - b1 - b2, b1, b2))
+}
+
+/// Nearest point of 2D triangle `t` to `p`, as barycentric `(b1, b2)`, and its distance.
+fn nearest_on_triangle(t: &[Vec2; 3], p: Vec2) -> (f32, f32, f32) {
+    if let Some((b0, b1, b2)) = barycentric(t, p) {
+        if b0 >= 0.0 && b1 >= 0.0 && b2 >= 0.0 {
+            return (b1, b2, 0.0);
+        }
+    }
+    let mut best = (0.0, 0.0, f32::INFINITY);
+    for i in 0..3 {
+        let (a, b) = (t[i], t[(i + 1) % 3]);
+        let ab = b - a;
+        let s = if ab.length_squared() > 0.0 {
+            ((p - a).dot(ab) / ab.length_squared()).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        let d = (a + ab * s).distance(p);
+        if d < best.2 {
+            // Barycentric weights of corners i and i+1 are (1-s, s).
+            let mut w = [0.0f32; 3];
+            w[i] = 1.0 - s;
+            w[(i + 1) % 3] = s;
+            best = (w[1], w[2], d);
+        }
+    }
+    best
+}
+
+/// Whether `p` lies inside 2D triangle `t`, away from its edges.
+fn strictly_inside(t: &[Vec2; 3], p: Vec2) -> bool {
+    barycentric(t, p).is_some_and(|(a, b, c)| a.min(b).min(c) > 1e-5)
+}
+
+/// Whether 2D triangle `t` overlaps the axis-aligned unit square at `(x, y)` (separating axes).
+fn overlaps_texel(t: &[Vec2; 3], x: f32, y: f32) -> bool {
+    let (min, max) = (t[0].min(t[1]).min(t[2]), t[0].max(t[1]).max(t[2]));
+    if min.x >= x + 1.0 || max.x <= x || min.y >= y + 1.0 || max.y <= y {
+        return false;
+    }
+    let square = [
+        Vec2::new(x, y),
+        Vec2::new(x + 1.0, y),
+        Vec2::new(x, y + 1.0),
+        Vec2::new(x + 1.0, y + 1.0),
+    ];
+    for i in 0..3 {
+        let e = t[(i + 1) % 3] - t[i];
+        let axis = Vec2::new(-e.y, e.x);
+        let tri_proj = t.map(|p| p.dot(axis));
+        let (tmin, tmax) = (
+            tri_proj.iter().copied().fold(f32::INFINITY, f32::min),
+            tri_proj.iter().copied().fold(f32::NEG_INFINITY, f32::max),
+        );
+        let sq = square.map(|p| p.dot(axis));
+        let (smin, smax) = (
+            sq.iter().copied().fold(f32::INFINITY, f32::min),
+            sq.iter().copied().fold(f32::NEG_INFINITY, f32::max),
+        );
+        if smin >= tmax || smax <= tmin {
+            return false;
+        }
+    }
+    true
+}
+
+/// Rasterises the triangles at their lightmap UVs into exit points, then dilates into the gutters.
+fn rasterize(
+    scene: &Scene,
+    resolution: u32,
+    uvs: Vec<[Vec2; 3]>,
+    chart_of_triangle: Vec<u32>,
+    charts: u32,
+    texel_size: f32,
+    gutter: u32,
+) -> Atlas {
+    let r = resolution as usize;
+    let rf = resolution as f32;
+    // Per texel: owning triangle and its distance to the texel centre, coverage, chart.
+    let mut owner = vec![(EMPTY_TEXEL, f32::INFINITY, 0.0f32, 0.0f32); r * r];
+    let mut coverage = vec![0.0f32; r * r];
+    let mut texel_chart = vec![EMPTY_TEXEL; r * r];
+    let (mut shared, mut overlapping) = (0u32, 0u32);
+    // Whether the texel centre lies strictly inside its owner (not on a shared edge): two such
+    // owners for one texel mean the chart folds over itself.
+    let mut owner_strict = vec![false; r * r];
+    let mut touches = vec![false; uvs.len()];
+    const SUB: usize = 4;
+    for (t, uv) in uvs.iter().enumerate() {
+        let tex = uv.map(|u| u * rf);
+        let (min, max) = (tex[0].min(tex[1]).min(tex[2]), tex[0].max(tex[1]).max(tex[2]));
+        let x0 = (min.x.floor().max(0.0)) as usize;
+        let y0 = (min.y.floor().max(0.0)) as usize;
+        let x1 = (max.x.ceil().min(rf) as usize).max(x0 + 1).min(r);
+        let y1 = (max.y.ceil().min(rf) as usize).max(y0 + 1).min(r);
+        for y in y0..y1 {
+            for x in x0..x1 {
+                if !overlaps_texel(&tex, x as f32, y as f32) {
+                    continue;
+                }
+                let i = y * r + x;
+                touches[t] = true;
+                let chart = chart_of_triangle[t];
+                if texel_chart[i] != EMPTY_TEXEL && texel_chart[i] != chart {
+                    shared += 1;
+                }
+                texel_chart[i] = chart;
+                let centre = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
+                let (b1, b2, d) = nearest_on_triangle(&tex, centre);
+                let strict = d == 0.0 && strictly_inside(&tex, centre);
+                if strict && owner_strict[i] {
+                    overlapping += 1;
+                }
+                if d < owner[i].1 || (strict && !owner_strict[i]) {
+                    owner[i] = (t as u32, d, b1, b2);
+                    owner_strict[i] = strict;
+                }
+                let mut inside = 0;
+                for sy in 0..SUB {
+                    for sx in 0..SUB {
+                        let p = Vec2::new(
+                            x as f32 + (sx as f32 + 0.5) / SUB as f32,
+                            y as f32 + (sy as f32 + 0.5) / SUB as f32,
+                        );
+                        if let Some((c0, c1, c2)) = barycentric(&tex, p) {
+                            if c0 >= 0.0 && c1 >= 0.0 && c2 >= 0.0 {
+                                inside += 1;
+                            }
+                        }
+                    }
+                }
+                coverage[i] += inside as f32 / (SUB * SUB) as f32;
+            }
+        }
+    }
+
+    // Triangles that lost every texel take one they overlap from an owner that has several.
+    let mut owned = vec![0u32; uvs.len()];
+    for o in &owner {
+        if o.0 != EMPTY_TEXEL {
+            owned[o.0 as usize] += 1;
+        }
+    }
+    let mut without_exit = 0u32;
+    for t in 0..uvs.len() {
+        if owned[t] > 0 {
+            continue;
+        }
+        let tex = uvs[t].map(|u| u * rf);
+        let (min, max) = (tex[0].min(tex[1]).min(tex[2]), tex[0].max(tex[1]).max(tex[2]));
+        let mut best: Option<(usize, u32)> = None;
+        for y in (min.y.floor().max(0.0) as usize)..(max.y.ceil().min(rf) as usize).max(1) {
+            for x in (min.x.floor().max(0.0) as usize)..(max.x.ceil().min(rf) as usize).max(1) {
+                let i = y * r + x;
+                if i >= owner.len() || !overlaps_texel(&tex, x as f32, y as f32) {
+                    continue;
+                }
+                let holder = owner[i].0;
+                if holder != EMPTY_TEXEL
+                    && owned[holder as usize] > 1
+                    && best.is_none_or(|(_, n)| owned[holder as usize] > n)
+                {
+                    best = Some((i, owned[holder as usize]));
+                }
+            }
+        }
+        match best {
+            Some((i, _)) => {
+                owned[owner[i].0 as usize] -= 1;
+                let (x, y) = ((i % r) as f32, (i / r) as f32);
+                let (b1, b2, d) = nearest_on_triangle(&tex, Vec2::new(x + 0.5, y + 0.5));
+                owner[i] = (t as u32, d, b1, b2);
+                owned[t] = 1;
+            }
+            None => without_exit += 1,
+        }
+    }
+
+    let mut exits = Vec::new();
+    let mut texel_exit = vec![EMPTY_TEXEL; r * r];
+    for (i, &(t, _, b1, b2)) in owner.iter().enumerate() {
+        if t == EMPTY_TEXEL {
+            continue;
+        }
+        let tri = &scene.triangles[t as usize];
+        texel_exit[i] = exits.len() as u32;
+        exits.push(ExitPoint {
+            texel: i as u32,
+            position: tri.point(b1, b2),
+            normal: tri.shading_normal(b1, b2),
+            albedo: scene.albedo(t as usize, b1, b2),
+            triangle: t,
+            coverage: coverage[i].clamp(1.0 / (SUB * SUB) as f32, 1.0),
+        });
+    }
+
+    // Dilation: `max(gutter, 1)` rings; each empty texel copies a filled 8-neighbour's source.
+    let mut source: Vec<u32> = (0..(r * r) as u32)
+        .map(|i| {
+            if texel_exit[i as usize] != EMPTY_TEXEL {
+                i
+            } else {
+                EMPTY_TEXEL
+            }
+        })
+        .collect();
+    let mut dilation = Vec::new();
+    for _ in 0..gutter.max(1) {
+        let mut ring = Vec::new();
+        for y in 0..r {
+            for x in 0..r {
+                let i = y * r + x;
+                if source[i] != EMPTY_TEXEL {
+                    continue;
+                }
+                'n: for (dx, dy) in [
+                    (-1i64, 0i64),
+                    (1, 0),
+                    (0, -1),
+                    (0, 1),
+                    (-1, -1),
+                    (1, -1),
+                    (-1, 1),
+                    (1, 1),
+                ] {
+                    let (nx, ny) = (x as i64 + dx, y as i64 + dy);
+                    if nx < 0 || ny < 0 || nx >= r as i64 || ny >= r as i64 {
+                        continue;
+                    }
+                    let n = ny as usize * r + nx as usize;
+                    if source[n] != EMPTY_TEXEL {
+                        ring.push((i, source[n], texel_chart[n]));
+                        break 'n;
+                    }
+                }
+            }
+        }
+        for (i, s, c) in ring {
+            source[i] = s;
+            texel_chart[i] = c;
+            dilation.push((i as u32, s));
+        }
+    }
+
+    let mut counts: Vec<u32> = owned.clone();
+    counts.sort_unstable();
+    let stats = AtlasStats {
+        resolution,
+        texel_size,
+        charts,
+        utilization: exits.len() as f32 / (r * r) as f32,
+        covered_texels: exits.len() as u32,
+        dilated_texels: dilation.len() as u32,
+        uncovered_triangles: touches.iter().filter(|&&t| !t).count() as u32,
+        triangles_without_exit: without_exit,
+        texels_per_triangle_min: counts.first().copied().unwrap_or(0),
+        texels_per_triangle_median: counts.get(counts.len() / 2).copied().unwrap_or(0),
+        overlapping_texels: overlapping,
+        shared_texels: shared,
+    };
+    Atlas {
+        resolution,
+        uvs,
+        chart_of_triangle,
+        exits,
+        texel_exit,
+        dilation,
+        texel_chart,
+        stats,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn texel_overlap_is_conservative_and_exact_at_edges() {
+        let t = [Vec2::new(0.1, 0.1), Vec2::new(0.3, 0.1), Vec2::new(0.1, 0.3)];
+        assert!(overlaps_texel(&t, 0.0, 0.0));
+        assert!(!overlaps_texel(&t, 1.0, 0.0));
+        // A thin diagonal sliver crosses the texel's corner region but not the texel at (1, 1).
+        let s = [Vec2::new(0.0, 0.0), Vec2::new(2.0, 0.0), Vec2::new(0.0, 1.9)];
+        assert!(!overlaps_texel(&s, 1.0, 1.0));
+        assert!(overlaps_texel(&s, 1.0, 0.0));
+    }
+
+    #[test]
+    fn nearest_point_inside_and_outside() {
+        let t = [Vec2::ZERO, Vec2::new(1.0, 0.0), Vec2::new(0.0, 1.0)];
+        let (b1, b2, d) = nearest_on_triangle(&t, Vec2::new(0.25, 0.25));
+        assert_eq!(d, 0.0);
+        assert!((b1 - 0.25).abs() < 1e-6 && (b2 - 0.25).abs() < 1e-6);
+        let (b1, b2, d) = nearest_on_triangle(&t, Vec2::new(0.5, -1.0));
+        assert!((d - 1.0).abs() < 1e-6 && (b1 - 0.5).abs() < 1e-6 && b2 == 0.0);
+    }
+
+    #[test]
+    fn auto_resolution_grows_with_triangles() {
+        assert_eq!(auto_resolution(36), 256);
+        assert_eq!(auto_resolution(100_000), 1152);
+        assert_eq!(auto_resolution(10_000_000), 4096);
+    }
+}

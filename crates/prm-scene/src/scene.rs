@@ -1,0 +1,250 @@
+//! The flat scene: triangles with per-corner attributes, materials, lights, cameras.
+
+use glam::{Vec2, Vec3};
+use std::path::PathBuf;
+
+use crate::texture::Texture;
+
+/// One triangle in world space with its per-corner attributes.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Triangle {
+    /// Corner positions.
+    pub positions: [Vec3; 3],
+    /// Corner shading normals (unit length, on the side of the geometric normal).
+    pub normals: [Vec3; 3],
+    /// Corner material texture coordinates (zero when the file has none).
+    pub uvs: [Vec2; 3],
+    /// Index into [`Scene::materials`].
+    pub material: u32,
+}
+
+impl Triangle {
+    /// Unnormalised geometric normal, `(p1 - p0) × (p2 - p0)`; its length is twice the area.
+    pub fn cross(&self) -> Vec3 {
+        (self.positions[1] - self.positions[0]).cross(self.positions[2] - self.positions[0])
+    }
+
+    /// Area in square scene units.
+    pub fn area(&self) -> f32 {
+        0.5 * self.cross().length()
+    }
+
+    /// Unit geometric normal (counter-clockwise winding).
+    pub fn normal(&self) -> Vec3 {
+        self.cross().normalize_or_zero()
+    }
+
+    /// Position at barycentric coordinates `(b1, b2)` (weights of corners 1 and 2).
+    pub fn point(&self, b1: f32, b2: f32) -> Vec3 {
+        let p = &self.positions;
+        p[0] * (1.0 - b1 - b2) + p[1] * b1 + p[2] * b2
+    }
+
+    /// Interpolated shading normal at barycentric `(b1, b2)`, unit length.
+    pub fn shading_normal(&self, b1: f32, b2: f32) -> Vec3 {
+        let n = &self.normals;
+        let s = (n[0] * (1.0 - b1 - b2) + n[1] * b1 + n[2] * b2).normalize_or_zero();
+        if s == Vec3::ZERO {
+            self.normal()
+        } else {
+            s
+        }
+    }
+
+    /// Interpolated material texture coordinate at barycentric `(b1, b2)`.
+    pub fn uv(&self, b1: f32, b2: f32) -> Vec2 {
+        let t = &self.uvs;
+        t[0] * (1.0 - b1 - b2) + t[1] * b1 + t[2] * b2
+    }
+}
+
+/// A diffuse material.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Material {
+    /// Name from the file (or a generated one).
+    pub name: String,
+    /// Linear RGB diffuse albedo; multiplies the texture when there is one.
+    pub albedo: Vec3,
+    /// Index into [`Scene::textures`] of the base colour texture (sRGB-encoded).
+    pub texture: Option<u32>,
+}
+
+/// A punctual light. Units follow `prm-bake reference --light`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Light {
+    /// Point light: radiant intensity in W/sr per channel.
+    Point {
+        /// Position.
+        position: Vec3,
+        /// Radiant intensity (W/sr) per RGB channel.
+        intensity: Vec3,
+    },
+    /// Spot light: a point light restricted to a cone around `direction`.
+    Spot {
+        /// Position.
+        position: Vec3,
+        /// Unit axis of the cone.
+        direction: Vec3,
+        /// Half angle of the cone, radians.
+        angle: f32,
+        /// Radiant intensity (W/sr) per RGB channel inside the cone.
+        intensity: Vec3,
+    },
+    /// Directional light travelling along `direction`.
+    Directional {
+        /// Unit direction the light travels in.
+        direction: Vec3,
+        /// Irradiance (W/m²) on a surface facing the light, per channel.
+        irradiance: Vec3,
+    },
+}
+
+/// A pinhole camera.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Camera {
+    /// Eye position.
+    pub eye: Vec3,
+    /// A point the camera looks at.
+    pub target: Vec3,
+    /// Vertical field of view, degrees.
+    pub fov_y_deg: f32,
+}
+
+/// Axis-aligned bounding box.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Aabb {
+    /// Minimum corner.
+    pub min: Vec3,
+    /// Maximum corner.
+    pub max: Vec3,
+}
+
+impl Aabb {
+    /// The empty box (min = +∞, max = −∞).
+    pub const EMPTY: Aabb = Aabb {
+        min: Vec3::INFINITY,
+        max: Vec3::NEG_INFINITY,
+    };
+
+    /// Grows the box to contain `p`.
+    pub fn grow(&mut self, p: Vec3) {
+        self.min = self.min.min(p);
+        self.max = self.max.max(p);
+    }
+
+    /// Edge lengths.
+    pub fn extent(&self) -> Vec3 {
+        (self.max - self.min).max(Vec3::ZERO)
+    }
+
+    /// Length of the diagonal.
+    pub fn diagonal(&self) -> f32 {
+        self.extent().length()
+    }
+}
+
+/// What the loader passed over without failing: warnings to show the user.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct LoadReport {
+    /// Human-readable warnings (missing MTL or texture, unsupported primitives, ...).
+    pub warnings: Vec<String>,
+    /// Triangles dropped because their area was zero (or negligible).
+    pub degenerate_dropped: usize,
+}
+
+/// A loaded scene, flat and in world space.
+#[derive(Clone, Debug)]
+pub struct Scene {
+    /// The file it came from.
+    pub source: PathBuf,
+    /// All triangles.
+    pub triangles: Vec<Triangle>,
+    /// Lightmap UVs from the file (glTF `TEXCOORD_1`), one per corner, for every triangle.
+    pub lightmap_uvs: Option<Vec<[Vec2; 3]>>,
+    /// Materials referenced by [`Triangle::material`].
+    pub materials: Vec<Material>,
+    /// Textures referenced by [`Material::texture`].
+    pub textures: Vec<Texture>,
+    /// Lights from the file.
+    pub lights: Vec<Light>,
+    /// Cameras from the file.
+    pub cameras: Vec<Camera>,
+    /// What the loader passed over.
+    pub report: LoadReport,
+}
+
+impl Scene {
+    /// Bounds of all triangle corners.
+    pub fn bounds(&self) -> Aabb {
+        let mut b = Aabb::EMPTY;
+        for t in &self.triangles {
+            for p in t.positions {
+                b.grow(p);
+            }
+        }
+        b
+    }
+
+    /// Total surface area.
+    pub fn area(&self) -> f64 {
+        self.triangles.iter().map(|t| t.area() as f64).sum()
+    }
+
+    /// Diffuse albedo of triangle `tri` at barycentric `(b1, b2)`: material albedo times texture.
+    pub fn albedo(&self, tri: usize, b1: f32, b2: f32) -> Vec3 {
+        let t = &self.triangles[tri];
+        let m = &self.materials[t.material as usize];
+        match m.texture {
+            Some(i) => m.albedo * self.textures[i as usize].sample(t.uv(b1, b2)),
+            None => m.albedo,
+        }
+    }
+
+    /// A stable 64-bit fingerprint of the geometry: triangle count and every corner position's
+    /// bits, in order (xxh3). Materials, lights and cameras do not enter it, so an archive stays
+    /// valid when only those change.
+    pub fn fingerprint(&self) -> u64 {
+        let mut h = xxhash_rust::xxh3::Xxh3::new();
+        h.update(&(self.triangles.len() as u64).to_le_bytes());
+        for t in &self.triangles {
+            for p in t.positions {
+                for c in p.to_array() {
+                    h.update(&c.to_bits().to_le_bytes());
+                }
+            }
+        }
+        h.digest()
+    }
+
+    /// Appends a triangle after validating it; returns false (and counts it) when degenerate.
+    ///
+    /// `area_eps` is the area below which a triangle counts as degenerate. Corner normals that are
+    /// missing (zero) or point away from the geometric normal are replaced or flipped.
+    pub(crate) fn push_triangle(&mut self, mut t: Triangle, area_eps: f32) -> bool {
+        let area = t.area();
+        if !(area > area_eps) {
+            self.report.degenerate_dropped += 1;
+            return false;
+        }
+        let ng = t.normal();
+        for n in &mut t.normals {
+            let u = n.normalize_or_zero();
+            *n = if u == Vec3::ZERO || !u.is_finite() {
+                ng
+            } else if u.dot(ng) < 0.0 {
+                // Shading normals on the far side of the face: the file's winding and normals
+                // disagree. Keep the geometry's winding and mirror the normal.
+                -u
+            } else {
+                u
+            };
+        }
+        self.triangles.push(t);
+        true
+    }
+}
+
+/// Degenerate-area threshold for a scene whose bounding-box diagonal is `diag`.
+pub(crate) fn area_epsilon(diag: f32) -> f32 {
+    (diag * diag * 1e-14).max(f32::MIN_POSITIVE)
+}

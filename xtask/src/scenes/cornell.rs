@@ -1,0 +1,356 @@
+//! The Cornell box from the Cornell Program of Computer Graphics' published measurements.
+//!
+//! Geometry: the "Cornell Box Data" page lists every surface as a quad in millimetres, already
+//! with +Y up, the floor in the x–z plane and the open side at z = 0 facing the camera at
+//! z = −800. That frame is right-handed as given: seen from the camera (looking +Z), +X is on
+//! the left, which is where the red wall (x ≈ 556) is in the photographs. So the only change is
+//! millimetres → metres. The page's vertex order is kept; it is counter-clockwise seen from the
+//! inside of the room and from outside the blocks, i.e. every face faces the open volume.
+
+use super::color::{
+    piecewise, round4, sampled_4nm, spectrum_to_rgb, CORNELL_GREEN, CORNELL_LAMP, CORNELL_RED, CORNELL_WHITE,
+};
+use super::mesh::{CameraSpec, Material, Part, PointLight, SceneDesc, V3};
+
+/// The light quad sits this far (mm) below the ceiling instead of in its plane (see README).
+pub const LIGHT_DROP_MM: f64 = 1.0;
+
+/// The lamp's diffuse reflectance; the data page does not give one (see README).
+pub const LIGHT_ALBEDO: f64 = 0.78;
+
+/// The point light's position (m): below the lamp centre, 48.8 mm under the ceiling.
+pub const POINT_LIGHT: V3 = [0.278, 0.5, 0.2795];
+
+/// Focal length and film height (m) from the data page's camera section.
+pub const FOCAL_LENGTH: f64 = 0.035;
+pub const FILM_HEIGHT: f64 = 0.025;
+
+type Quad = [[f64; 3]; 4];
+
+/// (part name, material, quads in mm) exactly as listed on the data page.
+fn measured() -> Vec<(&'static str, &'static str, Vec<Quad>)> {
+    let y_light = 548.8 - LIGHT_DROP_MM;
+    vec![
+        (
+            "floor",
+            "white",
+            vec![[
+                [552.8, 0.0, 0.0],
+                [0.0, 0.0, 0.0],
+                [0.0, 0.0, 559.2],
+                [549.6, 0.0, 559.2],
+            ]],
+        ),
+        (
+            "ceiling",
+            "white",
+            vec![[
+                [556.0, 548.8, 0.0],
+                [556.0, 548.8, 559.2],
+                [0.0, 548.8, 559.2],
+                [0.0, 548.8, 0.0],
+            ]],
+        ),
+        (
+            "back",
+            "white",
+            vec![[
+                [549.6, 0.0, 559.2],
+                [0.0, 0.0, 559.2],
+                [0.0, 548.8, 559.2],
+                [556.0, 548.8, 559.2],
+            ]],
+        ),
+        (
+            "left",
+            "red",
+            vec![[
+                [552.8, 0.0, 0.0],
+                [549.6, 0.0, 559.2],
+                [556.0, 548.8, 559.2],
+                [556.0, 548.8, 0.0],
+            ]],
+        ),
+        (
+            "right",
+            "green",
+            vec![[
+                [0.0, 0.0, 559.2],
+                [0.0, 0.0, 0.0],
+                [0.0, 548.8, 0.0],
+                [0.0, 548.8, 559.2],
+            ]],
+        ),
+        (
+            "short_block",
+            "white",
+            vec![
+                [
+                    [130.0, 165.0, 65.0],
+                    [82.0, 165.0, 225.0],
+                    [240.0, 165.0, 272.0],
+                    [290.0, 165.0, 114.0],
+                ],
+                [
+                    [290.0, 0.0, 114.0],
+                    [290.0, 165.0, 114.0],
+                    [240.0, 165.0, 272.0],
+                    [240.0, 0.0, 272.0],
+                ],
+                [
+                    [130.0, 0.0, 65.0],
+                    [130.0, 165.0, 65.0],
+                    [290.0, 165.0, 114.0],
+                    [290.0, 0.0, 114.0],
+                ],
+                [
+                    [82.0, 0.0, 225.0],
+                    [82.0, 165.0, 225.0],
+                    [130.0, 165.0, 65.0],
+                    [130.0, 0.0, 65.0],
+                ],
+                [
+                    [240.0, 0.0, 272.0],
+                    [240.0, 165.0, 272.0],
+                    [82.0, 165.0, 225.0],
+                    [82.0, 0.0, 225.0],
+                ],
+            ],
+        ),
+        (
+            "tall_block",
+            "white",
+            vec![
+                [
+                    [423.0, 330.0, 247.0],
+                    [265.0, 330.0, 296.0],
+                    [314.0, 330.0, 456.0],
+                    [472.0, 330.0, 406.0],
+                ],
+                [
+                    [423.0, 0.0, 247.0],
+                    [423.0, 330.0, 247.0],
+                    [472.0, 330.0, 406.0],
+                    [472.0, 0.0, 406.0],
+                ],
+                [
+                    [472.0, 0.0, 406.0],
+                    [472.0, 330.0, 406.0],
+                    [314.0, 330.0, 456.0],
+                    [314.0, 0.0, 456.0],
+                ],
+                [
+                    [314.0, 0.0, 456.0],
+                    [314.0, 330.0, 456.0],
+                    [265.0, 330.0, 296.0],
+                    [265.0, 0.0, 296.0],
+                ],
+                [
+                    [265.0, 0.0, 296.0],
+                    [265.0, 330.0, 296.0],
+                    [423.0, 330.0, 247.0],
+                    [423.0, 0.0, 247.0],
+                ],
+            ],
+        ),
+        (
+            "light",
+            "light",
+            vec![[
+                [343.0, y_light, 227.0],
+                [343.0, y_light, 332.0],
+                [213.0, y_light, 332.0],
+                [213.0, y_light, 227.0],
+            ]],
+        ),
+    ]
+}
+
+/// Lamp emission as linear RGB (the page's radiance units), from its emission spectrum.
+pub fn lamp_rgb() -> [f64; 3] {
+    round4(spectrum_to_rgb(piecewise(&CORNELL_LAMP)))
+}
+
+/// Lamp area in m² (130 mm × 105 mm).
+pub const LAMP_AREA: f64 = 0.130 * 0.105;
+
+pub fn scene() -> SceneDesc {
+    let parts = measured()
+        .into_iter()
+        .map(|(name, material, quads)| Part {
+            name: name.to_string(),
+            material: material.to_string(),
+            polys: quads
+                .iter()
+                .map(|q| q.iter().map(|p| p.map(|c| c / 1000.0)).collect())
+                .collect(),
+        })
+        .collect();
+    let lamp = lamp_rgb();
+    let materials = vec![
+        Material {
+            name: "white".into(),
+            albedo: round4(spectrum_to_rgb(sampled_4nm(&CORNELL_WHITE))),
+            emission: None,
+        },
+        Material {
+            name: "red".into(),
+            albedo: round4(spectrum_to_rgb(sampled_4nm(&CORNELL_RED))),
+            emission: None,
+        },
+        Material {
+            name: "green".into(),
+            albedo: round4(spectrum_to_rgb(sampled_4nm(&CORNELL_GREEN))),
+            emission: None,
+        },
+        Material {
+            name: "light".into(),
+            albedo: [LIGHT_ALBEDO; 3],
+            emission: Some(lamp),
+        },
+    ];
+    SceneDesc {
+        name: "cornell-box".into(),
+        parts,
+        materials,
+        camera: CameraSpec {
+            eye: [0.278, 0.273, -0.8],
+            target: [0.278, 0.273, 0.0],
+            fov_y_deg: (2.0 * (FILM_HEIGHT / 2.0 / FOCAL_LENGTH).atan()).to_degrees(),
+            aspect: Some(1.0),
+        },
+        light: PointLight {
+            position: POINT_LIGHT,
+            intensity: point_light_intensity(),
+        },
+    }
+}
+
+/// The point light's radiant intensity (W/sr): the lamp's on-axis radiant intensity
+/// `Ke × area` (a Lambertian emitter of radiance Ke), so the floor under the lamp gets about
+/// the irradiance the area lamp gives it.
+pub fn point_light_intensity() -> [f64; 3] {
+    lamp_rgb().map(|c| (c * LAMP_AREA * 1e4).round() / 1e4)
+}
+
+pub fn readme(s: &super::Stats) -> String {
+    let sc = scene();
+    let m = |n: &str| sc.materials.iter().find(|m| m.name == n).map(|m| m.albedo).unwrap();
+    let (w, r, g) = (m("white"), m("red"), m("green"));
+    let lamp = lamp_rgb();
+    let i = point_light_intensity();
+    format!(
+        "# cornell-box
+
+Tests: colour bleeding and soft indirect light in the classic closed-on-five-sides box with two
+white blocks, against a scene whose every number is measured.
+
+Generated by `cargo run -p xtask -- scenes` (`xtask/src/scenes/cornell.rs`); do not edit by hand.
+
+## Files
+
+- `cornell-box.obj` + `cornell-box.mtl`: one `o` per part — `floor`, `ceiling`, `back`, `left`
+  (red), `right` (green), `short_block`, `tall_block`, `light` — quads with positive indices;
+  the non-planar left wall is written as two explicit triangles.
+- `cornell-box.gltf`: the same {tris} triangles with the same f32 positions (one node and mesh
+  per part, flat per-face normals, embedded base64 buffer), the four materials as
+  `baseColorFactor`, a `KHR_lights_punctual` point light and a perspective camera.
+
+Triangles: {tris}. Total area: {area:.6} m². Bounds: {bounds}.
+
+## Source of the numbers
+
+All geometry, the camera, the reflectances and the lamp spectrum are from the Cornell
+University Program of Computer Graphics page \"Cornell Box Data\" (the box with diffuse objects).
+That data is in millimetres with +Y up, the floor in the x–z plane and the open side at z = 0;
+it is right-handed as given (looking +Z from the camera, +X is to the left, where the red wall
+is in the photographs), so it is only scaled mm → m. Surfaces face the open volume.
+
+Deviations, both for the lamp:
+- The lamp quad (343..213 × 227..332 mm) is listed at y = 548.8 mm, in the ceiling's plane.
+  Two coplanar surfaces would fight in depth tests and visibility rays, so it is moved
+  {drop} mm down (y = {ylight} m), facing down. It stays an ordinary diffuse surface for our
+  loader: `Ke` is written to the MTL but emission is ignored; glTF has no emission.
+- The page gives no reflectance for the lamp; it uses albedo {la} (grey), the value commonly
+  used in renderings of this scene.
+
+## Albedos (linear RGB)
+
+| material | R | G | B |
+| --- | --- | --- | --- |
+| white (floor, ceiling, back, blocks) | {w0:.4} | {w1:.4} | {w2:.4} |
+| red (left wall) | {r0:.4} | {r1:.4} | {r2:.4} |
+| green (right wall) | {g0:.4} | {g1:.4} | {g2:.4} |
+| light | {la} | {la} | {la} |
+
+Derived by our code (`xtask/src/scenes/color.rs`) from the published reflectance spectra
+(400–700 nm every 4 nm): each spectrum, linearly interpolated, is integrated against the CIE 1931
+2° colour-matching functions (analytic multi-lobe fit, Wyman, Sloan & Shirley 2013) in 1 nm
+steps; XYZ goes to linear sRGB with the IEC 61966-2-1 matrix; each channel is then divided by
+the value of a flat reflectance of 1 (white balance to the equal-energy illuminant), so a grey
+surface stays grey. Negative channels would clamp to 0 (none do).
+
+Why these and not the RGB values often quoted for this box (white ≈ 0.73, red ≈ (0.63, 0.065,
+0.05), green ≈ (0.14, 0.45, 0.09)): white agrees, but those red and green numbers match the
+spectra's values at single wavelengths (red's 0.62–0.66 plateau above 630 nm, green's 0.45–0.48
+peak near 520 nm, its 0.14 near 680 nm), while each sRGB channel really sees a broad band. The
+sRGB red channel responds mostly to 570–640 nm, where this red paint still rises from 0.07 to
+0.6, so its R is {r0:.2}, not 0.63; likewise green's G is {g1:.2}. We keep the colorimetric values
+so that a surface's RGB albedo is what the measured paint looks like under white light. Under
+the lamp's own (reddish) spectrum instead of the flat one, red would be about (0.45, 0.04, 0.01):
+the choice of white matters less than the band integration.
+
+The lamp's emission spectrum (0, 8, 15.6, 18.4 at 400, 500, 600, 700 nm, piecewise linear)
+reduced the same way gives `Ke` = ({k0:.4}, {k1:.4}, {k2:.4}) in the page's radiance units.
+
+## Camera and light
+
+```
+--camera 0.278,0.273,-0.8:0.278,0.273,0:{fov:.4}
+--light point:{lx},{ly},{lz}:{i0},{i1},{i2}
+```
+
+Camera: the page's camera — eye (278, 273, −800) mm looking +Z, up +Y, focal length 35 mm on a
+25 × 25 mm film: vertical field of view 2·atan(12.5/35) = {fov:.4}°, aspect 1. In glTF it is a
+node at the eye rotated 180° about +Y (glTF cameras look down −Z), `yfov` = {yfov:.6} rad,
+`aspectRatio` 1.
+
+Point light: ({lx}, {ly}, {lz}) m, under the lamp's centre and {below:.1} mm below the ceiling.
+Radiant intensity per channel = `Ke` × lamp area (0.130 × 0.105 m²) = ({i0}, {i1}, {i2}) W/sr:
+the area lamp's on-axis intensity. The floor under the lamp then gets ≈ {e:.2} W/m² (red)
+from the point light, against ≈ {ea:.2} W/m² from the area lamp, which hangs a little higher.
+In glTF: `color` = that / its largest channel, `intensity` =
+the largest channel. The glTF spec calls `intensity` candela; this project's loader reads
+`color × intensity` as W/sr per channel, with no 683 lm/W factor.
+",
+        tris = s.triangles,
+        area = s.area,
+        bounds = s.bounds_text(),
+        drop = LIGHT_DROP_MM,
+        ylight = (548.8 - LIGHT_DROP_MM) / 1000.0,
+        la = LIGHT_ALBEDO,
+        w0 = w[0],
+        w1 = w[1],
+        w2 = w[2],
+        r0 = r[0],
+        r1 = r[1],
+        r2 = r[2],
+        g0 = g[0],
+        g1 = g[1],
+        g2 = g[2],
+        k0 = lamp[0],
+        k1 = lamp[1],
+        k2 = lamp[2],
+        fov = sc.camera.fov_y_deg,
+        yfov = sc.camera.fov_y_deg.to_radians(),
+        lx = POINT_LIGHT[0],
+        ly = POINT_LIGHT[1],
+        lz = POINT_LIGHT[2],
+        below = (0.5488 - POINT_LIGHT[1]) * 1000.0,
+        i0 = i[0],
+        i1 = i[1],
+        i2 = i[2],
+        e = i[0] / (POINT_LIGHT[1] * POINT_LIGHT[1]),
+        ea = i[0] / (0.5478f64 * 0.5478),
+    )
+}
