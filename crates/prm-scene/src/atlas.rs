@@ -188,12 +188,13 @@ impl Atlas {
         let mut uvs = vec![[Vec2::ZERO; 3]; scene.triangles.len()];
         let mut chart_of_triangle = vec![0u32; scene.triangles.len()];
         for (ci, (chart, origin)) in charts.iter().zip(&cells).enumerate() {
-            let size = (chart.max - chart.min) * scale;
+            let cs = chart_scale(chart, scale);
+            let size = (chart.max - chart.min) * cs;
             // Centre the chart in its whole-texel footprint, `gutter` texels in from the cell edge.
-            let pad = (size.ceil().max(Vec2::ONE) - size) * 0.5;
+            let pad = (footprint(chart, scale) - size) * 0.5;
             let offset = *origin + Vec2::splat(g) + pad;
             for (&t, corners) in chart.triangles.iter().zip(&chart.corners) {
-                uvs[t as usize] = corners.map(|c| ((c - chart.min) * scale + offset) / resolution as f32);
+                uvs[t as usize] = corners.map(|c| ((c - chart.min) * cs + offset) / resolution as f32);
                 chart_of_triangle[t as usize] = ci as u32;
             }
         }
@@ -349,17 +350,47 @@ fn make_charts(scene: &Scene, cos_max: f32) -> Vec<Chart> {
                 }
             }
         }
-        // Orthonormal basis of the seed's plane, oriented so projected triangles keep their winding.
-        let (u, v) = n.any_orthonormal_pair();
-        let corners: Vec<[Vec2; 3]> = members
-            .iter()
-            .map(|&t| tris[t as usize].positions.map(|p| Vec2::new(p.dot(u), p.dot(v))))
-            .collect();
-        let (mut min, mut max) = (Vec2::INFINITY, Vec2::NEG_INFINITY);
-        for c in corners.iter().flatten() {
-            min = min.min(*c);
-            max = max.max(*c);
+        // Basis of the seed's plane: aligned with one of the first members' edges, the one that
+        // gives the smallest bounding rectangle (rectangular walls then pack without waste).
+        let project = |u: Vec3, v: Vec3| {
+            let corners: Vec<[Vec2; 3]> = members
+                .iter()
+                .map(|&t| tris[t as usize].positions.map(|p| Vec2::new(p.dot(u), p.dot(v))))
+                .collect();
+            let (mut min, mut max) = (Vec2::INFINITY, Vec2::NEG_INFINITY);
+            for c in corners.iter().flatten() {
+                min = min.min(*c);
+                max = max.max(*c);
+            }
+            (corners, min, max)
+        };
+        let mut best: Option<(Vec3, f32)> = None;
+        for &t in members.iter().take(8) {
+            let p = tris[t as usize].positions;
+            for c in 0..3 {
+                let e = p[(c + 1) % 3] - p[c];
+                let u = (e - n * e.dot(n)).normalize_or_zero();
+                if u == Vec3::ZERO {
+                    continue;
+                }
+                let v = n.cross(u);
+                let (mut lo, mut hi) = (Vec2::INFINITY, Vec2::NEG_INFINITY);
+                for &m in &members {
+                    for q in tris[m as usize].positions {
+                        let x = Vec2::new(q.dot(u), q.dot(v));
+                        lo = lo.min(x);
+                        hi = hi.max(x);
+                    }
+                }
+                let area = (hi - lo).x * (hi - lo).y;
+                if best.is_none_or(|(_, a)| area < a) {
+                    best = Some((u, area));
+                }
+            }
         }
+        // (u, v, n) is right-handed, so projected triangles keep their winding.
+        let u = best.map_or_else(|| n.any_orthonormal_pair().0, |(u, _)| u);
+        let (corners, min, max) = project(u, n.cross(u));
         charts.push(Chart {
             triangles: members,
             corners,
@@ -370,9 +401,48 @@ fn make_charts(scene: &Scene, cos_max: f32) -> Vec<Chart> {
     charts
 }
 
-/// Cell size of a chart in texels at `scale` texels per scene unit: whole footprint plus gutters.
+/// Shortest side, in texels, that a chart of several triangles is scaled up to (at most
+/// [`MAX_BOOST`] times), so that each of its triangles can own a texel centre: 2 texels, and
+/// 2·√k for a chart of k triangles (a fan of k wedges needs a ring of texels around its hub).
+fn min_chart_texels(triangles: usize) -> f32 {
+    (2.0 * (triangles as f32).sqrt()).max(2.0)
+}
+/// Largest factor by which a small chart's texel density exceeds the atlas's.
+const MAX_BOOST: f32 = 64.0;
+
+/// Texels per scene unit for `chart` when the atlas has `scale`: small multi-triangle charts get
+/// more, so that thin parts (chair legs, mouldings) keep one texel per triangle.
+fn chart_scale(chart: &Chart, scale: f32) -> f32 {
+    let short = (chart.max - chart.min).min_element() * scale;
+    let long = (chart.max - chart.min).max_element() * scale;
+    let min = min_chart_texels(chart.triangles.len());
+    if chart.triangles.len() < 2 || short >= min {
+        return scale;
+    }
+    // Slivers stop growing once their long side reaches four times the minimum.
+    let boost = if short > 0.0 {
+        (min / short).min(MAX_BOOST)
+    } else {
+        MAX_BOOST
+    };
+    let boost = if long > 0.0 {
+        boost.min((4.0 * min / long).max(1.0))
+    } else {
+        boost
+    };
+    scale * boost
+}
+
+/// Size in texels of a chart's footprint (whole texels, at least one).
+fn footprint(chart: &Chart, scale: f32) -> Vec2 {
+    ((chart.max - chart.min) * chart_scale(chart, scale))
+        .ceil()
+        .max(Vec2::ONE)
+}
+
+/// Cell size of a chart in texels at `scale` texels per scene unit: footprint plus gutters.
 fn cell_size(chart: &Chart, scale: f32, g: f32) -> Vec2 {
-    ((chart.max - chart.min) * scale).ceil().max(Vec2::ONE) + Vec2::splat(2.0 * g)
+    footprint(chart, scale) + Vec2::splat(2.0 * g)
 }
 
 /// Shelf packing into a `r × r` square; the cell origin of every chart, or `None` when it overflows.

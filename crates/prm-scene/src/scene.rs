@@ -229,7 +229,8 @@ impl Scene {
         let ng = t.normal();
         for n in &mut t.normals {
             let u = n.normalize_or_zero();
-            *n = if u == Vec3::ZERO || !u.is_finite() {
+            *n = if u == Vec3::ZERO || !u.is_finite() || u.dot(ng).abs() < 0.05 {
+                // Missing, or (nearly) in the face's plane: the face's own normal is safer.
                 ng
             } else if u.dot(ng) < 0.0 {
                 // Shading normals on the far side of the face: the file's winding and normals

@@ -1,0 +1,413 @@
+//! Integration tests of scene loading and atlas building on our scenes, third-party scenes and bad input.
+
+use glam::Vec3;
+use prm_scene::{Atlas, AtlasParams, Scene, SceneError, Sizing, EMPTY_TEXEL};
+use std::path::{Path, PathBuf};
+
+fn repo(rel: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..").join(rel)
+}
+
+fn load(rel: &str) -> Scene {
+    prm_scene::load(&repo(rel)).unwrap_or_else(|e| panic!("{rel}: {e}"))
+}
+
+/// A scratch directory under the target dir, emptied first.
+fn scratch(name: &str) -> PathBuf {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(name);
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+#[test]
+fn cornell_box_obj_and_gltf_agree() {
+    let obj = load("scenes/cornell-box/cornell-box.obj");
+    let gltf = load("scenes/cornell-box/cornell-box.gltf");
+    assert_eq!(obj.triangles.len(), gltf.triangles.len());
+    let (a, b) = (obj.area(), gltf.area());
+    assert!((a - b).abs() <= 1e-5 * a, "areas {a} vs {b}");
+    assert!((obj.bounds().min - gltf.bounds().min).abs().max_element() < 1e-5);
+    assert!((obj.bounds().max - gltf.bounds().max).abs().max_element() < 1e-5);
+    assert_eq!(obj.fingerprint(), gltf.fingerprint(), "same geometry in the same order");
+    // The glTF brings a point light under the ceiling and a camera; the OBJ has neither.
+    assert_eq!(gltf.lights.len(), 1);
+    assert_eq!(gltf.cameras.len(), 1);
+    match gltf.lights[0] {
+        prm_scene::Light::Point { position, intensity } => {
+            let b = gltf.bounds();
+            assert!(position.y < b.max.y && position.y > 0.5 * (b.min.y + b.max.y));
+            assert!(intensity.min_element() > 0.0);
+        }
+        other => panic!("expected a point light, got {other:?}"),
+    }
+    // Albedos: the white walls are about 0.74, the red wall reddest in R.
+    assert!(obj
+        .materials
+        .iter()
+        .any(|m| (m.albedo.x - 0.74).abs() < 0.02 && (m.albedo.y - 0.74).abs() < 0.02));
+    assert!(obj.materials.iter().any(|m| m.albedo.x > 5.0 * m.albedo.y));
+}
+
+/// The invariants every generated atlas keeps.
+fn check_atlas(scene: &Scene, atlas: &Atlas, gutter: u32) {
+    let r = atlas.resolution as usize;
+    let s = &atlas.stats;
+    assert_eq!(s.shared_texels, 0, "no texel is touched by two charts");
+    assert_eq!(s.uncovered_triangles, 0, "every triangle touches a covered texel");
+    // Charts stay apart: between covered texels of different charts lie at least 2·gutter texels.
+    let chart_at = |i: usize| atlas.chart_of_triangle[atlas.exits[atlas.texel_exit[i] as usize].triangle as usize];
+    let reach = 2 * gutter as i64;
+    for y in 0..r as i64 {
+        for x in 0..r as i64 {
+            let i = (y as usize) * r + x as usize;
+            if atlas.texel_exit[i] == EMPTY_TEXEL {
+                continue;
+            }
+            for dy in -reach..=reach {
+                for dx in -reach..=reach {
+                    let (nx, ny) = (x + dx, y + dy);
+                    if nx < 0 || ny < 0 || nx >= r as i64 || ny >= r as i64 {
+                        continue;
+                    }
+                    let j = ny as usize * r + nx as usize;
+                    if atlas.texel_exit[j] != EMPTY_TEXEL {
+                        assert_eq!(chart_at(i), chart_at(j), "charts closer than the gutter at ({x},{y})");
+                    }
+                }
+            }
+        }
+    }
+    // Every empty texel next to a covered one is dilated (no black in bilinear taps).
+    let dilated: std::collections::HashSet<u32> = atlas.dilation.iter().map(|d| d.0).collect();
+    for y in 0..r {
+        for x in 0..r {
+            let i = y * r + x;
+            if atlas.texel_exit[i] != EMPTY_TEXEL {
+                continue;
+            }
+            let next_to_cover = (x.saturating_sub(1)..=(x + 1).min(r - 1)).any(|nx| {
+                (y.saturating_sub(1)..=(y + 1).min(r - 1)).any(|ny| atlas.texel_exit[ny * r + nx] != EMPTY_TEXEL)
+            });
+            if next_to_cover {
+                assert!(dilated.contains(&(i as u32)), "gutter texel ({x},{y}) not dilated");
+            }
+        }
+    }
+    for &(dst, src) in &atlas.dilation {
+        assert_eq!(atlas.texel_exit[dst as usize], EMPTY_TEXEL);
+        assert_ne!(atlas.texel_exit[src as usize], EMPTY_TEXEL);
+    }
+    // Exit points lie on their triangles and face like them.
+    for e in &atlas.exits {
+        let t = &scene.triangles[e.triangle as usize];
+        let n = t.normal();
+        let d = (e.position - t.positions[0]).dot(n).abs();
+        assert!(
+            d < 1e-4 * scene.bounds().diagonal().max(1.0),
+            "exit point off its plane by {d}"
+        );
+        assert!(e.normal.dot(n) > 0.0);
+        assert!(e.coverage > 0.0 && e.coverage <= 1.0);
+    }
+    // Lightmap UVs are inside the atlas.
+    for uv in atlas.uvs.iter().flatten() {
+        assert!(
+            (0.0..=1.0).contains(&uv.x) && (0.0..=1.0).contains(&uv.y),
+            "uv {uv} outside [0,1]"
+        );
+    }
+}
+
+#[test]
+fn atlas_invariants_on_our_scenes() {
+    for (rel, res) in [
+        ("scenes/cornell-box/cornell-box.obj", 128),
+        ("scenes/chairs/chairs.obj", 512),
+        ("scenes/two-rooms/two-rooms.obj", 128),
+    ] {
+        let scene = load(rel);
+        for gutter in [1, 2] {
+            let params = AtlasParams {
+                sizing: Sizing::Resolution(res),
+                gutter,
+                ..AtlasParams::DEFAULT
+            };
+            let atlas = Atlas::build(&scene, &params).unwrap();
+            assert_eq!(atlas.resolution, res);
+            check_atlas(&scene, &atlas, gutter);
+            assert_eq!(
+                atlas.stats.triangles_without_exit, 0,
+                "{rel} gutter {gutter}: every triangle owns a texel"
+            );
+        }
+    }
+}
+
+#[test]
+fn texel_size_sets_resolution() {
+    let scene = load("scenes/cornell-box/cornell-box.obj");
+    let coarse = Atlas::build(&scene, &AtlasParams::with_sizing(Sizing::TexelSize(0.02))).unwrap();
+    let fine = Atlas::build(&scene, &AtlasParams::with_sizing(Sizing::TexelSize(0.01))).unwrap();
+    assert!((coarse.texel_size() - 0.02).abs() < 1e-6);
+    // Half the texel size, twice the resolution (within packing slack).
+    let ratio = fine.resolution as f32 / coarse.resolution as f32;
+    assert!((1.7..2.3).contains(&ratio), "ratio {ratio}");
+    // Covered area ≈ scene area: texels × texel area (coverage-weighted) matches within 15%.
+    let covered: f64 = fine.exits.iter().map(|e| e.coverage as f64).sum::<f64>() * 0.01f64.powi(2);
+    assert!(
+        (covered / scene.area() - 1.0).abs() < 0.15,
+        "covered {covered} vs area {}",
+        scene.area()
+    );
+    check_atlas(&scene, &fine, 1);
+}
+
+#[test]
+fn third_party_scenes_load_and_pack() {
+    let shared = repo("../shared/scenes");
+    if !shared.exists() {
+        eprintln!("skipped: {} is absent", shared.display());
+        return;
+    }
+    // McGuire's Cornell box uses negative (relative) indices; its extent is 2.02 x 1.99 x 2.03.
+    let cb = prm_scene::load(&shared.join("cornell-box/CornellBox-Original.obj")).unwrap();
+    let e = cb.bounds().extent();
+    assert!(
+        (e - Vec3::new(2.02, 1.99, 2.03)).abs().max_element() < 1e-3,
+        "extent {e}"
+    );
+    let atlas = Atlas::build(&cb, &AtlasParams::with_sizing(Sizing::Resolution(128))).unwrap();
+    check_atlas(&cb, &atlas, 1);
+    let holodeck = prm_scene::load(&shared.join("holodeck/holodeck.obj")).unwrap();
+    assert!(holodeck.textures.len() >= 1, "map_Kd wall.png is loaded");
+    let atlas = Atlas::build(&holodeck, &AtlasParams::DEFAULT).unwrap();
+    check_atlas(&holodeck, &atlas, 1);
+}
+
+fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
+    let p = dir.join(name);
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+#[test]
+fn obj_features_negative_indices_groups_and_missing_files() {
+    let dir = scratch("obj-features");
+    let obj = write(
+        &dir,
+        "quads.obj",
+        "mtllib missing.mtl\no first\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf -4 -3 -2 -1\n\
+         g second\nv 0 0 1\nv 1 0 1\nv 1 1 1\nf 5 6 7\n",
+    );
+    let scene = prm_scene::load(&obj).unwrap();
+    assert_eq!(scene.triangles.len(), 3, "a quad triangulated plus a triangle");
+    assert!((scene.area() - 1.5).abs() < 1e-6);
+    assert!(
+        scene.report.warnings.iter().any(|w| w.contains("material library")),
+        "{:?}",
+        scene.report.warnings
+    );
+    assert!(scene
+        .triangles
+        .iter()
+        .all(|t| scene.materials[t.material as usize].albedo == Vec3::splat(0.5)));
+
+    write(
+        &dir,
+        "tex.mtl",
+        "newmtl red\nKd 0.8 0.1 0.1\nnewmtl textured\nKd 1 1 1\nmap_Kd nowhere.png\n",
+    );
+    let obj = write(
+        &dir,
+        "tex.obj",
+        "mtllib tex.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\nusemtl red\nf 1/1 2/2 3/3\nusemtl textured\nf 1/1 3/3 2/2\n",
+    );
+    let scene = prm_scene::load(&obj).unwrap();
+    assert_eq!(
+        scene.materials[scene.triangles[0].material as usize].albedo,
+        Vec3::new(0.8, 0.1, 0.1)
+    );
+    assert!(
+        scene.report.warnings.iter().any(|w| w.contains("nowhere.png")),
+        "{:?}",
+        scene.report.warnings
+    );
+
+    // A texture that exists: a 2x2 PNG written here; the albedo is sampled from it.
+    let img = image::RgbImage::from_fn(2, 2, |_, _| image::Rgb([255, 255, 255]));
+    img.save(dir.join("white.png")).unwrap();
+    write(&dir, "ok.mtl", "newmtl w\nKd 0.2 0.2 0.2\nmap_Kd white.png\n");
+    let obj = write(
+        &dir,
+        "ok.obj",
+        "mtllib ok.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\nusemtl w\nf 1/1 2/2 3/3\n",
+    );
+    let scene = prm_scene::load(&obj).unwrap();
+    assert_eq!(scene.textures.len(), 1);
+    assert!((scene.albedo(0, 0.3, 0.3) - Vec3::ONE).abs().max_element() < 1e-5);
+}
+
+#[test]
+fn degenerate_triangles_are_dropped_and_counted() {
+    let dir = scratch("degenerate");
+    let obj = write(
+        &dir,
+        "d.obj",
+        "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 2 0 0\nf 1 2 3\nf 1 2 4\nf 1 1 3\n",
+    );
+    let scene = prm_scene::load(&obj).unwrap();
+    assert_eq!(scene.triangles.len(), 1);
+    assert_eq!(scene.report.degenerate_dropped, 2);
+    assert!(scene.report.warnings.iter().any(|w| w.contains("2 degenerate")));
+}
+
+#[test]
+fn bad_input_gives_clear_errors() {
+    let dir = scratch("bad-input");
+    let err = |p: &Path| prm_scene::load(p).expect_err("must fail");
+
+    let missing = dir.join("nope.obj");
+    let e = err(&missing);
+    assert!(
+        matches!(e, SceneError::NotFound(_)) && e.to_string().contains("nope.obj"),
+        "{e}"
+    );
+
+    let e = err(&write(&dir, "scene.fbx", "whatever"));
+    assert!(matches!(e, SceneError::UnsupportedFormat(_)), "{e}");
+
+    let e = err(&write(&dir, "bad.obj", "v 0 0 0\nv 1 0 0\nv 0 1 oops\nf 1 2 3\n"));
+    assert!(e.to_string().contains("bad.obj:3"), "names file and line: {e}");
+
+    let e = err(&write(&dir, "range.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n"));
+    assert!(e.to_string().contains("range.obj:4"), "{e}");
+
+    let e = err(&write(&dir, "nan.obj", "v 0 0 0\nv 1 0 0\nv 0 nan 0\nf 1 2 3\n"));
+    assert!(
+        e.to_string().contains("nan.obj") && e.to_string().contains("non-finite"),
+        "{e}"
+    );
+
+    let e = err(&write(&dir, "empty.obj", "# nothing\nv 0 0 0\n"));
+    assert!(matches!(e, SceneError::NoTriangles { .. }), "{e}");
+
+    let e = err(&write(&dir, "flat.obj", "v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n"));
+    assert!(matches!(e, SceneError::NoTriangles { dropped: 1, .. }), "{e}");
+
+    let e = err(&write(
+        &dir,
+        "bad.gltf",
+        "{ \"asset\": { \"version\": \"2.0\" }, \"meshes\": [ oops",
+    ));
+    assert!(
+        matches!(e, SceneError::Malformed { .. }) && e.to_string().contains("bad.gltf"),
+        "{e}"
+    );
+
+    let e = err(&write(&dir, "bad.glb", "glTF but not really"));
+    assert!(e.to_string().contains("bad.glb"), "{e}");
+
+    let e = err(&write(&dir, "nomesh.gltf", "{ \"asset\": { \"version\": \"2.0\" } }"));
+    assert!(matches!(e, SceneError::NoTriangles { .. }), "{e}");
+}
+
+/// A minimal glTF: one triangle in a buffer, instanced by two nodes (translated, and mirrored),
+/// with TEXCOORD_1, a spot light and a camera.
+fn tiny_gltf(dir: &Path) -> PathBuf {
+    let mut bin = Vec::new();
+    for v in [0.0f32, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0] {
+        bin.extend_from_slice(&v.to_le_bytes());
+    }
+    for v in [0.1f32, 0.1, 0.4, 0.1, 0.1, 0.4] {
+        bin.extend_from_slice(&v.to_le_bytes());
+    }
+    std::fs::write(dir.join("tiny.bin"), &bin).unwrap();
+    let json = r#"{
+      "asset": {"version": "2.0"},
+      "extensionsUsed": ["KHR_lights_punctual"],
+      "extensions": {"KHR_lights_punctual": {"lights": [
+        {"type": "spot", "color": [1, 0.5, 0.25], "intensity": 4, "spot": {"outerConeAngle": 0.5}}]}},
+      "buffers": [{"uri": "tiny.bin", "byteLength": 60}],
+      "bufferViews": [{"buffer": 0, "byteOffset": 0, "byteLength": 36}, {"buffer": 0, "byteOffset": 36, "byteLength": 24}],
+      "accessors": [
+        {"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3", "min": [0,0,0], "max": [1,1,0]},
+        {"bufferView": 1, "componentType": 5126, "count": 3, "type": "VEC2"}],
+      "materials": [{"pbrMetallicRoughness": {"baseColorFactor": [0.2, 0.4, 0.6, 1]}}],
+      "meshes": [{"primitives": [{"attributes": {"POSITION": 0, "TEXCOORD_1": 1}, "material": 0}]}],
+      "cameras": [{"type": "perspective", "perspective": {"yfov": 0.8, "znear": 0.01}}],
+      "nodes": [
+        {"mesh": 0, "translation": [0, 0, 5]},
+        {"mesh": 0, "scale": [-2, 2, 2]},
+        {"camera": 0, "translation": [0, 0, 10]},
+        {"extensions": {"KHR_lights_punctual": {"light": 0}}, "translation": [0, 3, 0]}],
+      "scenes": [{"nodes": [0, 1, 2, 3]}],
+      "scene": 0
+    }"#;
+    write(dir, "tiny.gltf", json)
+}
+
+#[test]
+fn gltf_transforms_lights_cameras_and_lightmap_uvs() {
+    let dir = scratch("gltf-tiny");
+    let scene = prm_scene::load(&tiny_gltf(&dir)).unwrap();
+    assert_eq!(scene.triangles.len(), 2);
+    let t0 = &scene.triangles[0];
+    assert_eq!(t0.positions[1], Vec3::new(1.0, 0.0, 5.0), "translation applied");
+    let t1 = &scene.triangles[1];
+    assert!((t1.area() - 2.0).abs() < 1e-6, "scale 2 quadruples the area");
+    assert!(
+        t1.normal().z > 0.0,
+        "mirroring keeps the face pointing +Z (winding swapped)"
+    );
+    assert_eq!(scene.materials[t0.material as usize].albedo, Vec3::new(0.2, 0.4, 0.6));
+    let luv = scene.lightmap_uvs.as_ref().expect("TEXCOORD_1 becomes lightmap UVs");
+    assert_eq!(luv.len(), 2);
+    match scene.lights[0] {
+        prm_scene::Light::Spot {
+            position,
+            direction,
+            angle,
+            intensity,
+        } => {
+            assert_eq!(position, Vec3::new(0.0, 3.0, 0.0));
+            assert_eq!(direction, Vec3::NEG_Z);
+            assert!((angle - 0.5).abs() < 1e-6);
+            assert_eq!(intensity, Vec3::new(4.0, 2.0, 1.0));
+        }
+        other => panic!("expected a spot light, got {other:?}"),
+    }
+    assert_eq!(scene.cameras[0].eye, Vec3::new(0.0, 0.0, 10.0));
+    assert!((scene.cameras[0].fov_y_deg - 0.8f32.to_degrees()).abs() < 1e-4);
+    // The file's lightmap UVs are used as they are.
+    let atlas = Atlas::build(&scene, &AtlasParams::with_sizing(Sizing::Resolution(32))).unwrap();
+    assert!((atlas.uvs[0][1] - glam::Vec2::new(0.4, 0.1)).length() < 1e-6);
+    assert!(atlas.exits.len() > 10);
+
+    // The same file as a binary .glb (JSON chunk only; the buffer stays external).
+    let text = std::fs::read_to_string(dir.join("tiny.gltf")).unwrap();
+    let mut json = text.into_bytes();
+    while json.len() % 4 != 0 {
+        json.push(b' ');
+    }
+    let mut glb = Vec::new();
+    glb.extend_from_slice(b"glTF");
+    glb.extend_from_slice(&2u32.to_le_bytes());
+    glb.extend_from_slice(&(12 + 8 + json.len() as u32).to_le_bytes());
+    glb.extend_from_slice(&(json.len() as u32).to_le_bytes());
+    glb.extend_from_slice(b"JSON");
+    glb.extend_from_slice(&json);
+    std::fs::write(dir.join("tiny.glb"), glb).unwrap();
+    let from_glb = prm_scene::load(&dir.join("tiny.glb")).unwrap();
+    assert_eq!(from_glb.fingerprint(), scene.fingerprint());
+}
+
+#[test]
+fn fingerprint_tracks_geometry_only() {
+    let a = load("scenes/cornell-box/cornell-box.obj");
+    let mut b = a.clone();
+    b.materials[0].albedo = Vec3::ONE;
+    assert_eq!(a.fingerprint(), b.fingerprint());
+    b.triangles[3].positions[0].x += 1e-4;
+    assert_ne!(a.fingerprint(), b.fingerprint());
+}
