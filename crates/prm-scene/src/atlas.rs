@@ -168,30 +168,54 @@ impl Atlas {
     fn generate(scene: &Scene, params: &AtlasParams) -> Result<Atlas, SceneError> {
         let charts = make_charts(scene, params.chart_angle_deg.to_radians().cos());
         let g = params.gutter as f32;
-        let (resolution, scale, cells) = match params.sizing {
+        // Small charts are scaled up (boost 1) unless that costs the rest of the atlas more than
+        // a fifth of its texel density (or, at a fixed texel size, a quarter more resolution);
+        // then half, a quarter, and finally no boost.
+        let plain = Lay { gutter: g, boost: 0.0 };
+        let (resolution, scale, cells, lay) = match params.sizing {
             Sizing::TexelSize(s) => {
                 let scale = 1.0 / s;
-                let r = fit_resolution(&charts, scale, g)?;
-                let cells = pack(&charts, scale, g, r).expect("fit_resolution found a fitting size");
-                (r, scale, cells)
+                let r0 = fit_resolution(&charts, scale, plain)?;
+                let mut chosen = (r0, plain);
+                for boost in [1.0, 0.5, 0.25] {
+                    let lay = Lay { gutter: g, boost };
+                    let r = fit_resolution(&charts, scale, lay)?;
+                    if r as f32 <= 1.25 * r0 as f32 {
+                        chosen = (r, lay);
+                        break;
+                    }
+                }
+                let (r, lay) = chosen;
+                let cells = pack(&charts, scale, lay, r).expect("fit_resolution found a fitting size");
+                (r, scale, cells, lay)
             }
-            Sizing::Resolution(r) => {
-                let (scale, cells) = fit_scale(&charts, g, r)?;
-                (r, scale, cells)
-            }
-            Sizing::Auto => {
-                let r = auto_resolution(scene.triangles.len());
-                let (scale, cells) = fit_scale(&charts, g, r)?;
-                (r, scale, cells)
+            Sizing::Resolution(_) | Sizing::Auto => {
+                let r = match params.sizing {
+                    Sizing::Resolution(r) => r,
+                    _ => auto_resolution(scene.triangles.len()),
+                };
+                let (s0, cells0) = fit_scale(&charts, plain, r)?;
+                let mut chosen = (s0, cells0, plain);
+                for boost in [1.0, 0.5, 0.25] {
+                    let lay = Lay { gutter: g, boost };
+                    if let Ok((s, cells)) = fit_scale(&charts, lay, r) {
+                        if s >= 0.8 * s0 {
+                            chosen = (s, cells, lay);
+                            break;
+                        }
+                    }
+                }
+                let (s, cells, lay) = chosen;
+                (r, s, cells, lay)
             }
         };
         let mut uvs = vec![[Vec2::ZERO; 3]; scene.triangles.len()];
         let mut chart_of_triangle = vec![0u32; scene.triangles.len()];
         for (ci, (chart, origin)) in charts.iter().zip(&cells).enumerate() {
-            let cs = chart_scale(chart, scale);
+            let cs = chart_scale(chart, scale, lay);
             let size = (chart.max - chart.min) * cs;
             // Centre the chart in its whole-texel footprint, `gutter` texels in from the cell edge.
-            let pad = (footprint(chart, scale) - size) * 0.5;
+            let pad = (footprint(chart, scale, lay) - size) * 0.5;
             let offset = *origin + Vec2::splat(g) + pad;
             for (&t, corners) in chart.triangles.iter().zip(&chart.corners) {
                 uvs[t as usize] = corners.map(|c| ((c - chart.min) * cs + offset) / resolution as f32);
@@ -401,6 +425,13 @@ fn make_charts(scene: &Scene, cos_max: f32) -> Vec<Chart> {
     charts
 }
 
+/// Gutter (texels per side) and how strongly small charts are scaled up (0: not at all).
+#[derive(Clone, Copy, Debug)]
+struct Lay {
+    gutter: f32,
+    boost: f32,
+}
+
 /// Shortest side, in texels, that a chart of several triangles is scaled up to (at most
 /// [`MAX_BOOST`] times), so that each of its triangles can own a texel centre: 2 texels, and
 /// 2·√k for a chart of k triangles (a fan of k wedges needs a ring of texels around its hub).
@@ -412,11 +443,11 @@ const MAX_BOOST: f32 = 64.0;
 
 /// Texels per scene unit for `chart` when the atlas has `scale`: small multi-triangle charts get
 /// more, so that thin parts (chair legs, mouldings) keep one texel per triangle.
-fn chart_scale(chart: &Chart, scale: f32) -> f32 {
+fn chart_scale(chart: &Chart, scale: f32, lay: Lay) -> f32 {
     let short = (chart.max - chart.min).min_element() * scale;
     let long = (chart.max - chart.min).max_element() * scale;
-    let min = min_chart_texels(chart.triangles.len());
-    if chart.triangles.len() < 2 || short >= min {
+    let min = min_chart_texels(chart.triangles.len()) * lay.boost;
+    if chart.triangles.len() < 2 || short >= min || lay.boost <= 0.0 {
         return scale;
     }
     // Slivers stop growing once their long side reaches four times the minimum.
@@ -434,20 +465,20 @@ fn chart_scale(chart: &Chart, scale: f32) -> f32 {
 }
 
 /// Size in texels of a chart's footprint (whole texels, at least one).
-fn footprint(chart: &Chart, scale: f32) -> Vec2 {
-    ((chart.max - chart.min) * chart_scale(chart, scale))
+fn footprint(chart: &Chart, scale: f32, lay: Lay) -> Vec2 {
+    ((chart.max - chart.min) * chart_scale(chart, scale, lay))
         .ceil()
         .max(Vec2::ONE)
 }
 
 /// Cell size of a chart in texels at `scale` texels per scene unit: footprint plus gutters.
-fn cell_size(chart: &Chart, scale: f32, g: f32) -> Vec2 {
-    footprint(chart, scale) + Vec2::splat(2.0 * g)
+fn cell_size(chart: &Chart, scale: f32, lay: Lay) -> Vec2 {
+    footprint(chart, scale, lay) + Vec2::splat(2.0 * lay.gutter)
 }
 
 /// Shelf packing into a `r × r` square; the cell origin of every chart, or `None` when it overflows.
-fn pack(charts: &[Chart], scale: f32, g: f32, r: u32) -> Option<Vec<Vec2>> {
-    let sizes: Vec<Vec2> = charts.iter().map(|c| cell_size(c, scale, g)).collect();
+fn pack(charts: &[Chart], scale: f32, lay: Lay, r: u32) -> Option<Vec<Vec2>> {
+    let sizes: Vec<Vec2> = charts.iter().map(|c| cell_size(c, scale, lay)).collect();
     let mut order: Vec<usize> = (0..charts.len()).collect();
     order.sort_by(|&a, &b| {
         sizes[b]
@@ -480,8 +511,9 @@ fn pack(charts: &[Chart], scale: f32, g: f32, r: u32) -> Option<Vec<Vec2>> {
 }
 
 /// The largest scale (texels per scene unit) whose packing fits `r × r`.
-fn fit_scale(charts: &[Chart], g: f32, r: u32) -> Result<(f32, Vec<Vec2>), SceneError> {
-    let Some(mut best) = pack(charts, 0.0, g, r) else {
+fn fit_scale(charts: &[Chart], lay: Lay, r: u32) -> Result<(f32, Vec<Vec2>), SceneError> {
+    let g = lay.gutter;
+    let Some(mut best) = pack(charts, 0.0, lay, r) else {
         let min_side = ((charts.len() as f64).sqrt() * (1.0 + 2.0 * g as f64)).ceil();
         return Err(SceneError::Atlas(format!(
             "resolution {r} cannot hold {} charts even at one texel each (with gutters); use a resolution of at least about {min_side}",
@@ -505,7 +537,7 @@ fn fit_scale(charts: &[Chart], g: f32, r: u32) -> Result<(f32, Vec<Vec2>), Scene
     }
     for _ in 0..40 {
         let mid = 0.5 * (lo + hi);
-        match pack(charts, mid, g, r) {
+        match pack(charts, mid, lay, r) {
             Some(cells) => {
                 lo = mid;
                 best = cells;
@@ -522,10 +554,10 @@ fn fit_scale(charts: &[Chart], g: f32, r: u32) -> Result<(f32, Vec<Vec2>), Scene
 }
 
 /// The smallest multiple-of-8 resolution whose packing at `scale` fits.
-fn fit_resolution(charts: &[Chart], scale: f32, g: f32) -> Result<u32, SceneError> {
+fn fit_resolution(charts: &[Chart], scale: f32, lay: Lay) -> Result<u32, SceneError> {
     let area: f64 = charts
         .iter()
-        .map(|c| (cell_size(c, scale, g).x * cell_size(c, scale, g).y) as f64)
+        .map(|c| (cell_size(c, scale, lay).x * cell_size(c, scale, lay).y) as f64)
         .sum();
     let mut r = ((area.sqrt() / 8.0).ceil() as u32 * 8).max(8);
     loop {
@@ -535,7 +567,7 @@ fn fit_resolution(charts: &[Chart], scale: f32, g: f32) -> Result<u32, SceneErro
                 1.0 / scale
             )));
         }
-        if pack(charts, scale, g, r).is_some() {
+        if pack(charts, scale, lay, r).is_some() {
             return Ok(r);
         }
         r = ((r as f32 * 1.03) as u32 / 8 + 1) * 8;
@@ -601,6 +633,10 @@ fn overlaps_texel(t: &[Vec2; 3], x: f32, y: f32) -> bool {
     for i in 0..3 {
         let e = t[(i + 1) % 3] - t[i];
         let axis = Vec2::new(-e.y, e.x);
+        if axis == Vec2::ZERO {
+            // A collapsed edge separates nothing.
+            continue;
+        }
         let tri_proj = t.map(|p| p.dot(axis));
         let (tmin, tmax) = (
             tri_proj.iter().copied().fold(f32::INFINITY, f32::min),

@@ -17,7 +17,6 @@ pub(crate) fn load(path: &Path) -> Result<Scene, SceneError> {
         single_index: true,
         ignore_points: true,
         ignore_lines: true,
-        ..Default::default()
     };
     let (models, materials) = match tobj::load_obj(path, &options) {
         Ok(r) => r,

@@ -222,7 +222,7 @@ impl Scene {
     /// missing (zero) or point away from the geometric normal are replaced or flipped.
     pub(crate) fn push_triangle(&mut self, mut t: Triangle, area_eps: f32) -> bool {
         let area = t.area();
-        if !(area > area_eps) {
+        if area.is_nan() || area <= area_eps {
             self.report.degenerate_dropped += 1;
             return false;
         }
