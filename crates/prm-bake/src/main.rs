@@ -1,6 +1,7 @@
 //! `prm-bake`: bakes Precomputed Radiance Maps and inspects scenes and archives.
 
 mod atlas;
+mod dump;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
@@ -23,12 +24,17 @@ enum Command {
     ///
     /// Example: prm-bake atlas scenes/cornell-box/cornell-box.obj --resolution 256 --png charts.png
     Atlas(atlas::AtlasArgs),
+    /// Inspect a .prm archive: summary, JSON, full verification or EXR export of its panes.
+    ///
+    /// Exit status 0 when the archive is good, 1 when it is damaged or the arguments are wrong.
+    Dump(dump::DumpArgs),
 }
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match &cli.command {
         Command::Atlas(args) => atlas::run(args),
+        Command::Dump(args) => dump::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -1,1 +1,36 @@
-//! placeholder
+//! Reader and writer of `.prm` Precomputed Radiance Map archives (format v1).
+//!
+//! An archive holds the lightmap atlas of a scene, its entry points and
+//! their clusters, and one *pane* per cluster: the indirect irradiance at
+//! every atlas texel, stored as RGB9E5 texels in independently zstd-compressed
+//! tiles. The byte layout is specified in `formats/prm.md`.
+//!
+//! * [`ArchiveWriter`] streams panes tile by tile into a temporary file and
+//!   renames it into place atomically.
+//! * [`Archive`] opens an archive from a path, a byte slice or any
+//!   `Read + Seek`, validates it as it goes and reads panes on demand;
+//!   [`Archive::verify`] checks everything.
+//! * [`encode_rgb9e5`] / [`decode_rgb9e5`] implement the texel encoding,
+//!   bit-exact with WebGPU's `rgb9e5ufloat`.
+#![warn(missing_docs)]
+
+mod error;
+mod filter;
+mod layout;
+mod metadata;
+mod reader;
+mod rgb9e5;
+mod sections;
+mod writer;
+
+pub use error::{Error, Result};
+pub use filter::TileFilter;
+pub use layout::{checksum, compression, kind, limits, MAGIC, VERSION_MAJOR, VERSION_MINOR};
+pub use metadata::{Generator, Metadata, Units};
+pub use reader::{pane_energy_peak, Archive, ArchiveInfo, SectionInfo, VerifyReport};
+pub use rgb9e5::{
+    decode_rgb9e5, decode_rgb9e5_slice, encode_rgb9e5, encode_rgb9e5_slice, RGB9E5_MAX, RGB9E5_MAX_RELATIVE_ERROR,
+    RGB9E5_MIN_ABS_ERROR, RGB9E5_MIN_NORMAL, RGB9E5_NAME,
+};
+pub use sections::{AtlasSection, Cluster, Entry};
+pub use writer::{ArchiveWriter, WriterOptions};

@@ -1,0 +1,506 @@
+//! `prm-bake dump`: summarise, verify and export the panes of a `.prm` archive.
+
+use std::io::{Read, Seek, Write};
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result};
+use prm_format::{compression, Archive, VerifyReport};
+use serde_json::{json, Value};
+
+/// Arguments of `prm-bake dump`.
+#[derive(clap::Args, Debug, Clone)]
+pub struct DumpArgs {
+    /// The `.prm` archive to inspect.
+    pub file: PathBuf,
+    /// Print one JSON object (keys documented in formats/prm.md §10) instead
+    /// of the readable summary.
+    #[arg(long)]
+    pub json: bool,
+    /// Decompress everything and check every checksum; fails naming the
+    /// damaged structure.
+    #[arg(long)]
+    pub verify: bool,
+    /// Write one EXR per pane (pane_00000.exr, …) and overview.exr, all
+    /// panes tiled in a grid, into DIR (created if missing).
+    #[arg(long, value_name = "DIR")]
+    pub export_exr: Option<PathBuf>,
+}
+
+/// Runs `prm-bake dump`.
+pub fn run(args: &DumpArgs) -> Result<()> {
+    let mut archive =
+        Archive::open(&args.file).with_context(|| format!("cannot open archive {}", args.file.display()))?;
+    let report = if args.verify {
+        Some(
+            archive
+                .verify()
+                .with_context(|| format!("{} failed verification", args.file.display()))?,
+        )
+    } else {
+        None
+    };
+    let printed = {
+        let stdout = std::io::stdout();
+        let mut out = stdout.lock();
+        if args.json {
+            let v = summary_json(&archive, &args.file, report.as_ref());
+            serde_json::to_writer_pretty(&mut out, &v)
+                .map_err(std::io::Error::from)
+                .and_then(|()| writeln!(out))
+        } else {
+            write_summary(&mut out, &archive, &args.file, report.as_ref())
+        }
+        .and_then(|()| out.flush())
+    };
+    match printed {
+        // e.g. `prm-bake dump x.prm | head`: not an error worth reporting
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => {}
+        r => r.context("cannot write to stdout")?,
+    }
+    if let Some(dir) = &args.export_exr {
+        let n = export_exr(&mut archive, dir)?;
+        eprintln!("wrote {n} pane EXR files and overview.exr to {}", dir.display());
+    }
+    Ok(())
+}
+
+fn hex(v: u64) -> String {
+    format!("{v:016x}")
+}
+
+fn human_bytes(n: u64) -> String {
+    const UNITS: [&str; 5] = ["B", "KiB", "MiB", "GiB", "TiB"];
+    let mut v = n as f64;
+    let mut u = 0;
+    while v >= 1024.0 && u + 1 < UNITS.len() {
+        v /= 1024.0;
+        u += 1;
+    }
+    if u == 0 {
+        format!("{n} B")
+    } else {
+        format!("{v:.2} {}", UNITS[u])
+    }
+}
+
+/// Five significant digits, fixed-point where readable.
+fn num(v: f32) -> String {
+    let a = v.abs();
+    if a == 0.0 {
+        "0".into()
+    } else if (1e-3..1e6).contains(&a) {
+        let decimals = (4 - a.log10().floor() as i32).max(0) as usize;
+        format!("{v:.decimals$}")
+    } else {
+        format!("{v:.4e}")
+    }
+}
+
+fn ratio(raw: u64, stored: u64) -> f64 {
+    if stored == 0 {
+        0.0
+    } else {
+        raw as f64 / stored as f64
+    }
+}
+
+/// The `--json` object (formats/prm.md §10).
+pub fn summary_json<R: Read + Seek>(archive: &Archive<R>, file: &Path, report: Option<&VerifyReport>) -> Value {
+    let info = archive.info();
+    let meta = archive.metadata();
+    let atlas = archive.atlas();
+    let sections: Vec<Value> = info
+        .sections
+        .iter()
+        .map(|s| {
+            json!({
+                "kind": s.kind,
+                "name": s.name,
+                "compression": compression::name(s.compression),
+                "offset": s.offset,
+                "stored_size": s.stored_size,
+                "raw_size": s.raw_size,
+                "checksum": hex(s.checksum),
+            })
+        })
+        .collect();
+    let panes: Vec<Value> = archive
+        .clusters()
+        .iter()
+        .enumerate()
+        .map(|(i, c)| json!({"index": i, "entries": c.count, "energy": c.energy, "peak": c.peak}))
+        .collect();
+    let total_tiles = info.tiles_per_pane * u64::from(info.pane_count);
+    let mut v = json!({
+        "file": file.display().to_string(),
+        "version": format!("{}.{}", info.major, info.minor),
+        "file_length": info.file_length,
+        "sections": sections,
+        "generator": meta.generator,
+        "params": meta.params,
+        "seed": meta.seed,
+        "timings": meta.timings,
+        "units": meta.units,
+        "source_scene": meta.source_scene,
+        "scene_fingerprint": hex(meta.scene_fingerprint),
+        "texel_encoding": meta.texel_encoding,
+        "texel_relative_error_bound": meta.texel_relative_error_bound,
+        "resolution": atlas.resolution,
+        "tile_size": atlas.tile_size,
+        "triangles": atlas.triangle_uvs.len(),
+        "covered_texels": atlas.covered_texels(),
+        "entries": archive.entries().len(),
+        "clusters": archive.clusters().len(),
+        "tiles": {
+            "filter": archive.tile_filter().name(),
+            "per_pane": info.tiles_per_pane,
+            "stored": info.stored_tiles,
+            "omitted": total_tiles - info.stored_tiles,
+            "stored_bytes": info.stored_tile_bytes,
+            "texel_bytes": info.pane_texel_bytes,
+        },
+        "panes": panes,
+    });
+    if let Some(r) = report {
+        v["verify"] = json!({
+            "ok": true,
+            "sections": r.sections,
+            "panes": r.panes,
+            "stored_tiles": r.stored_tiles,
+            "omitted_tiles": r.omitted_tiles,
+            "bytes_hashed": r.bytes_hashed,
+        });
+    }
+    v
+}
+
+/// The readable summary.
+pub fn write_summary<W: Write, R: Read + Seek>(
+    out: &mut W,
+    archive: &Archive<R>,
+    file: &Path,
+    report: Option<&VerifyReport>,
+) -> std::io::Result<()> {
+    let info = archive.info();
+    let meta = archive.metadata();
+    let atlas = archive.atlas();
+    let texels = u64::from(atlas.resolution) * u64::from(atlas.resolution);
+    let covered = atlas.covered_texels();
+    writeln!(out, "archive      {}", file.display())?;
+    writeln!(
+        out,
+        "format       .prm {}.{}, {} ({} bytes)",
+        info.major,
+        info.minor,
+        human_bytes(info.file_length),
+        info.file_length
+    )?;
+    writeln!(out, "generator    {} {}", meta.generator.name, meta.generator.version)?;
+    writeln!(
+        out,
+        "scene        {} (fingerprint {})",
+        if meta.source_scene.is_empty() {
+            "-"
+        } else {
+            &meta.source_scene
+        },
+        hex(meta.scene_fingerprint)
+    )?;
+    writeln!(out, "seed         {}", meta.seed)?;
+    writeln!(
+        out,
+        "units        length {}, irradiance {}",
+        meta.units.length, meta.units.irradiance
+    )?;
+    writeln!(
+        out,
+        "encoding     {} (largest-channel relative error <= {:.3e})",
+        meta.texel_encoding, meta.texel_relative_error_bound
+    )?;
+    writeln!(
+        out,
+        "atlas        {r}x{r} texels, tiles {t}x{t} ({} per pane), {} triangles, {covered} covered texels ({:.1}%)",
+        info.tiles_per_pane,
+        atlas.triangle_uvs.len(),
+        100.0 * covered as f64 / texels.max(1) as f64,
+        r = atlas.resolution,
+        t = atlas.tile_size,
+    )?;
+    writeln!(out, "entries      {}", archive.entries().len())?;
+    writeln!(out, "clusters     {} (one pane each)", archive.clusters().len())?;
+
+    writeln!(out, "\nsections")?;
+    let w = info.sections.iter().map(|s| s.name.len()).max().unwrap_or(0).max(8);
+    writeln!(
+        out,
+        "  {:<w$} {:<6} {:>12} {:>12} {:>12} {:>8}  checksum",
+        "name", "codec", "offset", "stored", "raw", "ratio"
+    )?;
+    for s in &info.sections {
+        writeln!(
+            out,
+            "  {:<w$} {:<6} {:>12} {:>12} {:>12} {:>8.2}  {}",
+            s.name,
+            compression::name(s.compression),
+            s.offset,
+            s.stored_size,
+            s.raw_size,
+            ratio(s.raw_size, s.stored_size),
+            hex(s.checksum)
+        )?;
+    }
+    let total_tiles = info.tiles_per_pane * u64::from(info.pane_count);
+    writeln!(
+        out,
+        "  pane tiles: {} of {} stored ({:.1}%), {} compressed ({} filter + zstd) from {} of RGB9E5 texels (ratio {:.2})",
+        info.stored_tiles,
+        total_tiles,
+        100.0 * info.stored_tiles as f64 / total_tiles.max(1) as f64,
+        human_bytes(info.stored_tile_bytes),
+        archive.tile_filter().name(),
+        human_bytes(info.pane_texel_bytes),
+        ratio(info.pane_texel_bytes, info.stored_tile_bytes)
+    )?;
+
+    writeln!(out, "\nbake parameters")?;
+    if meta.params.is_empty() {
+        writeln!(out, "  (none)")?;
+    }
+    for (k, v) in &meta.params {
+        writeln!(out, "  {k} = {v}")?;
+    }
+    writeln!(out, "\ntimings")?;
+    if meta.timings.is_empty() {
+        writeln!(out, "  (none)")?;
+    }
+    let mut total = 0.0;
+    for (k, v) in &meta.timings {
+        writeln!(out, "  {k:<20} {v:>10.3} s")?;
+        total += v;
+    }
+    if meta.timings.len() > 1 {
+        writeln!(out, "  {:<20} {total:>10.3} s", "(sum)")?;
+    }
+
+    writeln!(out, "\npanes")?;
+    writeln!(
+        out,
+        "  {:>6} {:>7}  {:>32}  {:>32}",
+        "pane", "entries", "energy (r g b)", "peak (r g b)"
+    )?;
+    for (i, c) in archive.clusters().iter().enumerate() {
+        let e = c.energy.map(num);
+        let p = c.peak.map(num);
+        writeln!(
+            out,
+            "  {i:>6} {:>7}  {:>10} {:>10} {:>10}  {:>10} {:>10} {:>10}",
+            c.count, e[0], e[1], e[2], p[0], p[1], p[2]
+        )?;
+    }
+    if let Some(r) = report {
+        writeln!(
+            out,
+            "\nverify       OK: {} sections ({}) hashed, {} panes decoded, {} tiles decompressed, {} omitted, cluster energy/peak match",
+            r.sections,
+            human_bytes(r.bytes_hashed),
+            r.panes,
+            r.stored_tiles,
+            r.omitted_tiles
+        )?;
+    }
+    Ok(())
+}
+
+/// Largest side of the overview image, in pixels.
+const OVERVIEW_MAX_SIDE: usize = 4096;
+
+/// Writes `pane_NNNNN.exr` for every pane and `overview.exr` with all panes
+/// in a grid (each cell box-filtered down so the overview's width stays
+/// within 4096 pixels). Returns the number of panes written.
+pub fn export_exr<R: Read + Seek>(archive: &mut Archive<R>, dir: &Path) -> Result<usize> {
+    std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    let res = archive.atlas().resolution as usize;
+    let n = archive.pane_count();
+    let cols = (n as f64).sqrt().ceil().max(1.0) as usize;
+    let rows = n.div_ceil(cols).max(1);
+    let cell = res.min((OVERVIEW_MAX_SIDE / cols).max(1));
+    let (width, height) = (cols * cell, rows * cell);
+    let mut overview = vec![[0f32; 3]; width * height];
+    for p in 0..n {
+        let pane = archive.read_pane(p).with_context(|| format!("cannot read pane {p}"))?;
+        let path = dir.join(format!("pane_{p:05}.exr"));
+        exr::prelude::write_rgb_file(&path, res, res, |x, y| {
+            let t = pane[y * res + x];
+            (t[0], t[1], t[2])
+        })
+        .with_context(|| format!("cannot write {}", path.display()))?;
+        let (ox, oy) = ((p % cols) * cell, (p / cols) * cell);
+        for v in 0..cell {
+            let (y0, y1) = (v * res / cell, ((v + 1) * res / cell).max(v * res / cell + 1));
+            for u in 0..cell {
+                let (x0, x1) = (u * res / cell, ((u + 1) * res / cell).max(u * res / cell + 1));
+                let mut sum = [0f64; 3];
+                for y in y0..y1 {
+                    for t in &pane[y * res + x0..y * res + x1] {
+                        for c in 0..3 {
+                            sum[c] += f64::from(t[c]);
+                        }
+                    }
+                }
+                let k = ((y1 - y0) * (x1 - x0)) as f64;
+                overview[(oy + v) * width + ox + u] = sum.map(|s| (s / k) as f32);
+            }
+        }
+    }
+    if n > 0 {
+        let path = dir.join("overview.exr");
+        exr::prelude::write_rgb_file(&path, width, height, |x, y| {
+            let t = overview[y * width + x];
+            (t[0], t[1], t[2])
+        })
+        .with_context(|| format!("cannot write {}", path.display()))?;
+    }
+    Ok(n)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use prm_format::{ArchiveWriter, AtlasSection, Cluster, Entry, Metadata};
+
+    fn temp_dir(name: &str) -> PathBuf {
+        let d = std::env::temp_dir().join(format!("prm-bake-dump-{}-{name}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).unwrap();
+        d
+    }
+
+    fn write_archive(path: &Path) {
+        let mut meta = Metadata::new("dump-test", "1.0");
+        meta.params.insert("bounces".into(), 2.into());
+        meta.timings.insert("trace".into(), 3.5);
+        meta.timings.insert("compress".into(), 0.25);
+        meta.scene_fingerprint = 0xfeed;
+        let atlas = AtlasSection::new(8, 4);
+        let entries = vec![
+            Entry {
+                position: [0.0; 3],
+                normal: [0.0, 0.0, 1.0],
+                cluster: 0,
+            },
+            Entry {
+                position: [1.0; 3],
+                normal: [0.0, 0.0, 1.0],
+                cluster: 1,
+            },
+        ];
+        let clusters = vec![
+            Cluster::new(0, 1, [0.0; 3], [0.0, 0.0, 1.0]),
+            Cluster::new(1, 1, [1.0; 3], [0.0, 0.0, 1.0]),
+            Cluster::new(2, 0, [0.0; 3], [0.0, 0.0, 1.0]),
+        ];
+        let mut w = ArchiveWriter::create(path, meta, &atlas, &entries, &clusters).unwrap();
+        for p in 0..3 {
+            w.add_pane_with(|tx, ty, tile| {
+                if (tx + ty) % 2 == 0 {
+                    tile.fill([p as f32, 0.5, 0.25]);
+                }
+            })
+            .unwrap();
+        }
+        w.finish().unwrap();
+    }
+
+    #[test]
+    fn numbers_are_readable() {
+        assert_eq!(num(0.0), "0");
+        assert_eq!(num(1.0), "1.0000");
+        assert_eq!(num(31.511), "31.511");
+        assert_eq!(num(70960.0), "70960");
+        assert_eq!(num(0.0012345), "0.0012345");
+        assert_eq!(num(2.5e7), "2.5000e7");
+        assert_eq!(num(1e-5), "1.0000e-5");
+    }
+
+    #[test]
+    fn json_summary_has_documented_keys() {
+        let dir = temp_dir("json");
+        let path = dir.join("a.prm");
+        write_archive(&path);
+        let mut a = Archive::open(&path).unwrap();
+        let report = a.verify().unwrap();
+        let v = summary_json(&a, &path, Some(&report));
+        assert_eq!(v["version"], "1.0");
+        assert_eq!(v["entries"], 2);
+        assert_eq!(v["clusters"], 3);
+        assert_eq!(v["resolution"], 8);
+        assert_eq!(v["sections"].as_array().unwrap().len(), 5);
+        assert_eq!(v["params"]["bounces"], 2);
+        assert_eq!(v["timings"]["trace"], 3.5);
+        assert_eq!(v["scene_fingerprint"], "000000000000feed");
+        assert_eq!(v["tiles"]["filter"], "delta-shuffle");
+        assert_eq!(v["tiles"]["stored"], 6); // 2 of 4 tiles per pane
+        assert_eq!(v["panes"][1]["peak"][0], 1.0);
+        assert_eq!(v["verify"]["panes"], 3);
+
+        let mut text = Vec::new();
+        write_summary(&mut text, &a, &path, Some(&report)).unwrap();
+        let text = String::from_utf8(text).unwrap();
+        for needle in [
+            "format       .prm 1.0",
+            "bounces = 2",
+            "trace",
+            "clusters     3",
+            "verify       OK",
+        ] {
+            assert!(text.contains(needle), "missing {needle:?} in\n{text}");
+        }
+        std::fs::remove_dir_all(dir).unwrap();
+    }
+
+    #[test]
+    fn verify_names_the_damage() {
+        let dir = temp_dir("verify");
+        let path = dir.join("a.prm");
+        write_archive(&path);
+        let mut bytes = std::fs::read(&path).unwrap();
+        // damage the first stored tile: the panes section follows atlas and entries
+        let a = Archive::open(&path).unwrap();
+        let panes = a.info().sections.iter().find(|s| s.name == "panes").unwrap();
+        let at = (panes.offset + panes.stored_size - 3) as usize;
+        bytes[at] ^= 0x40;
+        let bad = dir.join("bad.prm");
+        std::fs::write(&bad, &bytes).unwrap();
+        let args = DumpArgs {
+            file: bad.clone(),
+            json: true,
+            verify: true,
+            export_exr: None,
+        };
+        let err = format!("{:#}", run(&args).unwrap_err());
+        assert!(
+            err.contains("failed verification") && err.contains("checksum mismatch"),
+            "{err}"
+        );
+        let missing = DumpArgs {
+            file: dir.join("missing.prm"),
+            ..args
+        };
+        assert!(format!("{:#}", run(&missing).unwrap_err()).contains("cannot open archive"));
+        std::fs::remove_dir_all(dir).unwrap();
+    }
+
+    #[test]
+    fn exports_one_exr_per_pane_and_an_overview() {
+        let dir = temp_dir("exr");
+        let path = dir.join("a.prm");
+        write_archive(&path);
+        let out = dir.join("exr");
+        let mut a = Archive::open(&path).unwrap();
+        assert_eq!(export_exr(&mut a, &out).unwrap(), 3);
+        for f in ["pane_00000.exr", "pane_00001.exr", "pane_00002.exr", "overview.exr"] {
+            assert!(out.join(f).metadata().unwrap().len() > 0, "{f}");
+        }
+        std::fs::remove_dir_all(dir).unwrap();
+    }
+}

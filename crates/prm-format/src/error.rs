@@ -1,0 +1,79 @@
+//! The error type shared by the archive reader and writer.
+
+/// Everything that can go wrong reading or writing a `.prm` archive.
+///
+/// The variants keep apart the causes a caller may want to react to
+/// differently: an I/O failure, a file that ends too early, a file that is
+/// not an archive at all, an archive of a newer major version, damaged bytes
+/// (checksum), a damaged compressed stream, and bytes that are intact but
+/// describe something impossible.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum Error {
+    /// An operating-system level read, write, rename or sync failed.
+    #[error("I/O error: {0}")]
+    Io(#[from] std::io::Error),
+    /// The file ends before a structure it declares.
+    #[error("archive is truncated: {what}")]
+    Truncated {
+        /// What was being read when the data ran out.
+        what: String,
+    },
+    /// The first eight bytes are not the `.prm` magic.
+    #[error("not a .prm archive (bad magic bytes)")]
+    BadMagic,
+    /// The archive's major version is not one this library reads.
+    #[error(
+        "unsupported .prm version {major}.{minor}: this reader supports major version {}",
+        crate::VERSION_MAJOR
+    )]
+    UnsupportedVersion {
+        /// Major version found in the file.
+        major: u16,
+        /// Minor version found in the file.
+        minor: u16,
+    },
+    /// Stored bytes do not match their xxh3-64 checksum.
+    #[error("checksum mismatch in {section}")]
+    ChecksumMismatch {
+        /// The damaged structure, e.g. `"header"`, `"atlas"`, `"pane 3 tile (1, 0)"`.
+        section: String,
+    },
+    /// A zstd stream with a valid checksum failed to decompress or
+    /// decompressed to the wrong size.
+    #[error("cannot decompress {section}: {reason}")]
+    Decompress {
+        /// The structure being decompressed.
+        section: String,
+        /// What went wrong.
+        reason: String,
+    },
+    /// The bytes are intact but describe something the format forbids
+    /// (overlapping sections, out-of-range indices, sizes that disagree, …).
+    #[error("inconsistent archive: {what}")]
+    Inconsistent {
+        /// Description of the inconsistency.
+        what: String,
+    },
+    /// The writer was given data that cannot be stored (wrong pane size,
+    /// non-finite values, cluster ranges that do not tile the entries, …).
+    #[error("invalid input: {0}")]
+    InvalidInput(String),
+}
+
+/// `Result` with [`Error`].
+pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+impl Error {
+    pub(crate) fn truncated(what: impl Into<String>) -> Self {
+        Error::Truncated { what: what.into() }
+    }
+    pub(crate) fn inconsistent(what: impl Into<String>) -> Self {
+        Error::Inconsistent { what: what.into() }
+    }
+    pub(crate) fn checksum(section: impl Into<String>) -> Self {
+        Error::ChecksumMismatch {
+            section: section.into(),
+        }
+    }
+}

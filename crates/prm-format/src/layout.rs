@@ -1,0 +1,377 @@
+//! On-disk constants, limits and little-endian byte helpers of the v1 layout.
+
+use crate::error::{Error, Result};
+
+/// The eight magic bytes every archive starts with: `\x89PRM\r\n\x1a\n`.
+///
+/// Like PNG's signature, the high byte catches 7-bit transfers and the
+/// CR LF / ^Z / LF sequence catches newline translation.
+pub const MAGIC: [u8; 8] = *b"\x89PRM\r\n\x1a\n";
+
+/// Major version written by this library; a reader refuses any other major.
+pub const VERSION_MAJOR: u16 = 1;
+/// Minor version written by this library; a reader accepts every minor.
+pub const VERSION_MINOR: u16 = 0;
+
+/// Size of the fixed file header.
+pub const HEADER_SIZE: usize = 64;
+/// Size of one section table record.
+pub const SECTION_RECORD_SIZE: usize = 48;
+/// Size of the atlas section's fixed header.
+pub const ATLAS_HEADER_SIZE: usize = 16;
+/// Size of one entry record.
+pub const ENTRY_RECORD_SIZE: usize = 28;
+/// Size of one cluster record.
+pub const CLUSTER_RECORD_SIZE: usize = 56;
+/// Size of the panes section's fixed header.
+pub const PANES_HEADER_SIZE: usize = 32;
+/// Size of one tile index record.
+pub const TILE_RECORD_SIZE: usize = 24;
+/// Texel format code of RGB9E5 in the panes section header.
+pub const TEXEL_FORMAT_RGB9E5: u32 = 1;
+
+/// Section kind codes.
+pub mod kind {
+    /// JSON metadata.
+    pub const METADATA: u32 = 1;
+    /// Atlas layout: resolution, tiles, per-triangle UVs, coverage.
+    pub const ATLAS: u32 = 2;
+    /// Entry points.
+    pub const ENTRIES: u32 = 3;
+    /// Clusters of entry points.
+    pub const CLUSTERS: u32 = 4;
+    /// Tiled, per-tile compressed panes.
+    pub const PANES: u32 = 5;
+    /// First kind reserved for private extensions (never assigned by the spec).
+    pub const PRIVATE_FIRST: u32 = 0x8000_0000;
+
+    /// Human-readable name of a kind defined by v1, `None` for others.
+    pub fn name(kind: u32) -> Option<&'static str> {
+        match kind {
+            METADATA => Some("metadata"),
+            ATLAS => Some("atlas"),
+            ENTRIES => Some("entries"),
+            CLUSTERS => Some("clusters"),
+            PANES => Some("panes"),
+            _ => None,
+        }
+    }
+}
+
+/// Compression codes of the section table.
+pub mod compression {
+    /// Stored as is; `raw_size == stored_size`.
+    pub const NONE: u32 = 0;
+    /// One or more zstd frames.
+    pub const ZSTD: u32 = 1;
+
+    /// Human-readable name of a compression code.
+    pub fn name(code: u32) -> &'static str {
+        match code {
+            NONE => "none",
+            ZSTD => "zstd",
+            _ => "unknown",
+        }
+    }
+}
+
+/// Hard limits of format v1; archives beyond them are rejected, which bounds
+/// what a hostile file can make a reader allocate.
+pub mod limits {
+    /// Largest atlas resolution (texels per side).
+    pub const MAX_RESOLUTION: u32 = 8192;
+    /// Largest tile size (texels per side).
+    pub const MAX_TILE_SIZE: u32 = 1024;
+    /// Most triangles in the atlas section.
+    pub const MAX_TRIANGLES: u64 = 1 << 24;
+    /// Most entry points.
+    pub const MAX_ENTRIES: u64 = 1 << 24;
+    /// Most clusters (and therefore panes).
+    pub const MAX_CLUSTERS: u64 = 1 << 20;
+    /// Largest raw metadata JSON, in bytes.
+    pub const MAX_METADATA_BYTES: u64 = 16 << 20;
+    /// Most records in the section table.
+    pub const MAX_SECTIONS: u32 = 65_536;
+}
+
+/// xxh3-64 (seed 0, default secret) of `bytes`: the checksum used everywhere.
+#[inline]
+pub fn checksum(bytes: &[u8]) -> u64 {
+    xxhash_rust::xxh3::xxh3_64(bytes)
+}
+
+/// Bounds-checked little-endian cursor over a byte slice.
+pub(crate) struct Cursor<'a> {
+    data: &'a [u8],
+    pos: usize,
+    what: &'static str,
+}
+
+impl<'a> Cursor<'a> {
+    pub(crate) fn new(data: &'a [u8], what: &'static str) -> Self {
+        Cursor { data, pos: 0, what }
+    }
+
+    pub(crate) fn bytes(&mut self, n: usize) -> Result<&'a [u8]> {
+        let end = self
+            .pos
+            .checked_add(n)
+            .filter(|&e| e <= self.data.len())
+            .ok_or_else(|| Error::inconsistent(format!("{} record runs past its end", self.what)))?;
+        let s = &self.data[self.pos..end];
+        self.pos = end;
+        Ok(s)
+    }
+
+    pub(crate) fn array<const N: usize>(&mut self) -> Result<[u8; N]> {
+        let mut a = [0u8; N];
+        a.copy_from_slice(self.bytes(N)?);
+        Ok(a)
+    }
+
+    pub(crate) fn u16(&mut self) -> Result<u16> {
+        Ok(u16::from_le_bytes(self.array()?))
+    }
+    pub(crate) fn u32(&mut self) -> Result<u32> {
+        Ok(u32::from_le_bytes(self.array()?))
+    }
+    pub(crate) fn u64(&mut self) -> Result<u64> {
+        Ok(u64::from_le_bytes(self.array()?))
+    }
+    pub(crate) fn f32(&mut self) -> Result<f32> {
+        Ok(f32::from_le_bytes(self.array()?))
+    }
+    pub(crate) fn vec3(&mut self) -> Result<[f32; 3]> {
+        Ok([self.f32()?, self.f32()?, self.f32()?])
+    }
+}
+
+/// Little-endian appenders for building records.
+pub(crate) trait PutLe {
+    fn put_u16(&mut self, v: u16);
+    fn put_u32(&mut self, v: u32);
+    fn put_u64(&mut self, v: u64);
+    fn put_f32(&mut self, v: f32);
+    fn put_vec3(&mut self, v: [f32; 3]) {
+        for c in v {
+            self.put_f32(c);
+        }
+    }
+}
+
+impl PutLe for Vec<u8> {
+    fn put_u16(&mut self, v: u16) {
+        self.extend_from_slice(&v.to_le_bytes());
+    }
+    fn put_u32(&mut self, v: u32) {
+        self.extend_from_slice(&v.to_le_bytes());
+    }
+    fn put_u64(&mut self, v: u64) {
+        self.extend_from_slice(&v.to_le_bytes());
+    }
+    fn put_f32(&mut self, v: f32) {
+        self.extend_from_slice(&v.to_le_bytes());
+    }
+}
+
+/// The fixed 64-byte file header.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub(crate) struct Header {
+    pub major: u16,
+    pub minor: u16,
+    pub section_count: u32,
+    pub table_offset: u64,
+    pub file_length: u64,
+    pub reserved: [u64; 2],
+    pub table_checksum: u64,
+}
+
+impl Header {
+    pub(crate) fn encode(&self) -> Vec<u8> {
+        let mut b = Vec::with_capacity(HEADER_SIZE);
+        b.extend_from_slice(&MAGIC);
+        b.put_u16(self.major);
+        b.put_u16(self.minor);
+        b.put_u32(self.section_count);
+        b.put_u64(self.table_offset);
+        b.put_u64(self.file_length);
+        b.put_u64(self.reserved[0]);
+        b.put_u64(self.reserved[1]);
+        b.put_u64(self.table_checksum);
+        let sum = checksum(&b);
+        b.put_u64(sum);
+        b
+    }
+
+    /// Parses and checks a header: magic, then version, then checksum (the
+    /// version is checked first because another major may lay the header out
+    /// differently).
+    pub(crate) fn decode(b: &[u8]) -> Result<Header> {
+        let prefix = b.len().min(MAGIC.len());
+        if b[..prefix] != MAGIC[..prefix] {
+            return Err(Error::BadMagic);
+        }
+        if b.len() < HEADER_SIZE {
+            return Err(Error::truncated(format!(
+                "the file has {} bytes, the header alone needs {HEADER_SIZE}",
+                b.len()
+            )));
+        }
+        let mut c = Cursor::new(b, "header");
+        c.bytes(MAGIC.len())?;
+        let major = c.u16()?;
+        let minor = c.u16()?;
+        if major != VERSION_MAJOR {
+            return Err(Error::UnsupportedVersion { major, minor });
+        }
+        let h = Header {
+            major,
+            minor,
+            section_count: c.u32()?,
+            table_offset: c.u64()?,
+            file_length: c.u64()?,
+            reserved: [c.u64()?, c.u64()?],
+            table_checksum: c.u64()?,
+        };
+        let stored = c.u64()?;
+        if checksum(&b[..HEADER_SIZE - 8]) != stored {
+            return Err(Error::checksum("header"));
+        }
+        Ok(h)
+    }
+
+    /// Whether reserved fields must be zero: only for minors this library
+    /// knows (a later minor may give them a meaning).
+    // Always `==` while VERSION_MINOR is 0; `<=` is the rule for later minors.
+    #[allow(clippy::absurd_extreme_comparisons)]
+    pub(crate) fn strict_reserved(&self) -> bool {
+        self.minor <= VERSION_MINOR
+    }
+}
+
+/// One record of the section table as stored.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub(crate) struct SectionRecord {
+    pub kind: u32,
+    pub compression: u32,
+    pub offset: u64,
+    pub stored_size: u64,
+    pub raw_size: u64,
+    pub checksum: u64,
+    pub reserved: u64,
+}
+
+impl SectionRecord {
+    pub(crate) fn encode_into(&self, b: &mut Vec<u8>) {
+        b.put_u32(self.kind);
+        b.put_u32(self.compression);
+        b.put_u64(self.offset);
+        b.put_u64(self.stored_size);
+        b.put_u64(self.raw_size);
+        b.put_u64(self.checksum);
+        b.put_u64(self.reserved);
+    }
+
+    pub(crate) fn decode(c: &mut Cursor<'_>) -> Result<SectionRecord> {
+        Ok(SectionRecord {
+            kind: c.u32()?,
+            compression: c.u32()?,
+            offset: c.u64()?,
+            stored_size: c.u64()?,
+            raw_size: c.u64()?,
+            checksum: c.u64()?,
+            reserved: c.u64()?,
+        })
+    }
+}
+
+/// One record of the panes section's tile index.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub(crate) struct TileRecord {
+    /// Offset from the start of the panes section.
+    pub offset: u64,
+    /// Compressed size; 0 means the tile is omitted (all texels zero).
+    pub size: u32,
+    pub reserved: u32,
+    pub checksum: u64,
+}
+
+impl TileRecord {
+    pub(crate) fn encode_into(&self, b: &mut Vec<u8>) {
+        b.put_u64(self.offset);
+        b.put_u32(self.size);
+        b.put_u32(self.reserved);
+        b.put_u64(self.checksum);
+    }
+
+    pub(crate) fn decode(c: &mut Cursor<'_>) -> Result<TileRecord> {
+        Ok(TileRecord {
+            offset: c.u64()?,
+            size: c.u32()?,
+            reserved: c.u32()?,
+            checksum: c.u64()?,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn header_round_trip_and_checks() {
+        let h = Header {
+            major: 1,
+            minor: 0,
+            section_count: 5,
+            table_offset: 1000,
+            file_length: 1240,
+            reserved: [0, 0],
+            table_checksum: 42,
+        };
+        let b = h.encode();
+        assert_eq!(b.len(), HEADER_SIZE);
+        assert_eq!(Header::decode(&b).unwrap(), h);
+        let mut bad = b.clone();
+        bad[20] ^= 1;
+        assert!(matches!(Header::decode(&bad), Err(Error::ChecksumMismatch { .. })));
+        let mut bad = b.clone();
+        bad[0] = b'X';
+        assert!(matches!(Header::decode(&bad), Err(Error::BadMagic)));
+        assert!(matches!(Header::decode(&b[..30]), Err(Error::Truncated { .. })));
+        assert!(matches!(Header::decode(&b[..3]), Err(Error::Truncated { .. })));
+        let mut newer = b.clone();
+        newer[8] = 2;
+        assert!(matches!(
+            Header::decode(&newer),
+            Err(Error::UnsupportedVersion { major: 2, minor: 0 })
+        ));
+    }
+
+    #[test]
+    fn cursor_is_bounds_checked() {
+        let mut c = Cursor::new(&[1, 0, 0, 0, 5], "test");
+        assert_eq!(c.u32().unwrap(), 1);
+        assert!(c.u32().is_err());
+        assert!(c.bytes(usize::MAX).is_err());
+    }
+
+    #[test]
+    fn record_sizes_match_constants() {
+        let mut b = Vec::new();
+        SectionRecord {
+            kind: 1,
+            compression: 0,
+            offset: 0,
+            stored_size: 0,
+            raw_size: 0,
+            checksum: 0,
+            reserved: 0,
+        }
+        .encode_into(&mut b);
+        assert_eq!(b.len(), SECTION_RECORD_SIZE);
+        b.clear();
+        TileRecord::default().encode_into(&mut b);
+        assert_eq!(b.len(), TILE_RECORD_SIZE);
+    }
+}

@@ -1,0 +1,152 @@
+//! The JSON metadata section: provenance, bake parameters, timings, units.
+
+use std::collections::BTreeMap;
+
+use serde::{Deserialize, Serialize};
+
+use crate::rgb9e5::{RGB9E5_MAX_RELATIVE_ERROR, RGB9E5_NAME};
+
+/// Program that produced an archive.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Generator {
+    /// Program name, e.g. `"prm-bake"`.
+    pub name: String,
+    /// Program version, e.g. `"0.1.0"`.
+    pub version: String,
+}
+
+/// Units of the quantities stored in the archive.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Units {
+    /// Unit of entry positions and of the source scene, e.g. `"m"`.
+    pub length: String,
+    /// Unit of texel values, e.g. `"W/m^2"` or `"relative"`.
+    pub irradiance: String,
+}
+
+impl Default for Units {
+    fn default() -> Self {
+        Units {
+            length: "m".into(),
+            irradiance: "relative".into(),
+        }
+    }
+}
+
+/// Contents of the metadata section (a UTF-8 JSON object).
+///
+/// Unknown keys in a file are ignored, so later minor versions may add keys.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Metadata {
+    /// Program that wrote the archive.
+    pub generator: Generator,
+    /// Bake parameters, free-form.
+    pub params: serde_json::Map<String, serde_json::Value>,
+    /// Random seed of the bake.
+    pub seed: u64,
+    /// Wall-clock seconds per bake phase.
+    pub timings: BTreeMap<String, f64>,
+    /// Units of positions and texel values.
+    pub units: Units,
+    /// Path of the source scene relative to the archive's directory, with
+    /// `/` separators.
+    pub source_scene: String,
+    /// Fingerprint of the source scene; stored as 16 hex digits.
+    #[serde(with = "hex_u64")]
+    pub scene_fingerprint: u64,
+    /// Texel encoding name; always `"rgb9e5ufloat"` in v1 (set by the writer).
+    pub texel_encoding: String,
+    /// Relative error bound of the largest channel of a texel (set by the
+    /// writer: `2^-9` for RGB9E5).
+    pub texel_relative_error_bound: f64,
+}
+
+impl Metadata {
+    /// Metadata with the given generator and empty/zero everything else.
+    pub fn new(generator_name: impl Into<String>, generator_version: impl Into<String>) -> Self {
+        Metadata {
+            generator: Generator {
+                name: generator_name.into(),
+                version: generator_version.into(),
+            },
+            params: serde_json::Map::new(),
+            seed: 0,
+            timings: BTreeMap::new(),
+            units: Units::default(),
+            source_scene: String::new(),
+            scene_fingerprint: 0,
+            texel_encoding: RGB9E5_NAME.into(),
+            texel_relative_error_bound: RGB9E5_MAX_RELATIVE_ERROR,
+        }
+    }
+
+    /// Checks what JSON cannot express or the format forbids.
+    pub(crate) fn validate(&self) -> Result<(), String> {
+        for (k, v) in &self.timings {
+            if !v.is_finite() {
+                return Err(format!("timing {k:?} is not finite"));
+            }
+        }
+        if !self.texel_relative_error_bound.is_finite() {
+            return Err("texel_relative_error_bound is not finite".into());
+        }
+        if self.texel_encoding != RGB9E5_NAME {
+            return Err(format!(
+                "texel_encoding is {:?}, v1 only has {RGB9E5_NAME:?}",
+                self.texel_encoding
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Serde adapter writing a `u64` as exactly 16 lowercase hex digits.
+mod hex_u64 {
+    use serde::{de::Error, Deserialize, Deserializer, Serializer};
+
+    pub fn serialize<S: Serializer>(v: &u64, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(&format!("{v:016x}"))
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<u64, D::Error> {
+        let s = String::deserialize(d)?;
+        if s.len() != 16 || !s.bytes().all(|b| b.is_ascii_hexdigit()) {
+            return Err(D::Error::custom(format!(
+                "scene_fingerprint must be 16 hex digits, got {s:?}"
+            )));
+        }
+        u64::from_str_radix(&s, 16).map_err(D::Error::custom)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn json_round_trip_and_hex_fingerprint() {
+        let mut m = Metadata::new("test", "1.2.3");
+        m.scene_fingerprint = 0x00ab_cdef_0123_4567;
+        m.timings.insert("trace".into(), 1.5);
+        m.params.insert("bounces".into(), 3.into());
+        let s = serde_json::to_string(&m).unwrap();
+        assert!(s.contains("\"scene_fingerprint\":\"00abcdef01234567\""), "{s}");
+        let back: Metadata = serde_json::from_str(&s).unwrap();
+        assert_eq!(back, m);
+        let bad = s.replace("00abcdef01234567", "0xabcdef01234567");
+        assert!(serde_json::from_str::<Metadata>(&bad).is_err());
+        let upper = s.replace("00abcdef01234567", "00ABCDEF01234567");
+        assert_eq!(
+            serde_json::from_str::<Metadata>(&upper).unwrap().scene_fingerprint,
+            m.scene_fingerprint
+        );
+    }
+
+    #[test]
+    fn validate_rejects_non_finite_timings() {
+        let mut m = Metadata::new("t", "0");
+        assert!(m.validate().is_ok());
+        m.timings.insert("x".into(), f64::NAN);
+        assert!(m.validate().is_err());
+    }
+}

@@ -1,0 +1,662 @@
+//! Validating archive reader: `Archive` over a file, a byte slice or any `Read + Seek`.
+
+use std::fs::File;
+use std::io::{BufReader, Read, Seek, SeekFrom};
+use std::path::Path;
+
+use xxhash_rust::xxh3::Xxh3Default;
+
+use crate::error::{Error, Result};
+use crate::filter::TileFilter;
+use crate::layout::{
+    checksum, compression, kind, limits, Cursor, Header, SectionRecord, TileRecord, HEADER_SIZE, PANES_HEADER_SIZE,
+    SECTION_RECORD_SIZE, TEXEL_FORMAT_RGB9E5, TILE_RECORD_SIZE,
+};
+use crate::metadata::Metadata;
+use crate::rgb9e5::decode_rgb9e5;
+use crate::sections::{decode_clusters, decode_entries, validate_entries_clusters, AtlasSection, Cluster, Entry};
+
+/// Largest raw size this reader decompresses for a section kind it does not
+/// interpret (see [`Archive::read_custom_section`]).
+const MAX_CUSTOM_SECTION_BYTES: u64 = 1 << 30;
+
+/// One record of the section table.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct SectionInfo {
+    /// Kind code.
+    pub kind: u32,
+    /// `"metadata"`, `"atlas"`, … or `"unknown (kind N)"`.
+    pub name: String,
+    /// Compression code (0 none, 1 zstd).
+    pub compression: u32,
+    /// Byte offset in the file.
+    pub offset: u64,
+    /// Bytes stored in the file.
+    pub stored_size: u64,
+    /// Bytes after decompression.
+    pub raw_size: u64,
+    /// xxh3-64 of the stored bytes.
+    pub checksum: u64,
+}
+
+/// Summary of an archive's structure.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct ArchiveInfo {
+    /// Major format version.
+    pub major: u16,
+    /// Minor format version.
+    pub minor: u16,
+    /// File size in bytes.
+    pub file_length: u64,
+    /// The section table, in file order of the table.
+    pub sections: Vec<SectionInfo>,
+    /// Number of panes (= clusters).
+    pub pane_count: u32,
+    /// Tiles per pane (`(resolution / tile_size)²`).
+    pub tiles_per_pane: u64,
+    /// Tiles stored (not omitted as all-zero) over all panes.
+    pub stored_tiles: u64,
+    /// Compressed bytes of all stored tiles.
+    pub stored_tile_bytes: u64,
+    /// Uncompressed RGB9E5 bytes of all panes (`pane_count × resolution² × 4`).
+    pub pane_texel_bytes: u64,
+}
+
+/// What [`Archive::verify`] checked.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct VerifyReport {
+    /// Sections whose checksum was verified (including unknown ones).
+    pub sections: usize,
+    /// Panes decoded and checked against their cluster's energy and peak.
+    pub panes: u32,
+    /// Tiles decompressed.
+    pub stored_tiles: u64,
+    /// Tiles omitted as all-zero.
+    pub omitted_tiles: u64,
+    /// Bytes hashed.
+    pub bytes_hashed: u64,
+}
+
+/// An open archive. Metadata, atlas, entries, clusters and the tile index
+/// are read and validated on open; pane data is read on demand.
+pub struct Archive<R> {
+    src: R,
+    info: ArchiveInfo,
+    records: Vec<SectionRecord>,
+    metadata: Metadata,
+    atlas: AtlasSection,
+    entries: Vec<Entry>,
+    clusters: Vec<Cluster>,
+    tiles: Vec<TileRecord>,
+    panes_offset: u64,
+    tile_filter: TileFilter,
+    decompressor: zstd::bulk::Decompressor<'static>,
+}
+
+impl Archive<BufReader<File>> {
+    /// Opens and validates the archive at `path`.
+    pub fn open(path: impl AsRef<Path>) -> Result<Self> {
+        Archive::from_reader(BufReader::new(File::open(path)?))
+    }
+}
+
+impl<'a> Archive<std::io::Cursor<&'a [u8]>> {
+    /// Opens and validates an archive held in memory.
+    pub fn from_bytes(bytes: &'a [u8]) -> Result<Self> {
+        Archive::from_reader(std::io::Cursor::new(bytes))
+    }
+}
+
+fn section_name(kind: u32) -> String {
+    match kind::name(kind) {
+        Some(n) => n.to_string(),
+        None => format!("unknown (kind {kind})"),
+    }
+}
+
+/// Reads exactly `len` bytes at `offset`; a short read is `Truncated`.
+fn read_at<R: Read + Seek>(src: &mut R, offset: u64, len: u64, what: &str) -> Result<Vec<u8>> {
+    let len_usize = usize::try_from(len).map_err(|_| Error::inconsistent(format!("{what} too large")))?;
+    src.seek(SeekFrom::Start(offset))?;
+    let mut buf = Vec::new();
+    src.take(len).read_to_end(&mut buf)?;
+    if buf.len() != len_usize {
+        return Err(Error::truncated(format!(
+            "{what}: expected {len} bytes at offset {offset}, got {}",
+            buf.len()
+        )));
+    }
+    Ok(buf)
+}
+
+impl<R: Read + Seek> Archive<R> {
+    /// Opens and validates an archive from any seekable source.
+    pub fn from_reader(mut src: R) -> Result<Self> {
+        let file_length = src.seek(SeekFrom::End(0))?;
+        let head_len = file_length.min(HEADER_SIZE as u64);
+        let head = read_at(&mut src, 0, head_len, "header")?;
+        let header = Header::decode(&head)?;
+        let strict = header.strict_reserved();
+        if header.file_length > file_length {
+            return Err(Error::truncated(format!(
+                "the header declares {} bytes, the file has {file_length}",
+                header.file_length
+            )));
+        }
+        if header.file_length < file_length {
+            return Err(Error::inconsistent(format!(
+                "{} bytes follow the declared end of the archive",
+                file_length - header.file_length
+            )));
+        }
+        if strict && header.reserved != [0, 0] {
+            return Err(Error::inconsistent("reserved header fields are not zero"));
+        }
+        if header.section_count > limits::MAX_SECTIONS {
+            return Err(Error::inconsistent(format!(
+                "{} sections exceed the limit",
+                header.section_count
+            )));
+        }
+        let table_len = u64::from(header.section_count) * SECTION_RECORD_SIZE as u64;
+        let table_end = header.table_offset.checked_add(table_len);
+        if header.table_offset < HEADER_SIZE as u64 || table_end.is_none_or(|e| e > file_length) {
+            return Err(Error::inconsistent(format!(
+                "section table ({} records at offset {}) lies outside the file",
+                header.section_count, header.table_offset
+            )));
+        }
+        let table = read_at(&mut src, header.table_offset, table_len, "section table")?;
+        if checksum(&table) != header.table_checksum {
+            return Err(Error::checksum("section table"));
+        }
+        let mut c = Cursor::new(&table, "section table");
+        let mut records = Vec::with_capacity(header.section_count as usize);
+        for _ in 0..header.section_count {
+            records.push(SectionRecord::decode(&mut c)?);
+        }
+
+        // Every section lies after the header, inside the file, and overlaps
+        // neither another section nor the table.
+        let mut spans: Vec<(u64, u64, String)> = vec![(
+            header.table_offset,
+            header.table_offset + table_len,
+            "section table".into(),
+        )];
+        for r in &records {
+            let name = section_name(r.kind);
+            if strict && r.reserved != 0 {
+                return Err(Error::inconsistent(format!("{name}: reserved field is not zero")));
+            }
+            if r.kind == 0 {
+                return Err(Error::inconsistent("section kind 0 is invalid"));
+            }
+            let end = r.offset.checked_add(r.stored_size);
+            if r.offset < HEADER_SIZE as u64 || end.is_none_or(|e| e > file_length) {
+                return Err(Error::inconsistent(format!(
+                    "{name} section ({} bytes at offset {}) lies outside the file",
+                    r.stored_size, r.offset
+                )));
+            }
+            spans.push((r.offset, r.offset + r.stored_size, name));
+        }
+        spans.sort();
+        for w in spans.windows(2) {
+            if w[0].1 > w[1].0 {
+                return Err(Error::inconsistent(format!("{} overlaps {}", w[0].2, w[1].2)));
+            }
+        }
+        let find = |k: u32| -> Result<SectionRecord> {
+            let mut it = records.iter().filter(|r| r.kind == k);
+            let first = it
+                .next()
+                .cloned()
+                .ok_or_else(|| Error::inconsistent(format!("required {} section is missing", section_name(k))))?;
+            if it.next().is_some() {
+                return Err(Error::inconsistent(format!(
+                    "{} section appears more than once",
+                    section_name(k)
+                )));
+            }
+            Ok(first)
+        };
+        let meta_rec = find(kind::METADATA)?;
+        let atlas_rec = find(kind::ATLAS)?;
+        let entries_rec = find(kind::ENTRIES)?;
+        let clusters_rec = find(kind::CLUSTERS)?;
+        let panes_rec = find(kind::PANES)?;
+
+        let raw = load_section(&mut src, &meta_rec, limits::MAX_METADATA_BYTES)?;
+        let metadata: Metadata =
+            serde_json::from_slice(&raw).map_err(|e| Error::inconsistent(format!("metadata JSON: {e}")))?;
+        metadata
+            .validate()
+            .map_err(|e| Error::inconsistent(format!("metadata: {e}")))?;
+
+        let max_atlas = AtlasSection::raw_size_for(limits::MAX_RESOLUTION, limits::MAX_TRIANGLES).unwrap_or(u64::MAX);
+        let raw = load_section(&mut src, &atlas_rec, max_atlas)?;
+        let atlas = AtlasSection::decode(&raw, strict).map_err(Error::inconsistent)?;
+        drop(raw);
+
+        let max_entries = limits::MAX_ENTRIES * crate::layout::ENTRY_RECORD_SIZE as u64;
+        let raw = load_section(&mut src, &entries_rec, max_entries)?;
+        let entries = decode_entries(&raw).map_err(Error::inconsistent)?;
+        drop(raw);
+
+        let max_clusters = limits::MAX_CLUSTERS * crate::layout::CLUSTER_RECORD_SIZE as u64;
+        let raw = load_section(&mut src, &clusters_rec, max_clusters)?;
+        let clusters = decode_clusters(&raw).map_err(Error::inconsistent)?;
+        drop(raw);
+        validate_entries_clusters(&entries, &clusters).map_err(Error::inconsistent)?;
+
+        // Panes: fixed header and tile index, checked by the index checksum.
+        if panes_rec.compression != compression::NONE {
+            return Err(Error::inconsistent(
+                "the panes section must not be compressed as a whole",
+            ));
+        }
+        if panes_rec.raw_size != panes_rec.stored_size {
+            return Err(Error::inconsistent("panes section raw size differs from stored size"));
+        }
+        let tps = u64::from(atlas.tiles_per_side());
+        let tiles_per_pane = tps * tps;
+        let tile_count = clusters.len() as u64 * tiles_per_pane;
+        let index_len = tile_count * TILE_RECORD_SIZE as u64;
+        let data_start = PANES_HEADER_SIZE as u64 + index_len;
+        if panes_rec.stored_size < data_start {
+            return Err(Error::inconsistent(format!(
+                "panes section has {} bytes, its header and tile index for {} panes need {data_start}",
+                panes_rec.stored_size,
+                clusters.len()
+            )));
+        }
+        let head = read_at(&mut src, panes_rec.offset, data_start, "panes tile index")?;
+        let mut c = Cursor::new(&head, "panes header");
+        let index_sum = c.u64()?;
+        if checksum(&head[8..]) != index_sum {
+            return Err(Error::checksum("panes tile index"));
+        }
+        let pane_count = c.u32()?;
+        let stored_tps = c.u32()?;
+        let texel_format = c.u32()?;
+        let filter_code = c.u32()?;
+        let reserved = c.u64()?;
+        if u64::from(pane_count) != clusters.len() as u64 {
+            return Err(Error::inconsistent(format!(
+                "{pane_count} panes for {} clusters",
+                clusters.len()
+            )));
+        }
+        if u64::from(stored_tps) != tps {
+            return Err(Error::inconsistent(format!(
+                "panes have {stored_tps} tiles per side, the atlas implies {tps}"
+            )));
+        }
+        if texel_format != TEXEL_FORMAT_RGB9E5 {
+            return Err(Error::inconsistent(format!("unknown texel format {texel_format}")));
+        }
+        let tile_filter = TileFilter::from_code(filter_code)
+            .ok_or_else(|| Error::inconsistent(format!("unknown tile filter {filter_code}")))?;
+        if strict && reserved != 0 {
+            return Err(Error::inconsistent("panes header reserved fields are not zero"));
+        }
+        let tile_bytes = u64::from(atlas.tile_size) * u64::from(atlas.tile_size) * 4;
+        let mut tiles = Vec::with_capacity(tile_count as usize);
+        let (mut stored_tiles, mut stored_tile_bytes) = (0u64, 0u64);
+        for i in 0..tile_count {
+            let t = TileRecord::decode(&mut c)?;
+            let where_ = || {
+                let pane = i / tiles_per_pane;
+                let k = i % tiles_per_pane;
+                format!("pane {pane} tile ({}, {})", k % tps, k / tps)
+            };
+            if strict && t.reserved != 0 {
+                return Err(Error::inconsistent(format!("{}: reserved field is not zero", where_())));
+            }
+            if t.size == 0 {
+                if t.offset != 0 || t.checksum != 0 {
+                    return Err(Error::inconsistent(format!(
+                        "{}: omitted tile with non-zero offset or checksum",
+                        where_()
+                    )));
+                }
+            } else {
+                let end = t.offset.checked_add(u64::from(t.size));
+                if t.offset < data_start || end.is_none_or(|e| e > panes_rec.stored_size) {
+                    return Err(Error::inconsistent(format!(
+                        "{}: tile data lies outside the panes section's data area",
+                        where_()
+                    )));
+                }
+                stored_tiles += 1;
+                stored_tile_bytes += u64::from(t.size);
+            }
+            tiles.push(t);
+        }
+
+        let info = ArchiveInfo {
+            major: header.major,
+            minor: header.minor,
+            file_length,
+            sections: records
+                .iter()
+                .map(|r| SectionInfo {
+                    kind: r.kind,
+                    name: section_name(r.kind),
+                    compression: r.compression,
+                    offset: r.offset,
+                    stored_size: r.stored_size,
+                    raw_size: r.raw_size,
+                    checksum: r.checksum,
+                })
+                .collect(),
+            pane_count,
+            tiles_per_pane,
+            stored_tiles,
+            stored_tile_bytes,
+            pane_texel_bytes: u64::from(pane_count) * tiles_per_pane * tile_bytes,
+        };
+        Ok(Archive {
+            src,
+            info,
+            records,
+            metadata,
+            atlas,
+            entries,
+            clusters,
+            tiles,
+            panes_offset: panes_rec.offset,
+            tile_filter,
+            decompressor: zstd::bulk::Decompressor::new()?,
+        })
+    }
+
+    /// Version, sections and sizes.
+    pub fn info(&self) -> &ArchiveInfo {
+        &self.info
+    }
+
+    /// The metadata section.
+    pub fn metadata(&self) -> &Metadata {
+        &self.metadata
+    }
+
+    /// The atlas section.
+    pub fn atlas(&self) -> &AtlasSection {
+        &self.atlas
+    }
+
+    /// Entry points, sorted by cluster.
+    pub fn entries(&self) -> &[Entry] {
+        &self.entries
+    }
+
+    /// Clusters; cluster `i` owns pane `i`.
+    pub fn clusters(&self) -> &[Cluster] {
+        &self.clusters
+    }
+
+    /// Number of panes (= clusters).
+    pub fn pane_count(&self) -> usize {
+        self.clusters.len()
+    }
+
+    /// Whether tile `(tile_x, tile_y)` of `pane` is stored (`false`: all zero).
+    pub fn tile_is_stored(&self, pane: usize, tile_x: u32, tile_y: u32) -> Result<bool> {
+        Ok(self.tiles[self.tile_slot(pane, tile_x, tile_y)?].size != 0)
+    }
+
+    fn tile_slot(&self, pane: usize, tile_x: u32, tile_y: u32) -> Result<usize> {
+        let tps = self.atlas.tiles_per_side();
+        if pane >= self.clusters.len() || tile_x >= tps || tile_y >= tps {
+            return Err(Error::InvalidInput(format!(
+                "pane {pane} tile ({tile_x}, {tile_y}) out of range ({} panes, {tps}×{tps} tiles)",
+                self.clusters.len()
+            )));
+        }
+        let tps = tps as usize;
+        Ok(pane * tps * tps + tile_y as usize * tps + tile_x as usize)
+    }
+
+    /// Reads, checks, decompresses and unfilters one tile into `words`
+    /// (`tile_size²` texels, row-major); `bytes` is scratch space.
+    fn read_tile_into(
+        &mut self,
+        pane: usize,
+        tile_x: u32,
+        tile_y: u32,
+        bytes: &mut Vec<u8>,
+        words: &mut [u32],
+    ) -> Result<()> {
+        let rec = self.tiles[self.tile_slot(pane, tile_x, tile_y)?];
+        let want = words.len() * 4;
+        if rec.size == 0 {
+            words.fill(0);
+            return Ok(());
+        }
+        let what = format!("pane {pane} tile ({tile_x}, {tile_y})");
+        let stored = read_at(
+            &mut self.src,
+            self.panes_offset + rec.offset,
+            u64::from(rec.size),
+            &what,
+        )?;
+        if checksum(&stored) != rec.checksum {
+            return Err(Error::checksum(what));
+        }
+        // Decompress into exactly the tile's size: a longer stream fails.
+        bytes.clear();
+        bytes.reserve_exact(want);
+        let n = self
+            .decompressor
+            .decompress_to_buffer(&stored[..], bytes)
+            .map_err(|e| Error::Decompress {
+                section: what.clone(),
+                reason: e.to_string(),
+            })?;
+        if n != want || bytes.len() != want {
+            return Err(Error::Decompress {
+                section: what,
+                reason: format!("decompressed to {n} bytes, a tile has {want}"),
+            });
+        }
+        self.tile_filter.invert(bytes, words);
+        Ok(())
+    }
+
+    /// Reads one tile as RGB9E5 texels, `tile_size²` of them, row-major.
+    pub fn read_tile_rgb9e5(&mut self, pane: usize, tile_x: u32, tile_y: u32) -> Result<Vec<u32>> {
+        let t = self.atlas.tile_size as usize;
+        let mut words = vec![0u32; t * t];
+        self.read_tile_into(pane, tile_x, tile_y, &mut Vec::new(), &mut words)?;
+        Ok(words)
+    }
+
+    /// Reads one pane as RGB9E5 texels, `resolution²` of them, row-major.
+    pub fn read_pane_rgb9e5(&mut self, pane: usize) -> Result<Vec<u32>> {
+        let res = self.atlas.resolution as usize;
+        let t = self.atlas.tile_size as usize;
+        let tps = self.atlas.tiles_per_side();
+        if pane >= self.clusters.len() {
+            return Err(Error::InvalidInput(format!(
+                "pane {pane} out of range ({} panes)",
+                self.clusters.len()
+            )));
+        }
+        let mut texels = vec![0u32; res * res];
+        let mut bytes = Vec::with_capacity(t * t * 4);
+        let mut words = vec![0u32; t * t];
+        for ty in 0..tps {
+            for tx in 0..tps {
+                if !self.tile_is_stored(pane, tx, ty)? {
+                    continue;
+                }
+                self.read_tile_into(pane, tx, ty, &mut bytes, &mut words)?;
+                for (j, row) in words.chunks_exact(t).enumerate() {
+                    let start = (ty as usize * t + j) * res + tx as usize * t;
+                    texels[start..start + t].copy_from_slice(row);
+                }
+            }
+        }
+        Ok(texels)
+    }
+
+    /// The filter applied to tiles before compression.
+    pub fn tile_filter(&self) -> TileFilter {
+        self.tile_filter
+    }
+
+    /// Reads one pane decoded to linear RGB, `resolution²` texels, row-major.
+    pub fn read_pane(&mut self, pane: usize) -> Result<Vec<[f32; 3]>> {
+        Ok(self.read_pane_rgb9e5(pane)?.into_iter().map(decode_rgb9e5).collect())
+    }
+
+    /// Reads the first section of a kind v1 does not define, decompressed;
+    /// `Ok(None)` if there is none.
+    pub fn read_custom_section(&mut self, kind: u32) -> Result<Option<Vec<u8>>> {
+        let Some(rec) = self.records.iter().find(|r| r.kind == kind).cloned() else {
+            return Ok(None);
+        };
+        if crate::kind::name(kind).is_some() {
+            return Err(Error::InvalidInput(format!(
+                "section kind {kind} is defined by the format; use the typed accessors"
+            )));
+        }
+        load_section(&mut self.src, &rec, MAX_CUSTOM_SECTION_BYTES).map(Some)
+    }
+
+    /// Checks everything: every tile's checksum and decompression, every
+    /// cluster's energy and peak against its decoded pane, and every
+    /// section's checksum (unknown sections too).
+    pub fn verify(&mut self) -> Result<VerifyReport> {
+        let mut report = VerifyReport::default();
+        // Panes first, so that damaged tile data is reported by tile.
+        for pane in 0..self.clusters.len() {
+            let texels = self.read_pane_rgb9e5(pane)?;
+            let (energy, peak) = pane_energy_peak(&texels, self.atlas.resolution, self.atlas.tile_size);
+            let c = &self.clusters[pane];
+            if energy.map(f32::to_bits) != c.energy.map(f32::to_bits) {
+                return Err(Error::inconsistent(format!(
+                    "cluster {pane} energy {:?} does not match its pane ({energy:?})",
+                    c.energy
+                )));
+            }
+            if peak.map(f32::to_bits) != c.peak.map(f32::to_bits) {
+                return Err(Error::inconsistent(format!(
+                    "cluster {pane} peak {:?} does not match its pane ({peak:?})",
+                    c.peak
+                )));
+            }
+            report.panes += 1;
+        }
+        let mut buf = vec![0u8; 1 << 20];
+        for r in self.records.clone() {
+            let name = section_name(r.kind);
+            self.src.seek(SeekFrom::Start(r.offset))?;
+            let mut hasher = Xxh3Default::new();
+            let mut remaining = r.stored_size;
+            while remaining > 0 {
+                let n = remaining.min(buf.len() as u64) as usize;
+                self.src.read_exact(&mut buf[..n]).map_err(|e| match e.kind() {
+                    std::io::ErrorKind::UnexpectedEof => Error::truncated(name.clone()),
+                    _ => Error::Io(e),
+                })?;
+                hasher.update(&buf[..n]);
+                remaining -= n as u64;
+            }
+            if hasher.digest() != r.checksum {
+                return Err(Error::checksum(name));
+            }
+            report.sections += 1;
+            report.bytes_hashed += r.stored_size;
+        }
+        report.stored_tiles = self.info.stored_tiles;
+        report.omitted_tiles = self.tiles.len() as u64 - self.info.stored_tiles;
+        Ok(report)
+    }
+}
+
+/// Energy (sum) and peak (per-channel max) of a decoded pane, summed in f64
+/// in tile order, texels row-major within a tile, then rounded to f32: the
+/// exact order the spec prescribes.
+pub fn pane_energy_peak(texels: &[u32], resolution: u32, tile_size: u32) -> ([f32; 3], [f32; 3]) {
+    let res = resolution as usize;
+    let t = tile_size as usize;
+    let mut energy = [0f64; 3];
+    let mut peak = [0f32; 3];
+    if t == 0 || !res.is_multiple_of(t) || texels.len() != res * res {
+        return ([f32::NAN; 3], [f32::NAN; 3]);
+    }
+    let tps = res / t;
+    for ty in 0..tps {
+        for tx in 0..tps {
+            for j in 0..t {
+                let start = (ty * t + j) * res + tx * t;
+                for &texel in &texels[start..start + t] {
+                    let d = decode_rgb9e5(texel);
+                    for c in 0..3 {
+                        energy[c] += f64::from(d[c]);
+                        peak[c] = peak[c].max(d[c]);
+                    }
+                }
+            }
+        }
+    }
+    (energy.map(|e| e as f32), peak)
+}
+
+/// Reads a known-size section, checks its checksum and decompresses it with
+/// the output capped at the declared raw size (which must not exceed `max_raw`).
+fn load_section<R: Read + Seek>(src: &mut R, r: &SectionRecord, max_raw: u64) -> Result<Vec<u8>> {
+    let name = section_name(r.kind);
+    if r.raw_size > max_raw {
+        return Err(Error::inconsistent(format!(
+            "{name} section declares {} raw bytes, more than the limit {max_raw}",
+            r.raw_size
+        )));
+    }
+    match r.compression {
+        compression::NONE => {
+            if r.raw_size != r.stored_size {
+                return Err(Error::inconsistent(format!(
+                    "uncompressed {name} section has raw size {} but stored size {}",
+                    r.raw_size, r.stored_size
+                )));
+            }
+        }
+        compression::ZSTD => {}
+        other => {
+            return Err(Error::inconsistent(format!(
+                "{name} section uses unknown compression {other}"
+            )))
+        }
+    }
+    let stored = read_at(src, r.offset, r.stored_size, &name)?;
+    if checksum(&stored) != r.checksum {
+        return Err(Error::checksum(name));
+    }
+    if r.compression == compression::NONE {
+        return Ok(stored);
+    }
+    let decompress_err = |reason: String| Error::Decompress {
+        section: name.clone(),
+        reason,
+    };
+    // Streamed so memory grows only with output actually produced, and
+    // capped one byte past the declared size to detect overlong streams.
+    let decoder = zstd::stream::read::Decoder::with_buffer(&stored[..]).map_err(|e| decompress_err(e.to_string()))?;
+    let mut raw = Vec::new();
+    decoder
+        .take(r.raw_size + 1)
+        .read_to_end(&mut raw)
+        .map_err(|e| decompress_err(e.to_string()))?;
+    if raw.len() as u64 != r.raw_size {
+        return Err(decompress_err(format!(
+            "decompressed to {}{} bytes, the section table declares {}",
+            raw.len(),
+            if raw.len() as u64 > r.raw_size { "+" } else { "" },
+            r.raw_size
+        )));
+    }
+    Ok(raw)
+}

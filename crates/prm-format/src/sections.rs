@@ -1,0 +1,452 @@
+//! Atlas, entry and cluster sections: types, binary encoding and validation.
+
+use std::ops::Range;
+
+use crate::error::Result;
+use crate::layout::{limits, Cursor, PutLe, ATLAS_HEADER_SIZE, CLUSTER_RECORD_SIZE, ENTRY_RECORD_SIZE};
+
+/// The lightmap atlas shared by every pane.
+#[derive(Clone, Debug, PartialEq)]
+pub struct AtlasSection {
+    /// Texels per side of the (square) atlas and of every pane.
+    pub resolution: u32,
+    /// Texels per side of a tile; divides `resolution`.
+    pub tile_size: u32,
+    /// Lightmap UVs of every scene triangle, in scene triangle order: three
+    /// `[u, v]` pairs in `[0, 1]`, texel `(x, y)` having its centre at
+    /// `((x + 0.5) / resolution, (y + 0.5) / resolution)`.
+    pub triangle_uvs: Vec<[[f32; 2]; 3]>,
+    /// One bit per texel, set where some triangle covers the texel; texel
+    /// `(x, y)` is bit `i % 8` (LSB first) of byte `i / 8`, `i = y·resolution + x`.
+    pub coverage: Vec<u8>,
+}
+
+impl AtlasSection {
+    /// An atlas with no triangles and nothing covered.
+    pub fn new(resolution: u32, tile_size: u32) -> Self {
+        AtlasSection {
+            resolution,
+            tile_size,
+            triangle_uvs: Vec::new(),
+            coverage: vec![0; Self::coverage_len(resolution)],
+        }
+    }
+
+    /// Bytes of a packed coverage mask for `resolution`: `ceil(resolution² / 8)`.
+    pub fn coverage_len(resolution: u32) -> usize {
+        (u64::from(resolution) * u64::from(resolution)).div_ceil(8) as usize
+    }
+
+    /// Tiles per side (`resolution / tile_size`).
+    pub fn tiles_per_side(&self) -> u32 {
+        self.resolution.checked_div(self.tile_size).unwrap_or(0)
+    }
+
+    /// Texels per pane (`resolution²`).
+    pub fn texels_per_pane(&self) -> usize {
+        self.resolution as usize * self.resolution as usize
+    }
+
+    fn bit(&self, x: u32, y: u32) -> Option<(usize, u8)> {
+        if x >= self.resolution || y >= self.resolution {
+            return None;
+        }
+        let i = y as usize * self.resolution as usize + x as usize;
+        Some((i / 8, 1u8 << (i % 8)))
+    }
+
+    /// Whether texel `(x, y)` is covered; `false` outside the atlas.
+    pub fn is_covered(&self, x: u32, y: u32) -> bool {
+        self.bit(x, y)
+            .and_then(|(byte, mask)| self.coverage.get(byte).map(|b| b & mask != 0))
+            .unwrap_or(false)
+    }
+
+    /// Sets or clears the coverage bit of texel `(x, y)`; ignored outside the atlas.
+    pub fn set_covered(&mut self, x: u32, y: u32, covered: bool) {
+        if let Some((byte, mask)) = self.bit(x, y) {
+            if let Some(b) = self.coverage.get_mut(byte) {
+                if covered {
+                    *b |= mask;
+                } else {
+                    *b &= !mask;
+                }
+            }
+        }
+    }
+
+    /// Number of covered texels.
+    pub fn covered_texels(&self) -> u64 {
+        self.coverage.iter().map(|b| u64::from(b.count_ones())).sum()
+    }
+
+    /// Raw size of the encoded section, `None` on overflow.
+    pub(crate) fn raw_size_for(resolution: u32, triangles: u64) -> Option<u64> {
+        let mask = (u64::from(resolution) * u64::from(resolution)).div_ceil(8);
+        triangles
+            .checked_mul(24)?
+            .checked_add(ATLAS_HEADER_SIZE as u64)?
+            .checked_add(mask)
+    }
+
+    pub(crate) fn validate(&self) -> Result<(), String> {
+        let r = self.resolution;
+        if r == 0 || r > limits::MAX_RESOLUTION {
+            return Err(format!("atlas resolution {r} outside 1..={}", limits::MAX_RESOLUTION));
+        }
+        let t = self.tile_size;
+        if t == 0 || t > limits::MAX_TILE_SIZE || t > r || !r.is_multiple_of(t) {
+            return Err(format!(
+                "tile size {t} must be in 1..={} and divide the resolution {r}",
+                limits::MAX_TILE_SIZE
+            ));
+        }
+        if self.triangle_uvs.len() as u64 > limits::MAX_TRIANGLES {
+            return Err(format!("{} triangles exceed the limit", self.triangle_uvs.len()));
+        }
+        for (i, tri) in self.triangle_uvs.iter().enumerate() {
+            if tri.iter().flatten().any(|c| !(0.0..=1.0).contains(c)) {
+                return Err(format!("triangle {i} has UVs outside [0, 1]: {tri:?}"));
+            }
+        }
+        if self.coverage.len() != Self::coverage_len(r) {
+            return Err(format!(
+                "coverage mask has {} bytes, resolution {r} needs {}",
+                self.coverage.len(),
+                Self::coverage_len(r)
+            ));
+        }
+        let used_bits = (u64::from(r) * u64::from(r) % 8) as u32;
+        if used_bits != 0 {
+            let last = self.coverage.last().copied().unwrap_or(0);
+            if last >> used_bits != 0 {
+                return Err("coverage mask padding bits are not zero".into());
+            }
+        }
+        Ok(())
+    }
+
+    pub(crate) fn encode(&self) -> Vec<u8> {
+        let mut b = Vec::with_capacity(ATLAS_HEADER_SIZE + self.triangle_uvs.len() * 24 + self.coverage.len());
+        b.put_u32(self.resolution);
+        b.put_u32(self.tile_size);
+        b.put_u32(self.triangle_uvs.len() as u32);
+        b.put_u32(0);
+        for tri in &self.triangle_uvs {
+            for uv in tri {
+                b.put_f32(uv[0]);
+                b.put_f32(uv[1]);
+            }
+        }
+        b.extend_from_slice(&self.coverage);
+        b
+    }
+
+    /// Decodes raw section bytes; `strict` demands zero reserved fields.
+    pub(crate) fn decode(raw: &[u8], strict: bool) -> Result<Self, String> {
+        let err = |e: crate::Error| e.to_string();
+        let mut c = Cursor::new(raw, "atlas");
+        let resolution = c.u32().map_err(err)?;
+        let tile_size = c.u32().map_err(err)?;
+        let triangles = c.u32().map_err(err)?;
+        let reserved = c.u32().map_err(err)?;
+        if strict && reserved != 0 {
+            return Err("atlas reserved field is not zero".into());
+        }
+        if resolution == 0 || resolution > limits::MAX_RESOLUTION {
+            return Err(format!(
+                "atlas resolution {resolution} outside 1..={}",
+                limits::MAX_RESOLUTION
+            ));
+        }
+        let expected = Self::raw_size_for(resolution, u64::from(triangles));
+        if expected != Some(raw.len() as u64) {
+            return Err(format!(
+                "atlas section has {} raw bytes, resolution {resolution} and {triangles} triangles need {expected:?}",
+                raw.len()
+            ));
+        }
+        let mut triangle_uvs = Vec::with_capacity(triangles as usize);
+        for _ in 0..triangles {
+            let mut tri = [[0.0f32; 2]; 3];
+            for uv in &mut tri {
+                *uv = [c.f32().map_err(err)?, c.f32().map_err(err)?];
+            }
+            triangle_uvs.push(tri);
+        }
+        let coverage = c.bytes(Self::coverage_len(resolution)).map_err(err)?.to_vec();
+        let atlas = AtlasSection {
+            resolution,
+            tile_size,
+            triangle_uvs,
+            coverage,
+        };
+        atlas.validate()?;
+        Ok(atlas)
+    }
+}
+
+/// An entry point: a surface sample whose radiance transfer a pane stores.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Entry {
+    /// World-space position.
+    pub position: [f32; 3],
+    /// World-space unit normal.
+    pub normal: [f32; 3],
+    /// Index of the cluster the entry belongs to.
+    pub cluster: u32,
+}
+
+/// A cluster of entry points, owning one pane.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Cluster {
+    /// Index of the first member in the entry list (entries are sorted by cluster).
+    pub first: u32,
+    /// Number of members.
+    pub count: u32,
+    /// Mean position of the members.
+    pub centroid: [f32; 3],
+    /// Mean normal of the members.
+    pub mean_normal: [f32; 3],
+    /// Sum of the cluster's pane texels (RGB); computed by the writer.
+    pub energy: [f32; 3],
+    /// Per-channel maximum of the pane texels; computed by the writer.
+    pub peak: [f32; 3],
+}
+
+impl Cluster {
+    /// A cluster with zero energy and peak (the writer fills both in).
+    pub fn new(first: u32, count: u32, centroid: [f32; 3], mean_normal: [f32; 3]) -> Self {
+        Cluster {
+            first,
+            count,
+            centroid,
+            mean_normal,
+            energy: [0.0; 3],
+            peak: [0.0; 3],
+        }
+    }
+
+    /// Indices of the members in the entry list.
+    pub fn members(&self) -> Range<usize> {
+        self.first as usize..self.first as usize + self.count as usize
+    }
+}
+
+fn finite3(v: &[f32; 3]) -> bool {
+    v.iter().all(|c| c.is_finite())
+}
+
+pub(crate) fn encode_entries(entries: &[Entry]) -> Vec<u8> {
+    let mut b = Vec::with_capacity(entries.len() * ENTRY_RECORD_SIZE);
+    for e in entries {
+        b.put_vec3(e.position);
+        b.put_vec3(e.normal);
+        b.put_u32(e.cluster);
+    }
+    b
+}
+
+pub(crate) fn decode_entries(raw: &[u8]) -> Result<Vec<Entry>, String> {
+    if !raw.len().is_multiple_of(ENTRY_RECORD_SIZE) {
+        return Err(format!(
+            "entries section size {} is not a multiple of {ENTRY_RECORD_SIZE}",
+            raw.len()
+        ));
+    }
+    let n = raw.len() / ENTRY_RECORD_SIZE;
+    let mut c = Cursor::new(raw, "entries");
+    let mut out = Vec::with_capacity(n);
+    for _ in 0..n {
+        let e = (|| -> Result<Entry> {
+            Ok(Entry {
+                position: c.vec3()?,
+                normal: c.vec3()?,
+                cluster: c.u32()?,
+            })
+        })()
+        .map_err(|e| e.to_string())?;
+        out.push(e);
+    }
+    Ok(out)
+}
+
+pub(crate) fn encode_clusters(clusters: &[Cluster]) -> Vec<u8> {
+    let mut b = Vec::with_capacity(clusters.len() * CLUSTER_RECORD_SIZE);
+    for c in clusters {
+        b.put_u32(c.first);
+        b.put_u32(c.count);
+        b.put_vec3(c.centroid);
+        b.put_vec3(c.mean_normal);
+        b.put_vec3(c.energy);
+        b.put_vec3(c.peak);
+    }
+    b
+}
+
+pub(crate) fn decode_clusters(raw: &[u8]) -> Result<Vec<Cluster>, String> {
+    if !raw.len().is_multiple_of(CLUSTER_RECORD_SIZE) {
+        return Err(format!(
+            "clusters section size {} is not a multiple of {CLUSTER_RECORD_SIZE}",
+            raw.len()
+        ));
+    }
+    let n = raw.len() / CLUSTER_RECORD_SIZE;
+    let mut c = Cursor::new(raw, "clusters");
+    let mut out = Vec::with_capacity(n);
+    for _ in 0..n {
+        let cl = (|| -> Result<Cluster> {
+            Ok(Cluster {
+                first: c.u32()?,
+                count: c.u32()?,
+                centroid: c.vec3()?,
+                mean_normal: c.vec3()?,
+                energy: c.vec3()?,
+                peak: c.vec3()?,
+            })
+        })()
+        .map_err(|e| e.to_string())?;
+        out.push(cl);
+    }
+    Ok(out)
+}
+
+/// Checks entries and clusters against each other: finite values, entries
+/// sorted by cluster, cluster ranges tiling the entry list in order.
+pub(crate) fn validate_entries_clusters(entries: &[Entry], clusters: &[Cluster]) -> Result<(), String> {
+    if entries.len() as u64 > limits::MAX_ENTRIES {
+        return Err(format!(
+            "{} entries exceed the limit {}",
+            entries.len(),
+            limits::MAX_ENTRIES
+        ));
+    }
+    if clusters.len() as u64 > limits::MAX_CLUSTERS {
+        return Err(format!(
+            "{} clusters exceed the limit {}",
+            clusters.len(),
+            limits::MAX_CLUSTERS
+        ));
+    }
+    for (i, e) in entries.iter().enumerate() {
+        if !finite3(&e.position) || !finite3(&e.normal) {
+            return Err(format!("entry {i} has a non-finite position or normal"));
+        }
+    }
+    let mut next = 0u64;
+    for (ci, c) in clusters.iter().enumerate() {
+        if u64::from(c.first) != next {
+            return Err(format!(
+                "cluster {ci} starts at entry {}, expected {next} (ranges must tile the entries in order)",
+                c.first
+            ));
+        }
+        next += u64::from(c.count);
+        if next > entries.len() as u64 {
+            return Err(format!("cluster {ci} range ends past the {} entries", entries.len()));
+        }
+        for (k, e) in entries[c.members()].iter().enumerate() {
+            if e.cluster as usize != ci {
+                return Err(format!(
+                    "entry {} lies in cluster {ci}'s range but names cluster {}",
+                    c.first as usize + k,
+                    e.cluster
+                ));
+            }
+        }
+        if !finite3(&c.centroid) || !finite3(&c.mean_normal) {
+            return Err(format!("cluster {ci} has a non-finite centroid or normal"));
+        }
+        for v in c.energy.iter().chain(&c.peak) {
+            if !(v.is_finite() && *v >= 0.0) {
+                return Err(format!("cluster {ci} has a negative or non-finite energy/peak"));
+            }
+        }
+    }
+    if next != entries.len() as u64 {
+        return Err(format!("clusters cover {next} entries but there are {}", entries.len()));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn atlas() -> AtlasSection {
+        let mut a = AtlasSection::new(6, 3);
+        a.triangle_uvs.push([[0.0, 0.0], [1.0, 0.0], [0.5, 1.0]]);
+        a.set_covered(5, 5, true);
+        a.set_covered(0, 1, true);
+        a
+    }
+
+    #[test]
+    fn atlas_round_trip() {
+        let a = atlas();
+        assert_eq!(a.coverage.len(), 5); // 36 bits
+        assert!(a.is_covered(5, 5) && a.is_covered(0, 1) && !a.is_covered(1, 1));
+        assert!(!a.is_covered(6, 0));
+        assert_eq!(a.covered_texels(), 2);
+        let raw = a.encode();
+        assert_eq!(raw.len() as u64, AtlasSection::raw_size_for(6, 1).unwrap());
+        assert_eq!(AtlasSection::decode(&raw, true).unwrap(), a);
+    }
+
+    #[test]
+    fn atlas_rejects_bad_layouts() {
+        let mut a = atlas();
+        a.tile_size = 4;
+        assert!(a.validate().is_err());
+        let mut a = atlas();
+        a.triangle_uvs[0][1][0] = f32::NAN;
+        assert!(a.validate().is_err());
+        let mut a = atlas();
+        *a.coverage.last_mut().unwrap() |= 0x80; // padding bit
+        assert!(a.validate().is_err());
+        let raw = atlas().encode();
+        assert!(AtlasSection::decode(&raw[..raw.len() - 1], true).is_err());
+        let mut r = raw.clone();
+        r[12] = 1;
+        assert!(AtlasSection::decode(&r, true).is_err());
+        assert!(AtlasSection::decode(&r, false).is_ok());
+    }
+
+    #[test]
+    fn entries_and_clusters_round_trip_and_validate() {
+        let entries = vec![
+            Entry {
+                position: [0.0; 3],
+                normal: [0.0, 1.0, 0.0],
+                cluster: 0,
+            },
+            Entry {
+                position: [1.0; 3],
+                normal: [0.0, 1.0, 0.0],
+                cluster: 0,
+            },
+            Entry {
+                position: [2.0; 3],
+                normal: [1.0, 0.0, 0.0],
+                cluster: 2,
+            },
+        ];
+        let clusters = vec![
+            Cluster::new(0, 2, [0.5; 3], [0.0, 1.0, 0.0]),
+            Cluster::new(2, 0, [0.0; 3], [0.0, 1.0, 0.0]),
+            Cluster::new(2, 1, [2.0; 3], [1.0, 0.0, 0.0]),
+        ];
+        validate_entries_clusters(&entries, &clusters).unwrap();
+        assert_eq!(decode_entries(&encode_entries(&entries)).unwrap(), entries);
+        assert_eq!(decode_clusters(&encode_clusters(&clusters)).unwrap(), clusters);
+
+        let mut bad = clusters.clone();
+        bad[2].count = 2;
+        assert!(validate_entries_clusters(&entries, &bad).is_err());
+        let mut bad = entries.clone();
+        bad[2].cluster = 1;
+        assert!(validate_entries_clusters(&bad, &clusters).is_err());
+        assert!(validate_entries_clusters(&entries[..2], &clusters).is_err());
+        assert!(decode_entries(&[0; 27]).is_err());
+    }
+}

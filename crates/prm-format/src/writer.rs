@@ -1,0 +1,486 @@
+//! Streaming, atomic archive writer: panes are encoded and compressed tile by tile.
+
+use std::fs::{self, File, OpenOptions};
+use std::io::{BufWriter, Read, Seek, SeekFrom, Write};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use xxhash_rust::xxh3::Xxh3Default;
+
+use crate::error::{Error, Result};
+use crate::filter::TileFilter;
+use crate::layout::{
+    checksum, compression, kind, Header, PutLe, SectionRecord, TileRecord, HEADER_SIZE, PANES_HEADER_SIZE,
+    TEXEL_FORMAT_RGB9E5, TILE_RECORD_SIZE, VERSION_MAJOR, VERSION_MINOR,
+};
+use crate::metadata::Metadata;
+use crate::rgb9e5::{decode_rgb9e5, encode_rgb9e5, RGB9E5_MAX_RELATIVE_ERROR, RGB9E5_NAME};
+use crate::sections::{encode_clusters, encode_entries, validate_entries_clusters, AtlasSection, Cluster, Entry};
+
+/// Tuning knobs of [`ArchiveWriter`].
+#[derive(Clone, Debug)]
+pub struct WriterOptions {
+    /// zstd level for tiles and sections (1..=19 recommended; default 3).
+    pub zstd_level: i32,
+    /// Compress the metadata, atlas, entries and clusters sections with zstd
+    /// (each is stored uncompressed anyway when that is not smaller).
+    pub compress_sections: bool,
+    /// Filter applied to every tile before compression (default
+    /// [`TileFilter::DeltaShuffle`]).
+    pub tile_filter: TileFilter,
+}
+
+impl Default for WriterOptions {
+    fn default() -> Self {
+        WriterOptions {
+            zstd_level: 3,
+            compress_sections: true,
+            tile_filter: TileFilter::DeltaShuffle,
+        }
+    }
+}
+
+/// A temporary file next to the destination, removed on drop unless persisted.
+struct TempFile {
+    path: PathBuf,
+    file: Option<BufWriter<File>>,
+}
+
+impl Drop for TempFile {
+    fn drop(&mut self) {
+        drop(self.file.take());
+        if !self.path.as_os_str().is_empty() {
+            let _ = fs::remove_file(&self.path);
+        }
+    }
+}
+
+static TEMP_COUNTER: AtomicU64 = AtomicU64::new(0);
+
+/// Writes a `.prm` archive.
+///
+/// The archive is written to a temporary file in the destination's
+/// directory; [`finish`](Self::finish) flushes and fsyncs it and renames it
+/// over the destination. If anything fails, or the writer is dropped without
+/// `finish`, the temporary file is removed and an older archive at the
+/// destination is left untouched.
+///
+/// Panes are added in cluster order, one per cluster. Each tile is encoded to
+/// RGB9E5, compressed and written as soon as it is produced, so at most one
+/// tile is held in memory by the writer; [`add_pane_with`](Self::add_pane_with)
+/// lets the caller produce a pane tile by tile as well.
+///
+/// ```no_run
+/// # use prm_format::*;
+/// let atlas = AtlasSection::new(128, 64);
+/// let entries = vec![Entry { position: [0.0; 3], normal: [0.0, 1.0, 0.0], cluster: 0 }];
+/// let clusters = vec![Cluster::new(0, 1, [0.0; 3], [0.0, 1.0, 0.0])];
+/// let mut w = ArchiveWriter::create("out.prm", Metadata::new("doc", "0"), &atlas, &entries, &clusters)?;
+/// w.add_pane_with(|_tile_x, _tile_y, tile| tile.fill([0.5, 0.5, 0.5]))?;
+/// w.finish()?;
+/// # Ok::<(), prm_format::Error>(())
+/// ```
+pub struct ArchiveWriter {
+    dest: PathBuf,
+    temp: TempFile,
+    options: WriterOptions,
+    compressor: zstd::bulk::Compressor<'static>,
+    metadata: Metadata,
+    clusters: Vec<Cluster>,
+    custom: Vec<(u32, Vec<u8>)>,
+    records: Vec<SectionRecord>,
+    resolution: u32,
+    tile_size: u32,
+    tiles_per_side: u32,
+    /// Current end of written data.
+    pos: u64,
+    panes_offset: u64,
+    tiles: Vec<TileRecord>,
+    panes_done: usize,
+    poisoned: bool,
+    tile_texels: Vec<[f32; 3]>,
+    tile_words: Vec<u32>,
+    tile_bytes: Vec<u8>,
+}
+
+impl ArchiveWriter {
+    /// Starts an archive at `path` with default options. See
+    /// [`create_with_options`](Self::create_with_options).
+    pub fn create(
+        path: impl AsRef<Path>,
+        metadata: Metadata,
+        atlas: &AtlasSection,
+        entries: &[Entry],
+        clusters: &[Cluster],
+    ) -> Result<Self> {
+        Self::create_with_options(path, metadata, atlas, entries, clusters, WriterOptions::default())
+    }
+
+    /// Starts an archive at `path`.
+    ///
+    /// `metadata.texel_encoding` and `metadata.texel_relative_error_bound`
+    /// are set by the writer, as are the `energy` and `peak` of every cluster
+    /// (computed from the pane data). Entries must be sorted by cluster and
+    /// the cluster ranges must tile the entry list in order. One pane per
+    /// cluster must then be added before [`finish`](Self::finish).
+    pub fn create_with_options(
+        path: impl AsRef<Path>,
+        mut metadata: Metadata,
+        atlas: &AtlasSection,
+        entries: &[Entry],
+        clusters: &[Cluster],
+        options: WriterOptions,
+    ) -> Result<Self> {
+        metadata.texel_encoding = RGB9E5_NAME.into();
+        metadata.texel_relative_error_bound = RGB9E5_MAX_RELATIVE_ERROR;
+        metadata.validate().map_err(Error::InvalidInput)?;
+        atlas.validate().map_err(Error::InvalidInput)?;
+        let mut clusters = clusters.to_vec();
+        for c in &mut clusters {
+            c.energy = [0.0; 3];
+            c.peak = [0.0; 3];
+        }
+        validate_entries_clusters(entries, &clusters).map_err(Error::InvalidInput)?;
+
+        let dest = path.as_ref().to_path_buf();
+        let file_name = dest
+            .file_name()
+            .ok_or_else(|| Error::InvalidInput(format!("{} has no file name", dest.display())))?;
+        let dir = match dest.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+            _ => PathBuf::from("."),
+        };
+        let temp_path = dir.join(format!(
+            ".{}.tmp-{}-{}",
+            file_name.to_string_lossy(),
+            std::process::id(),
+            TEMP_COUNTER.fetch_add(1, Ordering::Relaxed)
+        ));
+        let file = OpenOptions::new()
+            .read(true)
+            .write(true)
+            .create_new(true)
+            .open(&temp_path)?;
+        let temp = TempFile {
+            path: temp_path,
+            file: Some(BufWriter::with_capacity(1 << 20, file)),
+        };
+
+        let tiles_per_side = atlas.tiles_per_side();
+        let tile_texels = atlas.tile_size as usize * atlas.tile_size as usize;
+        let tile_count = clusters.len() * tiles_per_side as usize * tiles_per_side as usize;
+        let mut w = ArchiveWriter {
+            dest,
+            temp,
+            compressor: zstd::bulk::Compressor::new(options.zstd_level)?,
+            options,
+            metadata,
+            clusters,
+            custom: Vec::new(),
+            records: Vec::new(),
+            resolution: atlas.resolution,
+            tile_size: atlas.tile_size,
+            tiles_per_side,
+            pos: 0,
+            panes_offset: 0,
+            tiles: Vec::with_capacity(tile_count),
+            panes_done: 0,
+            poisoned: false,
+            tile_texels: vec![[0.0; 3]; tile_texels],
+            tile_words: Vec::with_capacity(tile_texels),
+            tile_bytes: Vec::with_capacity(tile_texels * 4),
+        };
+        // Placeholder header, rewritten by `finish`.
+        w.write_all(&[0u8; HEADER_SIZE])?;
+        w.write_section(kind::ATLAS, &atlas.encode())?;
+        w.write_section(kind::ENTRIES, &encode_entries(entries))?;
+        // The panes section starts here; its header and tile index are
+        // written by `finish`, tile data streams in after them.
+        w.panes_offset = w.pos;
+        w.pos += (PANES_HEADER_SIZE + tile_count * TILE_RECORD_SIZE) as u64;
+        let pos = w.pos;
+        w.file()?.seek(SeekFrom::Start(pos))?;
+        Ok(w)
+    }
+
+    /// Atlas resolution (texels per pane side).
+    pub fn resolution(&self) -> u32 {
+        self.resolution
+    }
+
+    /// Tile size in texels per side.
+    pub fn tile_size(&self) -> u32 {
+        self.tile_size
+    }
+
+    /// Number of panes still to add.
+    pub fn panes_remaining(&self) -> usize {
+        self.clusters.len() - self.panes_done
+    }
+
+    /// The metadata to be written, e.g. to record timings measured while
+    /// panes are being added.
+    pub fn metadata_mut(&mut self) -> &mut Metadata {
+        &mut self.metadata
+    }
+
+    /// Queues an extension section of a kind v1 does not define (not 0 and not
+    /// one of [`kind`](crate::kind)'s); readers that do not know it skip it.
+    pub fn add_custom_section(&mut self, kind: u32, data: Vec<u8>) -> Result<()> {
+        if kind == 0 || crate::kind::name(kind).is_some() {
+            return Err(Error::InvalidInput(format!(
+                "section kind {kind} is reserved or defined by the format"
+            )));
+        }
+        self.custom.push((kind, data));
+        Ok(())
+    }
+
+    /// Adds the next pane, produced tile by tile.
+    ///
+    /// `fill(tile_x, tile_y, texels)` is called for every tile in row-major
+    /// tile order with a zeroed buffer of `tile_size²` RGB texels (row-major
+    /// within the tile) to fill: texel `(i, j)` of tile `(tile_x, tile_y)` is
+    /// atlas texel `(tile_x·tile_size + i, tile_y·tile_size + j)`.
+    pub fn add_pane_with<F>(&mut self, mut fill: F) -> Result<()>
+    where
+        F: FnMut(u32, u32, &mut [[f32; 3]]),
+    {
+        self.check_usable()?;
+        if self.panes_done >= self.clusters.len() {
+            return Err(Error::InvalidInput(format!(
+                "all {} panes have already been added",
+                self.clusters.len()
+            )));
+        }
+        // Any failure below leaves a partial pane in the file.
+        self.poisoned = true;
+        let mut energy = [0f64; 3];
+        let mut peak = [0f32; 3];
+        for ty in 0..self.tiles_per_side {
+            for tx in 0..self.tiles_per_side {
+                let mut texels = std::mem::take(&mut self.tile_texels);
+                texels.fill([0.0; 3]);
+                fill(tx, ty, &mut texels);
+                let result = self.write_tile(&texels, &mut energy, &mut peak);
+                self.tile_texels = texels;
+                let record = result?;
+                self.tiles.push(record);
+            }
+        }
+        let cluster = &mut self.clusters[self.panes_done];
+        cluster.energy = energy.map(|e| e as f32);
+        cluster.peak = peak;
+        self.panes_done += 1;
+        self.poisoned = false;
+        Ok(())
+    }
+
+    /// Adds the next pane from a full `resolution²` row-major RGB image.
+    pub fn add_pane(&mut self, texels: &[[f32; 3]]) -> Result<()> {
+        let res = self.resolution as usize;
+        if texels.len() != res * res {
+            return Err(Error::InvalidInput(format!(
+                "pane has {} texels, resolution {res} needs {}",
+                texels.len(),
+                res * res
+            )));
+        }
+        let t = self.tile_size as usize;
+        self.add_pane_with(|tx, ty, tile| {
+            for j in 0..t {
+                let row = (ty as usize * t + j) * res + tx as usize * t;
+                tile[j * t..(j + 1) * t].copy_from_slice(&texels[row..row + t]);
+            }
+        })
+    }
+
+    /// Encodes, compresses and writes one tile; accumulates energy and peak
+    /// of the decoded texels in the order the spec prescribes.
+    fn write_tile(&mut self, texels: &[[f32; 3]], energy: &mut [f64; 3], peak: &mut [f32; 3]) -> Result<TileRecord> {
+        self.tile_words.clear();
+        self.tile_words.extend(texels.iter().map(|&t| encode_rgb9e5(t)));
+        if self.tile_words.iter().all(|&w| w == 0) {
+            return Ok(TileRecord::default());
+        }
+        for &w in &self.tile_words {
+            let d = decode_rgb9e5(w);
+            for c in 0..3 {
+                energy[c] += f64::from(d[c]);
+                peak[c] = peak[c].max(d[c]);
+            }
+        }
+        self.options.tile_filter.apply(&self.tile_words, &mut self.tile_bytes);
+        let compressed = self.compressor.compress(&self.tile_bytes)?;
+        let size =
+            u32::try_from(compressed.len()).map_err(|_| Error::InvalidInput("compressed tile exceeds 4 GiB".into()))?;
+        let record = TileRecord {
+            offset: self.pos - self.panes_offset,
+            size,
+            reserved: 0,
+            checksum: checksum(&compressed),
+        };
+        self.write_all(&compressed)?;
+        Ok(record)
+    }
+
+    /// Writes the remaining sections, the section table and the header,
+    /// fsyncs, and atomically renames the archive into place. Returns the
+    /// archive's size in bytes.
+    pub fn finish(mut self) -> Result<u64> {
+        self.check_usable()?;
+        if self.panes_done != self.clusters.len() {
+            return Err(Error::InvalidInput(format!(
+                "{} of {} panes were added",
+                self.panes_done,
+                self.clusters.len()
+            )));
+        }
+        self.poisoned = true;
+
+        // Panes section: header + tile index, then hash the whole section.
+        let panes_end = self.pos;
+        let mut head = Vec::with_capacity(PANES_HEADER_SIZE + self.tiles.len() * TILE_RECORD_SIZE);
+        head.put_u64(0); // index checksum, patched below
+        head.put_u32(self.clusters.len() as u32);
+        head.put_u32(self.tiles_per_side);
+        head.put_u32(TEXEL_FORMAT_RGB9E5);
+        head.put_u32(self.options.tile_filter.code());
+        head.put_u64(0);
+        for t in &self.tiles {
+            t.encode_into(&mut head);
+        }
+        let index_sum = checksum(&head[8..]);
+        head[..8].copy_from_slice(&index_sum.to_le_bytes());
+        let panes_offset = self.panes_offset;
+        let file = self.file()?;
+        file.seek(SeekFrom::Start(panes_offset))?;
+        file.write_all(&head)?;
+        file.flush()?;
+        let inner = file.get_mut();
+        inner.seek(SeekFrom::Start(panes_offset))?;
+        let mut hasher = Xxh3Default::new();
+        let mut remaining = panes_end - panes_offset;
+        let mut buf = vec![0u8; 1 << 20];
+        while remaining > 0 {
+            let n = remaining.min(buf.len() as u64) as usize;
+            inner.read_exact(&mut buf[..n])?;
+            hasher.update(&buf[..n]);
+            remaining -= n as u64;
+        }
+        inner.seek(SeekFrom::Start(panes_end))?;
+        self.records.push(SectionRecord {
+            kind: kind::PANES,
+            compression: compression::NONE,
+            offset: panes_offset,
+            stored_size: panes_end - panes_offset,
+            raw_size: panes_end - panes_offset,
+            checksum: hasher.digest(),
+            reserved: 0,
+        });
+
+        let clusters = encode_clusters(&self.clusters);
+        self.write_section(kind::CLUSTERS, &clusters)?;
+        self.metadata.validate().map_err(Error::InvalidInput)?;
+        let json = serde_json::to_vec(&self.metadata).map_err(|e| Error::InvalidInput(format!("metadata: {e}")))?;
+        if json.len() as u64 > crate::limits::MAX_METADATA_BYTES {
+            return Err(Error::InvalidInput("metadata JSON exceeds 16 MiB".into()));
+        }
+        self.write_section(kind::METADATA, &json)?;
+        for (k, data) in std::mem::take(&mut self.custom) {
+            self.write_section(k, &data)?;
+        }
+
+        let mut table = Vec::with_capacity(self.records.len() * crate::layout::SECTION_RECORD_SIZE);
+        for r in &self.records {
+            r.encode_into(&mut table);
+        }
+        let table_offset = self.pos;
+        self.write_all(&table)?;
+        let header = Header {
+            major: VERSION_MAJOR,
+            minor: VERSION_MINOR,
+            section_count: self.records.len() as u32,
+            table_offset,
+            file_length: self.pos,
+            reserved: [0, 0],
+            table_checksum: checksum(&table),
+        };
+        let file_length = self.pos;
+        let file = self.file()?;
+        file.seek(SeekFrom::Start(0))?;
+        file.write_all(&header.encode())?;
+        file.flush()?;
+        file.get_ref().sync_all()?;
+        drop(self.temp.file.take());
+        fs::rename(&self.temp.path, &self.dest)?;
+        // The temp path no longer exists; make the guard's removal a no-op.
+        self.temp.path = PathBuf::new();
+        sync_parent_dir(&self.dest);
+        Ok(file_length)
+    }
+
+    fn check_usable(&self) -> Result<()> {
+        if self.poisoned {
+            return Err(Error::InvalidInput(
+                "an earlier write failed; the archive cannot be completed".into(),
+            ));
+        }
+        Ok(())
+    }
+
+    fn file(&mut self) -> Result<&mut BufWriter<File>> {
+        self.temp
+            .file
+            .as_mut()
+            .ok_or_else(|| Error::InvalidInput("archive already finished".into()))
+    }
+
+    fn write_all(&mut self, bytes: &[u8]) -> Result<()> {
+        self.file()?.write_all(bytes)?;
+        self.pos += bytes.len() as u64;
+        Ok(())
+    }
+
+    /// Writes one whole section (compressed when allowed and smaller) and
+    /// records it in the section table.
+    fn write_section(&mut self, kind: u32, raw: &[u8]) -> Result<()> {
+        let compressed = if self.options.compress_sections {
+            Some(self.compressor.compress(raw)?).filter(|c| c.len() < raw.len())
+        } else {
+            None
+        };
+        let (stored, compression) = match &compressed {
+            Some(c) => (c.as_slice(), compression::ZSTD),
+            None => (raw, compression::NONE),
+        };
+        let record = SectionRecord {
+            kind,
+            compression,
+            offset: self.pos,
+            stored_size: stored.len() as u64,
+            raw_size: raw.len() as u64,
+            checksum: checksum(stored),
+            reserved: 0,
+        };
+        self.write_all(stored)?;
+        self.records.push(record);
+        Ok(())
+    }
+}
+
+/// Best-effort fsync of the directory holding `path`, so the rename is durable.
+fn sync_parent_dir(path: &Path) {
+    #[cfg(unix)]
+    {
+        let dir = match path.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p,
+            _ => Path::new("."),
+        };
+        if let Ok(d) = File::open(dir) {
+            let _ = d.sync_all();
+        }
+    }
+    #[cfg(not(unix))]
+    let _ = path;
+}

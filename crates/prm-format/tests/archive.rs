@@ -1,0 +1,990 @@
+//! Integration tests of the `.prm` archive: round trip, corruption, atomicity, spec conformance.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use prm_format::*;
+
+// ---------------------------------------------------------------- helpers
+
+/// SplitMix64: deterministic PRNG, no dependency needed.
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+    fn below(&mut self, n: u64) -> u64 {
+        self.next() % n.max(1)
+    }
+    fn unit(&mut self) -> f32 {
+        (self.next() >> 40) as f32 / (1u64 << 24) as f32
+    }
+}
+
+/// A fresh, empty directory under cargo's per-target temp dir.
+fn test_dir(name: &str) -> PathBuf {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("prm-format-{name}"));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn dir_listing(dir: &Path) -> Vec<String> {
+    let mut v: Vec<String> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    v.sort();
+    v
+}
+
+struct Scene {
+    metadata: Metadata,
+    atlas: AtlasSection,
+    entries: Vec<Entry>,
+    clusters: Vec<Cluster>,
+    panes: Vec<Vec<[f32; 3]>>,
+}
+
+/// A small scene: `clusters` clusters of 0..3 entries, panes of smooth data
+/// with some all-zero tiles (pane 0 entirely zero).
+fn scene(resolution: u32, tile_size: u32, clusters: usize, seed: u64) -> Scene {
+    let mut rng = Rng(seed);
+    let mut metadata = Metadata::new("prm-format-tests", "0.0.0");
+    metadata.seed = seed;
+    metadata.params.insert("bounces".into(), 3.into());
+    metadata
+        .params
+        .insert("samples".into(), serde_json::json!({"per_texel": 64}));
+    metadata.timings.insert("trace".into(), 1.25);
+    metadata.timings.insert("cluster".into(), 0.5);
+    metadata.source_scene = "../scenes/box.gltf".into();
+    metadata.scene_fingerprint = 0x0123_4567_89ab_cdef ^ seed;
+
+    let mut atlas = AtlasSection::new(resolution, tile_size);
+    for _ in 0..5 {
+        atlas.triangle_uvs.push([
+            [rng.unit(), rng.unit()],
+            [rng.unit(), rng.unit()],
+            [rng.unit(), rng.unit()],
+        ]);
+    }
+    for y in 0..resolution {
+        for x in 0..resolution {
+            atlas.set_covered(x, y, (x + 2 * y) % 3 != 0);
+        }
+    }
+
+    let mut entries = Vec::new();
+    let mut cl = Vec::new();
+    for c in 0..clusters {
+        let first = entries.len() as u32;
+        let n = (rng.below(3)) as u32;
+        for _ in 0..n {
+            entries.push(Entry {
+                position: [rng.unit(), rng.unit(), c as f32],
+                normal: [0.0, 1.0, 0.0],
+                cluster: c as u32,
+            });
+        }
+        cl.push(Cluster::new(first, n, [0.5, 0.5, c as f32], [0.0, 1.0, 0.0]));
+    }
+
+    let res = resolution as usize;
+    let panes = (0..clusters)
+        .map(|p| {
+            let (cx, cy) = (rng.unit() * res as f32, rng.unit() * res as f32);
+            let scale = 0.1 + 4.0 * rng.unit();
+            (0..res * res)
+                .map(|i| {
+                    let (x, y) = ((i % res) as f32, (i / res) as f32);
+                    // pane 0 is all zero; left quarter zero elsewhere
+                    if p == 0 || x < res as f32 / 4.0 {
+                        return [0.0; 3];
+                    }
+                    let d2 = (x - cx).powi(2) + (y - cy).powi(2);
+                    let v = scale / (1.0 + d2 / 16.0);
+                    [v, 0.5 * v, 0.25 * v + 0.01]
+                })
+                .collect()
+        })
+        .collect();
+    Scene {
+        metadata,
+        atlas,
+        entries,
+        clusters: cl,
+        panes,
+    }
+}
+
+fn write_scene(path: &Path, s: &Scene, options: WriterOptions) -> u64 {
+    let mut w =
+        ArchiveWriter::create_with_options(path, s.metadata.clone(), &s.atlas, &s.entries, &s.clusters, options)
+            .unwrap();
+    for p in &s.panes {
+        w.add_pane(p).unwrap();
+    }
+    w.finish().unwrap()
+}
+
+/// The small archive most corruption tests mutate.
+fn small_archive(name: &str, options: WriterOptions) -> (Vec<u8>, Scene) {
+    let dir = test_dir(name);
+    let s = scene(16, 8, 3, 7);
+    let path = dir.join("small.prm");
+    write_scene(&path, &s, options);
+    (std::fs::read(&path).unwrap(), s)
+}
+
+/// Everything a reader can produce from an archive.
+#[derive(Debug, PartialEq)]
+struct Contents {
+    metadata: Metadata,
+    atlas: AtlasSection,
+    entries: Vec<Entry>,
+    clusters: Vec<Cluster>,
+    panes: Vec<Vec<u32>>,
+}
+
+fn read_all(bytes: &[u8]) -> Result<Contents> {
+    let mut a = Archive::from_bytes(bytes)?;
+    let panes = (0..a.pane_count())
+        .map(|p| a.read_pane_rgb9e5(p))
+        .collect::<Result<Vec<_>>>()?;
+    Ok(Contents {
+        metadata: a.metadata().clone(),
+        atlas: a.atlas().clone(),
+        entries: a.entries().to_vec(),
+        clusters: a.clusters().to_vec(),
+        panes,
+    })
+}
+
+fn verify_bytes(bytes: &[u8]) -> Result<VerifyReport> {
+    Archive::from_bytes(bytes)?.verify()
+}
+
+// Test-side view of the container, written from the spec (not the library).
+fn u32_at(b: &[u8], o: usize) -> Option<u32> {
+    Some(u32::from_le_bytes(b.get(o..o.checked_add(4)?)?.try_into().ok()?))
+}
+fn u64_at(b: &[u8], o: usize) -> Option<u64> {
+    Some(u64::from_le_bytes(b.get(o..o.checked_add(8)?)?.try_into().ok()?))
+}
+fn put_u64(b: &mut [u8], o: usize, v: u64) {
+    if let Some(s) = b.get_mut(o..o.saturating_add(8)) {
+        s.copy_from_slice(&v.to_le_bytes());
+    }
+}
+fn put_u16(b: &mut [u8], o: usize, v: u16) {
+    b[o..o + 2].copy_from_slice(&v.to_le_bytes());
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Sec {
+    kind: u32,
+    offset: usize,
+    size: usize,
+}
+
+fn sections(b: &[u8]) -> Vec<Sec> {
+    let (Some(n), Some(off)) = (u32_at(b, 12), u64_at(b, 16)) else {
+        return vec![];
+    };
+    (0..n as usize)
+        .map_while(|i| {
+            let r = (off as usize).checked_add(i.checked_mul(48)?)?;
+            Some(Sec {
+                kind: u32_at(b, r)?,
+                offset: u64_at(b, r.saturating_add(8))? as usize,
+                size: u64_at(b, r.saturating_add(16))? as usize,
+            })
+        })
+        .collect()
+}
+
+/// Recomputes every checksum after a mutation (tiles, tile index, sections,
+/// table, header), so that the mutation reaches structural validation.
+/// Robust against any garbage: skips whatever does not parse.
+fn resign(b: &mut [u8]) {
+    let secs = sections(b);
+    if let Some(p) = secs.iter().find(|s| s.kind == kind::PANES) {
+        let at = |k: usize| p.offset.saturating_add(k);
+        if let (Some(pc), Some(tps)) = (u32_at(b, at(8)), u32_at(b, at(12))) {
+            let count = (pc as u64)
+                .saturating_mul(tps as u64)
+                .saturating_mul(tps as u64)
+                .min(1 << 20) as usize;
+            for i in 0..count {
+                let r = at(32 + i * 24);
+                let (Some(off), Some(size)) = (u64_at(b, r), u32_at(b, r.saturating_add(8))) else {
+                    break;
+                };
+                let start = p.offset.saturating_add(off as usize);
+                if size > 0 {
+                    if let Some(data) = b.get(start..start.saturating_add(size as usize)) {
+                        let sum = checksum(data);
+                        put_u64(b, r + 16, sum);
+                    }
+                }
+            }
+            if let Some(region) = b.get(at(8)..at(32 + count * 24)) {
+                let sum = checksum(region);
+                put_u64(b, p.offset, sum);
+            }
+        }
+    }
+    let table = u64_at(b, 16).unwrap_or(0) as usize;
+    for (i, s) in secs.iter().enumerate() {
+        if let Some(data) = b.get(s.offset..s.offset.saturating_add(s.size)) {
+            let sum = checksum(data);
+            put_u64(b, table.saturating_add(i * 48 + 32), sum);
+        }
+    }
+    let n = u32_at(b, 12).unwrap_or(0) as usize;
+    if let Some(t) = b.get(table..table.saturating_add(n.saturating_mul(48))) {
+        let sum = checksum(t);
+        put_u64(b, 48, sum);
+    }
+    if b.len() >= 64 {
+        let sum = checksum(&b[..56]);
+        put_u64(b, 56, sum);
+    }
+}
+
+// ---------------------------------------------------------------- tests
+
+#[test]
+fn round_trip() {
+    let dir = test_dir("round-trip");
+    let s = scene(32, 8, 5, 1);
+    let path = dir.join("a.prm");
+    let size = write_scene(&path, &s, WriterOptions::default());
+    assert_eq!(size, std::fs::metadata(&path).unwrap().len());
+    assert_eq!(dir_listing(&dir), vec!["a.prm"]);
+
+    let mut a = Archive::open(&path).unwrap();
+    let info = a.info().clone();
+    assert_eq!((info.major, info.minor), (1, 0));
+    assert_eq!(info.pane_count, 5);
+    assert_eq!(info.tiles_per_pane, 16);
+    assert_eq!(a.tile_filter(), TileFilter::DeltaShuffle);
+    // pane 0 is all zero, and the left quarter (one tile column) of the others
+    assert_eq!(info.stored_tiles, 4 * 12);
+    let names: Vec<&str> = info.sections.iter().map(|s| s.name.as_str()).collect();
+    for n in ["metadata", "atlas", "entries", "clusters", "panes"] {
+        assert!(names.contains(&n), "{names:?}");
+    }
+
+    let mut expected_meta = s.metadata.clone();
+    expected_meta.texel_encoding = "rgb9e5ufloat".into();
+    expected_meta.texel_relative_error_bound = RGB9E5_MAX_RELATIVE_ERROR;
+    assert_eq!(a.metadata(), &expected_meta);
+    assert_eq!(a.atlas(), &s.atlas);
+    assert_eq!(a.entries(), &s.entries[..]);
+    assert_eq!(a.clusters().len(), s.clusters.len());
+
+    for (p, pane) in s.panes.iter().enumerate() {
+        let got = a.read_pane(p).unwrap();
+        let raw = a.read_pane_rgb9e5(p).unwrap();
+        let mut energy = [0f64; 3];
+        let mut peak = [0f32; 3];
+        for (i, (g, want)) in got.iter().zip(pane).enumerate() {
+            assert_eq!(*g, decode_rgb9e5(encode_rgb9e5(*want)), "pane {p} texel {i}");
+            assert_eq!(raw[i], encode_rgb9e5(*want));
+            for c in 0..3 {
+                energy[c] += f64::from(g[c]);
+                peak[c] = peak[c].max(g[c]);
+                let m = want[0].max(want[1]).max(want[2]);
+                assert!((g[c] - want[c]).abs() <= (m / 511.5).max(RGB9E5_MIN_ABS_ERROR));
+            }
+        }
+        let cl = &a.clusters()[p];
+        assert_eq!(cl.peak, peak);
+        for c in 0..3 {
+            let rel = (f64::from(cl.energy[c]) - energy[c]).abs() / energy[c].max(1e-30);
+            assert!(rel < 1e-6, "energy {:?} vs {energy:?}", cl.energy);
+        }
+        assert_eq!((cl.first, cl.count), (s.clusters[p].first, s.clusters[p].count));
+        assert_eq!(cl.centroid, s.clusters[p].centroid);
+    }
+    assert_eq!(a.clusters()[0].energy, [0.0; 3]);
+
+    // tile access and out-of-range requests
+    let t = a.read_tile_rgb9e5(1, 3, 3).unwrap();
+    assert_eq!(t.len(), 64);
+    assert!(a.tile_is_stored(1, 3, 3).unwrap());
+    assert!(!a.tile_is_stored(1, 0, 0).unwrap());
+    assert!(a.read_tile_rgb9e5(1, 0, 0).unwrap().iter().all(|&x| x == 0));
+    assert!(matches!(a.read_pane(5), Err(Error::InvalidInput(_))));
+    assert!(a.read_tile_rgb9e5(0, 4, 0).is_err());
+
+    let report = a.verify().unwrap();
+    assert_eq!(report.panes, 5);
+    assert_eq!(report.sections, 5);
+    assert_eq!(report.stored_tiles + report.omitted_tiles, 80);
+
+    // from_bytes agrees with open
+    let bytes = std::fs::read(&path).unwrap();
+    assert_eq!(read_all(&bytes).unwrap().panes[3], a.read_pane_rgb9e5(3).unwrap());
+}
+
+#[test]
+fn tile_callback_and_full_pane_agree() {
+    let dir = test_dir("tile-callback");
+    let s = scene(16, 4, 2, 3);
+    let a_path = dir.join("full.prm");
+    write_scene(&a_path, &s, WriterOptions::default());
+    let b_path = dir.join("tiles.prm");
+    let mut w = ArchiveWriter::create(&b_path, s.metadata.clone(), &s.atlas, &s.entries, &s.clusters).unwrap();
+    assert_eq!(w.panes_remaining(), 2);
+    for pane in &s.panes {
+        w.add_pane_with(|tx, ty, tile| {
+            for j in 0..4 {
+                for i in 0..4 {
+                    let (x, y) = (tx as usize * 4 + i, ty as usize * 4 + j);
+                    tile[j * 4 + i] = pane[y * 16 + x];
+                }
+            }
+        })
+        .unwrap();
+    }
+    assert!(w.add_pane(&s.panes[0]).is_err(), "one pane too many");
+    w.metadata_mut().timings.insert("compress".into(), 0.125);
+    w.finish().unwrap();
+    let a = read_all(&std::fs::read(&a_path).unwrap()).unwrap();
+    let b = read_all(&std::fs::read(&b_path).unwrap()).unwrap();
+    assert_eq!(a.panes, b.panes);
+    assert_eq!(a.clusters, b.clusters);
+    assert_eq!(b.metadata.timings["compress"], 0.125);
+}
+
+#[test]
+fn uncompressed_sections_round_trip() {
+    let opts = WriterOptions {
+        zstd_level: 1,
+        compress_sections: false,
+        tile_filter: TileFilter::None,
+    };
+    let (bytes, s) = small_archive("uncompressed", opts);
+    let c = read_all(&bytes).unwrap();
+    assert_eq!(c.entries, s.entries);
+    let a = Archive::from_bytes(&bytes).unwrap();
+    assert_eq!(a.tile_filter(), TileFilter::None);
+    for sec in &a.info().sections {
+        assert_eq!(sec.compression, compression::NONE, "{}", sec.name);
+    }
+    verify_bytes(&bytes).unwrap();
+}
+
+#[test]
+fn truncation_at_every_offset_is_an_error() {
+    let (bytes, _) = small_archive("truncation", WriterOptions::default());
+    assert!(bytes.len() > 500, "{}", bytes.len());
+    for len in 0..bytes.len() {
+        match Archive::from_bytes(&bytes[..len]) {
+            Err(Error::Truncated { .. }) => {}
+            Err(e) => panic!("truncated to {len}: expected Truncated, got {e}"),
+            Ok(_) => panic!("truncated to {len} bytes opened successfully"),
+        }
+    }
+    // appended bytes are refused too
+    let mut longer = bytes.clone();
+    longer.push(0);
+    assert!(matches!(Archive::from_bytes(&longer), Err(Error::Inconsistent { .. })));
+}
+
+#[test]
+fn bit_flips_never_give_silently_different_data() {
+    let (bytes, _) = small_archive("bitflips", WriterOptions::default());
+    let original = read_all(&bytes).unwrap();
+    let mut rng = Rng(0xB17F11B5);
+    let mut kinds = std::collections::BTreeMap::<String, usize>::new();
+    for _ in 0..1000 {
+        let mut m = bytes.clone();
+        let bit = rng.below(m.len() as u64 * 8) as usize;
+        m[bit / 8] ^= 1 << (bit % 8);
+        match read_all(&m) {
+            Ok(c) => assert_eq!(c, original, "flip of bit {bit} changed the data silently"),
+            Err(e) => {
+                let k = format!("{e:?}");
+                let k = k.split([' ', '{', '(']).next().unwrap().to_string();
+                *kinds.entry(k).or_default() += 1;
+            }
+        }
+        // Every byte is covered by a checksum, so verification always notices.
+        assert!(verify_bytes(&m).is_err(), "flip of bit {bit} passed verify()");
+    }
+    println!("bit flip outcomes: {kinds:?}");
+    assert!(kinds.contains_key("ChecksumMismatch"));
+}
+
+#[test]
+fn unknown_sections_are_skipped() {
+    let dir = test_dir("unknown");
+    let s = scene(16, 8, 2, 11);
+    let path = dir.join("custom.prm");
+    let mut w = ArchiveWriter::create(&path, s.metadata.clone(), &s.atlas, &s.entries, &s.clusters).unwrap();
+    assert!(w.add_custom_section(kind::ATLAS, vec![1]).is_err());
+    assert!(w.add_custom_section(0, vec![1]).is_err());
+    w.add_custom_section(kind::PRIVATE_FIRST + 7, b"hello, extension".repeat(10))
+        .unwrap();
+    for p in &s.panes {
+        w.add_pane(p).unwrap();
+    }
+    w.finish().unwrap();
+    let bytes = std::fs::read(&path).unwrap();
+    let mut a = Archive::from_bytes(&bytes).unwrap();
+    assert_eq!(a.info().sections.len(), 6);
+    assert!(a.info().sections.iter().any(|s| s.name.starts_with("unknown")));
+    assert_eq!(
+        a.read_custom_section(kind::PRIVATE_FIRST + 7).unwrap().unwrap(),
+        b"hello, extension".repeat(10)
+    );
+    assert_eq!(a.read_custom_section(99).unwrap(), None);
+    a.verify().unwrap();
+
+    // Splice in, by hand, a section of an unknown kind with an unknown
+    // compression code: a reader must skip it without interpreting it.
+    let secs = sections(&bytes);
+    let table_off = u64_at(&bytes, 16).unwrap() as usize;
+    let n = secs.len();
+    let payload = b"future data, compression 9".to_vec();
+    let mut out = bytes[..table_off].to_vec();
+    let payload_off = out.len();
+    out.extend_from_slice(&payload);
+    let new_table_off = out.len();
+    out.extend_from_slice(&bytes[table_off..table_off + n * 48]);
+    let mut rec = Vec::new();
+    rec.extend_from_slice(&1234u32.to_le_bytes());
+    rec.extend_from_slice(&9u32.to_le_bytes());
+    rec.extend_from_slice(&(payload_off as u64).to_le_bytes());
+    rec.extend_from_slice(&(payload.len() as u64).to_le_bytes());
+    rec.extend_from_slice(&(1u64 << 40).to_le_bytes());
+    rec.extend_from_slice(&checksum(&payload).to_le_bytes());
+    rec.extend_from_slice(&0u64.to_le_bytes());
+    out.extend_from_slice(&rec);
+    out[12..16].copy_from_slice(&(n as u32 + 1).to_le_bytes());
+    let len = out.len() as u64;
+    put_u64(&mut out, 16, new_table_off as u64);
+    put_u64(&mut out, 24, len);
+    resign(&mut out);
+    let mut a = Archive::from_bytes(&out).unwrap();
+    assert_eq!(a.info().sections.len(), 7);
+    assert_eq!(read_all(&out).unwrap(), read_all(&bytes).unwrap());
+    a.verify().unwrap();
+    assert!(
+        a.read_custom_section(1234).is_err(),
+        "unknown compression cannot be decoded"
+    );
+}
+
+#[test]
+fn newer_major_is_refused_newer_minor_accepted() {
+    let (bytes, _) = small_archive("versions", WriterOptions::default());
+    let mut newer = bytes.clone();
+    put_u16(&mut newer, 8, 2);
+    put_u16(&mut newer, 10, 3);
+    resign(&mut newer);
+    let err = Archive::from_bytes(&newer).err().unwrap();
+    assert!(matches!(err, Error::UnsupportedVersion { major: 2, minor: 3 }), "{err}");
+    assert!(err.to_string().contains("2.3"), "{err}");
+
+    // A later minor may use reserved fields; a 1.0 reader ignores them.
+    let mut minor = bytes.clone();
+    put_u16(&mut minor, 10, 1);
+    put_u64(&mut minor, 32, 0xdead_beef);
+    resign(&mut minor);
+    let a = Archive::from_bytes(&minor).unwrap();
+    assert_eq!((a.info().major, a.info().minor), (1, 1));
+    // ... but in a 1.0 file they must be zero.
+    let mut strict = bytes.clone();
+    put_u64(&mut strict, 32, 0xdead_beef);
+    resign(&mut strict);
+    assert!(matches!(Archive::from_bytes(&strict), Err(Error::Inconsistent { .. })));
+
+    let mut bad = bytes.clone();
+    bad[1] = b'Q';
+    assert!(matches!(Archive::from_bytes(&bad), Err(Error::BadMagic)));
+    assert!(matches!(
+        Archive::from_bytes(b"PK\x03\x04 not an archive"),
+        Err(Error::BadMagic)
+    ));
+}
+
+#[test]
+fn atomic_write_leaves_old_archive_untouched() {
+    let dir = test_dir("atomic");
+    let s = scene(16, 8, 2, 5);
+    let path = dir.join("scene.prm");
+    write_scene(&path, &s, WriterOptions::default());
+    let old = std::fs::read(&path).unwrap();
+    let other = scene(16, 8, 2, 6);
+
+    // 1. dropped without finish
+    {
+        let mut w = ArchiveWriter::create(
+            &path,
+            other.metadata.clone(),
+            &other.atlas,
+            &other.entries,
+            &other.clusters,
+        )
+        .unwrap();
+        w.add_pane(&other.panes[0]).unwrap();
+        assert_eq!(dir_listing(&dir).len(), 2, "temp file exists while writing");
+    }
+    assert_eq!(std::fs::read(&path).unwrap(), old);
+    assert_eq!(dir_listing(&dir), vec!["scene.prm"]);
+
+    // 2. finish with a pane missing
+    let mut w = ArchiveWriter::create(
+        &path,
+        other.metadata.clone(),
+        &other.atlas,
+        &other.entries,
+        &other.clusters,
+    )
+    .unwrap();
+    w.add_pane(&other.panes[0]).unwrap();
+    assert!(matches!(w.finish(), Err(Error::InvalidInput(_))));
+    assert_eq!(std::fs::read(&path).unwrap(), old);
+    assert_eq!(dir_listing(&dir), vec!["scene.prm"]);
+
+    // 3. wrong pane size, then finish
+    let mut w = ArchiveWriter::create(
+        &path,
+        other.metadata.clone(),
+        &other.atlas,
+        &other.entries,
+        &other.clusters,
+    )
+    .unwrap();
+    assert!(matches!(w.add_pane(&[[1.0; 3]; 10]), Err(Error::InvalidInput(_))));
+    assert!(w.finish().is_err());
+    assert_eq!(std::fs::read(&path).unwrap(), old);
+    assert_eq!(dir_listing(&dir), vec!["scene.prm"]);
+
+    // 4. the tile producer panics mid-pane
+    let r = std::panic::catch_unwind(|| {
+        let mut w = ArchiveWriter::create(
+            &path,
+            other.metadata.clone(),
+            &other.atlas,
+            &other.entries,
+            &other.clusters,
+        )
+        .unwrap();
+        w.add_pane_with(|tx, _, _| assert!(tx < 1, "producer failed")).unwrap();
+    });
+    assert!(r.is_err());
+    assert_eq!(std::fs::read(&path).unwrap(), old);
+    assert_eq!(dir_listing(&dir), vec!["scene.prm"]);
+
+    // 5. the final rename fails (destination is a non-empty directory)
+    let blocked = dir.join("blocked.prm");
+    std::fs::create_dir(&blocked).unwrap();
+    std::fs::write(blocked.join("keep"), b"x").unwrap();
+    let mut w = ArchiveWriter::create(
+        &blocked,
+        other.metadata.clone(),
+        &other.atlas,
+        &other.entries,
+        &other.clusters,
+    )
+    .unwrap();
+    for p in &other.panes {
+        w.add_pane(p).unwrap();
+    }
+    assert!(matches!(w.finish(), Err(Error::Io(_))));
+    assert_eq!(dir_listing(&dir), vec!["blocked.prm", "scene.prm"]);
+
+    // 6. invalid inputs are refused before any file is created
+    let mut bad = other.clusters.clone();
+    bad[1].first = 0;
+    assert!(ArchiveWriter::create(&path, other.metadata.clone(), &other.atlas, &other.entries, &bad).is_err());
+    let mut meta = other.metadata.clone();
+    meta.timings.insert("nan".into(), f64::NAN);
+    assert!(ArchiveWriter::create(&path, meta, &other.atlas, &other.entries, &other.clusters).is_err());
+    assert_eq!(dir_listing(&dir), vec!["blocked.prm", "scene.prm"]);
+
+    // and a successful write replaces the archive
+    write_scene(&path, &other, WriterOptions::default());
+    assert_ne!(std::fs::read(&path).unwrap(), old);
+    assert_eq!(dir_listing(&dir), vec!["blocked.prm", "scene.prm"]);
+}
+
+/// Random byte mutations, insertions and deletions, with and without
+/// re-signed checksums: the reader must never panic, and must either fail
+/// or return data (re-signed mutations can legitimately change data).
+#[test]
+fn fuzz_mutated_archives_never_panic() {
+    let mut rng = Rng(0xF022);
+    for (name, opts) in [
+        ("fuzz-zstd", WriterOptions::default()),
+        (
+            "fuzz-raw",
+            WriterOptions {
+                zstd_level: 1,
+                compress_sections: false,
+                tile_filter: TileFilter::None,
+            },
+        ),
+    ] {
+        let (bytes, _) = small_archive(name, opts);
+        let mut outcomes = std::collections::BTreeMap::<String, usize>::new();
+        for iter in 0..1500 {
+            let mut m = bytes.clone();
+            for _ in 0..1 + rng.below(4) {
+                let pos = rng.below(m.len() as u64 + 1) as usize;
+                match rng.below(6) {
+                    0 if pos < m.len() => {
+                        m.remove(pos);
+                    }
+                    1 => m.insert(pos.min(m.len()), rng.next() as u8),
+                    2 if pos + 8 <= m.len() => {
+                        // plausible-looking integers: small, huge, boundary
+                        let v: u64 = match rng.below(4) {
+                            0 => rng.below(256),
+                            1 => u64::MAX - rng.below(4),
+                            2 => 1 << rng.below(64),
+                            _ => m.len() as u64 + rng.below(64) - 32,
+                        };
+                        let w = [1usize, 2, 4, 8][rng.below(4) as usize];
+                        m[pos..pos + w].copy_from_slice(&v.to_le_bytes()[..w]);
+                    }
+                    _ if pos < m.len() => m[pos] = rng.next() as u8,
+                    _ => {}
+                }
+            }
+            // Half the time, fix lengths and checksums so structural checks run.
+            if iter % 2 == 0 {
+                let len = m.len() as u64;
+                if rng.below(2) == 0 {
+                    put_u64(&mut m, 24, len);
+                }
+                resign(&mut m);
+            }
+            let k = match read_all(&m) {
+                Ok(_) => "opened".to_string(),
+                Err(e) => format!("{e:?}").split([' ', '{', '(']).next().unwrap().to_string(),
+            };
+            *outcomes.entry(k).or_default() += 1;
+            let _ = verify_bytes(&m);
+        }
+        println!("{name}: {outcomes:?}");
+        assert!(
+            outcomes.len() >= 4,
+            "mutations should reach several checks: {outcomes:?}"
+        );
+    }
+}
+
+/// Hostile sizes: huge declared raw sizes or counts fail fast, without
+/// allocating what they declare.
+#[test]
+fn hostile_sizes_are_rejected_before_allocation() {
+    let opts = WriterOptions {
+        zstd_level: 1,
+        compress_sections: false,
+        tile_filter: TileFilter::None,
+    };
+    let (bytes, _) = small_archive("hostile", opts);
+    let secs = sections(&bytes);
+    let table = u64_at(&bytes, 16).unwrap() as usize;
+    for (i, s) in secs.iter().enumerate() {
+        for raw in [u64::MAX, 1 << 40, (s.size as u64) + 1] {
+            let mut m = bytes.clone();
+            put_u64(&mut m, table + i * 48 + 24, raw); // raw_size
+            m[table + i * 48 + 4] = 1; // pretend zstd
+            resign(&mut m);
+            assert!(Archive::from_bytes(&m).is_err());
+        }
+    }
+    // a pane count of 2^32-1 in the panes header
+    let p = secs.iter().find(|s| s.kind == kind::PANES).unwrap();
+    let mut m = bytes.clone();
+    m[p.offset + 8..p.offset + 12].copy_from_slice(&u32::MAX.to_le_bytes());
+    resign(&mut m);
+    assert!(matches!(Archive::from_bytes(&m), Err(Error::Inconsistent { .. })));
+    // a section count of 2^32-1
+    let mut m = bytes.clone();
+    m[12..16].copy_from_slice(&u32::MAX.to_le_bytes());
+    resign(&mut m);
+    assert!(matches!(Archive::from_bytes(&m), Err(Error::Inconsistent { .. })));
+    // an atlas resolution of 2^31 (section stored uncompressed)
+    let a = secs.iter().find(|s| s.kind == kind::ATLAS).unwrap();
+    let mut m = bytes.clone();
+    m[a.offset..a.offset + 4].copy_from_slice(&(1u32 << 31).to_le_bytes());
+    resign(&mut m);
+    assert!(matches!(Archive::from_bytes(&m), Err(Error::Inconsistent { .. })));
+}
+
+#[test]
+fn python_reader_agrees_with_rust() {
+    let dir = test_dir("python");
+    for (name, filter) in [("shuffled", TileFilter::DeltaShuffle), ("plain", TileFilter::None)] {
+        if !python_reader_check(&dir.join(format!("{name}.prm")), filter) {
+            return;
+        }
+    }
+}
+
+/// Writes an archive, reads it with `formats/read_prm.py` and compares;
+/// returns false if the test had to be skipped.
+fn python_reader_check(path: &Path, filter: TileFilter) -> bool {
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../formats/read_prm.py");
+    let dir = path.parent().unwrap();
+    let s = scene(16, 8, 4, 21);
+    let opts = WriterOptions {
+        tile_filter: filter,
+        ..WriterOptions::default()
+    };
+    let mut w =
+        ArchiveWriter::create_with_options(path, s.metadata.clone(), &s.atlas, &s.entries, &s.clusters, opts).unwrap();
+    w.add_custom_section(kind::PRIVATE_FIRST, b"skip me".to_vec()).unwrap();
+    for p in &s.panes {
+        w.add_pane(p).unwrap();
+    }
+    w.finish().unwrap();
+
+    let out = match Command::new("python3")
+        .arg(&script)
+        .arg("--pane")
+        .arg("2")
+        .arg(path)
+        .output()
+    {
+        Ok(o) => o,
+        Err(e) => {
+            println!("SKIPPED python_reader_agrees_with_rust: cannot run python3 ({e})");
+            return false;
+        }
+    };
+    if out.status.code() == Some(3) {
+        println!(
+            "SKIPPED python_reader_agrees_with_rust: {}",
+            String::from_utf8_lossy(&out.stderr).trim()
+        );
+        return false;
+    }
+    assert!(
+        out.status.success(),
+        "read_prm.py failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let mut a = Archive::open(path).unwrap();
+    assert_eq!(j["version"], "1.0");
+    assert_eq!(j["checksums_verified"], true);
+    assert_eq!(j["tile_filter"], filter.code());
+    assert_eq!(j["resolution"], 16);
+    assert_eq!(j["tile_size"], 8);
+    assert_eq!(j["covered_texels"], a.atlas().covered_texels());
+    assert_eq!(j["sections"].as_array().unwrap().len(), 6);
+    assert_eq!(
+        j["metadata"]["scene_fingerprint"],
+        format!("{:016x}", s.metadata.scene_fingerprint)
+    );
+    let f = |v: &serde_json::Value| v.as_f64().unwrap() as f32;
+    let v3 = |v: &serde_json::Value| [f(&v[0]), f(&v[1]), f(&v[2])];
+    let clusters = j["clusters"].as_array().unwrap();
+    assert_eq!(clusters.len(), a.clusters().len());
+    for (jc, c) in clusters.iter().zip(a.clusters()) {
+        assert_eq!(jc["first"], c.first);
+        assert_eq!(jc["count"], c.count);
+        assert_eq!(v3(&jc["energy"]), c.energy);
+        assert_eq!(v3(&jc["peak"]), c.peak);
+    }
+    let entries = j["entries"].as_array().unwrap();
+    assert_eq!(entries.len(), a.entries().len());
+    for (je, e) in entries.iter().zip(a.entries()) {
+        assert_eq!(v3(&je["position"]), e.position);
+        assert_eq!(v3(&je["normal"]), e.normal);
+        assert_eq!(je["cluster"], e.cluster);
+    }
+    let pane = a.read_pane(2).unwrap();
+    let texels = j["pane"]["texels"].as_array().unwrap();
+    assert_eq!(texels.len(), pane.len());
+    for (jt, t) in texels.iter().zip(&pane) {
+        assert_eq!(v3(jt), *t);
+    }
+    // The spec pins the summation order, so Python's energy is bit-identical.
+    assert_eq!(v3(&j["pane"]["energy"]), a.clusters()[2].energy);
+    assert_eq!(v3(&j["pane"]["peak"]), a.clusters()[2].peak);
+
+    // The Python reader rejects damage too.
+    let mut bytes = std::fs::read(path).unwrap();
+    let n = bytes.len();
+    bytes[n / 2] ^= 0x10;
+    let bad = dir.join("bad.prm");
+    std::fs::write(&bad, &bytes).unwrap();
+    let out = Command::new("python3").arg(&script).arg(&bad).output().unwrap();
+    assert_eq!(out.status.code(), Some(1), "{}", String::from_utf8_lossy(&out.stdout));
+    true
+}
+
+/// Size and accuracy on plausible data: 256 panes of 256×256 texels.
+/// Run with `cargo test -p prm-format --release -- --ignored --nocapture measure`.
+#[test]
+#[ignore]
+fn measure_256_panes_256x256() {
+    let res = 256u32;
+    let panes = 256usize;
+    let dir = test_dir("measure");
+    let path = dir.join("measure.prm");
+    let mut rng = Rng(2026);
+    let entries: Vec<Entry> = (0..panes)
+        .map(|c| Entry {
+            position: [rng.unit(), rng.unit(), rng.unit()],
+            normal: [0.0, 0.0, 1.0],
+            cluster: c as u32,
+        })
+        .collect();
+    let clusters: Vec<Cluster> = (0..panes)
+        .map(|c| Cluster::new(c as u32, 1, entries[c].position, [0.0, 0.0, 1.0]))
+        .collect();
+    let mut atlas = AtlasSection::new(res, 64);
+    for y in 0..res {
+        for x in 0..res {
+            atlas.set_covered(x, y, !zero_region(x, y, res));
+        }
+    }
+    for (level, filter) in [
+        (3, TileFilter::None),
+        (3, TileFilter::DeltaShuffle),
+        (9, TileFilter::DeltaShuffle),
+        (19, TileFilter::DeltaShuffle),
+    ] {
+        let started = std::time::Instant::now();
+        let mut w = ArchiveWriter::create_with_options(
+            &path,
+            Metadata::new("measure", "0"),
+            &atlas,
+            &entries,
+            &clusters,
+            WriterOptions {
+                zstd_level: level,
+                compress_sections: true,
+                tile_filter: filter,
+            },
+        )
+        .unwrap();
+        let mut worst_rel_max = 0f64;
+        let mut worst_rel_any = 0f64;
+        let mut sum_rel = 0f64;
+        let mut n_rel = 0u64;
+        let mut rng = Rng(7);
+        for _ in 0..panes {
+            let pane = smooth_pane(&mut rng, res);
+            for t in &pane {
+                let d = decode_rgb9e5(encode_rgb9e5(*t));
+                let m = t[0].max(t[1]).max(t[2]);
+                if m >= RGB9E5_MIN_NORMAL {
+                    for c in 0..3 {
+                        let rel = f64::from((d[c] - t[c]).abs()) / f64::from(t[c]);
+                        if t[c] == m {
+                            worst_rel_max = worst_rel_max.max(rel);
+                        }
+                        worst_rel_any = worst_rel_any.max(rel);
+                        sum_rel += rel;
+                        n_rel += 1;
+                    }
+                }
+            }
+            w.add_pane(&pane).unwrap();
+        }
+        let size = w.finish().unwrap();
+        let elapsed = started.elapsed();
+        let mut a = Archive::open(&path).unwrap();
+        let info = a.info().clone();
+        let t0 = std::time::Instant::now();
+        a.verify().unwrap();
+        println!(
+            "{filter:?}, zstd level {level}: {size} bytes ({:.2} MiB) for {panes} panes of {res}x{res}; \
+             RGB9E5 raw {:.1} MiB (ratio {:.2}), f32 RGB {:.1} MiB; stored tiles {}/{}; \
+             write {:.2?}, verify {:.2?}; max rel error (largest channel) {worst_rel_max:.3e}, \
+             (any channel) {worst_rel_any:.3e}, mean {:.3e}",
+            size as f64 / 1048576.0,
+            info.pane_texel_bytes as f64 / 1048576.0,
+            info.pane_texel_bytes as f64 / size as f64,
+            (panes as u64 * u64::from(res * res) * 12) as f64 / 1048576.0,
+            info.stored_tiles,
+            info.tiles_per_pane * u64::from(info.pane_count),
+            elapsed,
+            t0.elapsed(),
+            sum_rel / n_rel as f64,
+        );
+        assert!(worst_rel_max <= RGB9E5_MAX_RELATIVE_ERROR);
+    }
+}
+
+/// 10% of the atlas (a band at the bottom) is empty.
+fn zero_region(_x: u32, y: u32, res: u32) -> bool {
+    y >= res - res / 10
+}
+
+/// Sum of a few smooth radial falloffs with colour tints.
+fn smooth_pane(rng: &mut Rng, res: u32) -> Vec<[f32; 3]> {
+    let lights: Vec<([f32; 2], f32, [f32; 3])> = (0..4)
+        .map(|_| {
+            (
+                [rng.unit() * res as f32, rng.unit() * res as f32],
+                (0.05 + 0.3 * rng.unit()) * res as f32,
+                [0.2 + rng.unit(), 0.2 + rng.unit(), 0.2 + rng.unit()],
+            )
+        })
+        .collect();
+    let mut out = Vec::with_capacity((res * res) as usize);
+    for y in 0..res {
+        for x in 0..res {
+            if zero_region(x, y, res) {
+                out.push([0.0; 3]);
+                continue;
+            }
+            let mut v = [0.0f32; 3];
+            for (c, r, tint) in &lights {
+                let d2 = (x as f32 - c[0]).powi(2) + (y as f32 - c[1]).powi(2);
+                let f = 2.0 / (1.0 + d2 / (r * r));
+                for k in 0..3 {
+                    v[k] += f * tint[k];
+                }
+            }
+            out.push(v);
+        }
+    }
+    out
+}
+
+/// The pure-Python XXH3 of `read_prm.py` against the Rust crate, for every
+/// length class (0, 1–3, 4–8, 9–16, 17–128, 129–240, long, multi-block).
+#[test]
+fn python_xxh3_matches_rust() {
+    let formats = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../formats");
+    let lengths: Vec<usize> = (0..=260).chain([511, 1023, 1024, 1025, 2047, 4096 + 13]).collect();
+    let code = format!(
+        "import sys, json; sys.path.insert(0, {dir:?}); import read_prm\n\
+         data = bytes(((i * 131) ^ (i >> 3)) & 0xff for i in range(5000))\n\
+         print(json.dumps([read_prm.xxh3_64_pure(data[:n]) for n in {lengths:?}]))",
+        dir = formats.to_string_lossy(),
+    );
+    let out = match Command::new("python3").arg("-c").arg(&code).output() {
+        Ok(o) if o.status.success() => o,
+        Ok(o) => panic!("python failed: {}", String::from_utf8_lossy(&o.stderr)),
+        Err(e) => {
+            println!("SKIPPED python_xxh3_matches_rust: cannot run python3 ({e})");
+            return;
+        }
+    };
+    let got: Vec<u64> = serde_json::from_slice(&out.stdout).unwrap();
+    let data: Vec<u8> = (0..5000usize).map(|i| (((i * 131) ^ (i >> 3)) & 0xff) as u8).collect();
+    for (n, h) in lengths.iter().zip(got) {
+        assert_eq!(h, checksum(&data[..*n]), "length {n}");
+    }
+    assert_eq!(checksum(b""), 0x2d06_8005_38d3_94c2, "value quoted in the spec");
+}

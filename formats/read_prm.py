@@ -1,0 +1,522 @@
+#!/usr/bin/env python3
+"""Independent reader of .prm archives (format v1), written from formats/prm.md.
+
+Usage: read_prm.py [--pane N] [--no-verify] ARCHIVE
+
+Parses and validates ARCHIVE and prints a JSON summary on stdout. With
+--pane N, the decoded texels of pane N are included. Checksums are verified
+unless --no-verify is given (the pure-Python XXH3 used when the `xxhash`
+module is missing is slow on large archives).
+
+Needs only the Python 3 standard library plus a zstd decoder: the
+`zstandard` module if importable, otherwise the `zstd` command-line tool.
+
+Exit status: 0 success, 1 invalid archive, 2 usage error,
+3 no zstd decoder available.
+"""
+
+import json
+import shutil
+import struct
+import subprocess
+import sys
+
+MAGIC = b"\x89PRM\r\n\x1a\n"
+SUPPORTED_MAJOR = 1
+SUPPORTED_MINOR = 0
+KINDS = {1: "metadata", 2: "atlas", 3: "entries", 4: "clusters", 5: "panes"}
+MAX_RESOLUTION = 8192
+MAX_TILE_SIZE = 1024
+MAX_TRIANGLES = 1 << 24
+MAX_ENTRIES = 1 << 24
+MAX_CLUSTERS = 1 << 20
+MAX_METADATA = 16 << 20
+MAX_SECTIONS = 65536
+
+
+class InvalidArchive(Exception):
+    pass
+
+
+class NoZstd(Exception):
+    pass
+
+
+# ----------------------------------------------------------------- XXH3-64
+# Port of the scalar XXH3_64bits (seed 0, default secret), xxHash 0.8.
+
+M64 = (1 << 64) - 1
+P32_1, P32_2, P32_3 = 0x9E3779B1, 0x85EBCA77, 0xC2B2AE3D
+P64_1, P64_2, P64_3 = 0x9E3779B185EBCA87, 0xC2B2AE3D27D4EB4F, 0x165667B19E3779F9
+P64_4, P64_5 = 0x85EBCA77C2B2AE63, 0x27D4EB2F165667C5
+SECRET = bytes.fromhex(
+    "b8fe6c3923a44bbe7c01812cf721ad1cded46de9839097db7240a4a4b7b3671f"
+    "cb79e64eccc0e578825ad07dccff7221b8084674f743248ee03590e6813a264c"
+    "3c2852bb91c300cb88d0658b1b532ea371644897a20df94e3819ef46a9deacd8"
+    "a8fa763fe39c343ff9dcbbc7c70b4f1d8a51e04bcdb45931c89f7ec9d9787364"
+    "eac5ac8334d3ebc3c581a0fffa1363eb170ddd51b7f0da49d316552629d4689e"
+    "2b16be587d47a1fc8ff8b8d17ad031ce45cb3a8f95160428afd7fbcabb4b407e"
+)
+
+
+def _r64(b, o):
+    return int.from_bytes(b[o:o + 8], "little")
+
+
+def _r32(b, o):
+    return int.from_bytes(b[o:o + 4], "little")
+
+
+def _avalanche64(h):
+    h ^= h >> 33
+    h = (h * P64_2) & M64
+    h ^= h >> 29
+    h = (h * P64_3) & M64
+    return h ^ (h >> 32)
+
+
+def _avalanche3(h):
+    h ^= h >> 37
+    h = (h * 0x165667919E3779F9) & M64
+    return h ^ (h >> 32)
+
+
+def _rotl(v, r):
+    return ((v << r) | (v >> (64 - r))) & M64
+
+
+def _fold(a, b):
+    p = a * b
+    return (p & M64) ^ (p >> 64)
+
+
+def _mix16(b, o, so):
+    lo = _r64(b, o) ^ _r64(SECRET, so)
+    hi = _r64(b, o + 8) ^ _r64(SECRET, so + 8)
+    return _fold(lo, hi)
+
+
+def xxh3_64_pure(b):
+    n = len(b)
+    if n == 0:
+        return _avalanche64(_r64(SECRET, 56) ^ _r64(SECRET, 64))
+    if n <= 3:
+        combo = (b[0] << 16) | (b[n >> 1] << 24) | b[n - 1] | (n << 8)
+        return _avalanche64(combo ^ (_r32(SECRET, 0) ^ _r32(SECRET, 4)))
+    if n <= 8:
+        flip = _r64(SECRET, 8) ^ _r64(SECRET, 16)
+        keyed = ((_r32(b, n - 4) + (_r32(b, 0) << 32)) & M64) ^ flip
+        h = keyed ^ _rotl(keyed, 49) ^ _rotl(keyed, 24)
+        h = (h * 0x9FB21C651E98DF25) & M64
+        h ^= (h >> 35) + n
+        h = (h * 0x9FB21C651E98DF25) & M64
+        return h ^ (h >> 28)
+    if n <= 16:
+        lo = _r64(b, 0) ^ (_r64(SECRET, 24) ^ _r64(SECRET, 32))
+        hi = _r64(b, n - 8) ^ (_r64(SECRET, 40) ^ _r64(SECRET, 48))
+        swapped = int.from_bytes(lo.to_bytes(8, "little"), "big")
+        return _avalanche3((n + swapped + hi + _fold(lo, hi)) & M64)
+    if n <= 128:
+        acc = (n * P64_1) & M64
+        if n > 32:
+            if n > 64:
+                if n > 96:
+                    acc += _mix16(b, 48, 96) + _mix16(b, n - 64, 112)
+                acc += _mix16(b, 32, 64) + _mix16(b, n - 48, 80)
+            acc += _mix16(b, 16, 32) + _mix16(b, n - 32, 48)
+        acc += _mix16(b, 0, 0) + _mix16(b, n - 16, 16)
+        return _avalanche3(acc & M64)
+    if n <= 240:
+        acc = (n * P64_1) & M64
+        for i in range(8):
+            acc += _mix16(b, 16 * i, 16 * i)
+        acc = _avalanche3(acc & M64)
+        for i in range(8, n // 16):
+            acc += _mix16(b, 16 * i, 16 * (i - 8) + 3)
+        acc += _mix16(b, n - 16, 136 - 17)
+        return _avalanche3(acc & M64)
+    # long input: stripes of 64 bytes, 8 accumulators
+    acc = [P32_3, P64_1, P64_2, P64_3, P64_4, P32_2, P64_5, P32_1]
+    skeys = [[_r64(SECRET, 8 * s + 8 * i) for i in range(8)] for s in range(16)]
+
+    def accumulate(off, keys):
+        words = struct.unpack_from("<8Q", b, off)
+        for i in range(8):
+            v = words[i]
+            k = v ^ keys[i]
+            acc[i ^ 1] = (acc[i ^ 1] + v) & M64
+            acc[i] = (acc[i] + (k & 0xFFFFFFFF) * (k >> 32)) & M64
+
+    stripes_per_block = (len(SECRET) - 64) // 8  # 16
+    block_len = 64 * stripes_per_block
+    nb_blocks = (n - 1) // block_len
+    scramble = [_r64(SECRET, len(SECRET) - 64 + 8 * i) for i in range(8)]
+    for blk in range(nb_blocks):
+        for s in range(stripes_per_block):
+            accumulate(blk * block_len + s * 64, skeys[s])
+        for i in range(8):
+            a = acc[i]
+            a ^= a >> 47
+            a ^= scramble[i]
+            acc[i] = (a * P32_1) & M64
+    for s in range(((n - 1) - block_len * nb_blocks) // 64):
+        accumulate(nb_blocks * block_len + s * 64, skeys[s])
+    accumulate(n - 64, [_r64(SECRET, len(SECRET) - 64 - 7 + 8 * i) for i in range(8)])
+    result = (n * P64_1) & M64
+    for i in range(4):
+        result += _fold(acc[2 * i] ^ _r64(SECRET, 11 + 16 * i), acc[2 * i + 1] ^ _r64(SECRET, 11 + 16 * i + 8))
+    return _avalanche3(result & M64)
+
+
+try:
+    import xxhash as _xxhash
+
+    def xxh3_64(b):
+        return _xxhash.xxh3_64_intdigest(b)
+except ImportError:
+    xxh3_64 = xxh3_64_pure
+
+
+# -------------------------------------------------------------------- zstd
+
+try:
+    import zstandard as _zstandard
+except ImportError:
+    _zstandard = None
+
+
+def zstd_decompress(data, raw_size, what):
+    """Decompresses a zstd stream that must produce exactly raw_size bytes."""
+    limit = raw_size + 1
+    if _zstandard is not None:
+        out = bytearray()
+        try:
+            reader = _zstandard.ZstdDecompressor().stream_reader(data, read_across_frames=True)
+            while len(out) < limit:
+                chunk = reader.read(min(1 << 20, limit - len(out)))
+                if not chunk:
+                    break
+                out += chunk
+        except _zstandard.ZstdError as e:
+            raise InvalidArchive(f"cannot decompress {what}: {e}")
+    else:
+        exe = shutil.which("zstd")
+        if exe is None:
+            raise NoZstd("neither the python 'zstandard' module nor the 'zstd' command is available")
+        p = subprocess.run([exe, "-d", "-c", "-q"], input=data, capture_output=True)
+        if p.returncode != 0:
+            raise InvalidArchive(f"cannot decompress {what}: {p.stderr.decode(errors='replace').strip()}")
+        out = p.stdout
+    if len(out) != raw_size:
+        raise InvalidArchive(f"{what} decompressed to {len(out)} bytes, expected {raw_size}")
+    return bytes(out)
+
+
+# ------------------------------------------------------------------ RGB9E5
+
+def decode_rgb9e5(t):
+    scale = 2.0 ** ((t >> 27) - 24)
+    return [(t & 0x1FF) * scale, ((t >> 9) & 0x1FF) * scale, ((t >> 18) & 0x1FF) * scale]
+
+
+def unfilter(raw, n, tile_filter):
+    """Inverts the tile filter: returns the n row-major RGB9E5 words."""
+    if tile_filter == 0:
+        return struct.unpack(f"<{n}I", raw)
+    # 1: four byte planes of the differences d[k] = w[k] - w[k-1] mod 2^32
+    words = []
+    prev = 0
+    for k in range(n):
+        d = raw[k] | (raw[n + k] << 8) | (raw[2 * n + k] << 16) | (raw[3 * n + k] << 24)
+        prev = (prev + d) & 0xFFFFFFFF
+        words.append(prev)
+    return words
+
+
+def to_f32(x):
+    return struct.unpack("<f", struct.pack("<f", x))[0]
+
+
+# ------------------------------------------------------------------ reader
+
+class Reader:
+    def __init__(self, data, verify=True):
+        self.d = data
+        self.verify = verify
+        self.checksums_verified = verify
+
+    def check(self, data, expected, what):
+        if self.verify and xxh3_64(data) != expected:
+            raise InvalidArchive(f"checksum mismatch in {what}")
+
+    def parse(self):
+        d = self.d
+        n = len(d)
+        if d[:8] != MAGIC[:min(8, n)]:
+            raise InvalidArchive("bad magic")
+        if n < 64:
+            raise InvalidArchive("truncated: shorter than the header")
+        major, minor = struct.unpack_from("<HH", d, 8)
+        if major != SUPPORTED_MAJOR:
+            raise InvalidArchive(f"unsupported version {major}.{minor}")
+        (count, table_off, file_len, res0, res1, table_sum, head_sum) = struct.unpack_from("<IQQQQQQ", d, 12)
+        self.check(d[:56], head_sum, "header")
+        strict = minor <= SUPPORTED_MINOR
+        if file_len > n:
+            raise InvalidArchive(f"truncated: header declares {file_len} bytes, file has {n}")
+        if file_len < n:
+            raise InvalidArchive("trailing bytes after the archive")
+        if strict and (res0 or res1):
+            raise InvalidArchive("reserved header fields not zero")
+        if count > MAX_SECTIONS or table_off < 64 or table_off + 48 * count > n:
+            raise InvalidArchive("section table outside the file")
+        table = d[table_off:table_off + 48 * count]
+        self.check(table, table_sum, "section table")
+        sections = []
+        spans = [(table_off, table_off + 48 * count)]
+        for i in range(count):
+            kind, comp, off, stored, raw, csum, reserved = struct.unpack_from("<IIQQQQQ", table, 48 * i)
+            if kind == 0:
+                raise InvalidArchive("section kind 0")
+            if strict and reserved:
+                raise InvalidArchive("reserved section field not zero")
+            if off < 64 or off + stored > n:
+                raise InvalidArchive(f"section {kind} outside the file")
+            spans.append((off, off + stored))
+            sections.append(dict(kind=kind, name=KINDS.get(kind, f"unknown (kind {kind})"),
+                                 compression=comp, offset=off, stored_size=stored,
+                                 raw_size=raw, checksum=f"{csum:016x}", _sum=csum))
+        spans.sort()
+        for a, b in zip(spans, spans[1:]):
+            if a[1] > b[0]:
+                raise InvalidArchive("overlapping sections")
+        by_kind = {}
+        for s in sections:
+            if s["kind"] in KINDS:
+                if s["kind"] in by_kind:
+                    raise InvalidArchive(f"duplicate {s['name']} section")
+                by_kind[s["kind"]] = s
+            elif self.verify:
+                # unknown kinds are skipped, but their stored bytes are checked
+                self.check(d[s["offset"]:s["offset"] + s["stored_size"]], s["_sum"], s["name"])
+        for k, name in KINDS.items():
+            if k not in by_kind:
+                raise InvalidArchive(f"missing {name} section")
+        self.version = f"{major}.{minor}"
+        self.file_length = n
+        self.sections = sections
+        self.strict = strict
+
+        max_raw = {1: MAX_METADATA, 2: 16 + 24 * MAX_TRIANGLES + (MAX_RESOLUTION ** 2 + 7) // 8,
+                   3: 28 * MAX_ENTRIES, 4: 56 * MAX_CLUSTERS}
+        raw = {k: self.load(by_kind[k], max_raw[k]) for k in (1, 2, 3, 4)}
+
+        try:
+            meta = json.loads(raw[1].decode("utf-8"))
+        except (UnicodeDecodeError, ValueError) as e:
+            raise InvalidArchive(f"metadata is not JSON: {e}")
+        if not isinstance(meta, dict) or meta.get("texel_encoding") != "rgb9e5ufloat":
+            raise InvalidArchive("metadata: texel_encoding must be rgb9e5ufloat")
+        fp = meta.get("scene_fingerprint")
+        if not (isinstance(fp, str) and len(fp) == 16 and all(c in "0123456789abcdefABCDEF" for c in fp)):
+            raise InvalidArchive("metadata: scene_fingerprint must be 16 hex digits")
+        self.metadata = meta
+
+        self.parse_atlas(raw[2])
+        self.parse_entries_clusters(raw[3], raw[4])
+        self.parse_panes(by_kind[5])
+
+    def load(self, s, max_raw):
+        if s["raw_size"] > max_raw:
+            raise InvalidArchive(f"{s['name']} raw size over the limit")
+        stored = self.d[s["offset"]:s["offset"] + s["stored_size"]]
+        self.check(stored, s["_sum"], s["name"])
+        if s["compression"] == 0:
+            if s["raw_size"] != s["stored_size"]:
+                raise InvalidArchive(f"{s['name']}: raw size differs from stored size")
+            return stored
+        if s["compression"] == 1:
+            return zstd_decompress(stored, s["raw_size"], s["name"])
+        raise InvalidArchive(f"{s['name']}: unknown compression {s['compression']}")
+
+    def parse_atlas(self, raw):
+        if len(raw) < 16:
+            raise InvalidArchive("atlas too short")
+        res, tile, ntri, reserved = struct.unpack_from("<IIII", raw, 0)
+        if self.strict and reserved:
+            raise InvalidArchive("atlas reserved field not zero")
+        if not (1 <= res <= MAX_RESOLUTION and 1 <= tile <= min(res, MAX_TILE_SIZE) and res % tile == 0):
+            raise InvalidArchive("bad atlas resolution or tile size")
+        mask_len = (res * res + 7) // 8
+        if ntri > MAX_TRIANGLES or len(raw) != 16 + 24 * ntri + mask_len:
+            raise InvalidArchive("atlas size does not match its header")
+        uvs = struct.unpack_from(f"<{6 * ntri}f", raw, 16)
+        if any(not (0.0 <= v <= 1.0) for v in uvs):
+            raise InvalidArchive("atlas UV outside [0, 1]")
+        mask = raw[16 + 24 * ntri:]
+        used = (res * res) % 8
+        if used and mask[-1] >> used:
+            raise InvalidArchive("coverage padding bits not zero")
+        self.resolution, self.tile_size, self.triangles = res, tile, ntri
+        self.covered = sum(bin(b).count("1") for b in mask)
+
+    def parse_entries_clusters(self, er, cr):
+        if len(er) % 28 or len(cr) % 56:
+            raise InvalidArchive("entries/clusters size not a multiple of the record size")
+        entries = []
+        for i in range(len(er) // 28):
+            px, py, pz, nx, ny, nz, c = struct.unpack_from("<6fI", er, 28 * i)
+            vals = (px, py, pz, nx, ny, nz)
+            if any(v != v or v in (float("inf"), float("-inf")) for v in vals):
+                raise InvalidArchive(f"entry {i} not finite")
+            entries.append(dict(position=[px, py, pz], normal=[nx, ny, nz], cluster=c))
+        clusters = []
+        nxt = 0
+        for i in range(len(cr) // 56):
+            first, count, *f = struct.unpack_from("<II12f", cr, 56 * i)
+            if first != nxt or first + count > len(entries):
+                raise InvalidArchive(f"cluster {i} range does not tile the entries")
+            if any(e["cluster"] != i for e in entries[first:first + count]):
+                raise InvalidArchive(f"entry in cluster {i}'s range names another cluster")
+            if any(v != v or abs(v) == float("inf") for v in f) or any(v < 0 for v in f[6:]):
+                raise InvalidArchive(f"cluster {i} has invalid floats")
+            nxt = first + count
+            clusters.append(dict(first=first, count=count, centroid=f[0:3], mean_normal=f[3:6],
+                                 energy=f[6:9], peak=f[9:12]))
+        if nxt != len(entries):
+            raise InvalidArchive("clusters do not cover all entries")
+        self.entries, self.clusters = entries, clusters
+
+    def parse_panes(self, s):
+        if s["compression"] != 0 or s["raw_size"] != s["stored_size"]:
+            raise InvalidArchive("panes section must be uncompressed")
+        base, size = s["offset"], s["stored_size"]
+        tps = self.resolution // self.tile_size
+        k = len(self.clusters) * tps * tps
+        data_start = 32 + 24 * k
+        if size < data_start:
+            raise InvalidArchive("panes section too small for its tile index")
+        sec = self.d[base:base + size]
+        (index_sum,) = struct.unpack_from("<Q", sec, 0)
+        self.check(sec[8:data_start], index_sum, "panes tile index")
+        count, stps, fmt, tile_filter, reserved = struct.unpack_from("<IIIIQ", sec, 8)
+        if count != len(self.clusters) or stps != tps or fmt != 1:
+            raise InvalidArchive("panes header disagrees with atlas/clusters")
+        if tile_filter not in (0, 1):
+            raise InvalidArchive(f"unknown tile filter {tile_filter}")
+        if self.strict and reserved:
+            raise InvalidArchive("panes reserved field not zero")
+        self.tile_filter = tile_filter
+        tiles = []
+        for i in range(k):
+            off, csize, reserved, csum = struct.unpack_from("<QIIQ", sec, 32 + 24 * i)
+            if self.strict and reserved:
+                raise InvalidArchive("tile reserved field not zero")
+            if csize == 0:
+                if off or csum:
+                    raise InvalidArchive("omitted tile with offset or checksum")
+            elif off < data_start or off + csize > size:
+                raise InvalidArchive("tile outside the data area")
+            tiles.append((off, csize, csum))
+        self.panes_section = sec
+        self.tiles = tiles
+        self.tps = tps
+        if self.verify:
+            self.check(sec, s["_sum"], "panes")
+
+    def read_pane(self, p):
+        """Decoded pane as a row-major list of [r, g, b], plus energy and peak."""
+        res, t, tps = self.resolution, self.tile_size, self.tps
+        texels = [[0.0, 0.0, 0.0] for _ in range(res * res)]
+        energy = [0.0, 0.0, 0.0]
+        peak = [0.0, 0.0, 0.0]
+        for ty in range(tps):
+            for tx in range(tps):
+                off, csize, csum = self.tiles[p * tps * tps + ty * tps + tx]
+                if csize == 0:
+                    continue
+                what = f"pane {p} tile ({tx}, {ty})"
+                stored = self.panes_section[off:off + csize]
+                self.check(stored, csum, what)
+                raw = zstd_decompress(stored, t * t * 4, what)
+                words = unfilter(raw, t * t, self.tile_filter)
+                for j in range(t):
+                    for i in range(t):
+                        v = decode_rgb9e5(words[j * t + i])
+                        texels[(ty * t + j) * res + tx * t + i] = v
+                        for c in range(3):
+                            energy[c] += v[c]
+                            peak[c] = max(peak[c], v[c])
+        return texels, [to_f32(e) for e in energy], peak
+
+    def summary(self, pane=None):
+        out = dict(
+            version=self.version,
+            file_length=self.file_length,
+            checksums_verified=self.checksums_verified,
+            sections=[{k: v for k, v in s.items() if not k.startswith("_")} for s in self.sections],
+            metadata=self.metadata,
+            resolution=self.resolution,
+            tile_size=self.tile_size,
+            triangles=self.triangles,
+            covered_texels=self.covered,
+            entries=self.entries,
+            clusters=self.clusters,
+            tile_filter=self.tile_filter,
+            stored_tiles=sum(1 for t in self.tiles if t[1]),
+            tiles_per_pane=self.tps * self.tps,
+        )
+        if pane is not None:
+            if not 0 <= pane < len(self.clusters):
+                raise InvalidArchive(f"pane {pane} out of range")
+            texels, energy, peak = self.read_pane(pane)
+            out["pane"] = dict(index=pane, texels=texels, energy=energy, peak=peak)
+        return out
+
+
+def main(argv):
+    pane = None
+    verify = True
+    path = None
+    args = list(argv)
+    while args:
+        a = args.pop(0)
+        if a == "--pane" and args:
+            try:
+                pane = int(args.pop(0))
+            except ValueError:
+                print("--pane needs an integer", file=sys.stderr)
+                return 2
+        elif a == "--no-verify":
+            verify = False
+        elif a in ("-h", "--help"):
+            print(__doc__)
+            return 0
+        elif path is None and not a.startswith("--"):
+            path = a
+        else:
+            print(f"unexpected argument {a!r}\n{__doc__}", file=sys.stderr)
+            return 2
+    if path is None:
+        print(__doc__, file=sys.stderr)
+        return 2
+    try:
+        with open(path, "rb") as f:
+            data = f.read()
+        r = Reader(data, verify=verify)
+        r.parse()
+        print(json.dumps(r.summary(pane)))
+        return 0
+    except NoZstd as e:
+        print(str(e), file=sys.stderr)
+        return 3
+    except (InvalidArchive, struct.error) as e:
+        print(f"invalid archive: {e}", file=sys.stderr)
+        return 1
+    except OSError as e:
+        print(f"cannot read {path}: {e}", file=sys.stderr)
+        return 1
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
