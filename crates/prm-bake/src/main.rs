@@ -1,7 +1,11 @@
 //! `prm-bake`: bakes Precomputed Radiance Maps and inspects scenes and archives.
 
 mod atlas;
+mod bake;
 mod dump;
+mod params;
+mod progress;
+mod reference;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
@@ -20,6 +24,11 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Bake a scene into a .prm archive (atlas, entry points, walks, clusters, panes).
+    ///
+    /// Without sizes, the bake derives them from the scene and the budgets and says why.
+    /// Example: prm-bake bake scenes/cornell-box/cornell-box.gltf -o out/cornell-box.prm
+    Bake(Box<bake::BakeArgs>),
     /// Load a scene (OBJ or glTF), build its lightmap atlas and print statistics.
     ///
     /// Example: prm-bake atlas scenes/cornell-box/cornell-box.obj --resolution 256 --png charts.png
@@ -28,13 +37,20 @@ enum Command {
     ///
     /// Exit status 0 when the archive is good, 1 when it is damaged or the arguments are wrong.
     Dump(dump::DumpArgs),
+    /// Reference path tracer: ground-truth image or lightmap (EXR) under given lights.
+    ///
+    /// Example: prm-bake reference scenes/cornell-box/cornell-box.obj
+    /// --light point:0.278,0.5,0.2795:0.2347,0.1566,0.0418 --spp 256 -o ref.exr
+    Reference(reference::ReferenceArgs),
 }
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match &cli.command {
+        Command::Bake(args) => bake::run(args),
         Command::Atlas(args) => atlas::run(args),
         Command::Dump(args) => dump::run(args),
+        Command::Reference(args) => reference::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -86,23 +86,20 @@ pub struct GpuContext {
 impl GpuContext {
     /// Opens a device on `backend` with the adapter's own limits (lavapipe's are generous).
     pub fn new(backend: Backend) -> Result<GpuContext, GpuError> {
-        let backends = match backend {
-            Backend::Auto => wgpu::Backends::VULKAN | wgpu::Backends::GL,
-            Backend::Vulkan => wgpu::Backends::VULKAN,
-            Backend::Gl => wgpu::Backends::GL,
-        };
-        let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
-        desc.backends = backends;
-        let instance = wgpu::Instance::new(desc);
-        // Prefer Vulkan when both exist: request per backend in order.
+        // One instance per backend, Vulkan first: creating a GL instance probes EGL and window
+        // systems, which is slow and noisy when Vulkan is there anyway.
         let order: &[wgpu::Backends] = match backend {
             Backend::Auto => &[wgpu::Backends::VULKAN, wgpu::Backends::GL],
-            _ => &[backends],
+            Backend::Vulkan => &[wgpu::Backends::VULKAN],
+            Backend::Gl => &[wgpu::Backends::GL],
         };
         let adapter = order
             .iter()
-            .find_map(|b| {
-                let mut adapters = pollster::block_on(instance.enumerate_adapters(*b));
+            .find_map(|&b| {
+                let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
+                desc.backends = b;
+                let instance = wgpu::Instance::new(desc);
+                let mut adapters = pollster::block_on(instance.enumerate_adapters(b));
                 // A real GPU before a software one.
                 adapters.sort_by_key(|a| a.get_info().device_type == wgpu::DeviceType::Cpu);
                 adapters.into_iter().next()

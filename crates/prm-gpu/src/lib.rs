@@ -6,6 +6,10 @@
 #![warn(missing_docs)]
 
 mod context;
+pub mod pane;
+pub mod pane_gather;
 pub mod smoke;
+pub mod vpl_depth;
 
 pub use context::{Backend, GpuContext, GpuError};
+pub use pane::{render_panes, render_panes_with, PaneRenderParams, PaneRenderStats, ShadowBias};

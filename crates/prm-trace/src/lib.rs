@@ -1,1 +1,38 @@
-//! CPU light transport (placeholder until the transport issue lands).
+//! CPU light transport for PRM: ray casting, entry points, random walks, clustering, panes, reference.
+//!
+//! Flow of a bake: [`Bvh::build`] → [`sample_surface`] (entry points) → [`trace_walks`] (VPLs per
+//! entry point) → [`Clustering::kmeans`] → [`evaluate_panes`] (indirect irradiance per cluster at
+//! every exit point of the atlas). At run time `E_ind(x) = Σ_c weight_c · pane_c(x)` where
+//! `weight_c` is the mean direct irradiance of the cluster's entry points
+//! ([`entry_irradiance`], [`Clustering::weights`], [`Panes::combine`]). The estimator and its
+//! units are written out in [`walk`]. [`ReferenceTracer`] is the ground truth it is tested against.
+//!
+//! Every random decision draws from a stream keyed by `(seed, item, sub-item)` ([`Rng`]), and
+//! every parallel loop writes per-item results in order, so outputs are identical for any number
+//! of threads.
+
+#![warn(missing_docs)]
+
+pub mod bvh;
+pub mod cluster;
+pub mod direct;
+mod error;
+pub mod pane;
+pub mod reference;
+pub mod rng;
+pub mod sampling;
+pub mod spec;
+pub mod vpl;
+pub mod walk;
+
+pub use bvh::{BuildQuality, Bvh, BvhKind, BvhParams, Hit};
+pub use cluster::{ClusterParams, Clustering};
+pub use direct::{direct_irradiance, entry_irradiance};
+pub use error::{SpecError, TraceError};
+pub use pane::{evaluate_panes, PaneParams, Panes};
+pub use reference::{Estimate, ImageMode, Lighting, ReferenceParams, ReferenceTracer};
+pub use rng::Rng;
+pub use sampling::{sample_surface, EntryParams, SurfaceSample};
+pub use spec::{parse_camera, parse_light, parse_size};
+pub use vpl::VplBound;
+pub use walk::{trace_walks, Roulette, Vpl, VplSet, WalkParams, WalkStats};

@@ -1,0 +1,437 @@
+//! Bake parameters: presets, a TOML config file, command-line overrides, and the automatic
+//! choice of sizes from the scene and budgets ("bake no more than the scene needs").
+
+use anyhow::{bail, Context, Result};
+use prm_scene::{Atlas, Scene};
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// Named parameter sets.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum Preset {
+    /// Small and fast: 1024 entries, 64 clusters, 128² panes.
+    Preview,
+    /// Sizes derived from the scene and the budgets.
+    Default,
+    /// The paper's marble chamber: 4096 entries, 256 clusters, 256² panes, 32 clusters at run time.
+    Paper,
+    /// 16384 entries, 1024 clusters, 512² panes.
+    High,
+}
+
+/// Every bake parameter, all optional: a TOML config file holds these keys, the command line
+/// overrides them, and what is still unset follows from the preset (or, for `default`, from the
+/// scene and the budgets).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BakeConfig {
+    /// Named parameter set (default: `default`).
+    pub preset: Option<Preset>,
+    /// Entry points.
+    pub entries: Option<usize>,
+    /// Clusters of entry points (= panes).
+    pub clusters: Option<usize>,
+    /// Atlas (and pane) resolution.
+    pub resolution: Option<u32>,
+    /// Atlas texel size in scene units (instead of `resolution`).
+    pub texel_size: Option<f32>,
+    /// Random walks per entry point.
+    pub paths_per_entry: Option<u32>,
+    /// Seed of every random choice.
+    pub seed: Option<u64>,
+    /// Clusters blended per frame at run time (recorded for the player).
+    pub top_k: Option<usize>,
+    /// Texels on a side of each VPL hemicube face.
+    pub face_resolution: Option<u32>,
+    /// VPL bound: radius multiplier of the disk each VPL stands for (0 = no bound).
+    pub vpl_disk_scale: Option<f32>,
+    /// Largest archive, MiB (automatic sizing keeps under it).
+    pub archive_budget_mib: Option<f64>,
+    /// Largest run-time pane memory (all panes resident as RGB9E5), MiB.
+    pub memory_budget_mib: Option<f64>,
+}
+
+impl BakeConfig {
+    /// Reads a TOML config file.
+    pub fn load(path: &Path) -> Result<BakeConfig> {
+        let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+        toml::from_str(&text).with_context(|| format!("{}: not a valid bake config", path.display()))
+    }
+
+    /// `self` with every field that `over` sets replaced.
+    pub fn overridden_by(self, over: &BakeConfig) -> BakeConfig {
+        BakeConfig {
+            preset: over.preset.or(self.preset),
+            entries: over.entries.or(self.entries),
+            clusters: over.clusters.or(self.clusters),
+            resolution: over.resolution.or(self.resolution),
+            texel_size: over.texel_size.or(self.texel_size),
+            paths_per_entry: over.paths_per_entry.or(self.paths_per_entry),
+            seed: over.seed.or(self.seed),
+            top_k: over.top_k.or(self.top_k),
+            face_resolution: over.face_resolution.or(self.face_resolution),
+            vpl_disk_scale: over.vpl_disk_scale.or(self.vpl_disk_scale),
+            archive_budget_mib: over.archive_budget_mib.or(self.archive_budget_mib),
+            memory_budget_mib: over.memory_budget_mib.or(self.memory_budget_mib),
+        }
+    }
+}
+
+/// How the atlas is sized.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub enum AtlasSize {
+    /// Texels on a side.
+    Resolution(u32),
+    /// Texel size in scene units.
+    TexelSize(f32),
+}
+
+/// Fully resolved parameters of one bake, and why each automatic value was chosen.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct BakeParams {
+    /// The preset they started from.
+    pub preset: Preset,
+    /// Entry points.
+    pub entries: usize,
+    /// Clusters (panes); equal to `entries` means no clustering.
+    pub clusters: usize,
+    /// Atlas size.
+    pub atlas: AtlasSize,
+    /// Walks per entry point.
+    pub paths_per_entry: u32,
+    /// Seed.
+    pub seed: u64,
+    /// Clusters blended per frame at run time.
+    pub top_k: usize,
+    /// Hemicube face resolution.
+    pub face_resolution: u32,
+    /// VPL disk radius multiplier (0: plain 1/r²).
+    pub vpl_disk_scale: f32,
+    /// Archive budget, MiB.
+    pub archive_budget_mib: f64,
+    /// Run-time pane memory budget, MiB.
+    pub memory_budget_mib: f64,
+    /// One line per automatic choice.
+    pub reasons: Vec<String>,
+}
+
+struct PresetValues {
+    entries: usize,
+    clusters: usize,
+    resolution: u32,
+    paths: u32,
+    top_k: usize,
+    face: u32,
+}
+
+fn preset_values(p: Preset) -> Option<PresetValues> {
+    match p {
+        Preset::Preview => Some(PresetValues {
+            entries: 1024,
+            clusters: 64,
+            resolution: 128,
+            paths: 1,
+            top_k: 16,
+            face: 64,
+        }),
+        Preset::Paper => Some(PresetValues {
+            entries: 4096,
+            clusters: 256,
+            resolution: 256,
+            paths: 1,
+            top_k: 32,
+            face: 128,
+        }),
+        Preset::High => Some(PresetValues {
+            entries: 16384,
+            clusters: 1024,
+            resolution: 512,
+            paths: 2,
+            top_k: 64,
+            face: 256,
+        }),
+        Preset::Default => None,
+    }
+}
+
+/// Default budgets.
+pub const DEFAULT_ARCHIVE_BUDGET_MIB: f64 = 512.0;
+/// Default run-time pane memory budget.
+pub const DEFAULT_MEMORY_BUDGET_MIB: f64 = 256.0;
+
+impl BakeParams {
+    /// Resolves `config` for `scene`; `probe` builds the automatic atlas when one is needed.
+    ///
+    /// Automatic rules (preset `default`, each overridable):
+    /// - atlas: the atlas's own automatic size (about 12 texels per triangle, 256 to 4096 a side),
+    ///   shrunk until 32 panes fit the run-time memory budget;
+    /// - entries: 4 per chart (charts are the scene's distinct flat pieces), 1024 to 16384, a
+    ///   multiple of 256;
+    /// - clusters: entries / 16, 32 to 1024, then as many as the memory budget and the archive
+    ///   budget allow (archive estimate: 1.5 bytes per covered texel per pane, the measured
+    ///   RGB9E5 + filter + zstd rate on smooth panes, doubled for safety);
+    /// - walks per entry: enough for about 8192 walks in all, 1 to 16.
+    pub fn resolve(config: &BakeConfig, scene: &Scene, probe: impl Fn() -> Result<Atlas>) -> Result<BakeParams> {
+        let preset = config.preset.unwrap_or(Preset::Default);
+        let archive_budget_mib = config.archive_budget_mib.unwrap_or(DEFAULT_ARCHIVE_BUDGET_MIB);
+        let memory_budget_mib = config.memory_budget_mib.unwrap_or(DEFAULT_MEMORY_BUDGET_MIB);
+        if !(archive_budget_mib > 0.0 && memory_budget_mib > 0.0) {
+            bail!("budgets must be positive (archive {archive_budget_mib} MiB, memory {memory_budget_mib} MiB)");
+        }
+        let mut reasons = Vec::new();
+        let fixed = preset_values(preset);
+        let atlas = match (config.resolution, config.texel_size, &fixed) {
+            (Some(r), _, _) => AtlasSize::Resolution(r),
+            (None, Some(s), _) => AtlasSize::TexelSize(s),
+            (None, None, Some(v)) => AtlasSize::Resolution(v.resolution),
+            (None, None, None) => {
+                let auto = probe()?;
+                let mut r = auto.resolution;
+                let memory_texels = memory_budget_mib * 1024.0 * 1024.0 / 4.0;
+                while r > 64 && (32.0 * (r as f64).powi(2)) > memory_texels {
+                    r -= 64;
+                }
+                reasons.push(format!(
+                    "atlas {r}² texels: {} triangles want about 12 texels each{}",
+                    scene.triangles.len(),
+                    if r < auto.resolution {
+                        ", shrunk so 32 panes fit the memory budget"
+                    } else {
+                        ""
+                    }
+                ));
+                AtlasSize::Resolution(r)
+            }
+        };
+        let entries = match (config.entries, &fixed) {
+            (Some(n), _) => n,
+            (None, Some(v)) => v.entries,
+            (None, None) => {
+                let charts = probe()?.stats.charts as usize;
+                let n = (4 * charts).div_ceil(256).clamp(4, 64) * 256;
+                reasons.push(format!(
+                    "{n} entry points: 4 per chart of the scene's {charts} charts, 1024..16384"
+                ));
+                n
+            }
+        };
+        let texels_per_pane = match atlas {
+            AtlasSize::Resolution(r) => (r as f64).powi(2),
+            AtlasSize::TexelSize(s) => scene.area() / (s as f64).powi(2) * 2.0,
+        };
+        let clusters = match (config.clusters, &fixed) {
+            (Some(c), _) => c,
+            (None, Some(v)) => v.clusters.min(entries),
+            (None, None) => {
+                let wanted = (entries / 16).clamp(32, 1024).min(entries);
+                let by_memory = (memory_budget_mib * 1024.0 * 1024.0 / (4.0 * texels_per_pane)) as usize;
+                let by_archive = (archive_budget_mib * 1024.0 * 1024.0 / (1.5 * texels_per_pane)) as usize;
+                let c = wanted.min(by_memory).min(by_archive).max(1);
+                reasons.push(format!(
+                    "{c} clusters: entries/16 = {wanted}, memory budget allows {by_memory}, archive budget {by_archive}"
+                ));
+                c
+            }
+        };
+        let paths_per_entry = match (config.paths_per_entry, &fixed) {
+            (Some(m), _) => m,
+            (None, Some(v)) => v.paths,
+            (None, None) => {
+                let m = 8192usize.div_ceil(entries.max(1)).clamp(1, 16) as u32;
+                reasons.push(format!("{m} walks per entry point: about 8192 walks in all"));
+                m
+            }
+        };
+        let top_k = config
+            .top_k
+            .or(fixed.as_ref().map(|v| v.top_k))
+            .unwrap_or(32)
+            .min(clusters);
+        let face_resolution = config.face_resolution.or(fixed.as_ref().map(|v| v.face)).unwrap_or(128);
+        let params = BakeParams {
+            preset,
+            entries,
+            clusters,
+            atlas,
+            paths_per_entry,
+            seed: config.seed.unwrap_or(0),
+            top_k,
+            face_resolution,
+            vpl_disk_scale: config.vpl_disk_scale.unwrap_or(1.0),
+            archive_budget_mib,
+            memory_budget_mib,
+            reasons,
+        };
+        params.validate(texels_per_pane)?;
+        Ok(params)
+    }
+
+    /// Rejects impossible combinations before any work.
+    fn validate(&self, texels_per_pane: f64) -> Result<()> {
+        if self.entries == 0 {
+            bail!("--entries must be at least 1");
+        }
+        if self.clusters == 0 {
+            bail!("--clusters must be at least 1");
+        }
+        if self.clusters > self.entries {
+            bail!(
+                "{} clusters for {} entry points: there cannot be more clusters than entries",
+                self.clusters,
+                self.entries
+            );
+        }
+        if self.paths_per_entry == 0 {
+            bail!("--paths-per-entry must be at least 1");
+        }
+        if let AtlasSize::Resolution(r) = self.atlas {
+            if !(8..=8192).contains(&r) {
+                bail!("resolution {r} is outside 8..=8192");
+            }
+        }
+        if let AtlasSize::TexelSize(s) = self.atlas {
+            if !(s.is_finite() && s > 0.0) {
+                bail!("texel size {s} must be a positive number");
+            }
+        }
+        if !(8..=2048).contains(&self.face_resolution) {
+            bail!("face resolution {} is outside 8..=2048", self.face_resolution);
+        }
+        if !(self.vpl_disk_scale >= 0.0 && self.vpl_disk_scale.is_finite()) {
+            bail!("vpl_disk_scale {} must be a non-negative number", self.vpl_disk_scale);
+        }
+        let memory_mib = self.clusters as f64 * texels_per_pane * 4.0 / (1024.0 * 1024.0);
+        if memory_mib > self.memory_budget_mib {
+            bail!(
+                "{} panes of {:.0} texels need {memory_mib:.0} MiB at run time, over the {:.0} MiB memory budget; \
+                 use fewer --clusters, a lower --resolution, or raise memory_budget_mib",
+                self.clusters,
+                texels_per_pane,
+                self.memory_budget_mib
+            );
+        }
+        Ok(())
+    }
+
+    /// The VPL bound these parameters ask for.
+    pub fn bound(&self) -> prm_trace::VplBound {
+        if self.vpl_disk_scale > 0.0 {
+            prm_trace::VplBound::Disk {
+                scale: self.vpl_disk_scale,
+            }
+        } else {
+            prm_trace::VplBound::None
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cornell() -> Scene {
+        let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/cornell-box/cornell-box.obj");
+        prm_scene::load(&p).unwrap()
+    }
+
+    fn probe(scene: &Scene) -> impl Fn() -> Result<Atlas> + '_ {
+        move || Ok(Atlas::build(scene, &prm_scene::AtlasParams::DEFAULT)?)
+    }
+
+    #[test]
+    fn paper_preset_is_the_papers_settings() {
+        let scene = cornell();
+        let cfg = BakeConfig {
+            preset: Some(Preset::Paper),
+            ..Default::default()
+        };
+        let p = BakeParams::resolve(&cfg, &scene, probe(&scene)).unwrap();
+        assert_eq!(
+            (p.entries, p.clusters, p.atlas, p.top_k),
+            (4096, 256, AtlasSize::Resolution(256), 32)
+        );
+        assert!(p.reasons.is_empty());
+    }
+
+    #[test]
+    fn command_line_overrides_config_overrides_preset() {
+        let scene = cornell();
+        let file: BakeConfig = toml::from_str("preset = \"paper\"\nentries = 2048\nclusters = 128\n").unwrap();
+        let cli = BakeConfig {
+            clusters: Some(64),
+            ..Default::default()
+        };
+        let p = BakeParams::resolve(&file.overridden_by(&cli), &scene, probe(&scene)).unwrap();
+        assert_eq!((p.entries, p.clusters), (2048, 64));
+        assert!(
+            toml::from_str::<BakeConfig>("entires = 3").is_err(),
+            "unknown keys are errors"
+        );
+    }
+
+    #[test]
+    fn automatic_sizes_follow_the_scene_and_budgets() {
+        let scene = cornell();
+        let p = BakeParams::resolve(&BakeConfig::default(), &scene, probe(&scene)).unwrap();
+        assert_eq!(p.entries, 1024, "a 16-chart box needs the minimum");
+        assert!(p.clusters >= 32 && p.clusters <= p.entries);
+        assert!(!p.reasons.is_empty());
+        // A tight memory budget shrinks the atlas or the cluster count until the panes fit it.
+        let bytes = |p: &BakeParams| match p.atlas {
+            AtlasSize::Resolution(r) => p.clusters as f64 * (r as f64).powi(2) * 4.0,
+            AtlasSize::TexelSize(_) => unreachable!(),
+        };
+        let tight = BakeConfig {
+            memory_budget_mib: Some(2.0),
+            ..Default::default()
+        };
+        let q = BakeParams::resolve(&tight, &scene, probe(&scene)).unwrap();
+        assert!(
+            bytes(&q) <= 2.0 * 1024.0 * 1024.0 && bytes(&q) < bytes(&p),
+            "{q:?} vs {p:?}"
+        );
+    }
+
+    #[test]
+    fn impossible_parameters_are_refused() {
+        let scene = cornell();
+        for (cfg, needle) in [
+            (
+                BakeConfig {
+                    entries: Some(0),
+                    ..Default::default()
+                },
+                "entries",
+            ),
+            (
+                BakeConfig {
+                    entries: Some(100),
+                    clusters: Some(200),
+                    ..Default::default()
+                },
+                "more clusters",
+            ),
+            (
+                BakeConfig {
+                    resolution: Some(100_000),
+                    ..Default::default()
+                },
+                "resolution",
+            ),
+            (
+                BakeConfig {
+                    preset: Some(Preset::High),
+                    memory_budget_mib: Some(16.0),
+                    ..Default::default()
+                },
+                "memory budget",
+            ),
+        ] {
+            let e = BakeParams::resolve(&cfg, &scene, probe(&scene))
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains(needle), "{e}");
+        }
+    }
+}

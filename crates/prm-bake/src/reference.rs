@@ -1,0 +1,169 @@
+//! `prm-bake reference`: ground-truth images and lightmaps from the reference path tracer.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use glam::Vec3;
+use prm_scene::{Atlas, AtlasParams, Light, Sizing};
+use prm_trace::{
+    parse_camera, parse_light, parse_size, Bvh, BvhParams, ImageMode, Lighting, ReferenceParams, ReferenceTracer,
+};
+
+/// Arguments of `prm-bake reference`.
+#[derive(clap::Args, Debug, Clone)]
+pub struct ReferenceArgs {
+    /// Scene file (OBJ or glTF).
+    pub scene: PathBuf,
+    /// A light: `point:X,Y,Z:R,G,B` (W/sr), `spot:X,Y,Z:DX,DY,DZ:ANGLE_DEG:R,G,B` (W/sr inside
+    /// the cone of that half angle) or `dir:DX,DY,DZ:R,G,B` (W/m² on a surface facing the light).
+    /// Repeatable; defaults to the scene's own lights.
+    #[arg(long = "light", value_name = "SPEC")]
+    pub lights: Vec<String>,
+    /// Camera `EX,EY,EZ:TX,TY,TZ:FOV_DEG` (eye, target, vertical FOV; +Y up). Defaults to the
+    /// scene's first camera.
+    #[arg(long, value_name = "SPEC", conflicts_with = "lightmap")]
+    pub camera: Option<String>,
+    /// Image size for the camera, `WxH`.
+    #[arg(long, value_name = "WxH", default_value = "512x512", conflicts_with = "lightmap")]
+    pub size: String,
+    /// Write the irradiance at the exit points of the scene's lightmap atlas instead of a camera
+    /// image (atlas-sized image, texel (x, y) at row y; gutter texels copy their source).
+    #[arg(long)]
+    pub lightmap: bool,
+    /// Atlas resolution for --lightmap (default: automatic, as `prm-bake atlas`).
+    #[arg(long, value_name = "TEXELS", requires = "lightmap")]
+    pub resolution: Option<u32>,
+    /// Paths per pixel/texel in total (split into progressive passes).
+    #[arg(long, default_value_t = 256)]
+    pub spp: u32,
+    /// Only the indirect part: radiance ρ/π·E_ind (camera) or irradiance E_ind (lightmap).
+    #[arg(long)]
+    pub indirect_only: bool,
+    /// Seed of the path tracer.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Output EXR (linear radiance W/(m²·sr) for images, irradiance W/m² for lightmaps).
+    #[arg(short, long, value_name = "FILE.exr")]
+    pub output: PathBuf,
+}
+
+/// Runs `prm-bake reference`.
+pub fn run(args: &ReferenceArgs) -> Result<()> {
+    let start = Instant::now();
+    let scene = prm_scene::load(&args.scene).with_context(|| format!("cannot load scene {}", args.scene.display()))?;
+    for w in &scene.report.warnings {
+        eprintln!("warning: {w}");
+    }
+    let lights: Vec<Light> = if args.lights.is_empty() {
+        scene.lights.clone()
+    } else {
+        args.lights
+            .iter()
+            .map(|s| parse_light(s).with_context(|| format!("bad --light {s:?}")))
+            .collect::<Result<_>>()?
+    };
+    if lights.is_empty() {
+        bail!(
+            "{} has no lights of its own; give at least one --light SPEC",
+            args.scene.display()
+        );
+    }
+    let bvh = Bvh::build(&scene, &BvhParams::DEFAULT).context("cannot build the BVH")?;
+    eprintln!(
+        "{}: {} triangles, {} lights, BVH in {:.2?}",
+        args.scene.display(),
+        scene.triangles.len(),
+        lights.len(),
+        bvh.build_time()
+    );
+    let tracer = ReferenceTracer::new(&scene, &bvh, Lighting::Lights(&lights));
+    let params = ReferenceParams {
+        seed: args.seed,
+        ..ReferenceParams::with_spp(args.spp)
+    };
+    let mut progress = |pass: u32, passes: u32| {
+        eprintln!("pass {pass}/{passes} ({:.1?})", start.elapsed());
+    };
+    let (width, height, pixels) = if args.lightmap {
+        let sizing = match args.resolution {
+            Some(r) => Sizing::Resolution(r),
+            None => Sizing::Auto,
+        };
+        let atlas = Atlas::build(&scene, &AtlasParams::with_sizing(sizing)).context("cannot build the atlas")?;
+        eprintln!(
+            "atlas {0}x{0}, {1} exit points; {2} passes x {3} paths",
+            atlas.resolution,
+            atlas.exits.len(),
+            params.passes,
+            params.samples_per_pass
+        );
+        let est = tracer
+            .indirect_at_exits(&atlas.exits, &params, &mut progress)
+            .context("reference tracing failed")?;
+        let mut values = est.mean;
+        if !args.indirect_only {
+            for (v, d) in values.iter_mut().zip(tracer.direct_at_exits(&atlas.exits)) {
+                *v += d;
+            }
+        }
+        let r = atlas.resolution as usize;
+        let mut img = vec![Vec3::ZERO; r * r];
+        for (x, v) in atlas.exits.iter().zip(&values) {
+            img[x.texel as usize] = *v;
+        }
+        for &(gutter, source) in &atlas.dilation {
+            img[gutter as usize] = img[source as usize];
+        }
+        report_noise(&est.variance, &values);
+        (r, r, img)
+    } else {
+        let camera = match &args.camera {
+            Some(s) => parse_camera(s).with_context(|| format!("bad --camera {s:?}"))?,
+            None => *scene
+                .cameras
+                .first()
+                .with_context(|| format!("{} has no camera; give --camera SPEC", args.scene.display()))?,
+        };
+        let (w, h) = parse_size(&args.size).with_context(|| format!("bad --size {:?}", args.size))?;
+        let mode = if args.indirect_only {
+            ImageMode::IndirectOnly
+        } else {
+            ImageMode::Full
+        };
+        eprintln!(
+            "image {w}x{h}; {} passes x {} paths",
+            params.passes, params.samples_per_pass
+        );
+        let est = tracer
+            .render(&camera, w, h, mode, &params, &mut progress)
+            .context("reference rendering failed")?;
+        report_noise(&est.variance, &est.mean);
+        (w as usize, h as usize, est.mean)
+    };
+    exr::prelude::write_rgb_file(&args.output, width, height, |x, y| {
+        let v = pixels[y * width + x];
+        (v.x, v.y, v.z)
+    })
+    .with_context(|| format!("cannot write {}", args.output.display()))?;
+    eprintln!(
+        "wrote {} ({width}x{height}) in {:.1?}",
+        args.output.display(),
+        start.elapsed()
+    );
+    Ok(())
+}
+
+/// Prints the RMS standard error relative to the mean value.
+fn report_noise(variance: &[Vec3], mean: &[Vec3]) {
+    let n = mean.len().max(1) as f64;
+    let m = mean.iter().map(|v| v.element_sum() as f64).sum::<f64>() / n;
+    let s = (variance.iter().map(|v| v.element_sum() as f64).sum::<f64>() / n).sqrt();
+    if m > 0.0 {
+        eprintln!(
+            "mean value {:.5} (channel sum), RMS standard error {:.2}% of it",
+            m,
+            100.0 * s / m
+        );
+    }
+}

@@ -1,0 +1,340 @@
+//! GPU pane rendering: every cluster's pane (indirect irradiance at every exit point per unit
+//! irradiance on the cluster) from its VPLs, by the [`crate::vpl_depth`] and [`crate::pane_gather`]
+//! passes.
+//!
+//! Same estimator and VPL bound as the CPU evaluator [`prm_trace::evaluate_panes`]; only the
+//! visibility differs: a five-face hemicube depth map per VPL (each face `face_resolution²`,
+//! sampled with 2×2 percentage-closer filtering) instead of a shadow ray.
+//!
+//! Work is cut twice: clusters into *groups* whose panes fit one storage binding (≤ 128 MiB on
+//! lavapipe), and each group's VPLs (sorted by cluster) into *batches* whose depth faces fit one
+//! texture array. A group's panes are read back and handed to the caller before the next group
+//! starts, so at most one group of panes is in memory.
+
+use glam::Vec3;
+use prm_scene::{ExitPoint, Scene};
+use prm_trace::{Clustering, Panes, VplBound, VplSet};
+use wgpu::util::DeviceExt;
+
+use crate::pane_gather::{GatherParams, GpuExit, PaneGatherPass};
+use crate::vpl_depth::{DepthFrame, GpuVpl, VplDepthPass, FACES};
+use crate::{GpuContext, GpuError};
+
+/// Parameters of GPU pane rendering.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PaneRenderParams {
+    /// The VPL singularity bound (must match the CPU evaluator's for comparisons).
+    pub bound: VplBound,
+    /// Texels on a side of each hemicube face.
+    pub face_resolution: u32,
+    /// VPLs whose depth faces are rendered per batch (clamped to the device's array-layer limit).
+    pub vpls_per_batch: u32,
+    /// Largest pane buffer of one group, bytes (clamped to the device's storage-binding limit).
+    pub max_group_bytes: u64,
+    /// Shadow-test biases.
+    pub bias: ShadowBias,
+}
+
+/// Biases of the depth-map visibility test against self-shadowing ("acne").
+///
+/// A receiver at distance `d` from the VPL counts as lit when the stored distance exceeds
+/// `d − (constant + slope · d · texel_angle · tan θ)`, where `θ` is the angle between the receiver's
+/// normal and the direction to the VPL (tan θ capped at 8). Larger values leak light through thin
+/// walls; smaller ones darken surfaces seen at grazing angles.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ShadowBias {
+    /// Constant part, as a fraction of the scene diagonal.
+    pub constant: f32,
+    /// Slope part, in depth texels.
+    pub slope: f32,
+    /// Receiver offset along its normal, as a fraction of the scene diagonal.
+    pub receiver_offset: f32,
+}
+
+impl ShadowBias {
+    /// 1e-4 diagonal constant, 1.5 texels of slope, no receiver offset.
+    pub const DEFAULT: ShadowBias = ShadowBias {
+        constant: 1e-4,
+        slope: 1.5,
+        receiver_offset: 0.0,
+    };
+}
+
+impl PaneRenderParams {
+    /// 128² faces, 256 VPLs a batch, 64 MiB groups.
+    pub const DEFAULT: PaneRenderParams = PaneRenderParams {
+        bound: VplBound::DEFAULT,
+        face_resolution: 128,
+        vpls_per_batch: 256,
+        max_group_bytes: 64 << 20,
+        bias: ShadowBias::DEFAULT,
+    };
+}
+
+impl Default for PaneRenderParams {
+    fn default() -> Self {
+        Self::DEFAULT
+    }
+}
+
+/// Counters of a pane rendering run.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PaneRenderStats {
+    /// VPLs rendered.
+    pub vpls: u64,
+    /// Depth faces rendered.
+    pub faces: u64,
+    /// Batches submitted.
+    pub batches: u64,
+    /// Cluster groups read back.
+    pub groups: u64,
+    /// VPL × exit point evaluations.
+    pub evaluations: u64,
+    /// Wall time of the depth pass (write, record, run), seconds.
+    pub depth_seconds: f64,
+    /// Wall time of the gather pass, seconds.
+    pub gather_seconds: f64,
+}
+
+/// Renders every cluster's pane over `exits` and hands each to `sink(cluster, pane)` in cluster
+/// order, one group at a time; `sink`'s errors stop the work and are returned as they are.
+pub fn render_panes_with<E: From<GpuError>>(
+    ctx: &GpuContext,
+    scene: &Scene,
+    exits: &[ExitPoint],
+    vpls: &VplSet,
+    clustering: &Clustering,
+    params: &PaneRenderParams,
+    mut sink: impl FnMut(usize, &[Vec3]) -> Result<(), E>,
+) -> Result<PaneRenderStats, E> {
+    let device = &ctx.device;
+    let limits = device.limits();
+    let n_exit = exits.len().max(1) as u64;
+    let clusters = clustering.len();
+    let mut stats = PaneRenderStats::default();
+    if clusters == 0 {
+        return Ok(stats);
+    }
+    let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+
+    // Scene geometry as a flat vertex list, and the frame of the hemicubes.
+    let positions: Vec<[f32; 3]> = scene
+        .triangles
+        .iter()
+        .flat_map(|t| t.positions.map(|p| p.to_array()))
+        .collect();
+    let diagonal = scene.bounds().diagonal().max(1e-12);
+    let frame = DepthFrame {
+        near: 1e-4 * diagonal,
+        far: 1.01 * diagonal,
+        lift: 1e-5 * diagonal,
+        _pad: 0.0,
+    };
+    let (bound_kind, bound_value) = match params.bound {
+        VplBound::None => (0, 0.0),
+        VplBound::Clamp { min_distance } => (1, min_distance * min_distance),
+        VplBound::Disk { scale } => (2, scale * scale * std::f32::consts::FRAC_1_PI),
+    };
+
+    // VPLs sorted by cluster (members ascending, VPLs of an entry in walk order).
+    let mut sorted = Vec::with_capacity(vpls.vpls.len());
+    let mut cluster_start = Vec::with_capacity(clusters + 1);
+    for (c, members) in clustering.members.iter().enumerate() {
+        cluster_start.push(sorted.len());
+        for &k in members {
+            for v in &vpls.vpls[vpls.range(k as usize)] {
+                sorted.push(GpuVpl {
+                    position: v.position.to_array(),
+                    area: v.area,
+                    normal: v.normal.to_array(),
+                    cluster: c as u32,
+                    power: v.power.to_array(),
+                    _pad: 0.0,
+                });
+            }
+        }
+    }
+    cluster_start.push(sorted.len());
+
+    let batch_cap = params
+        .vpls_per_batch
+        .clamp(1, (limits.max_texture_array_layers / FACES).max(1));
+    let group_bytes = params
+        .max_group_bytes
+        .min(limits.max_storage_buffer_binding_size)
+        .max(16 * n_exit);
+    let group_cap = (group_bytes / (16 * n_exit)).max(1) as usize;
+    let face_res = params.face_resolution.clamp(8, limits.max_texture_dimension_2d);
+
+    let scene_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("pane scene"),
+        contents: bytemuck::cast_slice(&positions),
+        usage: wgpu::BufferUsages::VERTEX,
+    });
+    let gpu_exits: Vec<GpuExit> = exits
+        .iter()
+        .map(|e| GpuExit {
+            position: e.position.to_array(),
+            _pad0: 0.0,
+            normal: e.normal.to_array(),
+            _pad1: 0.0,
+        })
+        .collect();
+    let exit_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("pane exits"),
+        contents: if gpu_exits.is_empty() {
+            &[0u8; 32]
+        } else {
+            bytemuck::cast_slice(&gpu_exits)
+        },
+        usage: wgpu::BufferUsages::STORAGE,
+    });
+    let vpl_buffer = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("pane vpl batch"),
+        size: batch_cap as u64 * std::mem::size_of::<GpuVpl>() as u64,
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    let frame_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("pane depth frame"),
+        contents: bytemuck::bytes_of(&frame),
+        usage: wgpu::BufferUsages::UNIFORM,
+    });
+    let params_buffer = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("pane gather params"),
+        size: std::mem::size_of::<GatherParams>() as u64,
+        usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    let pane_bytes = (group_cap.min(clusters) as u64) * 16 * n_exit;
+    let pane_buffer = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("pane group"),
+        size: pane_bytes,
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    let readback = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("pane readback"),
+        size: pane_bytes,
+        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    let depth = VplDepthPass::new(device, batch_cap, face_res, &vpl_buffer, &frame_buffer);
+    let gather = PaneGatherPass::new(
+        device,
+        &vpl_buffer,
+        &exit_buffer,
+        &pane_buffer,
+        &params_buffer,
+        &depth.array_view,
+    );
+    if let Some(e) = pollster::block_on(scope.pop()) {
+        return Err(GpuError::Validation {
+            pass: "pane setup",
+            message: e.to_string(),
+        }
+        .into());
+    }
+
+    // A face spans 90°: one texel subtends about π/2 / resolution at its centre.
+    let texel = std::f32::consts::FRAC_PI_2 / face_res as f32;
+    let mut first = 0;
+    while first < clusters {
+        let last = (first + group_cap).min(clusters);
+        let (v0, v1) = (cluster_start[first], cluster_start[last]);
+        let mut encoder = device.create_command_encoder(&Default::default());
+        encoder.clear_buffer(&pane_buffer, 0, None);
+        ctx.queue.submit([encoder.finish()]);
+        let mut at = v0;
+        while at < v1 {
+            let end = (at + batch_cap as usize).min(v1);
+            let batch = &sorted[at..end];
+            let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+            ctx.queue.write_buffer(&vpl_buffer, 0, bytemuck::cast_slice(batch));
+            let gp = GatherParams {
+                exit_count: exits.len() as u32,
+                vpl_count: batch.len() as u32,
+                first_cluster: first as u32,
+                bound_kind,
+                bound_value,
+                near: frame.near,
+                far: frame.far,
+                lift: frame.lift,
+                receiver_offset: params.bias.receiver_offset * diagonal,
+                bias_constant: params.bias.constant * diagonal,
+                bias_slope: params.bias.slope,
+                texel_angle: texel,
+            };
+            ctx.queue.write_buffer(&params_buffer, 0, bytemuck::bytes_of(&gp));
+            // Two submissions so each pass can be timed (the device runs them in order anyway).
+            let t = std::time::Instant::now();
+            let mut encoder = device.create_command_encoder(&Default::default());
+            depth.encode(&mut encoder, &scene_buffer, positions.len() as u32, batch.len() as u32);
+            ctx.queue.submit([encoder.finish()]);
+            ctx.wait()?;
+            stats.depth_seconds += t.elapsed().as_secs_f64();
+            let t = std::time::Instant::now();
+            let mut encoder = device.create_command_encoder(&Default::default());
+            gather.encode(&mut encoder, exits.len() as u32);
+            ctx.queue.submit([encoder.finish()]);
+            ctx.wait()?;
+            stats.gather_seconds += t.elapsed().as_secs_f64();
+            if let Some(e) = pollster::block_on(scope.pop()) {
+                return Err(GpuError::Validation {
+                    pass: "pane batch",
+                    message: e.to_string(),
+                }
+                .into());
+            }
+            stats.vpls += batch.len() as u64;
+            stats.faces += (batch.len() as u32 * FACES) as u64;
+            stats.batches += 1;
+            stats.evaluations += batch.len() as u64 * exits.len() as u64;
+            at = end;
+        }
+        let bytes = ((last - first) as u64) * 16 * n_exit;
+        let mut encoder = device.create_command_encoder(&Default::default());
+        encoder.copy_buffer_to_buffer(&pane_buffer, 0, &readback, 0, bytes);
+        ctx.queue.submit([encoder.finish()]);
+        let data = ctx.read_buffer(&readback)?;
+        let texels: &[[f32; 4]] = bytemuck::cast_slice(&data);
+        let mut pane = vec![Vec3::ZERO; exits.len()];
+        for c in first..last {
+            let base = (c - first) * n_exit as usize;
+            for (i, p) in pane.iter_mut().enumerate() {
+                let t = texels[base + i];
+                *p = Vec3::new(t[0], t[1], t[2]);
+            }
+            sink(c, &pane)?;
+        }
+        stats.groups += 1;
+        first = last;
+    }
+    Ok(stats)
+}
+
+/// Renders all panes into memory (cluster-major, like [`prm_trace::Panes`]).
+pub fn render_panes(
+    ctx: &GpuContext,
+    scene: &Scene,
+    exits: &[ExitPoint],
+    vpls: &VplSet,
+    clustering: &Clustering,
+    params: &PaneRenderParams,
+) -> Result<(Panes, PaneRenderStats), GpuError> {
+    let mut data = vec![Vec3::ZERO; clustering.len() * exits.len()];
+    let n = exits.len();
+    let stats = render_panes_with(ctx, scene, exits, vpls, clustering, params, |c, pane| {
+        data[c * n..(c + 1) * n].copy_from_slice(pane);
+        Ok::<(), GpuError>(())
+    })?;
+    Ok((
+        Panes {
+            clusters: clustering.len(),
+            exits: n,
+            data,
+            rays: 0,
+        },
+        stats,
+    ))
+}

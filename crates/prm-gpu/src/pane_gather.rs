@@ -1,0 +1,138 @@
+//! The pane gather pass (`shaders/pane_gather.wgsl`): adds a batch of VPLs, with depth-map
+//! visibility, into the panes of their clusters at every exit point.
+
+use bytemuck::{Pod, Zeroable};
+
+/// An exit point as the GPU sees it; layout shared with WGSL.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+pub struct GpuExit {
+    /// Position.
+    pub position: [f32; 3],
+    /// Padding.
+    pub _pad0: f32,
+    /// Unit normal.
+    pub normal: [f32; 3],
+    /// Padding.
+    pub _pad1: f32,
+}
+const _: () = assert!(std::mem::size_of::<GpuExit>() == 32);
+
+/// Uniforms of one gather dispatch; layout shared with WGSL.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+pub struct GatherParams {
+    /// Exit points.
+    pub exit_count: u32,
+    /// VPLs in the batch.
+    pub vpl_count: u32,
+    /// Cluster stored at slot 0 of the pane buffer.
+    pub first_cluster: u32,
+    /// 0 plain `1/r²`, 1 clamp, 2 disk.
+    pub bound_kind: u32,
+    /// Clamp: `d_min²`; disk: `scale²/π`.
+    pub bound_value: f32,
+    /// Hemicube near plane.
+    pub near: f32,
+    /// Hemicube far plane.
+    pub far: f32,
+    /// VPL lift off its surface.
+    pub lift: f32,
+    /// Receiver offset along its normal.
+    pub receiver_offset: f32,
+    /// Constant distance bias, scene units.
+    pub bias_constant: f32,
+    /// Slope bias, in depth texels (multiplied by the texel footprint and tan θ of the receiver).
+    pub bias_slope: f32,
+    /// Angle subtended by one depth texel at the face centre, radians.
+    pub texel_angle: f32,
+}
+const _: () = assert!(std::mem::size_of::<GatherParams>() == 48);
+
+/// Pipeline and bindings of the gather pass.
+pub struct PaneGatherPass {
+    pipeline: wgpu::ComputePipeline,
+    group: wgpu::BindGroup,
+}
+
+impl PaneGatherPass {
+    /// Creates the pass over the given buffers and depth array.
+    pub fn new(
+        device: &wgpu::Device,
+        vpls: &wgpu::Buffer,
+        exits: &wgpu::Buffer,
+        panes: &wgpu::Buffer,
+        params: &wgpu::Buffer,
+        depth: &wgpu::TextureView,
+    ) -> PaneGatherPass {
+        let source = format!(
+            "{}\n{}",
+            include_str!("../../../shaders/hemicube.wgsl"),
+            include_str!("../../../shaders/pane_gather.wgsl")
+        );
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("pane_gather"),
+            source: wgpu::ShaderSource::Wgsl(source.into()),
+        });
+        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("pane_gather"),
+            layout: None,
+            module: &module,
+            entry_point: Some("main"),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+        // Bilinear comparison: 2×2 percentage-closer filtering softens the depth maps' texels.
+        let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
+            label: Some("pane_gather shadow"),
+            address_mode_u: wgpu::AddressMode::ClampToEdge,
+            address_mode_v: wgpu::AddressMode::ClampToEdge,
+            mag_filter: wgpu::FilterMode::Linear,
+            min_filter: wgpu::FilterMode::Linear,
+            compare: Some(wgpu::CompareFunction::LessEqual),
+            ..Default::default()
+        });
+        let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("pane_gather"),
+            layout: &pipeline.get_bind_group_layout(0),
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: vpls.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: exits.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: panes.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 3,
+                    resource: params.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 4,
+                    resource: wgpu::BindingResource::TextureView(depth),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 5,
+                    resource: wgpu::BindingResource::Sampler(&sampler),
+                },
+            ],
+        });
+        PaneGatherPass { pipeline, group }
+    }
+
+    /// Records one dispatch over `exit_count` exit points.
+    pub fn encode(&self, encoder: &mut wgpu::CommandEncoder, exit_count: u32) {
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("pane_gather"),
+            timestamp_writes: None,
+        });
+        pass.set_pipeline(&self.pipeline);
+        pass.set_bind_group(0, &self.group, &[]);
+        pass.dispatch_workgroups(exit_count.div_ceil(64), 1, 1);
+    }
+}

@@ -1,0 +1,264 @@
+//! The VPL depth pass (`shaders/vpl_depth.wgsl`): the scene's depth through each hemicube face of
+//! each VPL of a batch, one layer of a depth texture array per face.
+
+use bytemuck::{Pod, Zeroable};
+
+/// A VPL as the GPU sees it; layout shared with `hemicube.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+pub struct GpuVpl {
+    /// Position.
+    pub position: [f32; 3],
+    /// Area it stands for (for the disk bound).
+    pub area: f32,
+    /// Unit normal.
+    pub normal: [f32; 3],
+    /// Cluster index.
+    pub cluster: u32,
+    /// Power per unit entry irradiance.
+    pub power: [f32; 3],
+    /// Padding.
+    pub _pad: f32,
+}
+const _: () = assert!(std::mem::size_of::<GpuVpl>() == 48);
+
+/// Near/far planes and the lift of the VPL off its surface; layout shared with WGSL.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+pub struct DepthFrame {
+    /// Near plane (distance along a face axis).
+    pub near: f32,
+    /// Far plane.
+    pub far: f32,
+    /// VPL origin offset along its normal.
+    pub lift: f32,
+    /// Padding.
+    pub _pad: f32,
+}
+const _: () = assert!(std::mem::size_of::<DepthFrame>() == 16);
+
+/// Faces per VPL (hemicube).
+pub const FACES: u32 = 5;
+/// Depth format of the face layers.
+pub const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
+
+/// Pipeline and per-layer state of the depth pass for batches of up to `capacity` VPLs.
+pub struct VplDepthPass {
+    pipeline: wgpu::RenderPipeline,
+    frame_group: wgpu::BindGroup,
+    face_group: wgpu::BindGroup,
+    face_stride: u32,
+    layer_views: Vec<wgpu::TextureView>,
+    /// All layers, for sampling.
+    pub array_view: wgpu::TextureView,
+    /// Face size in texels.
+    pub resolution: u32,
+}
+
+impl VplDepthPass {
+    /// Creates the pass: the depth array for `capacity` VPLs of `resolution²` faces, bound to
+    /// `vpls` (the batch buffer) and `frame`.
+    pub fn new(
+        device: &wgpu::Device,
+        capacity: u32,
+        resolution: u32,
+        vpls: &wgpu::Buffer,
+        frame: &wgpu::Buffer,
+    ) -> VplDepthPass {
+        let source = format!(
+            "{}\n{}",
+            include_str!("../../../shaders/hemicube.wgsl"),
+            include_str!("../../../shaders/vpl_depth.wgsl")
+        );
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("vpl_depth"),
+            source: wgpu::ShaderSource::Wgsl(source.into()),
+        });
+        let frame_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("vpl_depth frame"),
+            entries: &[
+                wgpu::BindGroupLayoutEntry {
+                    binding: 0,
+                    visibility: wgpu::ShaderStages::VERTEX,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Storage { read_only: true },
+                        has_dynamic_offset: false,
+                        min_binding_size: None,
+                    },
+                    count: None,
+                },
+                wgpu::BindGroupLayoutEntry {
+                    binding: 1,
+                    visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Uniform,
+                        has_dynamic_offset: false,
+                        min_binding_size: None,
+                    },
+                    count: None,
+                },
+            ],
+        });
+        let face_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("vpl_depth face"),
+            entries: &[wgpu::BindGroupLayoutEntry {
+                binding: 0,
+                visibility: wgpu::ShaderStages::VERTEX,
+                ty: wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Uniform,
+                    has_dynamic_offset: true,
+                    min_binding_size: wgpu::BufferSize::new(16),
+                },
+                count: None,
+            }],
+        });
+        let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("vpl_depth"),
+            bind_group_layouts: &[Some(&frame_layout), Some(&face_layout)],
+            immediate_size: 0,
+        });
+        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("vpl_depth"),
+            layout: Some(&layout),
+            vertex: wgpu::VertexState {
+                module: &module,
+                entry_point: Some("vs_main"),
+                compilation_options: Default::default(),
+                buffers: &[Some(wgpu::VertexBufferLayout {
+                    array_stride: 12,
+                    step_mode: wgpu::VertexStepMode::Vertex,
+                    attributes: &wgpu::vertex_attr_array![0 => Float32x3],
+                })],
+            },
+            primitive: wgpu::PrimitiveState {
+                cull_mode: None,
+                ..Default::default()
+            },
+            depth_stencil: Some(wgpu::DepthStencilState {
+                format: DEPTH_FORMAT,
+                depth_write_enabled: Some(true),
+                depth_compare: Some(wgpu::CompareFunction::Less),
+                stencil: Default::default(),
+                // No raster bias: the gather pass biases distances in scene units.
+                bias: Default::default(),
+            }),
+            multisample: Default::default(),
+            fragment: Some(wgpu::FragmentState {
+                module: &module,
+                entry_point: Some("fs_main"),
+                compilation_options: Default::default(),
+                targets: &[],
+            }),
+            multiview_mask: None,
+            cache: None,
+        });
+        let frame_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("vpl_depth frame"),
+            layout: &frame_layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: vpls.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: frame.as_entire_binding(),
+                },
+            ],
+        });
+        // Face selectors: layer j·5+f reads VPL j, face f; one aligned uniform slot per layer.
+        let layers = capacity * FACES;
+        let face_stride = device.limits().min_uniform_buffer_offset_alignment.max(16);
+        let mut faces = vec![0u8; (layers * face_stride) as usize];
+        for layer in 0..layers {
+            let sel = [layer / FACES, layer % FACES, 0, 0];
+            let at = (layer * face_stride) as usize;
+            faces[at..at + 16].copy_from_slice(bytemuck::cast_slice(&sel));
+        }
+        let face_buffer = wgpu::util::DeviceExt::create_buffer_init(
+            device,
+            &wgpu::util::BufferInitDescriptor {
+                label: Some("vpl_depth faces"),
+                contents: &faces,
+                usage: wgpu::BufferUsages::UNIFORM,
+            },
+        );
+        let face_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("vpl_depth face"),
+            layout: &face_layout,
+            entries: &[wgpu::BindGroupEntry {
+                binding: 0,
+                resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                    buffer: &face_buffer,
+                    offset: 0,
+                    size: wgpu::BufferSize::new(16),
+                }),
+            }],
+        });
+        let texture = device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("vpl_depth layers"),
+            size: wgpu::Extent3d {
+                width: resolution,
+                height: resolution,
+                depth_or_array_layers: layers,
+            },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: DEPTH_FORMAT,
+            usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
+            view_formats: &[],
+        });
+        let layer_views = (0..layers)
+            .map(|layer| {
+                texture.create_view(&wgpu::TextureViewDescriptor {
+                    label: Some("vpl_depth layer"),
+                    dimension: Some(wgpu::TextureViewDimension::D2),
+                    base_array_layer: layer,
+                    array_layer_count: Some(1),
+                    ..Default::default()
+                })
+            })
+            .collect();
+        let array_view = texture.create_view(&wgpu::TextureViewDescriptor {
+            label: Some("vpl_depth array"),
+            dimension: Some(wgpu::TextureViewDimension::D2Array),
+            ..Default::default()
+        });
+        VplDepthPass {
+            pipeline,
+            frame_group,
+            face_group,
+            face_stride,
+            layer_views,
+            array_view,
+            resolution,
+        }
+    }
+
+    /// Records the depth of `vertex_count` scene vertices for the first `vpls` VPLs of the batch.
+    pub fn encode(&self, encoder: &mut wgpu::CommandEncoder, scene: &wgpu::Buffer, vertex_count: u32, vpls: u32) {
+        for layer in 0..vpls * FACES {
+            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("vpl_depth"),
+                color_attachments: &[],
+                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                    view: &self.layer_views[layer as usize],
+                    depth_ops: Some(wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(1.0),
+                        store: wgpu::StoreOp::Store,
+                    }),
+                    stencil_ops: None,
+                }),
+                timestamp_writes: None,
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            pass.set_pipeline(&self.pipeline);
+            pass.set_bind_group(0, &self.frame_group, &[]);
+            pass.set_bind_group(1, &self.face_group, &[layer * self.face_stride]);
+            pass.set_vertex_buffer(0, scene.slice(..));
+            pass.draw(0..vertex_count, 0..1);
+        }
+    }
+}

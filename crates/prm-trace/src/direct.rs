@@ -1,0 +1,68 @@
+//! Direct irradiance from punctual lights, with shadow rays.
+//!
+//! Point: `E = I · cos θ / d² · V` (I in W/sr). Spot: the same inside the cone
+//! (angle between the light's axis and the direction to the point ≤ half angle), zero outside: a
+//! hard-edged cone with no falloff. Directional: `E = E⊥ · cos θ · V` with `E⊥` the irradiance on a
+//! surface facing the light, shadow ray to infinity.
+
+use glam::Vec3;
+use prm_scene::Light;
+use rayon::prelude::*;
+
+use crate::bvh::Bvh;
+use crate::sampling::SurfaceSample;
+
+/// Direct irradiance (W/m²) at `p` on triangle `tri` with unit geometric normal `ng`, using `n`
+/// (unit) as the receiving normal.
+pub fn direct_irradiance(bvh: &Bvh, lights: &[Light], p: Vec3, ng: Vec3, n: Vec3, tri: u32) -> Vec3 {
+    let mut e = Vec3::ZERO;
+    for light in lights {
+        let (to_light, dist, radiometric) = match *light {
+            Light::Point { position, intensity } => {
+                let d = position - p;
+                let r = d.length();
+                (d / r, r, intensity / (r * r))
+            }
+            Light::Spot {
+                position,
+                direction,
+                angle,
+                intensity,
+            } => {
+                let d = position - p;
+                let r = d.length();
+                let l = d / r;
+                if (-l).dot(direction) < angle.cos() {
+                    continue;
+                }
+                (l, r, intensity / (r * r))
+            }
+            Light::Directional { direction, irradiance } => (-direction, f32::INFINITY, irradiance),
+        };
+        if !to_light.is_finite() {
+            continue;
+        }
+        let cos = n.dot(to_light);
+        if cos <= 0.0 || ng.dot(to_light) <= 0.0 {
+            continue;
+        }
+        let o = bvh.spawn(p, ng, to_light);
+        let tmax = if dist.is_finite() {
+            (dist - bvh.epsilon()).max(0.0)
+        } else {
+            f32::INFINITY
+        };
+        if !bvh.occluded(o, to_light, tmax, [tri, u32::MAX]) {
+            e += radiometric * cos;
+        }
+    }
+    e
+}
+
+/// Direct irradiance at every entry point (the run-time weights before cluster averaging).
+pub fn entry_irradiance(bvh: &Bvh, lights: &[Light], entries: &[SurfaceSample]) -> Vec<Vec3> {
+    entries
+        .par_iter()
+        .map(|e| direct_irradiance(bvh, lights, e.position, e.normal, e.normal, e.triangle))
+        .collect()
+}

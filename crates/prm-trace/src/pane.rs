@@ -1,0 +1,130 @@
+//! CPU pane evaluator: the pane of every cluster at every exit point, by brute force.
+//!
+//! `pane_c(x) = Σ_{k ∈ c} Σ_{v ∈ VPLs of k} Φ_v/π · cos θ_x · cos θ_v · b(r², v) · V(x, v)` where
+//! `b` is the bounded `1/r²` ([`VplBound`]) and `V` is a shadow ray ([`Bvh::visible`]); `cos θ_x`
+//! uses the exit point's (shading) normal, `cos θ_v` the VPL's geometric normal. Values are
+//! indirect irradiance in W/m² per W/m² of entry irradiance. At run time
+//! `E_ind(x) = Σ_c weight_c · pane_c(x)` with `weight_c` the mean direct irradiance of the
+//! cluster's members ([`crate::Clustering::weights`], [`Panes::combine`]).
+//!
+//! Work is parallel over exit points; each exit point sums its VPLs in a fixed order, so the
+//! result does not depend on the thread count. This is the exact yardstick for a GPU renderer.
+
+use glam::Vec3;
+use prm_scene::ExitPoint;
+use rayon::prelude::*;
+
+use crate::bvh::Bvh;
+use crate::cluster::Clustering;
+use crate::vpl::VplBound;
+use crate::walk::VplSet;
+use crate::TraceError;
+
+/// Pane evaluation parameters.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PaneParams {
+    /// Singularity bound.
+    pub bound: VplBound,
+}
+
+impl PaneParams {
+    /// [`VplBound::DEFAULT`].
+    pub const DEFAULT: PaneParams = PaneParams {
+        bound: VplBound::DEFAULT,
+    };
+}
+
+impl Default for PaneParams {
+    fn default() -> Self {
+        Self::DEFAULT
+    }
+}
+
+/// The panes of all clusters over a list of exit points.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Panes {
+    /// Number of clusters.
+    pub clusters: usize,
+    /// Number of exit points.
+    pub exits: usize,
+    /// Cluster-major: `data[c * exits + i]` is cluster `c`'s pane at exit point `i`.
+    pub data: Vec<Vec3>,
+    /// Shadow rays cast.
+    pub rays: u64,
+}
+
+impl Panes {
+    /// Cluster `c`'s pane, one value per exit point.
+    pub fn pane(&self, c: usize) -> &[Vec3] {
+        &self.data[c * self.exits..(c + 1) * self.exits]
+    }
+
+    /// `Σ_c weights[c] · pane_c` at every exit point (component-wise product).
+    pub fn combine(&self, weights: &[Vec3]) -> Vec<Vec3> {
+        assert_eq!(weights.len(), self.clusters, "one weight per cluster");
+        (0..self.exits)
+            .map(|i| {
+                (0..self.clusters)
+                    .map(|c| weights[c] * self.data[c * self.exits + i])
+                    .sum()
+            })
+            .collect()
+    }
+}
+
+/// Evaluates every cluster's pane at every exit point in `exits`.
+pub fn evaluate_panes(
+    bvh: &Bvh,
+    vpls: &VplSet,
+    clustering: &Clustering,
+    exits: &[ExitPoint],
+    params: &PaneParams,
+) -> Result<Panes, TraceError> {
+    if clustering.of_entry.len() != vpls.entries() {
+        return Err(TraceError::InvalidParameter(format!(
+            "clustering covers {} entry points, the VPL set {}",
+            clustering.of_entry.len(),
+            vpls.entries()
+        )));
+    }
+    let c = clustering.len();
+    let cluster_of_vpl: Vec<u32> = vpls
+        .vpls
+        .iter()
+        .map(|v| clustering.of_entry[v.entry as usize])
+        .collect();
+    let per_exit: Vec<(Vec<Vec3>, u64)> = exits
+        .par_iter()
+        .map(|x| {
+            let mut acc = vec![Vec3::ZERO; c];
+            let mut rays = 0u64;
+            let ng = bvh.geometric_normal(x.triangle);
+            for (v, &cl) in vpls.vpls.iter().zip(&cluster_of_vpl) {
+                let e = params.bound.irradiance(v, x.position, x.normal);
+                if e == Vec3::ZERO || v.position.distance_squared(x.position) == 0.0 {
+                    continue;
+                }
+                rays += 1;
+                if bvh.visible(x.position, ng, x.triangle, v.position, v.normal, v.triangle) {
+                    acc[cl as usize] += e;
+                }
+            }
+            (acc, rays)
+        })
+        .collect();
+    let n = exits.len();
+    let mut data = vec![Vec3::ZERO; c * n];
+    let mut rays = 0;
+    for (i, (acc, r)) in per_exit.into_iter().enumerate() {
+        rays += r;
+        for (cl, v) in acc.into_iter().enumerate() {
+            data[cl * n + i] = v;
+        }
+    }
+    Ok(Panes {
+        clusters: c,
+        exits: n,
+        data,
+        rays,
+    })
+}

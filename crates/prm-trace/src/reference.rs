@@ -1,0 +1,368 @@
+//! Reference path tracer: ground truth for indirect irradiance at exit points and for images.
+//!
+//! Indirect irradiance at `x` (receiving normal `n_x`) is `E_ind(x) = ∫ L(ω) cos θ dω` over the
+//! hemisphere, where `L` is the radiance leaving the first surface `y₁` seen along `ω`:
+//! `L = ρ(y₁)/π · (E_dir(y₁) + E_ind(y₁))`. Sampling `ω` with pdf `cos θ/π` gives the one-sample
+//! estimate `π·L = ρ(y₁)·(E_dir(y₁) + E_ind(y₁))`, and recursing on `E_ind(y₁)` gives the path
+//! estimator
+//!
+//! ```text
+//! Ê_ind(x) = Σ_{j≥1} T_j · ρ(y_j) · E_dir(y_j),    T_1 = 1,  T_{j+1} = T_j · ρ(y_j) / q_j
+//! ```
+//!
+//! with next-event estimation to the punctual lights for `E_dir(y_j)` ([`crate::direct_irradiance`])
+//! and Russian roulette `q_j` ([`Roulette`]) after each vertex. Unbiased apart from the
+//! `max_bounces` cap (tail below 2·10⁻⁶ by default). Surfaces are one-sided, as in the walks: a
+//! ray hitting the back of a surface ends the path. Vertices use geometric normals; the exit point
+//! uses its own (shading) normal for the first cosine, as the pane evaluator does.
+//!
+//! Images: one pinhole ray per pixel centre per pass (right-handed, +Y up, vertical FOV, row 0 at
+//! the top). The radiance is `ρ(x)/π · (E_dir(x) + E_ind(x))` at the first visible point `x`, or
+//! only `ρ(x)/π · E_ind(x)` with [`ImageMode::IndirectOnly`]; back faces and misses are black.
+//!
+//! Progressive: each pass adds `samples_per_pass` independent paths per texel/pixel; the pass
+//! means are combined with Welford's algorithm, giving the mean and the variance of the mean
+//! (`s²/passes`, zero until two passes exist). Texel `i` in pass `p` uses the stream
+//! `(seed, i, p)`, so results do not depend on the thread count.
+//!
+//! [`Lighting::UniformIrradiance`] is a pseudo-light for the furnace test: every front-facing
+//! surface point receives that direct irradiance, with no visibility.
+
+use glam::{Vec2, Vec3};
+use prm_scene::{Camera, ExitPoint, Light, Scene};
+use rayon::prelude::*;
+
+use crate::bvh::Bvh;
+use crate::direct::direct_irradiance;
+use crate::rng::Rng;
+use crate::sampling::cosine_hemisphere;
+use crate::walk::Roulette;
+use crate::TraceError;
+
+/// Where direct light comes from.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Lighting<'a> {
+    /// Punctual lights with shadows.
+    Lights(&'a [Light]),
+    /// Every front-facing surface point receives this irradiance (W/m²), no visibility (furnace).
+    UniformIrradiance(Vec3),
+}
+
+/// What an image shows.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ImageMode {
+    /// `ρ/π · (E_dir + E_ind)`.
+    Full,
+    /// `ρ/π · E_ind`.
+    IndirectOnly,
+}
+
+/// Reference tracer parameters.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ReferenceParams {
+    /// Progressive passes.
+    pub passes: u32,
+    /// Paths per texel/pixel per pass.
+    pub samples_per_pass: u32,
+    /// Russian roulette after each vertex.
+    pub roulette: Roulette,
+    /// Hard cap on path vertices.
+    pub max_bounces: u32,
+    /// Seed.
+    pub seed: u64,
+}
+
+impl ReferenceParams {
+    /// 8 passes × 8 paths.
+    pub const PREVIEW: ReferenceParams = ReferenceParams {
+        passes: 8,
+        samples_per_pass: 8,
+        roulette: Roulette::DEFAULT,
+        max_bounces: 256,
+        seed: 0,
+    };
+    /// 16 passes × 64 paths.
+    pub const STANDARD: ReferenceParams = ReferenceParams {
+        passes: 16,
+        samples_per_pass: 64,
+        ..Self::PREVIEW
+    };
+
+    /// About `spp` paths in total, split into passes of at most 64 (at least 4 passes if possible).
+    pub fn with_spp(spp: u32) -> Self {
+        let spp = spp.max(1);
+        let per = (spp / 4).clamp(1, 64);
+        ReferenceParams {
+            passes: spp.div_ceil(per),
+            samples_per_pass: per,
+            ..Self::STANDARD
+        }
+    }
+}
+
+impl Default for ReferenceParams {
+    fn default() -> Self {
+        Self::STANDARD
+    }
+}
+
+/// A progressive estimate per texel or pixel.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Estimate {
+    /// Mean over passes.
+    pub mean: Vec<Vec3>,
+    /// Variance of the mean (sample variance of pass means / passes).
+    pub variance: Vec<Vec3>,
+    /// Passes done.
+    pub passes: u32,
+}
+
+struct Welford {
+    mean: Vec<Vec3>,
+    m2: Vec<Vec3>,
+    n: u32,
+}
+
+impl Welford {
+    fn new(len: usize) -> Self {
+        Welford {
+            mean: vec![Vec3::ZERO; len],
+            m2: vec![Vec3::ZERO; len],
+            n: 0,
+        }
+    }
+    fn add(&mut self, values: &[Vec3]) {
+        self.n += 1;
+        let n = self.n as f32;
+        for ((m, s), &v) in self.mean.iter_mut().zip(self.m2.iter_mut()).zip(values) {
+            let d = v - *m;
+            *m += d / n;
+            *s += d * (v - *m);
+        }
+    }
+    fn estimate(&self) -> Estimate {
+        let n = self.n as f32;
+        let variance = if self.n > 1 {
+            self.m2.iter().map(|s| *s / ((n - 1.0) * n)).collect()
+        } else {
+            vec![Vec3::ZERO; self.mean.len()]
+        };
+        Estimate {
+            mean: self.mean.clone(),
+            variance,
+            passes: self.n,
+        }
+    }
+}
+
+/// The reference path tracer over one scene and lighting.
+pub struct ReferenceTracer<'a> {
+    scene: &'a Scene,
+    bvh: &'a Bvh,
+    lighting: Lighting<'a>,
+}
+
+impl<'a> ReferenceTracer<'a> {
+    /// A tracer for `scene` (with its `bvh`) under `lighting`.
+    pub fn new(scene: &'a Scene, bvh: &'a Bvh, lighting: Lighting<'a>) -> Self {
+        ReferenceTracer { scene, bvh, lighting }
+    }
+
+    fn direct(&self, p: Vec3, ng: Vec3, n: Vec3, tri: u32) -> Vec3 {
+        match self.lighting {
+            Lighting::Lights(l) => direct_irradiance(self.bvh, l, p, ng, n, tri),
+            Lighting::UniformIrradiance(e) => e,
+        }
+    }
+
+    /// Direct irradiance at every exit point (receiving with the exit point's normal).
+    pub fn direct_at_exits(&self, exits: &[ExitPoint]) -> Vec<Vec3> {
+        exits
+            .par_iter()
+            .map(|x| {
+                let ng = self.bvh.geometric_normal(x.triangle);
+                self.direct(x.position, ng, x.normal, x.triangle)
+            })
+            .collect()
+    }
+
+    /// One path estimate of the indirect irradiance at `x`.
+    fn indirect_path(&self, x: Vec3, ng: Vec3, n: Vec3, tri: u32, p: &ReferenceParams, rng: &mut Rng) -> Vec3 {
+        let (mut pos, mut ng, mut n, mut tri) = (x, ng, n, tri);
+        let mut throughput = Vec3::ONE;
+        let mut sum = Vec3::ZERO;
+        for _ in 0..p.max_bounces {
+            let dir = cosine_hemisphere(rng.next_vec2(), n);
+            if dir.dot(ng) <= 0.0 {
+                break;
+            }
+            let Some(hit) = self
+                .bvh
+                .closest_hit(self.bvh.spawn(pos, ng, dir), dir, f32::INFINITY, tri)
+            else {
+                break;
+            };
+            if !hit.front {
+                break;
+            }
+            tri = hit.triangle;
+            pos = self.scene.triangles[tri as usize].point(hit.b1, hit.b2);
+            ng = self.bvh.geometric_normal(tri);
+            n = ng;
+            let rho = self.scene.albedo(tri as usize, hit.b1, hit.b2);
+            sum += throughput * rho * self.direct(pos, ng, n, tri);
+            let q = p.roulette.survival(rho);
+            if rng.next_f32() >= q {
+                break;
+            }
+            throughput *= rho / q;
+        }
+        sum
+    }
+
+    /// Indirect irradiance (W/m²) at every exit point, progressively.
+    /// `progress(pass, passes)` is called after every pass.
+    pub fn indirect_at_exits(
+        &self,
+        exits: &[ExitPoint],
+        params: &ReferenceParams,
+        progress: &mut dyn FnMut(u32, u32),
+    ) -> Result<Estimate, TraceError> {
+        validate(params)?;
+        let mut w = Welford::new(exits.len());
+        for pass in 0..params.passes {
+            let values: Vec<Vec3> = exits
+                .par_iter()
+                .enumerate()
+                .map(|(i, x)| {
+                    let mut rng = Rng::new(params.seed, i as u64, pass as u64);
+                    let ng = self.bvh.geometric_normal(x.triangle);
+                    let mut s = Vec3::ZERO;
+                    for _ in 0..params.samples_per_pass {
+                        s += self.indirect_path(x.position, ng, x.normal, x.triangle, params, &mut rng);
+                    }
+                    s / params.samples_per_pass as f32
+                })
+                .collect();
+            w.add(&values);
+            progress(pass + 1, params.passes);
+        }
+        Ok(w.estimate())
+    }
+
+    /// Radiance image (W/(m²·sr)) seen by `camera`, `width × height`, row-major from the top row.
+    pub fn render(
+        &self,
+        camera: &Camera,
+        width: u32,
+        height: u32,
+        mode: ImageMode,
+        params: &ReferenceParams,
+        progress: &mut dyn FnMut(u32, u32),
+    ) -> Result<Estimate, TraceError> {
+        validate(params)?;
+        if width == 0 || height == 0 {
+            return Err(TraceError::InvalidParameter("image size must be positive".into()));
+        }
+        let forward = (camera.target - camera.eye).normalize_or_zero();
+        if forward == Vec3::ZERO || !(camera.fov_y_deg > 0.0 && camera.fov_y_deg < 180.0) {
+            return Err(TraceError::InvalidParameter(format!("degenerate camera {camera:?}")));
+        }
+        let mut right = forward.cross(Vec3::Y);
+        if right.length_squared() < 1e-12 {
+            right = forward.cross(Vec3::Z);
+        }
+        let right = right.normalize();
+        let up = right.cross(forward);
+        let tan = (camera.fov_y_deg.to_radians() * 0.5).tan();
+        let aspect = width as f32 / height as f32;
+        // First hits are the same every pass: find them once.
+        let primary: Vec<Option<(Vec3, u32, Vec3, Vec3)>> = (0..width * height)
+            .into_par_iter()
+            .map(|i| {
+                let (px, py) = (i % width, i / width);
+                let s = Vec2::new(
+                    (2.0 * (px as f32 + 0.5) / width as f32 - 1.0) * tan * aspect,
+                    (1.0 - 2.0 * (py as f32 + 0.5) / height as f32) * tan,
+                );
+                let dir = (forward + right * s.x + up * s.y).normalize();
+                let hit = self.bvh.closest_hit(camera.eye, dir, f32::INFINITY, u32::MAX)?;
+                if !hit.front {
+                    return None;
+                }
+                let p = self.scene.triangles[hit.triangle as usize].point(hit.b1, hit.b2);
+                let ng = self.bvh.geometric_normal(hit.triangle);
+                let rho = self.scene.albedo(hit.triangle as usize, hit.b1, hit.b2);
+                let direct = match mode {
+                    ImageMode::Full => self.direct(p, ng, ng, hit.triangle),
+                    ImageMode::IndirectOnly => Vec3::ZERO,
+                };
+                Some((p, hit.triangle, rho, direct))
+            })
+            .collect();
+        let mut w = Welford::new(primary.len());
+        for pass in 0..params.passes {
+            let values: Vec<Vec3> = primary
+                .par_iter()
+                .enumerate()
+                .map(|(i, h)| {
+                    let Some((p, tri, rho, direct)) = *h else {
+                        return Vec3::ZERO;
+                    };
+                    let mut rng = Rng::new(params.seed, i as u64, pass as u64);
+                    let ng = self.bvh.geometric_normal(tri);
+                    let mut s = Vec3::ZERO;
+                    for _ in 0..params.samples_per_pass {
+                        s += self.indirect_path(p, ng, ng, tri, params, &mut rng);
+                    }
+                    rho * std::f32::consts::FRAC_1_PI * (direct + s / params.samples_per_pass as f32)
+                })
+                .collect();
+            w.add(&values);
+            progress(pass + 1, params.passes);
+        }
+        Ok(w.estimate())
+    }
+}
+
+fn validate(p: &ReferenceParams) -> Result<(), TraceError> {
+    if p.passes == 0 || p.samples_per_pass == 0 {
+        return Err(TraceError::InvalidParameter(
+            "passes and samples per pass must be positive".into(),
+        ));
+    }
+    if !(p.roulette.min > 0.0 && p.roulette.min <= p.roulette.max && p.roulette.max <= 1.0) {
+        return Err(TraceError::InvalidParameter(
+            "roulette bounds must satisfy 0 < min <= max <= 1".into(),
+        ));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn welford_matches_direct_formulas() {
+        let mut w = Welford::new(1);
+        let xs = [1.0f32, 2.0, 4.0, 7.0];
+        for x in xs {
+            w.add(&[Vec3::splat(x)]);
+        }
+        let e = w.estimate();
+        let mean = xs.iter().sum::<f32>() / 4.0;
+        let var = xs.iter().map(|x| (x - mean).powi(2)).sum::<f32>() / 3.0;
+        assert!((e.mean[0].x - mean).abs() < 1e-6);
+        assert!((e.variance[0].x - var / 4.0).abs() < 1e-5);
+    }
+
+    #[test]
+    fn spp_split() {
+        let p = ReferenceParams::with_spp(256);
+        assert_eq!(p.passes * p.samples_per_pass, 256);
+        assert!(p.passes >= 4);
+        let p = ReferenceParams::with_spp(3);
+        assert!(p.passes * p.samples_per_pass >= 3);
+    }
+}

@@ -1,0 +1,217 @@
+//! Text specs for lights, cameras and image sizes, shared with the `prm-bake` CLI.
+//!
+//! * `point:X,Y,Z:R,G,B` — point light, intensity in W/sr per channel;
+//! * `spot:X,Y,Z:DX,DY,DZ:ANGLE_DEG:R,G,B` — spot light along `D` with cone half angle in
+//!   degrees (0, 180), intensity W/sr inside the cone;
+//! * `dir:DX,DY,DZ:R,G,B` — directional light travelling along `D`, irradiance in W/m² on a
+//!   surface facing the light;
+//! * camera `EX,EY,EZ:TX,TY,TZ:FOV_DEG` — eye, target, vertical field of view in degrees
+//!   (right-handed, +Y up, pinhole);
+//! * size `WxH`.
+
+use glam::Vec3;
+use prm_scene::{Camera, Light};
+
+use crate::SpecError;
+
+const POINT: &str = "point:X,Y,Z:R,G,B";
+const SPOT: &str = "spot:X,Y,Z:DX,DY,DZ:ANGLE_DEG:R,G,B";
+const DIR: &str = "dir:DX,DY,DZ:R,G,B";
+const CAMERA: &str = "EX,EY,EZ:TX,TY,TZ:FOV_DEG";
+
+fn bad(spec: &str, field: &'static str, value: &str, reason: impl Into<String>) -> SpecError {
+    SpecError::BadField {
+        spec: spec.into(),
+        field,
+        value: value.into(),
+        reason: reason.into(),
+    }
+}
+
+fn number(spec: &str, field: &'static str, s: &str) -> Result<f32, SpecError> {
+    let v: f32 = s.trim().parse().map_err(|_| bad(spec, field, s, "not a number"))?;
+    if v.is_finite() {
+        Ok(v)
+    } else {
+        Err(bad(spec, field, s, "not finite"))
+    }
+}
+
+fn vec3(spec: &str, field: &'static str, s: &str) -> Result<Vec3, SpecError> {
+    let parts: Vec<&str> = s.split(',').collect();
+    if parts.len() != 3 {
+        return Err(bad(
+            spec,
+            field,
+            s,
+            format!("expected 3 comma-separated numbers, found {}", parts.len()),
+        ));
+    }
+    Ok(Vec3::new(
+        number(spec, field, parts[0])?,
+        number(spec, field, parts[1])?,
+        number(spec, field, parts[2])?,
+    ))
+}
+
+fn direction(spec: &str, field: &'static str, s: &str) -> Result<Vec3, SpecError> {
+    let d = vec3(spec, field, s)?;
+    let n = d.normalize_or_zero();
+    if n == Vec3::ZERO {
+        return Err(bad(spec, field, s, "zero-length direction"));
+    }
+    Ok(n)
+}
+
+fn colour(spec: &str, field: &'static str, s: &str) -> Result<Vec3, SpecError> {
+    let c = vec3(spec, field, s)?;
+    if c.min_element() < 0.0 {
+        return Err(bad(spec, field, s, "negative channel"));
+    }
+    Ok(c)
+}
+
+fn fields<'a>(
+    spec: &'a str,
+    what: &'static str,
+    expected: usize,
+    format: &'static str,
+) -> Result<Vec<&'a str>, SpecError> {
+    let f: Vec<&str> = spec.split(':').collect();
+    if f.len() != expected {
+        return Err(SpecError::FieldCount {
+            what,
+            spec: spec.into(),
+            found: f.len(),
+            expected,
+            format,
+        });
+    }
+    Ok(f)
+}
+
+/// Parses a light spec (see the module docs).
+pub fn parse_light(spec: &str) -> Result<Light, SpecError> {
+    let kind = spec.split(':').next().unwrap_or("").trim();
+    match kind {
+        "point" => {
+            let f = fields(spec, "point light", 3, POINT)?;
+            Ok(Light::Point {
+                position: vec3(spec, "position", f[1])?,
+                intensity: colour(spec, "intensity", f[2])?,
+            })
+        }
+        "spot" => {
+            let f = fields(spec, "spot light", 5, SPOT)?;
+            let angle = number(spec, "cone half angle", f[3])?;
+            if !(angle > 0.0 && angle < 180.0) {
+                return Err(bad(spec, "cone half angle", f[3], "must be in (0, 180) degrees"));
+            }
+            Ok(Light::Spot {
+                position: vec3(spec, "position", f[1])?,
+                direction: direction(spec, "direction", f[2])?,
+                angle: angle.to_radians(),
+                intensity: colour(spec, "intensity", f[4])?,
+            })
+        }
+        "dir" => {
+            let f = fields(spec, "directional light", 3, DIR)?;
+            Ok(Light::Directional {
+                direction: direction(spec, "direction", f[1])?,
+                irradiance: colour(spec, "irradiance", f[2])?,
+            })
+        }
+        _ => Err(SpecError::UnknownLightKind {
+            spec: spec.into(),
+            kind: kind.into(),
+        }),
+    }
+}
+
+/// Parses a camera spec `EX,EY,EZ:TX,TY,TZ:FOV_DEG`.
+pub fn parse_camera(spec: &str) -> Result<Camera, SpecError> {
+    let f = fields(spec, "camera", 3, CAMERA)?;
+    let eye = vec3(spec, "eye", f[0])?;
+    let target = vec3(spec, "target", f[1])?;
+    if (target - eye).length_squared() == 0.0 {
+        return Err(bad(spec, "target", f[1], "coincides with the eye"));
+    }
+    let fov = number(spec, "vertical field of view", f[2])?;
+    if !(fov > 0.0 && fov < 180.0) {
+        return Err(bad(spec, "vertical field of view", f[2], "must be in (0, 180) degrees"));
+    }
+    Ok(Camera {
+        eye,
+        target,
+        fov_y_deg: fov,
+    })
+}
+
+/// Parses an image size `WxH` (both positive, at most 16384).
+pub fn parse_size(spec: &str) -> Result<(u32, u32), SpecError> {
+    let (w, h) = spec
+        .split_once(['x', 'X'])
+        .ok_or_else(|| bad(spec, "size", spec, "expected WxH, e.g. 512x512"))?;
+    let p = |s: &str| -> Result<u32, SpecError> {
+        let v: u32 = s
+            .trim()
+            .parse()
+            .map_err(|_| bad(spec, "size", s, "not a positive integer"))?;
+        if (1..=16384).contains(&v) {
+            Ok(v)
+        } else {
+            Err(bad(spec, "size", s, "must be in 1..=16384"))
+        }
+    };
+    Ok((p(w)?, p(h)?))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parses_the_readme_specs() {
+        let l = parse_light("point:0.278,0.5,0.2795:0.2347,0.1566,0.0418").unwrap();
+        assert_eq!(
+            l,
+            Light::Point {
+                position: Vec3::new(0.278, 0.5, 0.2795),
+                intensity: Vec3::new(0.2347, 0.1566, 0.0418)
+            }
+        );
+        let c = parse_camera("0.278,0.273,-0.8:0.278,0.273,0:39.3076").unwrap();
+        assert_eq!(c.eye, Vec3::new(0.278, 0.273, -0.8));
+        assert_eq!(c.fov_y_deg, 39.3076);
+        match parse_light("spot:0,2,0:0,-2,0:30:1,1,1").unwrap() {
+            Light::Spot { direction, angle, .. } => {
+                assert_eq!(direction, -Vec3::Y);
+                assert!((angle - 30f32.to_radians()).abs() < 1e-6);
+            }
+            other => panic!("{other:?}"),
+        }
+        assert!(matches!(
+            parse_light("dir:0,-1,0:3,3,3").unwrap(),
+            Light::Directional { .. }
+        ));
+        assert_eq!(parse_size("640x480").unwrap(), (640, 480));
+    }
+
+    #[test]
+    fn rejects_bad_specs_clearly() {
+        let e = parse_light("area:0,0,0:1,1,1").unwrap_err();
+        assert!(e.to_string().contains("unknown light kind"), "{e}");
+        let e = parse_light("point:0,0:1,1,1").unwrap_err();
+        assert!(e.to_string().contains("3 comma-separated"), "{e}");
+        let e = parse_light("point:0,0,0").unwrap_err();
+        assert!(e.to_string().contains("expected 3"), "{e}");
+        assert!(parse_light("spot:0,0,0:0,0,0:30:1,1,1").is_err());
+        assert!(parse_light("spot:0,0,0:0,-1,0:0:1,1,1").is_err());
+        assert!(parse_light("point:0,0,0:-1,1,1").is_err());
+        assert!(parse_light("point:0,0,x:1,1,1").is_err());
+        assert!(parse_camera("0,0,0:0,0,0:40").is_err());
+        assert!(parse_camera("0,0,0:0,0,1:0").is_err());
+        assert!(parse_size("640").is_err());
+        assert!(parse_size("0x4").is_err());
+    }
+}

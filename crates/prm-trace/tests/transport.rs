@@ -1,0 +1,394 @@
+//! Integration tests: white furnace, PRM panes vs the reference on the Cornell box, thread
+//! independence. Measured numbers are printed (run with `--nocapture` to see them).
+
+use std::path::PathBuf;
+
+use glam::{Vec2, Vec3};
+use prm_scene::{Atlas, AtlasParams, ExitPoint, LoadReport, Material, Scene, Sizing, Triangle};
+use prm_trace::{
+    entry_irradiance, evaluate_panes, parse_light, sample_surface, trace_walks, Bvh, BvhParams, ClusterParams,
+    Clustering, EntryParams, Lighting, PaneParams, ReferenceParams, ReferenceTracer, VplBound, WalkParams,
+};
+
+/// Unit cube, six inward-facing faces, each split into `s × s` quads (2 triangles each).
+fn furnace_box(s: u32, albedo: f32) -> Scene {
+    let mut triangles = Vec::new();
+    // (origin, u axis, v axis) with u × v pointing into the box.
+    let faces = [
+        (Vec3::ZERO, Vec3::Z, Vec3::X), // floor y=0, normal +Y
+        (Vec3::Y, Vec3::X, Vec3::Z),    // ceiling y=1, normal -Y
+        (Vec3::ZERO, Vec3::X, Vec3::Y), // z=0, normal +Z
+        (Vec3::Z, Vec3::Y, Vec3::X),    // z=1, normal -Z
+        (Vec3::ZERO, Vec3::Y, Vec3::Z), // x=0, normal +X
+        (Vec3::X, Vec3::Z, Vec3::Y),    // x=1, normal -X
+    ];
+    for (o, u, v) in faces {
+        let n = u.cross(v);
+        for i in 0..s {
+            for j in 0..s {
+                let p = |a: u32, b: u32| o + u * (a as f32 / s as f32) + v * (b as f32 / s as f32);
+                let (a, b, c, d) = (p(i, j), p(i + 1, j), p(i + 1, j + 1), p(i, j + 1));
+                for positions in [[a, b, c], [a, c, d]] {
+                    triangles.push(Triangle {
+                        positions,
+                        normals: [n; 3],
+                        uvs: [Vec2::ZERO; 3],
+                        material: 0,
+                    });
+                }
+            }
+        }
+    }
+    Scene {
+        source: PathBuf::from("furnace"),
+        triangles,
+        lightmap_uvs: None,
+        materials: vec![Material {
+            name: "grey".into(),
+            albedo: Vec3::splat(albedo),
+            texture: None,
+        }],
+        textures: vec![],
+        lights: vec![],
+        cameras: vec![],
+        report: LoadReport::default(),
+    }
+}
+
+fn scene_path(rel: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..").join(rel)
+}
+
+/// (mean relative error, max relative error) of `values` (channel mean) against `expected`.
+fn errors(values: &[Vec3], expected: &[Vec3]) -> (f64, f64) {
+    let mut sum = 0.0;
+    let mut max = 0.0f64;
+    for (v, e) in values.iter().zip(expected) {
+        let r = ((v.element_sum() / e.element_sum()) as f64 - 1.0).abs();
+        sum += r;
+        max = max.max(r);
+    }
+    (sum / values.len() as f64, max)
+}
+
+fn mean_ratio(values: &[Vec3], expected: &[Vec3]) -> f64 {
+    let a: f64 = values.iter().map(|v| v.element_sum() as f64).sum();
+    let b: f64 = expected.iter().map(|v| v.element_sum() as f64).sum();
+    a / b
+}
+
+/// Distance from `p` to the nearest edge of the unit cube (second smallest distance to a face plane).
+fn edge_distance(p: Vec3) -> f32 {
+    let mut d = [p.x, 1.0 - p.x, p.y, 1.0 - p.y, p.z, 1.0 - p.z];
+    d.sort_by(|a, b| a.total_cmp(b));
+    d[1]
+}
+
+/// Exit points closer than this to a box edge lie on it (the atlas puts the exit points of
+/// partially covered border texels on the triangle's boundary); they are reported, not asserted.
+const EDGE_MARGIN: f32 = 0.05;
+
+fn split_report(label: &str, exits: &[ExitPoint], values: &[Vec3]) -> (f64, f64) {
+    let (mut inner, mut inner_ref, mut edge, mut edge_ref) = (vec![], vec![], vec![], vec![]);
+    for (x, v) in exits.iter().zip(values) {
+        if edge_distance(x.position) >= EDGE_MARGIN {
+            inner.push(*v);
+            inner_ref.push(Vec3::ONE);
+        } else {
+            edge.push(*v);
+            edge_ref.push(Vec3::ONE);
+        }
+    }
+    let (mean, max) = errors(&inner, &inner_ref);
+    let (emean, emax) = errors(&edge, &edge_ref);
+    eprintln!(
+        "{label}: {} exits off the edges: mean |err| {mean:.4}, max |err| {max:.4}, bias {:+.4}; \
+         {} exits on box edges: mean |err| {emean:.4}, max {emax:.4}, bias {:+.4}",
+        inner.len(),
+        mean_ratio(&inner, &inner_ref) - 1.0,
+        edge.len(),
+        mean_ratio(&edge, &edge_ref) - 1.0,
+    );
+    (mean, max)
+}
+
+#[test]
+fn furnace_panes_and_reference() {
+    let scene = furnace_box(3, 0.5);
+    let atlas = Atlas::build(&scene, &AtlasParams::with_sizing(Sizing::Resolution(32))).unwrap();
+    let exits: &[ExitPoint] = &atlas.exits;
+    let bvh = Bvh::build(&scene, &BvhParams::DEFAULT).unwrap();
+    let entries = sample_surface(&scene, &EntryParams { count: 4096, seed: 1 }).unwrap();
+    let walks = trace_walks(
+        &scene,
+        &bvh,
+        &entries,
+        &WalkParams {
+            seed: 1,
+            ..WalkParams::PREVIEW
+        },
+    )
+    .unwrap();
+    eprintln!(
+        "furnace: {} exits, {} entries, {} VPLs, walk stats {:?}",
+        exits.len(),
+        entries.len(),
+        walks.vpls.len(),
+        walks.stats
+    );
+    assert_eq!(walks.stats.escaped, 0, "rays leaked out of the closed box");
+    let diag = scene.bounds().diagonal();
+    for (name, clustering) in [
+        ("identity", Clustering::identity(&entries)),
+        (
+            "kmeans-64",
+            Clustering::kmeans(&entries, diag, &ClusterParams::with_clusters(64)).unwrap(),
+        ),
+    ] {
+        let panes = evaluate_panes(&bvh, &walks, &clustering, exits, &PaneParams::DEFAULT).unwrap();
+        let weights = clustering.weights(&vec![Vec3::ONE; entries.len()]);
+        let e = panes.combine(&weights);
+        let (mean, max) = split_report(
+            &format!("furnace panes, {name} ({} clusters)", clustering.len()),
+            exits,
+            &e,
+        );
+        assert!(mean < 0.02, "{name}: mean error {mean}");
+        assert!(max < 0.10, "{name}: max error {max}");
+    }
+    let reference = ReferenceTracer::new(&scene, &bvh, Lighting::UniformIrradiance(Vec3::ONE));
+    // Per-path standard deviation here is about 0.7 (a geometric number of 0.5 terms): 2048 paths
+    // give a standard error of 1.6 %.
+    let params = ReferenceParams {
+        passes: 8,
+        samples_per_pass: 256,
+        seed: 3,
+        ..ReferenceParams::PREVIEW
+    };
+    let est = reference.indirect_at_exits(exits, &params, &mut |_, _| {}).unwrap();
+    let (mean, max) = split_report("furnace reference", exits, &est.mean);
+    assert!(mean < 0.02 && max < 0.10);
+}
+
+struct CornellSetup {
+    atlas_resolution: u32,
+    entries: usize,
+    clusters: usize,
+    reference: ReferenceParams,
+}
+
+/// Cornell box with its README point light: PRM (direct irradiance at entry points × panes)
+/// against the reference path tracer at the exit points. Returns (bias, relative RMSE, reference
+/// relative noise) of the clustered PRM.
+fn cornell_comparison(setup: &CornellSetup) -> (f64, f64, f64) {
+    let scene = prm_scene::load(&scene_path("scenes/cornell-box/cornell-box.obj")).unwrap();
+    let light = parse_light("point:0.278,0.5,0.2795:0.2347,0.1566,0.0418").unwrap();
+    let atlas = Atlas::build(
+        &scene,
+        &AtlasParams::with_sizing(Sizing::Resolution(setup.atlas_resolution)),
+    )
+    .unwrap();
+    let exits: &[ExitPoint] = &atlas.exits;
+    let bvh = Bvh::build(&scene, &BvhParams::DEFAULT).unwrap();
+    let entries = sample_surface(
+        &scene,
+        &EntryParams {
+            count: setup.entries,
+            seed: 7,
+        },
+    )
+    .unwrap();
+    let walks = trace_walks(
+        &scene,
+        &bvh,
+        &entries,
+        &WalkParams {
+            seed: 7,
+            ..WalkParams::PREVIEW
+        },
+    )
+    .unwrap();
+    let irradiance = entry_irradiance(&bvh, &[light], &entries);
+    let reference = ReferenceTracer::new(&scene, &bvh, Lighting::Lights(std::slice::from_ref(&light)));
+    let est = reference
+        .indirect_at_exits(exits, &setup.reference, &mut |_, _| {})
+        .unwrap();
+    let n = exits.len() as f64;
+    let ref_mean: f64 = est.mean.iter().map(|v| v.element_sum() as f64).sum::<f64>() / n;
+    // Standard error of the reference (channel sums), RMS over exits, relative to the mean.
+    let ref_noise = (est.variance.iter().map(|v| v.element_sum() as f64).sum::<f64>() / n).sqrt() / ref_mean;
+    let diag = scene.bounds().diagonal();
+    // Energy the default bound removes: the same panes without any bound.
+    let unbounded = evaluate_panes(
+        &bvh,
+        &walks,
+        &Clustering::identity(&entries),
+        exits,
+        &PaneParams { bound: VplBound::None },
+    )
+    .unwrap()
+    .combine(&irradiance);
+    let mut result = (0.0, 0.0, ref_noise);
+    for (name, clustering) in [
+        ("identity", Clustering::identity(&entries)),
+        (
+            "kmeans",
+            Clustering::kmeans(&entries, diag, &ClusterParams::with_clusters(setup.clusters)).unwrap(),
+        ),
+    ] {
+        let panes = evaluate_panes(&bvh, &walks, &clustering, exits, &PaneParams::DEFAULT).unwrap();
+        let prm = panes.combine(&clustering.weights(&irradiance));
+        let bias = mean_ratio(&prm, &est.mean) - 1.0;
+        eprintln!(
+            "cornell {name}: the default VPL bound keeps {:.4} of the unbounded estimate's energy \
+             (unbounded vs reference: {:+.4})",
+            mean_ratio(&prm, &unbounded),
+            mean_ratio(&unbounded, &est.mean) - 1.0
+        );
+        let sq = |f: f64| {
+            (prm.iter()
+                .zip(&est.mean)
+                .map(|(a, b)| (a.element_sum() as f64 / f - b.element_sum() as f64).powi(2))
+                .sum::<f64>()
+                / n)
+                .sqrt()
+                / ref_mean
+        };
+        let (rel_rmse, debiased) = (sq(1.0), sq(1.0 + bias));
+        // Fully covered texels only: partially covered border texels put their exit point on the
+        // triangle's boundary, where the VPL estimate is degenerate at concave edges.
+        let inner: Vec<usize> = (0..exits.len()).filter(|&i| exits[i].coverage >= 0.999).collect();
+        let inner_mean: f64 = inner.iter().map(|&i| est.mean[i].element_sum() as f64).sum::<f64>() / inner.len() as f64;
+        let inner_bias = inner.iter().map(|&i| prm[i].element_sum() as f64).sum::<f64>()
+            / inner.iter().map(|&i| est.mean[i].element_sum() as f64).sum::<f64>()
+            - 1.0;
+        let inner_rmse = (inner
+            .iter()
+            .map(|&i| ((prm[i].element_sum() - est.mean[i].element_sum()) as f64).powi(2))
+            .sum::<f64>()
+            / inner.len() as f64)
+            .sqrt()
+            / inner_mean;
+        let inner_noise =
+            (inner.iter().map(|&i| est.variance[i].element_sum() as f64).sum::<f64>() / inner.len() as f64).sqrt()
+                / inner_mean;
+        eprintln!(
+            "cornell {name}: {} fully covered exits: bias {inner_bias:+.4}, relative RMSE {inner_rmse:.4}, reference noise {inner_noise:.4}",
+            inner.len()
+        );
+        // What is left once the reference's own noise is taken out (in quadrature).
+        let excess = (debiased * debiased - ref_noise * ref_noise).max(0.0).sqrt();
+        eprintln!(
+            "cornell {name} ({} clusters): {} exits, {} VPLs, reference {}x{} paths: mean bias {bias:+.4}, \
+             relative RMSE {rel_rmse:.4} ({debiased:.4} without the bias), reference relative noise \
+             {ref_noise:.4}, PRM error beyond the reference noise {excess:.4}",
+            clustering.len(),
+            exits.len(),
+            walks.vpls.len(),
+            setup.reference.passes,
+            setup.reference.samples_per_pass,
+        );
+        result = (bias, rel_rmse, ref_noise);
+    }
+    result
+}
+
+#[test]
+fn cornell_panes_match_reference() {
+    let (bias, rmse, noise) = cornell_comparison(&CornellSetup {
+        atlas_resolution: 32,
+        entries: 4096,
+        clusters: 256,
+        reference: ReferenceParams {
+            passes: 4,
+            samples_per_pass: 128,
+            seed: 11,
+            ..ReferenceParams::PREVIEW
+        },
+    });
+    assert!(bias.abs() < 0.05, "bias {bias}");
+    // The RMSE is the reference's noise plus PRM's own error (VPL noise, the bound, degenerate
+    // exit points on chart borders) in quadrature; see the heavy variant for tighter numbers.
+    assert!(
+        rmse * rmse < noise * noise + 0.2 * 0.2,
+        "relative RMSE {rmse} vs reference noise {noise}"
+    );
+}
+
+/// The same comparison at higher sample counts (about 15 s in release).
+#[test]
+#[ignore]
+fn cornell_panes_match_reference_heavy() {
+    let (bias, rmse, noise) = cornell_comparison(&CornellSetup {
+        atlas_resolution: 48,
+        entries: 4096,
+        clusters: 256,
+        reference: ReferenceParams {
+            passes: 16,
+            samples_per_pass: 256,
+            seed: 11,
+            ..ReferenceParams::PREVIEW
+        },
+    });
+    assert!(bias.abs() < 0.03, "bias {bias}");
+    assert!(
+        rmse * rmse < noise * noise + 0.11 * 0.11,
+        "relative RMSE {rmse} vs reference noise {noise}"
+    );
+}
+
+/// Same seed, same output with 1 and 2 threads: entry points, walks, clustering, panes, reference.
+#[test]
+fn results_do_not_depend_on_thread_count() {
+    let scene = prm_scene::load(&scene_path("scenes/cornell-box/cornell-box.obj")).unwrap();
+    let light = parse_light("point:0.278,0.5,0.2795:0.2347,0.1566,0.0418").unwrap();
+    let atlas = Atlas::build(&scene, &AtlasParams::with_sizing(Sizing::Resolution(16))).unwrap();
+    let run = || {
+        let bvh = Bvh::build(&scene, &BvhParams::DEFAULT).unwrap();
+        let entries = sample_surface(&scene, &EntryParams { count: 256, seed: 5 }).unwrap();
+        let walks = trace_walks(
+            &scene,
+            &bvh,
+            &entries,
+            &WalkParams {
+                seed: 5,
+                ..WalkParams::PREVIEW
+            },
+        )
+        .unwrap();
+        let clustering = Clustering::kmeans(
+            &entries,
+            scene.bounds().diagonal(),
+            &ClusterParams {
+                clusters: 32,
+                seed: 5,
+                ..ClusterParams::PAPER
+            },
+        )
+        .unwrap();
+        let panes = evaluate_panes(&bvh, &walks, &clustering, &atlas.exits, &PaneParams::DEFAULT).unwrap();
+        let reference = ReferenceTracer::new(&scene, &bvh, Lighting::Lights(std::slice::from_ref(&light)));
+        let params = ReferenceParams {
+            passes: 2,
+            samples_per_pass: 4,
+            seed: 5,
+            ..ReferenceParams::PREVIEW
+        };
+        let est = reference
+            .indirect_at_exits(&atlas.exits, &params, &mut |_, _| {})
+            .unwrap();
+        let camera = scene
+            .cameras
+            .first()
+            .copied()
+            .unwrap_or(prm_trace::parse_camera("0.278,0.273,-0.8:0.278,0.273,0:39.3076").unwrap());
+        let image = reference
+            .render(&camera, 16, 16, prm_trace::ImageMode::Full, &params, &mut |_, _| {})
+            .unwrap();
+        (entries, walks, clustering, panes, est, image)
+    };
+    let pool = |n| rayon::ThreadPoolBuilder::new().num_threads(n).build().unwrap();
+    let one = pool(1).install(run);
+    let two = pool(2).install(run);
+    assert!(one == two, "results differ between 1 and 2 threads");
+}

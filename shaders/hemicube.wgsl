@@ -1,0 +1,66 @@
+// hemicube: the five faces around a VPL's normal, shared by vpl_depth and pane_gather (prepended to both).
+//
+// A VPL's local frame is (t, b, n). Face 0 looks along n; faces 1-4 along +t, -t, +b, -b and keep
+// only their upper half (local z >= 0), stretched over the whole face. Clip w is the distance
+// along the face axis, so perspective division gives the face coordinates and depth.
+
+struct Vpl {
+    position: vec3<f32>,
+    area: f32,
+    normal: vec3<f32>,
+    cluster: u32,
+    power: vec3<f32>,
+    _pad: f32,
+}
+
+// Orthonormal basis (t, b, n) around unit n (Duff et al. 2017), as matrix columns.
+fn vpl_frame(n: vec3<f32>) -> mat3x3<f32> {
+    let s = select(-1.0, 1.0, n.z >= 0.0);
+    let a = -1.0 / (s + n.z);
+    let b = n.x * n.y * a;
+    let t = vec3<f32>(1.0 + s * n.x * n.x * a, s * b, -s * n.x);
+    let bt = vec3<f32>(b, s + n.y * n.y * a, -n.y);
+    return mat3x3<f32>(t, bt, n);
+}
+
+// Which face sees local direction l (l.z >= 0).
+fn hemicube_face(l: vec3<f32>) -> u32 {
+    let a = abs(l);
+    if (l.z >= a.x && l.z >= a.y) {
+        return 0u;
+    }
+    if (a.x >= a.y) {
+        return select(2u, 1u, l.x > 0.0);
+    }
+    return select(4u, 3u, l.y > 0.0);
+}
+
+// Clip-space position of local point l on face f; depth is 0 at `near` and 1 at `far`.
+fn hemicube_clip(l: vec3<f32>, f: u32, near: f32, far: f32) -> vec4<f32> {
+    var uv: vec2<f32>;
+    var w: f32;
+    switch f {
+        case 0u: {
+            uv = l.xy;
+            w = l.z;
+        }
+        case 1u: {
+            uv = vec2<f32>(l.y, 2.0 * l.z - l.x);
+            w = l.x;
+        }
+        case 2u: {
+            uv = vec2<f32>(-l.y, 2.0 * l.z + l.x);
+            w = -l.x;
+        }
+        case 3u: {
+            uv = vec2<f32>(-l.x, 2.0 * l.z - l.y);
+            w = l.y;
+        }
+        default: {
+            uv = vec2<f32>(l.x, 2.0 * l.z + l.y);
+            w = -l.y;
+        }
+    }
+    let z = (w - near) * far / (far - near);
+    return vec4<f32>(uv, z, w);
+}

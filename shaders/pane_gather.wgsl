@@ -1,0 +1,107 @@
+// pane_gather: adds every VPL of a batch to its cluster's pane at every exit point, with hemicube
+// depth-map visibility. One thread per exit point; VPLs arrive sorted by cluster. Prepended with
+// hemicube.wgsl.
+
+struct Exit {
+    position: vec3<f32>,
+    _pad0: f32,
+    normal: vec3<f32>,
+    _pad1: f32,
+}
+
+struct Gather {
+    exit_count: u32,
+    vpl_count: u32,
+    first_cluster: u32,
+    // 0: plain 1/r², 1: 1/max(r², value), 2: 1/(r² + value · area)
+    bound_kind: u32,
+    bound_value: f32,
+    near: f32,
+    far: f32,
+    lift: f32,
+    receiver_offset: f32,
+    // Distance bias in scene units: constant + slope × (one depth texel's footprint) × tan θ.
+    bias_constant: f32,
+    bias_slope: f32,
+    texel_angle: f32,
+}
+
+@group(0) @binding(0) var<storage, read> vpls: array<Vpl>;
+@group(0) @binding(1) var<storage, read> exits: array<Exit>;
+@group(0) @binding(2) var<storage, read_write> panes: array<vec4<f32>>;
+@group(0) @binding(3) var<uniform> g: Gather;
+@group(0) @binding(4) var depth: texture_depth_2d_array;
+@group(0) @binding(5) var shadow: sampler_comparison;
+
+const INV_PI: f32 = 0.31830988618379067;
+
+fn inverse_square(r2: f32, area: f32) -> f32 {
+    switch g.bound_kind {
+        case 1u: {
+            return 1.0 / max(r2, g.bound_value);
+        }
+        case 2u: {
+            return 1.0 / (r2 + g.bound_value * area);
+        }
+        default: {
+            return 1.0 / r2;
+        }
+    }
+}
+
+fn visibility(j: u32, v: Vpl, x: Exit, cos_x: f32) -> f32 {
+    let origin = v.position + v.normal * g.lift;
+    let p = x.position + x.normal * g.receiver_offset;
+    let l = transpose(vpl_frame(v.normal)) * (p - origin);
+    let lz = vec3<f32>(l.xy, max(l.z, 0.0));
+    let f = hemicube_face(lz);
+    let c = hemicube_clip(lz, f, g.near, g.far);
+    if (c.w <= g.near) {
+        // Closer to the VPL than the depth maps resolve: nothing can lie between.
+        return 1.0;
+    }
+    let ndc = c.xy / c.w;
+    let uv = vec2<f32>(ndc.x * 0.5 + 0.5, 0.5 - ndc.y * 0.5);
+    let dist = length(l);
+    let tan_x = min(sqrt(max(1.0 - cos_x * cos_x, 0.0)) / max(cos_x, 1e-3), 8.0);
+    let bias = g.bias_constant + g.bias_slope * dist * g.texel_angle * tan_x;
+    return textureSampleCompareLevel(depth, shadow, uv, i32(j * 5u + f), (dist - bias) / g.far);
+}
+
+fn flush(cluster: u32, i: u32, acc: vec3<f32>) {
+    let k = (cluster - g.first_cluster) * g.exit_count + i;
+    panes[k] = panes[k] + vec4<f32>(acc, 0.0);
+}
+
+@compute @workgroup_size(64)
+fn main(@builtin(global_invocation_id) id: vec3<u32>) {
+    let i = id.x;
+    if (i >= g.exit_count || g.vpl_count == 0u) {
+        return;
+    }
+    let x = exits[i];
+    var current = vpls[0].cluster;
+    var acc = vec3<f32>(0.0);
+    for (var j = 0u; j < g.vpl_count; j = j + 1u) {
+        let v = vpls[j];
+        if (v.cluster != current) {
+            flush(current, i, acc);
+            acc = vec3<f32>(0.0);
+            current = v.cluster;
+        }
+        let d = v.position - x.position;
+        let r2 = dot(d, d);
+        if (r2 <= 0.0) {
+            continue;
+        }
+        let r = sqrt(r2);
+        let cx = dot(x.normal, d) / r;
+        let cv = -dot(v.normal, d) / r;
+        if (cx <= 0.0 || cv <= 0.0) {
+            continue;
+        }
+        let e = v.power * (INV_PI * cx * cv * inverse_square(r2, v.area));
+        acc = acc + e * visibility(j, v, x, cx);
+    }
+    flush(current, i, acc);
+}

@@ -1,0 +1,120 @@
+// Shared by the prm-play passes that light points (play_weights.wgsl, play_shade.wgsl): the light
+// and shadow-view layouts and the direct irradiance of a point from every light, with shadow-map
+// visibility. The including pass declares `frame`, `lights`, `views` and `shadow_maps`.
+
+struct Frame {
+    view_proj: mat4x4<f32>,
+    eye: vec4<f32>,
+    // light_count, mode, width, height
+    counts: vec4<u32>,
+    // cluster_count, top_k, entry_count, unused
+    clusters: vec4<u32>,
+    // fade band, shadow-map resolution, normal offset (texels), depth bias (texels)
+    params: vec4<f32>,
+};
+
+struct Light {
+    // 0 point, 1 spot, 2 directional
+    kind: u32,
+    first_view: u32,
+    view_count: u32,
+    cos_cutoff: f32,
+    position: vec4<f32>,
+    // spot axis or directional travel direction
+    direction: vec4<f32>,
+    // W/sr (point, spot) or W/m² (directional)
+    color: vec4<f32>,
+};
+
+struct ShadowView {
+    view_proj: mat4x4<f32>,
+    // x: texel footprint (world units per texel at unit distance for perspective views,
+    // absolute for orthographic ones), y: near, z: far, w: 1 for orthographic
+    params: vec4<f32>,
+};
+
+// Linear depth (distance along the view axis) of a stored depth-buffer value.
+fn linear_depth(z: f32, v: ShadowView) -> f32 {
+    let n = v.params.y;
+    let f = v.params.z;
+    if v.params.w > 0.5 {
+        return n + z * (f - n);
+    }
+    return n * f / (f - z * (f - n));
+}
+
+// Fraction of the light `l` that reaches `p` (surface normal `n`), 2×2 percentage-closer filter.
+fn visibility(l: Light, p: vec3<f32>, n: vec3<f32>, dist: f32) -> f32 {
+    var face = 0u;
+    if l.view_count == 6u {
+        let d = p - l.position.xyz;
+        let a = abs(d);
+        if a.x >= a.y && a.x >= a.z {
+            face = select(1u, 0u, d.x > 0.0);
+        } else if a.y >= a.z {
+            face = select(3u, 2u, d.y > 0.0);
+        } else {
+            face = select(5u, 4u, d.z > 0.0);
+        }
+    }
+    let layer = l.first_view + face;
+    let v = views[layer];
+    let ortho = v.params.w > 0.5;
+    let texel = select(v.params.x * dist, v.params.x, ortho);
+    let q = p + n * (frame.params.z * texel);
+    let c = v.view_proj * vec4<f32>(q, 1.0);
+    let ndc = c.xyz / c.w;
+    if c.w <= 0.0 || any(abs(ndc.xy) > vec2<f32>(1.0)) {
+        return 1.0;
+    }
+    var mine = c.w;
+    if ortho {
+        mine = linear_depth(ndc.z, v);
+    }
+    let bias = frame.params.w * texel;
+    let res = frame.params.y;
+    let uv = vec2<f32>(ndc.x * 0.5 + 0.5, 0.5 - ndc.y * 0.5) * res - 0.5;
+    let base = floor(uv);
+    let f = uv - base;
+    let hi = i32(res) - 1;
+    var lit = array<f32, 4>(0.0, 0.0, 0.0, 0.0);
+    for (var k = 0; k < 4; k++) {
+        let t = clamp(vec2<i32>(base) + vec2<i32>(k & 1, k >> 1), vec2<i32>(0), vec2<i32>(hi));
+        let stored = linear_depth(textureLoad(shadow_maps, t, i32(layer), 0), v);
+        lit[k] = select(0.0, 1.0, mine <= stored + bias);
+    }
+    return mix(mix(lit[0], lit[1], f.x), mix(lit[2], lit[3], f.x), f.y);
+}
+
+// Direct irradiance (RGB, W/m²) at `p` with unit normal `n` from light `i`.
+fn light_irradiance(i: u32, p: vec3<f32>, n: vec3<f32>) -> vec3<f32> {
+    let l = lights[i];
+    var wi: vec3<f32>;
+    var scale: vec3<f32>;
+    var dist = 1.0;
+    if l.kind == 2u {
+        wi = -l.direction.xyz;
+        scale = l.color.rgb;
+    } else {
+        let d = l.position.xyz - p;
+        dist = max(length(d), 1e-6);
+        wi = d / dist;
+        scale = l.color.rgb / (dist * dist);
+        if l.kind == 1u && dot(-wi, l.direction.xyz) < l.cos_cutoff {
+            return vec3<f32>(0.0);
+        }
+    }
+    let cos_t = dot(n, wi);
+    if cos_t <= 0.0 {
+        return vec3<f32>(0.0);
+    }
+    return scale * cos_t * visibility(l, p, n, dist);
+}
+
+fn direct_irradiance(p: vec3<f32>, n: vec3<f32>) -> vec3<f32> {
+    var e = vec3<f32>(0.0);
+    for (var i = 0u; i < frame.counts.x; i++) {
+        e += light_irradiance(i, p, n);
+    }
+    return e;
+}

@@ -1,0 +1,55 @@
+// prm-play select pass: keeps the top K clusters, fades their weights near the threshold and
+// writes them compactly (slot = rank) for the blend pass.
+//
+// Fade: with t the score of the first dropped cluster (rank K), a kept cluster of score s gets
+// weight_eff = weight · smoothstep(t, t·(1 + band), s). It is continuous in every score: a cluster
+// reaches weight 0 exactly when its score falls to t, where it may swap with the dropped one.
+// With K ≥ C nothing is dropped and nothing fades.
+
+struct Frame {
+    view_proj: mat4x4<f32>,
+    eye: vec4<f32>,
+    counts: vec4<u32>,
+    clusters: vec4<u32>,
+    params: vec4<f32>,
+};
+
+struct Selected {
+    weight: vec3<f32>,
+    cluster: u32,
+};
+
+@group(0) @binding(0) var<uniform> frame: Frame;
+@group(0) @binding(1) var<storage, read> weights: array<vec4<f32>>;
+@group(0) @binding(2) var<storage, read> ranks: array<u32>;
+@group(0) @binding(3) var<storage, read> threshold: array<f32>;
+@group(0) @binding(4) var<storage, read_write> selected: array<Selected>;
+@group(0) @binding(5) var<storage, read_write> effective: array<vec4<f32>>;
+
+fn fade(s: f32) -> f32 {
+    if frame.clusters.x <= frame.clusters.y {
+        return 1.0;
+    }
+    let t = threshold[0];
+    let width = t * frame.params.x;
+    if width <= 0.0 {
+        return select(0.0, 1.0, s > t);
+    }
+    return smoothstep(t, t + width, s);
+}
+
+@compute @workgroup_size(64)
+fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let i = gid.x;
+    if i >= frame.clusters.x {
+        return;
+    }
+    let w = weights[i];
+    let rank = ranks[i];
+    var eff = vec3<f32>(0.0);
+    if rank < frame.clusters.y {
+        eff = w.xyz * fade(w.w);
+        selected[rank] = Selected(eff, i);
+    }
+    effective[i] = vec4<f32>(eff, f32(rank));
+}
