@@ -1,6 +1,6 @@
 // hemicube: the five faces around a VPL's normal, shared by vpl_depth and pane_gather (prepended to both).
 //
-// A VPL's local frame is (t, b, n). Face 0 looks along n; faces 1-4 along +t, -t, +b, -b and keep
+// A VPL's local frame is (t, b, n), computed once on the CPU. Face 0 looks along n; faces 1-4 along +t, -t, +b, -b and keep
 // only their upper half (local z >= 0), stretched over the whole face. Clip w is the distance
 // along the face axis, so perspective division gives the face coordinates and depth.
 
@@ -10,17 +10,16 @@ struct Vpl {
     normal: vec3<f32>,
     cluster: u32,
     power: vec3<f32>,
-    _pad: f32,
+    _pad0: f32,
+    tangent: vec3<f32>,
+    _pad1: f32,
+    bitangent: vec3<f32>,
+    _pad2: f32,
 }
 
-// Orthonormal basis (t, b, n) around unit n (Duff et al. 2017), as matrix columns.
-fn vpl_frame(n: vec3<f32>) -> mat3x3<f32> {
-    let s = select(-1.0, 1.0, n.z >= 0.0);
-    let a = -1.0 / (s + n.z);
-    let b = n.x * n.y * a;
-    let t = vec3<f32>(1.0 + s * n.x * n.x * a, s * b, -s * n.x);
-    let bt = vec3<f32>(b, s + n.y * n.y * a, -n.y);
-    return mat3x3<f32>(t, bt, n);
+// Local coordinates (along tangent, bitangent, normal) of world offset d from the VPL.
+fn vpl_local(v: Vpl, d: vec3<f32>) -> vec3<f32> {
+    return vec3<f32>(dot(d, v.tangent), dot(d, v.bitangent), dot(d, v.normal));
 }
 
 // Which face sees local direction l (l.z >= 0).

@@ -24,6 +24,12 @@ struct Gather {
     bias_constant: f32,
     bias_slope: f32,
     texel_angle: f32,
+    // 0: nearest depth texel; 1: 2×2 percentage-closer filtering
+    depth_filter: u32,
+    // Face tiling of the depth layers (see vpl_depth.rs).
+    face_resolution: u32,
+    faces_per_row: u32,
+    _pad: u32,
 }
 
 @group(0) @binding(0) var<storage, read> vpls: array<Vpl>;
@@ -52,7 +58,7 @@ fn inverse_square(r2: f32, area: f32) -> f32 {
 fn visibility(j: u32, v: Vpl, x: Exit, cos_x: f32) -> f32 {
     let origin = v.position + v.normal * g.lift;
     let p = x.position + x.normal * g.receiver_offset;
-    let l = transpose(vpl_frame(v.normal)) * (p - origin);
+    let l = vpl_local(v, p - origin);
     let lz = vec3<f32>(l.xy, max(l.z, 0.0));
     let f = hemicube_face(lz);
     let c = hemicube_clip(lz, f, g.near, g.far);
@@ -65,7 +71,23 @@ fn visibility(j: u32, v: Vpl, x: Exit, cos_x: f32) -> f32 {
     let dist = length(l);
     let tan_x = min(sqrt(max(1.0 - cos_x * cos_x, 0.0)) / max(cos_x, 1e-3), 8.0);
     let bias = g.bias_constant + g.bias_slope * dist * g.texel_angle * tan_x;
-    return textureSampleCompareLevel(depth, shadow, uv, i32(j * 5u + f), (dist - bias) / g.far);
+    let reference = (dist - bias) / g.far;
+    // Face i = 5j + f sits in layer i / per_layer, tile i % per_layer (row-major).
+    let i = j * 5u + f;
+    let per_layer = g.faces_per_row * g.faces_per_row;
+    let slot = i % per_layer;
+    let tile = vec2<f32>(f32(slot % g.faces_per_row), f32(slot / g.faces_per_row));
+    let layer = i32(i / per_layer);
+    let res = f32(g.face_resolution);
+    if (g.depth_filter == 1u) {
+        // Keep the 2×2 footprint inside the face's tile.
+        let inside = clamp(uv, vec2<f32>(0.5 / res), vec2<f32>(1.0 - 0.5 / res));
+        let at = (tile + inside) / f32(g.faces_per_row);
+        return textureSampleCompareLevel(depth, shadow, at, layer, reference);
+    }
+    let texel = vec2<i32>(tile) * i32(g.face_resolution)
+        + clamp(vec2<i32>(uv * res), vec2<i32>(0), vec2<i32>(i32(g.face_resolution) - 1));
+    return select(0.0, 1.0, reference <= textureLoad(depth, texel, layer, 0));
 }
 
 fn flush(cluster: u32, i: u32, acc: vec3<f32>) {

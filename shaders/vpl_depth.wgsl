@@ -29,7 +29,7 @@ struct VertexOut {
 fn vs_main(@location(0) p: vec3<f32>) -> VertexOut {
     let v = vpls[select_face.vpl];
     let origin = v.position + v.normal * frame.lift;
-    let l = transpose(vpl_frame(v.normal)) * (p - origin);
+    let l = vpl_local(v, p - origin);
     return VertexOut(hemicube_clip(l, select_face.face, frame.near, frame.far), l);
 }
 

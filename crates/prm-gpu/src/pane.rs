@@ -33,6 +33,17 @@ pub struct PaneRenderParams {
     pub max_group_bytes: u64,
     /// Shadow-test biases.
     pub bias: ShadowBias,
+    /// How the depth maps are read.
+    pub filter: DepthFilter,
+}
+
+/// How the gather pass reads a VPL's depth map.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DepthFilter {
+    /// The depth texel under the receiver: hard shadows, fastest.
+    Nearest = 0,
+    /// 2×2 percentage-closer filtering through a comparison sampler: softer shadow edges.
+    Pcf2x2 = 1,
 }
 
 /// Biases of the depth-map visibility test against self-shadowing ("acne").
@@ -68,6 +79,7 @@ impl PaneRenderParams {
         vpls_per_batch: 256,
         max_group_bytes: 64 << 20,
         bias: ShadowBias::DEFAULT,
+        filter: DepthFilter::Pcf2x2,
     };
 }
 
@@ -143,14 +155,7 @@ pub fn render_panes_with<E: From<GpuError>>(
         cluster_start.push(sorted.len());
         for &k in members {
             for v in &vpls.vpls[vpls.range(k as usize)] {
-                sorted.push(GpuVpl {
-                    position: v.position.to_array(),
-                    area: v.area,
-                    normal: v.normal.to_array(),
-                    cluster: c as u32,
-                    power: v.power.to_array(),
-                    _pad: 0.0,
-                });
+                sorted.push(GpuVpl::new(v.position, v.normal, v.power, v.area, c as u32));
             }
         }
     }
@@ -264,6 +269,10 @@ pub fn render_panes_with<E: From<GpuError>>(
                 bias_constant: params.bias.constant * diagonal,
                 bias_slope: params.bias.slope,
                 texel_angle: texel,
+                filter: params.filter as u32,
+                face_resolution: face_res,
+                faces_per_row: depth.faces_per_row,
+                _pad: 0,
             };
             ctx.queue.write_buffer(&params_buffer, 0, bytemuck::bytes_of(&gp));
             // Two submissions so each pass can be timed (the device runs them in order anyway).

@@ -46,8 +46,16 @@ pub struct GatherParams {
     pub bias_slope: f32,
     /// Angle subtended by one depth texel at the face centre, radians.
     pub texel_angle: f32,
+    /// 0: nearest depth texel; 1: 2×2 percentage-closer filtering.
+    pub filter: u32,
+    /// Texels on a side of a hemicube face.
+    pub face_resolution: u32,
+    /// Faces on a row of a depth layer.
+    pub faces_per_row: u32,
+    /// Padding.
+    pub _pad: u32,
 }
-const _: () = assert!(std::mem::size_of::<GatherParams>() == 48);
+const _: () = assert!(std::mem::size_of::<GatherParams>() == 64);
 
 /// Pipeline and bindings of the gather pass.
 pub struct PaneGatherPass {

@@ -1,5 +1,9 @@
 //! The VPL depth pass (`shaders/vpl_depth.wgsl`): the scene's depth through each hemicube face of
-//! each VPL of a batch, one layer of a depth texture array per face.
+//! each VPL of a batch, faces tiled side by side in the layers of a depth texture array.
+//!
+//! Tiling matters on lavapipe: a render pass costs about 0.15 ms however little it draws, so one
+//! pass per face made the depth maps cost as much as the shading; with a viewport per face, one
+//! pass renders a whole layer of faces.
 
 use bytemuck::{Pod, Zeroable};
 
@@ -18,9 +22,36 @@ pub struct GpuVpl {
     /// Power per unit entry irradiance.
     pub power: [f32; 3],
     /// Padding.
-    pub _pad: f32,
+    pub _pad0: f32,
+    /// Unit tangent of the hemicube frame.
+    pub tangent: [f32; 3],
+    /// Padding.
+    pub _pad1: f32,
+    /// Unit bitangent (normal × tangent).
+    pub bitangent: [f32; 3],
+    /// Padding.
+    pub _pad2: f32,
 }
-const _: () = assert!(std::mem::size_of::<GpuVpl>() == 48);
+const _: () = assert!(std::mem::size_of::<GpuVpl>() == 80);
+
+impl GpuVpl {
+    /// A VPL with its hemicube frame; `(tangent, bitangent, normal)` is right-handed.
+    pub fn new(position: glam::Vec3, normal: glam::Vec3, power: glam::Vec3, area: f32, cluster: u32) -> GpuVpl {
+        let (t, b) = normal.any_orthonormal_pair();
+        GpuVpl {
+            position: position.to_array(),
+            area,
+            normal: normal.to_array(),
+            cluster,
+            power: power.to_array(),
+            _pad0: 0.0,
+            tangent: t.to_array(),
+            _pad1: 0.0,
+            bitangent: b.to_array(),
+            _pad2: 0.0,
+        }
+    }
+}
 
 /// Near/far planes and the lift of the VPL off its surface; layout shared with WGSL.
 #[repr(C)]
@@ -53,6 +84,8 @@ pub struct VplDepthPass {
     pub array_view: wgpu::TextureView,
     /// Face size in texels.
     pub resolution: u32,
+    /// Faces on a row of a layer (a layer holds `faces_per_row²` faces).
+    pub faces_per_row: u32,
 }
 
 impl VplDepthPass {
@@ -195,13 +228,12 @@ impl VplDepthPass {
                 }),
             }],
         });
+        let faces_per_row = (4096.min(device.limits().max_texture_dimension_2d) / resolution).max(1);
+        let per_layer = faces_per_row * faces_per_row;
+        let side = faces_per_row * resolution;
         let texture = device.create_texture(&wgpu::TextureDescriptor {
             label: Some("vpl_depth layers"),
-            size: wgpu::Extent3d {
-                width: resolution,
-                height: resolution,
-                depth_or_array_layers: layers,
-            },
+            size: wgpu::Extent3d { width: side, height: side, depth_or_array_layers: layers.div_ceil(per_layer) },
             mip_level_count: 1,
             sample_count: 1,
             dimension: wgpu::TextureDimension::D2,
@@ -209,7 +241,7 @@ impl VplDepthPass {
             usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
             view_formats: &[],
         });
-        let layer_views = (0..layers)
+        let layer_views = (0..layers.div_ceil(per_layer))
             .map(|layer| {
                 texture.create_view(&wgpu::TextureViewDescriptor {
                     label: Some("vpl_depth layer"),
@@ -233,21 +265,24 @@ impl VplDepthPass {
             layer_views,
             array_view,
             resolution,
+            faces_per_row,
         }
     }
 
-    /// Records the depth of `vertex_count` scene vertices for the first `vpls` VPLs of the batch.
+    /// Records the depth of `vertex_count` scene vertices for the first `vpls` VPLs of the batch:
+    /// face `i` (VPL `i / 5`, face `i % 5`) goes to layer `i / per_layer`, tile `i % per_layer`
+    /// (row-major, `faces_per_row` to a row).
     pub fn encode(&self, encoder: &mut wgpu::CommandEncoder, scene: &wgpu::Buffer, vertex_count: u32, vpls: u32) {
-        for layer in 0..vpls * FACES {
+        let faces = vpls * FACES;
+        let per_layer = self.faces_per_row * self.faces_per_row;
+        let res = self.resolution;
+        for (layer, view) in self.layer_views.iter().enumerate().take(faces.div_ceil(per_layer) as usize) {
             let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
                 label: Some("vpl_depth"),
                 color_attachments: &[],
                 depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                    view: &self.layer_views[layer as usize],
-                    depth_ops: Some(wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(1.0),
-                        store: wgpu::StoreOp::Store,
-                    }),
+                    view,
+                    depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(1.0), store: wgpu::StoreOp::Store }),
                     stencil_ops: None,
                 }),
                 timestamp_writes: None,
@@ -256,9 +291,16 @@ impl VplDepthPass {
             });
             pass.set_pipeline(&self.pipeline);
             pass.set_bind_group(0, &self.frame_group, &[]);
-            pass.set_bind_group(1, &self.face_group, &[layer * self.face_stride]);
             pass.set_vertex_buffer(0, scene.slice(..));
-            pass.draw(0..vertex_count, 0..1);
+            let first = layer as u32 * per_layer;
+            for face in first..(first + per_layer).min(faces) {
+                let slot = face - first;
+                let (x, y) = ((slot % self.faces_per_row) * res, (slot / self.faces_per_row) * res);
+                pass.set_viewport(x as f32, y as f32, res as f32, res as f32, 0.0, 1.0);
+                pass.set_scissor_rect(x, y, res, res);
+                pass.set_bind_group(1, &self.face_group, &[face * self.face_stride]);
+                pass.draw(0..vertex_count, 0..1);
+            }
         }
     }
 }

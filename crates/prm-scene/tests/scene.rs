@@ -180,7 +180,7 @@ fn third_party_scenes_load_and_pack() {
     let atlas = Atlas::build(&cb, &AtlasParams::with_sizing(Sizing::Resolution(128))).unwrap();
     check_atlas(&cb, &atlas, 1);
     let holodeck = prm_scene::load(&shared.join("holodeck/holodeck.obj")).unwrap();
-    assert!(holodeck.textures.len() >= 1, "map_Kd wall.png is loaded");
+    assert!(!holodeck.textures.is_empty(), "map_Kd wall.png is loaded");
     let atlas = Atlas::build(&holodeck, &AtlasParams::DEFAULT).unwrap();
     check_atlas(&holodeck, &atlas, 1);
 }
@@ -387,7 +387,7 @@ fn gltf_transforms_lights_cameras_and_lightmap_uvs() {
     // The same file as a binary .glb (JSON chunk only; the buffer stays external).
     let text = std::fs::read_to_string(dir.join("tiny.gltf")).unwrap();
     let mut json = text.into_bytes();
-    while json.len() % 4 != 0 {
+    while !json.len().is_multiple_of(4) {
         json.push(b' ');
     }
     let mut glb = Vec::new();
