@@ -613,6 +613,30 @@ fn nearest_on_triangle(t: &[Vec2; 3], p: Vec2) -> (f32, f32, f32) {
     best
 }
 
+/// Barycentric `(b1, b2)` of the centroid of the 4×4 sub-samples of texel `(x, y)` that lie in
+/// 2D triangle `t`; `None` when none does.
+fn covered_centroid(t: &[Vec2; 3], x: usize, y: usize) -> Option<(f32, f32)> {
+    const SUB: usize = 4;
+    let (mut sum, mut n) = (Vec2::ZERO, 0);
+    for sy in 0..SUB {
+        for sx in 0..SUB {
+            let p = Vec2::new(
+                x as f32 + (sx as f32 + 0.5) / SUB as f32,
+                y as f32 + (sy as f32 + 0.5) / SUB as f32,
+            );
+            if barycentric(t, p).is_some_and(|(a, b, c)| a >= 0.0 && b >= 0.0 && c >= 0.0) {
+                sum += p;
+                n += 1;
+            }
+        }
+    }
+    if n == 0 {
+        return None;
+    }
+    // The centroid of points inside a triangle is inside it (convexity).
+    barycentric(t, sum / n as f32).map(|(_, b1, b2)| (b1.max(0.0), b2.max(0.0)))
+}
+
 /// Whether `p` lies inside 2D triangle `t`, away from its edges.
 fn strictly_inside(t: &[Vec2; 3], p: Vec2) -> bool {
     barycentric(t, p).is_some_and(|(a, b, c)| a.min(b).min(c) > 1e-5)
@@ -773,6 +797,10 @@ fn rasterize(
             continue;
         }
         let tri = &scene.triangles[t as usize];
+        // The exit point is the centroid of the part of the texel its triangle covers (the
+        // texel centre when it covers it all). A point on the triangle's boundary instead would
+        // sit exactly in a concave edge, where half the surroundings meet it at grazing angles.
+        let (b1, b2) = covered_centroid(&uvs[t as usize].map(|u| u * rf), i % r, i / r).unwrap_or((b1, b2));
         texel_exit[i] = exits.len() as u32;
         exits.push(ExitPoint {
             texel: i as u32,
