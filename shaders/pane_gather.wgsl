@@ -68,10 +68,14 @@ fn visibility(j: u32, v: Vpl, x: Exit, cos_x: f32) -> f32 {
     }
     let ndc = c.xy / c.w;
     let uv = vec2<f32>(ndc.x * 0.5 + 0.5, 0.5 - ndc.y * 0.5);
-    let dist = length(l);
+    // Bias in scene units along the face axis: constant + slope × texel footprint × tan θ.
     let tan_x = min(sqrt(max(1.0 - cos_x * cos_x, 0.0)) / max(cos_x, 1e-3), 8.0);
-    let bias = g.bias_constant + g.bias_slope * dist * g.texel_angle * tan_x;
-    let reference = (dist - bias) / g.far;
+    let w = c.w - (g.bias_constant + g.bias_slope * c.w * g.texel_angle * tan_x);
+    if (w <= g.near) {
+        return 1.0;
+    }
+    // Stored depth is (w - near)·far / ((far - near)·w); compare in that space.
+    let reference = (w - g.near) * g.far / ((g.far - g.near) * w);
     // Face i = 5j + f sits in layer i / per_layer, tile i % per_layer (row-major).
     let i = j * 5u + f;
     let per_layer = g.faces_per_row * g.faces_per_row;

@@ -20,9 +20,27 @@ fn main() -> anyhow::Result<()> {
     let scene = prm_scene::load(std::path::Path::new(scene_path))?;
     let atlas = Atlas::build(&scene, &AtlasParams::with_sizing(Sizing::Resolution(resolution)))?;
     let bvh = Bvh::build(&scene, &BvhParams::DEFAULT)?;
-    let samples = prm_trace::sample_surface(&scene, &EntryParams { count: entries, seed: 1 })?;
-    let vpls = prm_trace::trace_walks(&scene, &bvh, &samples, &WalkParams { walks_per_entry: walks, ..WalkParams::PREVIEW })?;
-    let clustering = Clustering::kmeans(&samples, scene.bounds().diagonal(), &ClusterParams::with_clusters(clusters))?;
+    let samples = prm_trace::sample_surface(
+        &scene,
+        &EntryParams {
+            count: entries,
+            seed: 1,
+        },
+    )?;
+    let vpls = prm_trace::trace_walks(
+        &scene,
+        &bvh,
+        &samples,
+        &WalkParams {
+            walks_per_entry: walks,
+            ..WalkParams::PREVIEW
+        },
+    )?;
+    let clustering = Clustering::kmeans(
+        &samples,
+        scene.bounds().diagonal(),
+        &ClusterParams::with_clusters(clusters),
+    )?;
     let ctx = GpuContext::new(Backend::Vulkan)?;
     println!(
         "{scene_path}: {} triangles, {} exits, {} VPLs, {} clusters on {}",
@@ -41,7 +59,11 @@ fn main() -> anyhow::Result<()> {
         (DepthFilter::Pcf2x2, 64),
         (DepthFilter::Nearest, 64),
     ] {
-        let params = PaneRenderParams { filter, face_resolution: face, ..PaneRenderParams::DEFAULT };
+        let params = PaneRenderParams {
+            filter,
+            face_resolution: face,
+            ..PaneRenderParams::DEFAULT
+        };
         let t = Instant::now();
         let (panes, stats) = prm_gpu::render_panes(&ctx, &scene, &atlas.exits, &vpls, &clustering, &params)?;
         let total = t.elapsed().as_secs_f64();

@@ -137,7 +137,7 @@ pub fn render_panes_with<E: From<GpuError>>(
         .collect();
     let diagonal = scene.bounds().diagonal().max(1e-12);
     let frame = DepthFrame {
-        near: 1e-4 * diagonal,
+        near: 5e-4 * diagonal,
         far: 1.01 * diagonal,
         lift: 1e-5 * diagonal,
         _pad: 0.0,

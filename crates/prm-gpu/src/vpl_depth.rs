@@ -122,7 +122,7 @@ impl VplDepthPass {
                 },
                 wgpu::BindGroupLayoutEntry {
                     binding: 1,
-                    visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
+                    visibility: wgpu::ShaderStages::VERTEX,
                     ty: wgpu::BindingType::Buffer {
                         ty: wgpu::BufferBindingType::Uniform,
                         has_dynamic_offset: false,
@@ -176,12 +176,7 @@ impl VplDepthPass {
                 bias: Default::default(),
             }),
             multisample: Default::default(),
-            fragment: Some(wgpu::FragmentState {
-                module: &module,
-                entry_point: Some("fs_main"),
-                compilation_options: Default::default(),
-                targets: &[],
-            }),
+            fragment: None,
             multiview_mask: None,
             cache: None,
         });
@@ -233,7 +228,11 @@ impl VplDepthPass {
         let side = faces_per_row * resolution;
         let texture = device.create_texture(&wgpu::TextureDescriptor {
             label: Some("vpl_depth layers"),
-            size: wgpu::Extent3d { width: side, height: side, depth_or_array_layers: layers.div_ceil(per_layer) },
+            size: wgpu::Extent3d {
+                width: side,
+                height: side,
+                depth_or_array_layers: layers.div_ceil(per_layer),
+            },
             mip_level_count: 1,
             sample_count: 1,
             dimension: wgpu::TextureDimension::D2,
@@ -276,13 +275,21 @@ impl VplDepthPass {
         let faces = vpls * FACES;
         let per_layer = self.faces_per_row * self.faces_per_row;
         let res = self.resolution;
-        for (layer, view) in self.layer_views.iter().enumerate().take(faces.div_ceil(per_layer) as usize) {
+        for (layer, view) in self
+            .layer_views
+            .iter()
+            .enumerate()
+            .take(faces.div_ceil(per_layer) as usize)
+        {
             let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
                 label: Some("vpl_depth"),
                 color_attachments: &[],
                 depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
                     view,
-                    depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(1.0), store: wgpu::StoreOp::Store }),
+                    depth_ops: Some(wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(1.0),
+                        store: wgpu::StoreOp::Store,
+                    }),
                     stencil_ops: None,
                 }),
                 timestamp_writes: None,

@@ -114,3 +114,240 @@ mod panes {
         assert!(summed < 0.02, "GPU vs CPU relative RMSE {summed}");
     }
 }
+
+/// The white furnace through the GPU pane renderer: a closed box of albedo ρ = 0.5 with unit
+/// irradiance at every entry point has indirect irradiance ρ/(1−ρ) = 1 everywhere.
+mod furnace {
+    use super::vulkan;
+    use glam::{Vec2, Vec3};
+    use prm_gpu::PaneRenderParams;
+    use prm_scene::{Atlas, AtlasParams, ExitPoint, LoadReport, Material, Scene, Sizing, Triangle};
+    use prm_trace::{Bvh, BvhParams, ClusterParams, Clustering, EntryParams, PaneParams, WalkParams};
+    use std::path::PathBuf;
+
+    /// Unit cube, six inward-facing faces, each split into `s × s` quads (2 triangles each);
+    /// the same box as prm-trace's furnace test.
+    fn furnace_box(s: u32, albedo: f32) -> Scene {
+        let mut triangles = Vec::new();
+        // (origin, u axis, v axis) with u × v pointing into the box.
+        let faces = [
+            (Vec3::ZERO, Vec3::Z, Vec3::X), // floor y=0, normal +Y
+            (Vec3::Y, Vec3::X, Vec3::Z),    // ceiling y=1, normal -Y
+            (Vec3::ZERO, Vec3::X, Vec3::Y), // z=0, normal +Z
+            (Vec3::Z, Vec3::Y, Vec3::X),    // z=1, normal -Z
+            (Vec3::ZERO, Vec3::Y, Vec3::Z), // x=0, normal +X
+            (Vec3::X, Vec3::Z, Vec3::Y),    // x=1, normal -X
+        ];
+        for (o, u, v) in faces {
+            let n = u.cross(v);
+            for i in 0..s {
+                for j in 0..s {
+                    let p = |a: u32, b: u32| o + u * (a as f32 / s as f32) + v * (b as f32 / s as f32);
+                    let (a, b, c, d) = (p(i, j), p(i + 1, j), p(i + 1, j + 1), p(i, j + 1));
+                    for positions in [[a, b, c], [a, c, d]] {
+                        triangles.push(Triangle {
+                            positions,
+                            normals: [n; 3],
+                            uvs: [Vec2::ZERO; 3],
+                            material: 0,
+                        });
+                    }
+                }
+            }
+        }
+        Scene {
+            source: PathBuf::from("furnace"),
+            triangles,
+            lightmap_uvs: None,
+            materials: vec![Material {
+                name: "grey".into(),
+                albedo: Vec3::splat(albedo),
+                texture: None,
+            }],
+            textures: vec![],
+            lights: vec![],
+            cameras: vec![],
+            report: LoadReport::default(),
+        }
+    }
+
+    /// Distance from `p` to the nearest edge of the unit cube (second smallest distance to a
+    /// face plane).
+    fn edge_distance(p: Vec3) -> f32 {
+        let mut d = [p.x, 1.0 - p.x, p.y, 1.0 - p.y, p.z, 1.0 - p.z];
+        d.sort_by(|a, b| a.total_cmp(b));
+        d[1]
+    }
+
+    /// Exit points closer than this to a box edge are reported, not asserted: the same rule
+    /// (and margin) as prm-trace's furnace test.
+    ///
+    /// Is it principled? Only partly. The furnace identity E_ind = ρ/(1−ρ) holds at *every* point,
+    /// edges and corners included, so nothing physical happens at the edges; what fails there is
+    /// the estimator, for two reasons:
+    /// - an exit point lying *exactly* on a concave edge (the atlas used to put the exit points of
+    ///   partially covered border texels on the triangle's boundary) sees the adjacent wall
+    ///   edge-on: every VPL there has cos θ_v = 0, so half of the hemisphere (a third in a corner)
+    ///   contributes nothing and the sum is about 0.42 instead of 1 (measured: 96 such exits at
+    ///   32², mean 0.42). That is a degenerate sample position, and excluding it is right;
+    /// - an exit point at distance d from the edge gets a large share of its irradiance from the
+    ///   adjacent wall within distance ~d, where the VPL bound (a disk of radius
+    ///   R = sqrt(A/(πN)): 1/(r² + R²)) removes energy and the VPL spacing (~R) cannot resolve
+    ///   the 1/r² kernel. This bias is a property of the bound, and the margin that excludes it
+    ///   should scale with R (0.031 for the 2048 entries here, 0.061 for 512), not be a fixed
+    ///   0.05. With 512 entries the exits at 0.05..0.1 from an edge are still 4 % low (up to
+    ///   16 %), which is why this test uses 2048 entries (the CPU evaluator gives the same
+    ///   numbers: it is the estimator, not the GPU).
+    ///
+    /// The fixed margin is kept for comparability with the CPU test; the errors by distance to
+    /// the edges are printed so the edge bias stays visible.
+    const EDGE_MARGIN: f32 = 0.05;
+
+    struct Stats {
+        mean: f64,
+        max: f64,
+        bias: f64,
+        count: usize,
+    }
+
+    /// |value − 1| statistics (value: channel mean) over the exits whose distance to the nearest
+    /// box edge lies in `lo..hi`.
+    fn stats(exits: &[ExitPoint], values: &[Vec3], lo: f32, hi: f32) -> Stats {
+        let (mut sum, mut max, mut total, mut count) = (0.0f64, 0.0f64, 0.0f64, 0usize);
+        for (x, v) in exits.iter().zip(values) {
+            if !(lo..hi).contains(&edge_distance(x.position)) {
+                continue;
+            }
+            let value = v.element_sum() as f64 / 3.0;
+            sum += (value - 1.0).abs();
+            max = max.max((value - 1.0).abs());
+            total += value;
+            count += 1;
+        }
+        let n = count.max(1) as f64;
+        Stats {
+            mean: sum / n,
+            max,
+            bias: total / n - 1.0,
+            count,
+        }
+    }
+
+    fn describe(s: &Stats) -> String {
+        format!(
+            "{} exits: mean |err| {:.4}, max |err| {:.4}, bias {:+.4}",
+            s.count, s.mean, s.max, s.bias
+        )
+    }
+
+    /// Relative RMSE of `a` against `b`, normalised by the RMS of `b`.
+    fn relative_rmse(a: &[Vec3], b: &[Vec3]) -> f64 {
+        let (mut err, mut norm) = (0.0f64, 0.0f64);
+        for (x, y) in a.iter().zip(b) {
+            err += (*x - *y).length_squared() as f64;
+            norm += y.length_squared() as f64;
+        }
+        (err / norm.max(1e-30)).sqrt()
+    }
+
+    /// About 18 s in the test profile on lavapipe: 2048 entries (512 are too few for the 2 % /
+    /// 10 % bounds with the edge rule below, see [`EDGE_MARGIN`]), 4 walks each, 64² faces.
+    #[test]
+    fn furnace_sums_to_one_on_the_gpu() {
+        let ctx = vulkan();
+        let scene = furnace_box(3, 0.5);
+        let atlas = Atlas::build(&scene, &AtlasParams::with_sizing(Sizing::Resolution(32))).unwrap();
+        let exits: &[ExitPoint] = &atlas.exits;
+        let bvh = Bvh::build(&scene, &BvhParams::DEFAULT).unwrap();
+        let entries = prm_trace::sample_surface(&scene, &EntryParams { count: 2048, seed: 1 }).unwrap();
+        let walks = prm_trace::trace_walks(
+            &scene,
+            &bvh,
+            &entries,
+            &WalkParams {
+                seed: 1,
+                ..WalkParams::PREVIEW
+            },
+        )
+        .unwrap();
+        assert_eq!(walks.stats.escaped, 0, "rays leaked out of the closed box");
+        eprintln!(
+            "GPU furnace: {} exits, {} entries, {} VPLs",
+            exits.len(),
+            entries.len(),
+            walks.vpls.len()
+        );
+        let params = PaneRenderParams {
+            face_resolution: 64,
+            ..PaneRenderParams::DEFAULT
+        };
+        let off_edges: Vec<usize> = (0..exits.len())
+            .filter(|&i| edge_distance(exits[i].position) >= EDGE_MARGIN)
+            .collect();
+        assert!(off_edges.len() > exits.len() / 2, "most exit points are off the edges");
+        let pick = |v: &[Vec3]| off_edges.iter().map(|&i| v[i]).collect::<Vec<_>>();
+        let diag = scene.bounds().diagonal();
+        for (name, clustering) in [
+            ("identity", Clustering::identity(&entries)),
+            (
+                "kmeans-32",
+                Clustering::kmeans(&entries, diag, &ClusterParams::with_clusters(32)).unwrap(),
+            ),
+        ] {
+            let t = std::time::Instant::now();
+            let (gpu, render) =
+                prm_gpu::render_panes(&ctx, &scene, exits, &walks, &clustering, &params).expect("GPU panes");
+            let gpu_s = t.elapsed().as_secs_f64();
+            assert_eq!(render.vpls as usize, walks.vpls.len());
+            assert!(gpu.data.iter().all(|v| v.is_finite()));
+            // Unit irradiance at every entry point: every cluster's weight is 1.
+            let weights = clustering.weights(&vec![Vec3::ONE; entries.len()]);
+            assert!(weights.iter().all(|w| *w == Vec3::ONE));
+            let sum = gpu.combine(&weights);
+            let t = std::time::Instant::now();
+            let cpu = prm_trace::evaluate_panes(&bvh, &walks, &clustering, exits, &PaneParams::DEFAULT).unwrap();
+            let cpu_s = t.elapsed().as_secs_f64();
+            let cpu_sum = cpu.combine(&weights);
+            let inner = stats(exits, &sum, EDGE_MARGIN, f32::INFINITY);
+            let edge = stats(exits, &sum, 0.0, EDGE_MARGIN);
+            let cpu_inner = stats(exits, &cpu_sum, EDGE_MARGIN, f32::INFINITY);
+            let (rmse_panes, rmse_sum, rmse_sum_inner) = (
+                relative_rmse(&gpu.data, &cpu.data),
+                relative_rmse(&sum, &cpu_sum),
+                relative_rmse(&pick(&sum), &pick(&cpu_sum)),
+            );
+            eprintln!(
+                "GPU furnace, {name} ({} clusters; GPU {gpu_s:.2} s, CPU {cpu_s:.2} s):\n  \
+                 GPU off the edges: {}\n  GPU on the edges (< {EDGE_MARGIN}): {}\n  \
+                 CPU off the edges: {}\n  \
+                 GPU vs CPU relative RMSE: per-cluster panes {rmse_panes:.4}, summed {rmse_sum:.4}, \
+                 summed off the edges {rmse_sum_inner:.4}",
+                clustering.len(),
+                describe(&inner),
+                describe(&edge),
+                describe(&cpu_inner),
+            );
+            for (lo, hi) in [
+                (0.0, 1e-4),
+                (1e-4, 0.02),
+                (0.02, 0.05),
+                (0.05, 0.1),
+                (0.1, 0.2),
+                (0.2, 1.0),
+            ] {
+                let s = stats(exits, &sum, lo, hi);
+                if s.count > 0 {
+                    eprintln!("    distance to an edge {lo}..{hi}: {}", describe(&s));
+                }
+            }
+            assert!(inner.mean < 0.02, "{name}: mean error {}", inner.mean);
+            assert!(inner.max < 0.10, "{name}: max error {}", inner.max);
+            // Same estimator, same VPL bound; only the visibility differs (depth maps vs shadow
+            // rays), and in a convex box everything is visible.
+            assert!(
+                rmse_sum_inner < 0.02,
+                "{name}: GPU vs CPU relative RMSE {rmse_sum_inner}"
+            );
+        }
+    }
+}

@@ -1,1 +1,164 @@
-fn main() {}
+//! `prm-play`: plays a baked `.prm` archive, in a window (orbit camera) or headless to EXR/PNG.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use clap::Parser;
+use prm_play::animation::Animation;
+use prm_play::{output, FrameInput, Mode, PlayOptions, Renderer};
+
+/// Real-time global illumination from a Precomputed Radiance Map.
+#[derive(Parser, Debug)]
+#[command(name = "prm-play", version)]
+struct Args {
+    /// The baked archive.
+    archive: PathBuf,
+    /// Scene file (default: the archive's `source_scene`, relative to the archive).
+    #[arg(long)]
+    scene: Option<PathBuf>,
+    /// Render `--frames` frames to `--out` without a window (default: open a window; keys 1-4
+    /// gi/direct/indirect/split, +/- top K, space pause, Esc quit; drag orbits, wheel zooms).
+    #[arg(long)]
+    headless: bool,
+    /// Image size, WxH.
+    #[arg(long, default_value = "1024x768")]
+    size: String,
+    /// Camera `EX,EY,EZ:TX,TY,TZ:FOV_DEG` (default: the scene's first, or a view of its bounds).
+    #[arg(long)]
+    camera: Option<String>,
+    /// Light spec, repeatable: `point:X,Y,Z:R,G,B` (W/sr), `spot:X,Y,Z:DX,DY,DZ:ANGLE_DEG:R,G,B`,
+    /// `dir:DX,DY,DZ:R,G,B` (W/m²). Default: the scene's lights.
+    #[arg(long = "light")]
+    lights: Vec<String>,
+    /// gi, direct, indirect or split (left direct, right gi).
+    #[arg(long, default_value = "gi")]
+    mode: Mode,
+    /// Clusters kept per frame (default: the archive's params.top_k, else 32).
+    #[arg(long)]
+    top_k: Option<u32>,
+    /// Frames to render.
+    #[arg(long, default_value_t = 1)]
+    frames: u32,
+    /// Keyframed lights and camera (TOML; see the prm_play::animation docs).
+    #[arg(long)]
+    animation: Option<PathBuf>,
+    /// Output directory.
+    #[arg(long, default_value = "out")]
+    out: PathBuf,
+    /// Write per-pass GPU times and frame times as JSON.
+    #[arg(long)]
+    timings: Option<PathBuf>,
+    /// Shadow-map resolution per view.
+    #[arg(long, default_value_t = 512)]
+    shadow_resolution: u32,
+    /// Fade band: kept clusters scoring within (1 + band) × the first dropped cluster's score are
+    /// faded by a smoothstep (0: hard cut).
+    #[arg(long, default_value_t = 0.25)]
+    fade_band: f32,
+    /// Exposure of the tone-mapped PNG (multiplies radiance before clamping and sRGB).
+    #[arg(long, default_value_t = 1.0)]
+    exposure: f32,
+}
+
+fn main() -> Result<()> {
+    let args = Args::parse();
+    let (width, height) = prm_trace::parse_size(&args.size)?;
+    let (mut archive, scene) = prm_play::open(&args.archive, args.scene.as_deref())?;
+    let top_k = args.top_k.unwrap_or_else(|| prm_play::archive_top_k(&archive));
+    let base_camera = match &args.camera {
+        Some(s) => prm_trace::parse_camera(s)?,
+        None => prm_play::default_camera(&scene),
+    };
+    let base_lights = if args.lights.is_empty() {
+        scene.lights.clone()
+    } else {
+        args.lights
+            .iter()
+            .map(|s| prm_trace::parse_light(s))
+            .collect::<Result<Vec<_>, _>>()?
+    };
+    let animation = args.animation.as_deref().map(Animation::load).transpose()?;
+    if !args.headless {
+        return prm_play::window::run(prm_play::window::WindowConfig {
+            scene,
+            archive,
+            options: PlayOptions {
+                width,
+                height,
+                top_k,
+                shadow_resolution: args.shadow_resolution,
+                fade_band: args.fade_band.max(0.0),
+                ..Default::default()
+            },
+            camera: base_camera,
+            lights: base_lights,
+            animation,
+            mode: args.mode,
+            exposure: args.exposure,
+        })
+        .context("window mode");
+    }
+    let ctx = prm_play::open_vulkan()?;
+    eprintln!("GPU: {}", ctx.describe());
+    let opts = PlayOptions {
+        width,
+        height,
+        top_k,
+        shadow_resolution: args.shadow_resolution,
+        timestamps: args.timings.is_some(),
+        fade_band: args.fade_band.max(0.0),
+        ..Default::default()
+    };
+    let mut renderer = Renderer::new(ctx, &scene, &mut archive, opts)?;
+    if args.timings.is_some() && !renderer.has_timestamps() {
+        eprintln!("note: this device has no timestamp queries; --timings records CPU frame times only");
+    }
+    std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
+    let mut frames = Vec::new();
+    for i in 0..args.frames {
+        let (camera, lights) = match &animation {
+            Some(a) => {
+                let t = a.time(i);
+                let lights = if a.lights.is_empty() {
+                    base_lights.clone()
+                } else {
+                    a.lights_at(t)
+                };
+                (a.camera_at(t).unwrap_or(base_camera), lights)
+            }
+            None => (base_camera, base_lights.clone()),
+        };
+        let t = renderer.render(&FrameInput {
+            camera,
+            lights: &lights,
+            mode: args.mode,
+        })?;
+        let image = renderer.read_image()?;
+        let stem = args.out.join(format!("frame{i:04}"));
+        output::write_exr(&stem.with_extension("exr"), &image)?;
+        output::write_png(&stem.with_extension("png"), &image, args.exposure)?;
+        eprintln!("frame {i}: {:.2} ms", t.cpu_ms);
+        frames.push(t);
+    }
+    if let Some(path) = &args.timings {
+        let json = serde_json::json!({
+            "gpu_timestamps": renderer.has_timestamps(),
+            "note": if renderer.has_timestamps() {
+                "gpu_ms: per-pass GPU time from timestamp queries; cpu_ms: wall time from recording to GPU completion"
+            } else {
+                "no timestamp queries on this device: cpu_ms only (wall time from recording to GPU completion)"
+            },
+            "size": [width, height],
+            "mode": format!("{:?}", args.mode).to_lowercase(),
+            "top_k": top_k,
+            "clusters": renderer.cluster_count(),
+            "frames": frames.iter().map(|f| serde_json::json!({
+                "cpu_ms": f.cpu_ms,
+                "gpu_ms": f.gpu_ms.iter().map(|(k, v)| ((*k).to_string(), serde_json::json!(v))).collect::<serde_json::Map<_, _>>(),
+            })).collect::<Vec<_>>(),
+        });
+        std::fs::write(path, serde_json::to_string_pretty(&json)?)
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+    Ok(())
+}

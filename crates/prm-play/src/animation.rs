@@ -1,0 +1,214 @@
+//! Keyframed light and camera paths (`--animation FILE.toml`).
+//!
+//! ```toml
+//! fps = 24.0                # frame i is at time i / fps seconds (default 24)
+//!
+//! [[camera]]                # optional; keys in increasing time
+//! t = 0.0
+//! spec = "0,1,3.5:0,1,0:40" # as --camera
+//! [[camera]]
+//! t = 2.0
+//! spec = "1,1,3.5:0,1,0:40"
+//!
+//! [[light]]                 # one table per light; replaces the scene's and --light lights
+//! keys = [
+//!   { t = 0.0, spec = "point:0,1.5,0:2,1,1" },   # as --light
+//!   { t = 2.0, spec = "point:0.5,1.5,0:1,1,2" },
+//! ]
+//! ```
+//!
+//! Between keys every parameter is interpolated linearly (positions, intensities, cone angles;
+//! directions are interpolated and renormalised); before the first key and after the last the
+//! end keys hold. The keys of one light must all be of the same kind.
+
+use std::path::Path;
+
+use glam::Vec3;
+use prm_scene::{Camera, Light};
+use serde::Deserialize;
+
+use crate::PlayError;
+
+#[derive(Deserialize)]
+struct FileKey {
+    t: f32,
+    spec: String,
+}
+
+#[derive(Deserialize)]
+struct FileLight {
+    keys: Vec<FileKey>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct File {
+    fps: Option<f32>,
+    #[serde(default)]
+    camera: Vec<FileKey>,
+    #[serde(default)]
+    light: Vec<FileLight>,
+}
+
+/// A parsed animation.
+#[derive(Clone, Debug, Default)]
+pub struct Animation {
+    /// Frames per second.
+    pub fps: f32,
+    /// Camera keys (time, camera).
+    pub camera: Vec<(f32, Camera)>,
+    /// Per light, its keys (time, light).
+    pub lights: Vec<Vec<(f32, Light)>>,
+}
+
+fn lerp_light(a: &Light, b: &Light, s: f32) -> Light {
+    let dir = |x: Vec3, y: Vec3| x.lerp(y, s).normalize_or(y);
+    match (*a, *b) {
+        (
+            Light::Point {
+                position: p0,
+                intensity: i0,
+            },
+            Light::Point {
+                position: p1,
+                intensity: i1,
+            },
+        ) => Light::Point {
+            position: p0.lerp(p1, s),
+            intensity: i0.lerp(i1, s),
+        },
+        (
+            Light::Spot {
+                position: p0,
+                direction: d0,
+                angle: a0,
+                intensity: i0,
+            },
+            Light::Spot {
+                position: p1,
+                direction: d1,
+                angle: a1,
+                intensity: i1,
+            },
+        ) => Light::Spot {
+            position: p0.lerp(p1, s),
+            direction: dir(d0, d1),
+            angle: a0 + (a1 - a0) * s,
+            intensity: i0.lerp(i1, s),
+        },
+        (
+            Light::Directional {
+                direction: d0,
+                irradiance: e0,
+            },
+            Light::Directional {
+                direction: d1,
+                irradiance: e1,
+            },
+        ) => Light::Directional {
+            direction: dir(d0, d1),
+            irradiance: e0.lerp(e1, s),
+        },
+        _ => *a,
+    }
+}
+
+/// Index pair and blend factor of time `t` in sorted keys.
+fn locate<T>(keys: &[(f32, T)], t: f32) -> (usize, usize, f32) {
+    let last = keys.len() - 1;
+    if t <= keys[0].0 {
+        return (0, 0, 0.0);
+    }
+    if t >= keys[last].0 {
+        return (last, last, 0.0);
+    }
+    let i = keys.iter().position(|k| k.0 > t).unwrap_or(last) - 1;
+    let (t0, t1) = (keys[i].0, keys[i + 1].0);
+    (i, i + 1, if t1 > t0 { (t - t0) / (t1 - t0) } else { 0.0 })
+}
+
+impl Animation {
+    /// Reads and validates a TOML animation.
+    pub fn load(path: &Path) -> Result<Animation, PlayError> {
+        let err = |message: String| PlayError::Animation {
+            path: path.to_path_buf(),
+            message,
+        };
+        let text = std::fs::read_to_string(path).map_err(|e| err(e.to_string()))?;
+        Self::parse(&text).map_err(err)
+    }
+
+    /// Parses TOML text (see the module docs).
+    pub fn parse(text: &str) -> Result<Animation, String> {
+        let f: File = toml::from_str(text).map_err(|e| e.to_string())?;
+        let sorted = |v: &[(f32, String)]| v.windows(2).all(|w| w[0].0 <= w[1].0) && v.iter().all(|k| k.0.is_finite());
+        let fps = f.fps.unwrap_or(24.0);
+        if !(fps > 0.0 && fps.is_finite()) {
+            return Err(format!("fps must be positive, got {fps}"));
+        }
+        let cam_keys: Vec<(f32, String)> = f.camera.iter().map(|k| (k.t, k.spec.clone())).collect();
+        if !sorted(&cam_keys) {
+            return Err("camera keys must be in increasing time".into());
+        }
+        let camera = cam_keys
+            .iter()
+            .map(|(t, s)| prm_trace::parse_camera(s).map(|c| (*t, c)).map_err(|e| e.to_string()))
+            .collect::<Result<Vec<_>, _>>()?;
+        let mut lights = Vec::new();
+        for (i, l) in f.light.iter().enumerate() {
+            let keys: Vec<(f32, String)> = l.keys.iter().map(|k| (k.t, k.spec.clone())).collect();
+            if keys.is_empty() {
+                return Err(format!("light {i} has no keys"));
+            }
+            if !sorted(&keys) {
+                return Err(format!("light {i}: keys must be in increasing time"));
+            }
+            let parsed = keys
+                .iter()
+                .map(|(t, s)| {
+                    prm_trace::parse_light(s)
+                        .map(|l| (*t, l))
+                        .map_err(|e| format!("light {i}: {e}"))
+                })
+                .collect::<Result<Vec<_>, _>>()?;
+            if parsed
+                .windows(2)
+                .any(|w| std::mem::discriminant(&w[0].1) != std::mem::discriminant(&w[1].1))
+            {
+                return Err(format!("light {i}: all keys must be of the same kind"));
+            }
+            lights.push(parsed);
+        }
+        Ok(Animation { fps, camera, lights })
+    }
+
+    /// Time of frame `i`.
+    pub fn time(&self, frame: u32) -> f32 {
+        frame as f32 / self.fps
+    }
+
+    /// The camera at time `t`, if the animation has camera keys.
+    pub fn camera_at(&self, t: f32) -> Option<Camera> {
+        if self.camera.is_empty() {
+            return None;
+        }
+        let (i, j, s) = locate(&self.camera, t);
+        let (a, b) = (self.camera[i].1, self.camera[j].1);
+        Some(Camera {
+            eye: a.eye.lerp(b.eye, s),
+            target: a.target.lerp(b.target, s),
+            fov_y_deg: a.fov_y_deg + (b.fov_y_deg - a.fov_y_deg) * s,
+        })
+    }
+
+    /// The lights at time `t` (empty if the animation has none).
+    pub fn lights_at(&self, t: f32) -> Vec<Light> {
+        self.lights
+            .iter()
+            .map(|keys| {
+                let (i, j, s) = locate(keys, t);
+                lerp_light(&keys[i].1, &keys[j].1, s)
+            })
+            .collect()
+    }
+}

@@ -1,0 +1,75 @@
+//! The errors of the player library.
+
+use std::path::PathBuf;
+
+/// Why the player could not load or render.
+#[derive(Debug, thiserror::Error)]
+pub enum PlayError {
+    /// The archive could not be read.
+    #[error("cannot read archive {path}: {source}")]
+    Archive {
+        /// The archive.
+        path: PathBuf,
+        /// The reader's reason.
+        source: prm_format::Error,
+    },
+    /// The archive records no source scene and none was given.
+    #[error("archive {0} records no source scene: pass --scene")]
+    NoSourceScene(PathBuf),
+    /// The scene could not be loaded.
+    #[error("cannot load scene {path}: {source}")]
+    Scene {
+        /// The scene file.
+        path: PathBuf,
+        /// The loader's reason.
+        source: prm_scene::SceneError,
+    },
+    /// The archive was baked for other geometry.
+    #[error(
+        "archive {archive} was baked for another scene: its fingerprint is {expected:016x}, \
+         {scene} has {found:016x} (re-bake, or pass the right --scene)"
+    )]
+    FingerprintMismatch {
+        /// The archive.
+        archive: PathBuf,
+        /// The scene file.
+        scene: PathBuf,
+        /// Fingerprint recorded in the archive.
+        expected: u64,
+        /// Fingerprint of the scene.
+        found: u64,
+    },
+    /// The archive and the scene disagree in a way the fingerprint does not catch.
+    #[error("archive does not fit the scene: {0}")]
+    Mismatch(String),
+    /// More panes than the GPU holds in one texture array.
+    #[error("the archive has {panes} panes but this GPU holds at most {max} texture layers")]
+    TooManyPanes {
+        /// Panes in the archive.
+        panes: usize,
+        /// The device's `max_texture_array_layers`.
+        max: u32,
+    },
+    /// A GPU error (no device, validation, device lost).
+    #[error(transparent)]
+    Gpu(#[from] prm_gpu::GpuError),
+    /// Window mode failed (no display, no surface).
+    #[error("window mode: {0}")]
+    Window(String),
+    /// An animation file could not be read or is invalid.
+    #[error("animation {path}: {message}")]
+    Animation {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
+    /// Writing an image failed.
+    #[error("cannot write {path}: {message}")]
+    Output {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        message: String,
+    },
+}

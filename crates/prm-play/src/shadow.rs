@@ -1,0 +1,153 @@
+//! Shadow views of the lights: a cube (6 perspective views) for point lights, one perspective
+//! view for spot lights of half angle up to [`SPOT_SINGLE_VIEW_MAX_DEG`] (a cube beyond, where a
+//! single frustum would waste its texels), one orthographic view covering the scene's bounds for
+//! directional lights. Depth is [0, 1] (wgpu), linearised in `play_lights.wgsl`.
+
+use glam::{Mat4, Vec3};
+use prm_scene::{Aabb, Light};
+
+use crate::gpu::{GpuLight, GpuView};
+
+/// Right-handed perspective projection with WebGPU's NDC (z in [0, 1], y up).
+pub fn perspective(fov_y: f32, aspect: f32, near: f32, far: f32) -> Mat4 {
+    glam::camera::rh::proj::directx::perspective(fov_y, aspect, near, far)
+}
+
+/// Right-handed orthographic projection with WebGPU's NDC (z in [0, 1], y up).
+pub fn orthographic(left: f32, right: f32, bottom: f32, top: f32, near: f32, far: f32) -> Mat4 {
+    glam::camera::rh::proj::directx::orthographic(left, right, bottom, top, near, far)
+}
+
+/// Right-handed view matrix from `eye` looking along `dir`.
+pub fn look_to(eye: Vec3, dir: Vec3, up: Vec3) -> Mat4 {
+    glam::camera::rh::view::look_to_mat4(eye, dir, up)
+}
+
+/// Largest spot half angle that gets one perspective view.
+pub const SPOT_SINGLE_VIEW_MAX_DEG: f32 = 60.0;
+
+/// The six cube-face directions, in the order `play_lights.wgsl` selects them (+X −X +Y −Y +Z −Z).
+const CUBE: [(Vec3, Vec3); 6] = [
+    (Vec3::X, Vec3::NEG_Y),
+    (Vec3::NEG_X, Vec3::NEG_Y),
+    (Vec3::Y, Vec3::Z),
+    (Vec3::NEG_Y, Vec3::NEG_Z),
+    (Vec3::Z, Vec3::NEG_Y),
+    (Vec3::NEG_Z, Vec3::NEG_Y),
+];
+
+fn corners(b: &Aabb) -> [Vec3; 8] {
+    let mut c = [Vec3::ZERO; 8];
+    for (i, p) in c.iter_mut().enumerate() {
+        *p = Vec3::new(
+            if i & 1 == 0 { b.min.x } else { b.max.x },
+            if i & 2 == 0 { b.min.y } else { b.max.y },
+            if i & 4 == 0 { b.min.z } else { b.max.z },
+        );
+    }
+    c
+}
+
+fn cols(m: Mat4) -> [[f32; 4]; 4] {
+    m.to_cols_array_2d()
+}
+
+/// GPU lights and their shadow views for `lights` in a scene of bounds `bounds`, shadow maps of
+/// `resolution`² texels.
+pub fn build(lights: &[Light], bounds: &Aabb, resolution: u32) -> (Vec<GpuLight>, Vec<GpuView>) {
+    let res = resolution as f32;
+    let diag = bounds.diagonal().max(1e-3);
+    let mut out_lights = Vec::with_capacity(lights.len());
+    let mut views = Vec::new();
+    let far_from = |p: Vec3| {
+        corners(bounds)
+            .iter()
+            .map(|c| c.distance(p))
+            .fold(0.0f32, f32::max)
+            .max(diag * 1e-2)
+            * 1.01
+    };
+    let cube = |views: &mut Vec<GpuView>, p: Vec3| {
+        let near = diag * 1e-3;
+        let far = far_from(p);
+        let proj = perspective(std::f32::consts::FRAC_PI_2, 1.0, near, far);
+        for (dir, up) in CUBE {
+            views.push(GpuView {
+                view_proj: cols(proj * look_to(p, dir, up)),
+                params: [2.0 / res, near, far, 0.0],
+            });
+        }
+    };
+    for light in lights {
+        let first_view = views.len() as u32;
+        let gl = match *light {
+            Light::Point { position, intensity } => {
+                cube(&mut views, position);
+                GpuLight {
+                    kind: 0,
+                    first_view,
+                    view_count: 6,
+                    cos_cutoff: -2.0,
+                    position: position.extend(1.0).to_array(),
+                    direction: [0.0; 4],
+                    color: intensity.extend(0.0).to_array(),
+                }
+            }
+            Light::Spot {
+                position,
+                direction,
+                angle,
+                intensity,
+            } => {
+                let view_count = if angle.to_degrees() <= SPOT_SINGLE_VIEW_MAX_DEG {
+                    let fov = (angle * 2.0 * 1.05 + 2f32.to_radians()).min(170f32.to_radians());
+                    let near = diag * 1e-3;
+                    let far = far_from(position);
+                    let up = if direction.y.abs() > 0.99 { Vec3::Z } else { Vec3::Y };
+                    let proj = perspective(fov, 1.0, near, far);
+                    views.push(GpuView {
+                        view_proj: cols(proj * look_to(position, direction, up)),
+                        params: [2.0 * (fov * 0.5).tan() / res, near, far, 0.0],
+                    });
+                    1
+                } else {
+                    cube(&mut views, position);
+                    6
+                };
+                GpuLight {
+                    kind: 1,
+                    first_view,
+                    view_count,
+                    cos_cutoff: angle.cos(),
+                    position: position.extend(1.0).to_array(),
+                    direction: direction.normalize().extend(0.0).to_array(),
+                    color: intensity.extend(0.0).to_array(),
+                }
+            }
+            Light::Directional { direction, irradiance } => {
+                let d = direction.normalize();
+                let centre = (bounds.min + bounds.max) * 0.5;
+                let r = diag * 0.5;
+                let eye = centre - d * 2.0 * r;
+                let up = if d.y.abs() > 0.99 { Vec3::Z } else { Vec3::Y };
+                let (near, far) = (0.5 * r, 3.5 * r);
+                let proj = orthographic(-r, r, -r, r, near, far);
+                views.push(GpuView {
+                    view_proj: cols(proj * look_to(eye, d, up)),
+                    params: [2.0 * r / res, near, far, 1.0],
+                });
+                GpuLight {
+                    kind: 2,
+                    first_view,
+                    view_count: 1,
+                    cos_cutoff: -2.0,
+                    position: [0.0; 4],
+                    direction: d.extend(0.0).to_array(),
+                    color: irradiance.extend(0.0).to_array(),
+                }
+            }
+        };
+        out_lights.push(gl);
+    }
+    (out_lights, views)
+}

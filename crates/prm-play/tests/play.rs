@@ -1,0 +1,575 @@
+//! Integration tests of the player on Vulkan (lavapipe): GPU blend vs CPU, mode consistency,
+//! golden Cornell box frame, top-K selection, fingerprint check, multi-light animation, CLI.
+
+use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
+
+use glam::Vec3;
+use prm_format::Archive;
+use prm_play::animation::Animation;
+use prm_play::synthetic::{cornell_box_path, write_archive, SyntheticParams};
+use prm_play::{output, FrameInput, Image, Mode, PlayError, PlayOptions, Renderer};
+use prm_scene::{Light, Scene};
+
+fn out_dir(name: &str) -> PathBuf {
+    let d = Path::new(env!("CARGO_TARGET_TMPDIR")).join("prm-play").join(name);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// The synthetic Cornell box archive (written once per test run; see `prm_play::synthetic`).
+fn cornell_archive() -> &'static Path {
+    static PATH: OnceLock<PathBuf> = OnceLock::new();
+    PATH.get_or_init(|| {
+        let scene_path = cornell_box_path();
+        let scene = prm_scene::load(&scene_path).unwrap();
+        let path = out_dir("archive").join("cornell-synthetic.prm");
+        write_archive(&scene, &scene_path, &path, SyntheticParams::default()).unwrap();
+        path
+    })
+}
+
+fn renderer(opts: PlayOptions) -> (Renderer, Scene) {
+    let (mut archive, scene) = prm_play::open(cornell_archive(), None).unwrap();
+    // Vulkan explicitly: a missing driver fails loudly here.
+    let ctx = prm_play::open_vulkan().expect("a Vulkan device (install mesa-vulkan-drivers for lavapipe)");
+    let r = Renderer::new(ctx, &scene, &mut archive, opts).unwrap();
+    (r, scene)
+}
+
+fn small(top_k: u32) -> PlayOptions {
+    PlayOptions {
+        width: 96,
+        height: 96,
+        top_k,
+        shadow_resolution: 256,
+        ..Default::default()
+    }
+}
+
+/// Möller–Trumbore: is the segment from `o` along `d` (length `t_max`) blocked?
+fn occluded(scene: &Scene, o: Vec3, d: Vec3, t_max: f32) -> bool {
+    scene.triangles.iter().any(|tri| {
+        let [a, b, c] = tri.positions;
+        let (e1, e2) = (b - a, c - a);
+        let p = d.cross(e2);
+        let det = e1.dot(p);
+        if det.abs() < 1e-12 {
+            return false;
+        }
+        let inv = 1.0 / det;
+        let s = o - a;
+        let u = s.dot(p) * inv;
+        if !(0.0..=1.0).contains(&u) {
+            return false;
+        }
+        let q = s.cross(e1);
+        let v = d.dot(q) * inv;
+        if v < 0.0 || u + v > 1.0 {
+            return false;
+        }
+        let t = e2.dot(q) * inv;
+        t > 1e-4 && t < t_max
+    })
+}
+
+/// Exact (ray-traced) irradiance at an entry point.
+fn cpu_irradiance(scene: &Scene, lights: &[Light], p: Vec3, n: Vec3) -> Vec3 {
+    let o = p + n * 1e-4;
+    lights
+        .iter()
+        .map(|l| match *l {
+            Light::Point { position, intensity }
+            | Light::Spot {
+                position, intensity, ..
+            } => {
+                let d = position - p;
+                let dist = d.length();
+                let wi = d / dist;
+                if let Light::Spot { direction, angle, .. } = *l {
+                    if (-wi).dot(direction) < angle.cos() {
+                        return Vec3::ZERO;
+                    }
+                }
+                let c = n.dot(wi);
+                if c <= 0.0 || occluded(scene, o, wi, dist) {
+                    Vec3::ZERO
+                } else {
+                    intensity * c / (dist * dist)
+                }
+            }
+            Light::Directional { direction, irradiance } => {
+                let c = n.dot(-direction);
+                if c <= 0.0 || occluded(scene, o, -direction, 1e9) {
+                    Vec3::ZERO
+                } else {
+                    irradiance * c
+                }
+            }
+        })
+        .sum()
+}
+
+fn cornell_lights(scene: &Scene) -> Vec<Light> {
+    let mut l = scene.lights.clone();
+    // Add one of each other kind so all paths are exercised.
+    let b = scene.bounds();
+    let c = (b.min + b.max) * 0.5;
+    let h = b.extent();
+    l.push(Light::Spot {
+        position: c + Vec3::new(0.3 * h.x, 0.4 * h.y, 0.3 * h.z),
+        direction: Vec3::new(-0.3, -1.0, -0.2).normalize(),
+        angle: 35f32.to_radians(),
+        intensity: Vec3::new(0.05, 0.1, 0.2),
+    });
+    l.push(Light::Directional {
+        direction: Vec3::new(0.2, -1.0, -0.4).normalize(),
+        irradiance: Vec3::new(0.3, 0.2, 0.1),
+    });
+    l
+}
+
+/// With K = all clusters, the GPU lightmap is Σ weight × pane computed on the CPU from the
+/// archive (with the GPU's weights, read back) within 1 %; the GPU weights themselves match
+/// weights from ray-traced visibility (shadow maps differ only near shadow edges).
+#[test]
+fn lightmap_equals_cpu_blend_with_all_clusters() {
+    let (mut r, scene) = renderer(small(u32::MAX));
+    let lights = cornell_lights(&scene);
+    let camera = prm_play::default_camera(&scene);
+    r.render(&FrameInput {
+        camera,
+        lights: &lights,
+        mode: Mode::Gi,
+    })
+    .unwrap();
+    let gpu = r.read_lightmap().unwrap();
+    let weights = r.read_weights().unwrap();
+    let mut archive = Archive::open(cornell_archive()).unwrap();
+    let n = archive.clusters().len();
+    assert_eq!(weights.len(), n);
+    let mut cpu = vec![[0f64; 3]; gpu.len()];
+    for (c, w) in weights.iter().enumerate() {
+        assert_eq!(w.effective, w.weight, "K = all: nothing fades (cluster {c})");
+        let pane = archive.read_pane(c).unwrap();
+        for (acc, t) in cpu.iter_mut().zip(&pane) {
+            for k in 0..3 {
+                acc[k] += w.weight[k] as f64 * t[k] as f64;
+            }
+        }
+    }
+    let peak = cpu.iter().flat_map(|p| *p).fold(0f64, f64::max);
+    assert!(peak > 0.0, "the lightmap is not black");
+    let mut worst = 0f64;
+    for (g, c) in gpu.iter().zip(&cpu) {
+        for k in 0..3 {
+            // 1 % of the value, with a floor of 1e-4 of the peak for near-black texels.
+            let err = (g[k] as f64 - c[k]).abs() / c[k].abs().max(peak * 1e-4);
+            worst = worst.max(err);
+        }
+    }
+    assert!(worst < 0.01, "GPU lightmap vs CPU blend: worst relative error {worst}");
+
+    // GPU weights vs ray-traced weights.
+    let entries = archive.entries().to_vec();
+    let clusters = archive.clusters().to_vec();
+    let wmax = weights.iter().flat_map(|w| w.weight).fold(0f32, f32::max);
+    let mut bad = 0;
+    let mut sum_err = 0.0;
+    for (c, cl) in clusters.iter().enumerate() {
+        let mut e = Vec3::ZERO;
+        for en in &entries[cl.first as usize..(cl.first + cl.count) as usize] {
+            e += cpu_irradiance(&scene, &lights, Vec3::from(en.position), Vec3::from(en.normal));
+        }
+        let e = e / cl.count.max(1) as f32;
+        let g = Vec3::from(weights[c].weight);
+        let err = (g - e).abs().max_element() / wmax;
+        sum_err += err;
+        if err > 0.1 {
+            bad += 1;
+        }
+    }
+    let mean = sum_err / clusters.len() as f32;
+    assert!(mean < 0.01, "mean weight error {mean} of the largest weight");
+    assert!(
+        bad * 20 <= clusters.len(),
+        "{bad} of {} clusters off by >10 % of the largest weight",
+        clusters.len()
+    );
+}
+
+/// `gi` = `direct` + `indirect`, per pixel.
+#[test]
+fn gi_is_direct_plus_indirect() {
+    let (mut r, scene) = renderer(small(16));
+    let lights = cornell_lights(&scene);
+    let camera = prm_play::default_camera(&scene);
+    let mut frame = |mode| {
+        r.render(&FrameInput {
+            camera,
+            lights: &lights,
+            mode,
+        })
+        .unwrap();
+        r.read_image().unwrap()
+    };
+    let gi = frame(Mode::Gi);
+    let direct = frame(Mode::Direct);
+    let indirect = frame(Mode::Indirect);
+    let split = frame(Mode::Split);
+    let peak = gi.rgb.iter().flatten().fold(0f32, |a, b| a.max(*b));
+    assert!(peak > 0.0);
+    let ind_peak = indirect.rgb.iter().flatten().fold(0f32, |a, b| a.max(*b));
+    assert!(ind_peak > 0.0, "indirect light is visible");
+    for i in 0..gi.rgb.len() {
+        for k in 0..3 {
+            let sum = direct.rgb[i][k] + indirect.rgb[i][k];
+            assert!(
+                (gi.rgb[i][k] - sum).abs() <= 1e-5 * peak + 1e-5 * gi.rgb[i][k].abs(),
+                "pixel {i} channel {k}: gi {} vs direct + indirect {sum}",
+                gi.rgb[i][k]
+            );
+        }
+        // Split: left half direct, right half gi.
+        let x = i as u32 % gi.width;
+        let want = if x < gi.width / 2 { direct.rgb[i] } else { gi.rgb[i] };
+        assert_eq!(split.rgb[i], want, "split pixel {i}");
+    }
+}
+
+fn mean_rel_and_outliers(a: &Image, b: &Image) -> (f32, f32) {
+    let peak = b.rgb.iter().flatten().fold(0f32, |m, v| m.max(*v));
+    let floor = peak * 0.01;
+    let mut sum = 0.0;
+    let mut outliers = 0;
+    for (p, q) in a.rgb.iter().zip(&b.rgb) {
+        let e = (0..3)
+            .map(|k| (p[k] - q[k]).abs() / q[k].abs().max(floor))
+            .fold(0f32, f32::max);
+        sum += e;
+        if e > 0.05 {
+            outliers += 1;
+        }
+    }
+    (sum / a.rgb.len() as f32, outliers as f32 / a.rgb.len() as f32)
+}
+
+/// A headless Cornell box frame (its light and camera, K = 32, synthetic archive) against the
+/// golden EXR in `tests/golden/`. `PRM_UPDATE_GOLDEN=1` rewrites the golden.
+///
+/// Thresholds: mean per-pixel relative error (max over channels, floor 1 % of the peak) below
+/// 0.5 %, and at most 0.5 % of the pixels off by more than 5 %: room for rasterisation and
+/// shadow-edge differences between drivers, far below any change of the lighting model.
+#[test]
+fn cornell_box_matches_golden() {
+    let (mut r, scene) = renderer(PlayOptions {
+        width: 128,
+        height: 128,
+        top_k: 32,
+        shadow_resolution: 512,
+        ..Default::default()
+    });
+    r.render(&FrameInput {
+        camera: prm_play::default_camera(&scene),
+        lights: &scene.lights,
+        mode: Mode::Gi,
+    })
+    .unwrap();
+    let image = r.read_image().unwrap();
+    let golden_path = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/golden/cornell-box-gi.exr");
+    if std::env::var_os("PRM_UPDATE_GOLDEN").is_some() {
+        output::write_exr_compact(&golden_path, &image).unwrap();
+        output::write_png(&golden_path.with_extension("png"), &image, 1.0).unwrap();
+    }
+    let golden = output::read_exr(&golden_path).expect("golden image (PRM_UPDATE_GOLDEN=1 creates it)");
+    assert_eq!((golden.width, golden.height), (image.width, image.height));
+    let (mean, outliers) = mean_rel_and_outliers(&image, &golden);
+    if mean >= 0.005 || outliers > 0.005 {
+        let dir = out_dir("golden");
+        output::write_exr(&dir.join("actual.exr"), &image).unwrap();
+        output::write_png(&dir.join("actual.png"), &image, 1.0).unwrap();
+        let diff = Image {
+            width: image.width,
+            height: image.height,
+            rgb: image
+                .rgb
+                .iter()
+                .zip(&golden.rgb)
+                .map(|(a, b)| [0, 1, 2].map(|k| (a[k] - b[k]).abs()))
+                .collect(),
+        };
+        output::write_exr(&dir.join("diff.exr"), &diff).unwrap();
+        output::write_png(&dir.join("diff.png"), &diff, 10.0).unwrap();
+        panic!(
+            "Cornell box differs from the golden: mean relative error {mean}, {outliers} of pixels > 5 %; \
+             see {}",
+            dir.display()
+        );
+    }
+}
+
+/// K < C: exactly the top K clusters contribute, faded weights never exceed the raw ones, ranks
+/// are a permutation, and the lightmap is Σ effective weight × pane.
+#[test]
+fn top_k_keeps_the_strongest_clusters() {
+    let k = 8;
+    let (mut r, scene) = renderer(small(k));
+    let lights = cornell_lights(&scene);
+    r.render(&FrameInput {
+        camera: prm_play::default_camera(&scene),
+        lights: &lights,
+        mode: Mode::Indirect,
+    })
+    .unwrap();
+    let w = r.read_weights().unwrap();
+    let mut ranks: Vec<u32> = w.iter().map(|c| c.rank).collect();
+    ranks.sort();
+    assert_eq!(ranks, (0..w.len() as u32).collect::<Vec<_>>());
+    let mut by_score: Vec<usize> = (0..w.len()).collect();
+    by_score.sort_by(|&a, &b| w[b].score.total_cmp(&w[a].score).then(a.cmp(&b)));
+    for (rank, &c) in by_score.iter().enumerate() {
+        assert_eq!(w[c].rank, rank as u32);
+        for ch in 0..3 {
+            if rank as u32 >= k {
+                assert_eq!(w[c].effective[ch], 0.0);
+            } else {
+                assert!(w[c].effective[ch] <= w[c].weight[ch] * (1.0 + 1e-6));
+            }
+        }
+    }
+    // The best cluster is far above the threshold: unfaded.
+    assert_eq!(w[by_score[0]].effective, w[by_score[0]].weight);
+    let gpu = r.read_lightmap().unwrap();
+    let mut archive = Archive::open(cornell_archive()).unwrap();
+    let mut cpu = vec![[0f32; 3]; gpu.len()];
+    for &c in &by_score[..k as usize] {
+        let pane = archive.read_pane(c).unwrap();
+        for (acc, t) in cpu.iter_mut().zip(&pane) {
+            for ch in 0..3 {
+                acc[ch] += w[c].effective[ch] * t[ch];
+            }
+        }
+    }
+    let peak = cpu.iter().flatten().fold(0f32, |a, b| a.max(*b));
+    for (g, c) in gpu.iter().zip(&cpu) {
+        for ch in 0..3 {
+            assert!((g[ch] - c[ch]).abs() <= 0.01 * c[ch].abs().max(peak * 1e-4));
+        }
+    }
+}
+
+/// An archive baked for other geometry is refused with a fingerprint error.
+#[test]
+fn refuses_archive_of_other_geometry() {
+    let other = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/two-rooms");
+    let other_scene = std::fs::read_dir(&other)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.extension().is_some_and(|e| e == "obj" || e == "gltf"))
+        .expect("a two-rooms scene file");
+    let Err(err) = prm_play::open(cornell_archive(), Some(&other_scene)) else {
+        panic!("an archive of the Cornell box opened with {}", other_scene.display());
+    };
+    assert!(matches!(err, PlayError::FingerprintMismatch { .. }), "{err}");
+    assert!(err.to_string().contains("baked for another scene"), "{err}");
+}
+
+const EIGHT_LIGHTS: &str = include_str!("../examples/eight-lights.toml");
+
+/// Eight coloured, moving lights of all three kinds, from an animation.
+#[test]
+fn eight_moving_lights_of_all_kinds() {
+    let anim = Animation::parse(EIGHT_LIGHTS).unwrap();
+    assert_eq!(anim.lights.len(), 8);
+    let (mut r, _scene) = renderer(small(32));
+    let mut images = Vec::new();
+    for i in [0, 5, 10] {
+        let t = anim.time(i);
+        let lights = anim.lights_at(t);
+        r.render(&FrameInput {
+            camera: anim.camera_at(t).unwrap(),
+            lights: &lights,
+            mode: Mode::Gi,
+        })
+        .unwrap();
+        let img = r.read_image().unwrap();
+        assert!(img.rgb.iter().flatten().all(|v| v.is_finite() && *v >= 0.0));
+        assert!(img.rgb.iter().flatten().any(|v| *v > 0.0));
+        images.push(img);
+    }
+    assert_ne!(images[0].rgb, images[1].rgb, "the lights move");
+    let mid = anim.lights_at(0.5);
+    match (mid[0], anim.lights[0][0].1, anim.lights[0][1].1) {
+        (Light::Point { position, .. }, Light::Point { position: a, .. }, Light::Point { position: b, .. }) => {
+            assert!((position - (a + b) * 0.5).length() < 1e-3)
+        }
+        _ => panic!("light 0 is a point light"),
+    }
+}
+
+/// The CLI renders headless frames to EXR and PNG and writes timings.
+#[test]
+fn cli_headless_writes_images_and_timings() {
+    let dir = out_dir("cli");
+    let timings = dir.join("timings.json");
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_prm-play"))
+        .arg(cornell_archive())
+        .args([
+            "--headless",
+            "--frames",
+            "2",
+            "--size",
+            "64x48",
+            "--mode",
+            "split",
+            "--top-k",
+            "8",
+        ])
+        .arg("--animation")
+        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/eight-lights.toml"))
+        .arg("--out")
+        .arg(&dir)
+        .arg("--timings")
+        .arg(&timings)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    for f in ["frame0000.exr", "frame0000.png", "frame0001.exr", "frame0001.png"] {
+        assert!(dir.join(f).exists(), "{f}");
+    }
+    let json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&timings).unwrap()).unwrap();
+    assert_eq!(json["frames"].as_array().unwrap().len(), 2);
+    assert_eq!(json["top_k"], 8);
+    let img = output::read_exr(&dir.join("frame0000.exr")).unwrap();
+    assert_eq!((img.width, img.height), (64, 48));
+    // Without --headless and without a display: a clear message, non-zero exit.
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_prm-play"))
+        .arg(cornell_archive())
+        .env_remove("DISPLAY")
+        .env_remove("WAYLAND_DISPLAY")
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--headless"));
+}
+
+/// Animation files: interpolation between keys, holding outside them, and clear errors.
+#[test]
+fn animation_interpolates_and_validates() {
+    let a = Animation::parse(
+        r#"
+fps = 4.0
+[[camera]]
+t = 0.0
+spec = "0,0,1:0,0,0:40"
+[[camera]]
+t = 1.0
+spec = "2,0,1:0,0,0:60"
+[[light]]
+keys = [ { t = 0.5, spec = "spot:0,1,0:0,-1,0:20:1,1,1" }, { t = 1.5, spec = "spot:0,1,0:1,0,0:40:3,1,1" } ]
+"#,
+    )
+    .unwrap();
+    assert_eq!(a.time(2), 0.5);
+    let c = a.camera_at(0.5).unwrap();
+    assert!((c.eye - Vec3::new(1.0, 0.0, 1.0)).length() < 1e-6 && (c.fov_y_deg - 50.0).abs() < 1e-4);
+    assert_eq!(a.camera_at(-1.0).unwrap().eye, Vec3::new(0.0, 0.0, 1.0));
+    match a.lights_at(1.0)[0] {
+        Light::Spot {
+            direction,
+            angle,
+            intensity,
+            ..
+        } => {
+            assert!((direction.length() - 1.0).abs() < 1e-5);
+            assert!((angle.to_degrees() - 30.0).abs() < 1e-3);
+            assert!((intensity - Vec3::new(2.0, 1.0, 1.0)).length() < 1e-5);
+        }
+        l => panic!("{l:?}"),
+    }
+    assert!(matches!(a.lights_at(9.0)[0], Light::Spot { angle, .. } if (angle.to_degrees() - 40.0).abs() < 1e-3));
+    for (bad, says) in [
+        ("fps = 0.0", "fps"),
+        ("[[light]]\nkeys = []", "no keys"),
+        (
+            "[[light]]\nkeys = [ { t = 1.0, spec = \"point:0,0,0:1,1,1\" }, { t = 0.0, spec = \"point:0,0,0:1,1,1\" } ]",
+            "increasing",
+        ),
+        (
+            "[[light]]\nkeys = [ { t = 0.0, spec = \"point:0,0,0:1,1,1\" }, { t = 1.0, spec = \"dir:0,-1,0:1,1,1\" } ]",
+            "same kind",
+        ),
+        ("[[light]]\nkeys = [ { t = 0.0, spec = \"lamp:0,0,0\" } ]", "light 0"),
+        ("colour = 1", "unknown field"),
+    ] {
+        let e = Animation::parse(bad).unwrap_err();
+        assert!(e.contains(says), "{bad:?} gave {e:?}");
+    }
+}
+
+/// Window mode's present pass (run offscreen: no display here): the tone-mapped frame equals the
+/// PNG tone mapping of the linear image, within one 8-bit step.
+#[test]
+fn present_pass_matches_png_tone_mapping() {
+    let (mut r, scene) = renderer(small(16));
+    r.render(&FrameInput {
+        camera: prm_play::default_camera(&scene),
+        lights: &scene.lights,
+        mode: Mode::Gi,
+    })
+    .unwrap();
+    let image = r.read_image().unwrap();
+    let exposure = 2.0;
+    let format = wgpu::TextureFormat::Rgba8Unorm;
+    let mut presenter = prm_play::window::Presenter::new(r.context(), format, exposure);
+    presenter.bind(&r);
+    let ctx = r.context();
+    let (w, h) = (image.width, image.height);
+    let target = ctx.device.create_texture(&wgpu::TextureDescriptor {
+        label: Some("present test"),
+        size: wgpu::Extent3d {
+            width: w,
+            height: h,
+            depth_or_array_layers: 1,
+        },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format,
+        usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
+        view_formats: &[],
+    });
+    let padded = (w * 4).div_ceil(256) * 256;
+    let buffer = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("present test"),
+        size: (padded * h) as u64,
+        usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+        mapped_at_creation: false,
+    });
+    let mut enc = ctx.device.create_command_encoder(&Default::default());
+    presenter.draw(&mut enc, &target.create_view(&Default::default()));
+    enc.copy_texture_to_buffer(
+        target.as_image_copy(),
+        wgpu::TexelCopyBufferInfo {
+            buffer: &buffer,
+            layout: wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(padded),
+                rows_per_image: Some(h),
+            },
+        },
+        target.size(),
+    );
+    ctx.queue.submit([enc.finish()]);
+    let bytes = ctx.read_buffer(&buffer).unwrap();
+    for y in 0..h as usize {
+        for x in 0..w as usize {
+            let p = image.rgb[y * w as usize + x];
+            for k in 0..3 {
+                let got = bytes[y * padded as usize + x * 4 + k] as i32;
+                let want = output::tone_map(p[k], exposure) as i32;
+                assert!((got - want).abs() <= 1, "pixel ({x}, {y}) channel {k}: {got} vs {want}");
+            }
+        }
+    }
+}
