@@ -1,13 +1,15 @@
 //! Project automation tasks: `cargo run -p xtask -- <task> [args]`.
 
+mod demo;
 mod scenes;
 
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     match args.first().map(String::as_str) {
         Some("scenes") => scenes::run(&args[1..]),
+        Some("demo") => demo::run(&args[1..]),
         _ => {
-            eprintln!("usage: cargo run -p xtask -- <task>\n\ntasks:\n  scenes [--out DIR] [--check]   write (or verify) the test scenes in scenes/");
+            eprintln!("usage: cargo run -p xtask -- <task>\n\ntasks:\n  demo [SCENE]                    bake a scene (default: the Cornell box) and render a frame headless into out/\n  scenes [--out DIR] [--check]   write (or verify) the test scenes in scenes/");
             std::process::exit(2);
         }
     }

@@ -1,0 +1,28 @@
+//! `cargo xtask demo`: the main job end to end: bake the Cornell box, render a frame headless.
+
+use anyhow::{bail, Context, Result};
+use std::process::Command;
+
+/// Runs one `cargo run --release` step, streaming its output.
+fn cargo_run(package: &str, args: &[&str]) -> Result<()> {
+    let status = Command::new(env!("CARGO"))
+        .args(["run", "--release", "--quiet", "-p", package, "--"])
+        .args(args)
+        .status()
+        .with_context(|| format!("starting cargo run -p {package}"))?;
+    if !status.success() {
+        bail!("{package} {} failed ({status})", args.join(" "));
+    }
+    Ok(())
+}
+
+pub fn run(args: &[String]) -> Result<()> {
+    let scene = args.first().map(String::as_str).unwrap_or("scenes/cornell-box/cornell-box.gltf");
+    let name = std::path::Path::new(scene).file_stem().and_then(|s| s.to_str()).unwrap_or("scene").to_string();
+    let archive = format!("out/{name}.prm");
+    let frames = format!("out/{name}");
+    cargo_run("prm-bake", &["bake", scene, "-o", &archive])?;
+    cargo_run("prm-play", &[&archive, "--headless", "--mode", "split", "--size", "800x600", "--out", &frames])?;
+    println!("\narchive: {archive}\nframe:   {frames}/ (EXR linear radiance, PNG tone-mapped; left half direct light only, right half with PRM indirect light)");
+    Ok(())
+}
