@@ -17,12 +17,31 @@ fn cargo_run(package: &str, args: &[&str]) -> Result<()> {
 }
 
 pub fn run(args: &[String]) -> Result<()> {
-    let scene = args.first().map(String::as_str).unwrap_or("scenes/cornell-box/cornell-box.gltf");
-    let name = std::path::Path::new(scene).file_stem().and_then(|s| s.to_str()).unwrap_or("scene").to_string();
+    let scene = args
+        .first()
+        .map(String::as_str)
+        .unwrap_or("scenes/cornell-box/cornell-box.gltf");
+    let name = std::path::Path::new(scene)
+        .file_stem()
+        .and_then(|s| s.to_str())
+        .unwrap_or("scene")
+        .to_string();
     let archive = format!("out/{name}.prm");
     let frames = format!("out/{name}");
     cargo_run("prm-bake", &["bake", scene, "-o", &archive])?;
-    cargo_run("prm-play", &[&archive, "--headless", "--mode", "split", "--size", "800x600", "--out", &frames])?;
+    cargo_run(
+        "prm-play",
+        &[
+            &archive,
+            "--headless",
+            "--mode",
+            "split",
+            "--size",
+            "800x600",
+            "--out",
+            &frames,
+        ],
+    )?;
     println!("\narchive: {archive}\nframe:   {frames}/ (EXR linear radiance, PNG tone-mapped; left half direct light only, right half with PRM indirect light)");
     Ok(())
 }

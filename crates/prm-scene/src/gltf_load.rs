@@ -258,20 +258,7 @@ pub(crate) fn load(path: &Path) -> Result<Scene, SceneError> {
     if all_have_lightmap_uvs {
         scene.lightmap_uvs = Some(lightmap_uvs);
     }
-    if scene.report.degenerate_dropped > 0 {
-        let n = scene.report.degenerate_dropped;
-        scene
-            .report
-            .warnings
-            .push(format!("{}: {n} degenerate triangles dropped", path.display()));
-    }
-    if scene.triangles.is_empty() {
-        return Err(SceneError::NoTriangles {
-            path: path.to_path_buf(),
-            dropped: scene.report.degenerate_dropped,
-        });
-    }
-    Ok(scene)
+    scene.finish_load()
 }
 
 /// Converts a decoded glTF image to an 8-bit RGB texture; `None` for float formats.

@@ -153,20 +153,7 @@ pub(crate) fn load(path: &Path) -> Result<Scene, SceneError> {
             );
         }
     }
-    if scene.report.degenerate_dropped > 0 {
-        let n = scene.report.degenerate_dropped;
-        scene
-            .report
-            .warnings
-            .push(format!("{}: {n} degenerate triangles dropped", path.display()));
-    }
-    if scene.triangles.is_empty() {
-        return Err(SceneError::NoTriangles {
-            path: path.to_path_buf(),
-            dropped: scene.report.degenerate_dropped,
-        });
-    }
-    Ok(scene)
+    scene.finish_load()
 }
 
 /// `tobj` reports what went wrong but not where: scan the file for the first line that is

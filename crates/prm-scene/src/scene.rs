@@ -216,6 +216,23 @@ impl Scene {
         h.digest()
     }
 
+    /// Ends a loader's work: a warning for dropped degenerate triangles, an error when none is left.
+    pub(crate) fn finish_load(mut self) -> Result<Scene, crate::SceneError> {
+        let n = self.report.degenerate_dropped;
+        if n > 0 {
+            self.report
+                .warnings
+                .push(format!("{}: {n} degenerate triangles dropped", self.source.display()));
+        }
+        if self.triangles.is_empty() {
+            return Err(crate::SceneError::NoTriangles {
+                path: self.source.clone(),
+                dropped: n,
+            });
+        }
+        Ok(self)
+    }
+
     /// Appends a triangle after validating it; returns false (and counts it) when degenerate.
     ///
     /// `area_eps` is the area below which a triangle counts as degenerate. Corner normals that are
