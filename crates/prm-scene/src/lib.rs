@@ -9,6 +9,7 @@
 
 #![warn(missing_docs)]
 
+pub mod analytic;
 mod atlas;
 mod error;
 mod gltf_load;

@@ -3,57 +3,14 @@
 
 use std::path::PathBuf;
 
-use glam::{Vec2, Vec3};
-use prm_scene::{Atlas, AtlasParams, ExitPoint, LoadReport, Material, Scene, Sizing, Triangle};
+use glam::Vec3;
+use prm_scene::{Atlas, AtlasParams, ExitPoint, Sizing};
 use prm_trace::{
     entry_irradiance, evaluate_panes, parse_light, sample_surface, trace_walks, Bvh, BvhParams, ClusterParams,
     Clustering, EntryParams, Lighting, PaneParams, ReferenceParams, ReferenceTracer, VplBound, WalkParams,
 };
 
-/// Unit cube, six inward-facing faces, each split into `s × s` quads (2 triangles each).
-fn furnace_box(s: u32, albedo: f32) -> Scene {
-    let mut triangles = Vec::new();
-    // (origin, u axis, v axis) with u × v pointing into the box.
-    let faces = [
-        (Vec3::ZERO, Vec3::Z, Vec3::X), // floor y=0, normal +Y
-        (Vec3::Y, Vec3::X, Vec3::Z),    // ceiling y=1, normal -Y
-        (Vec3::ZERO, Vec3::X, Vec3::Y), // z=0, normal +Z
-        (Vec3::Z, Vec3::Y, Vec3::X),    // z=1, normal -Z
-        (Vec3::ZERO, Vec3::Y, Vec3::Z), // x=0, normal +X
-        (Vec3::X, Vec3::Z, Vec3::Y),    // x=1, normal -X
-    ];
-    for (o, u, v) in faces {
-        let n = u.cross(v);
-        for i in 0..s {
-            for j in 0..s {
-                let p = |a: u32, b: u32| o + u * (a as f32 / s as f32) + v * (b as f32 / s as f32);
-                let (a, b, c, d) = (p(i, j), p(i + 1, j), p(i + 1, j + 1), p(i, j + 1));
-                for positions in [[a, b, c], [a, c, d]] {
-                    triangles.push(Triangle {
-                        positions,
-                        normals: [n; 3],
-                        uvs: [Vec2::ZERO; 3],
-                        material: 0,
-                    });
-                }
-            }
-        }
-    }
-    Scene {
-        source: PathBuf::from("furnace"),
-        triangles,
-        lightmap_uvs: None,
-        materials: vec![Material {
-            name: "grey".into(),
-            albedo: Vec3::splat(albedo),
-            texture: None,
-        }],
-        textures: vec![],
-        lights: vec![],
-        cameras: vec![],
-        report: LoadReport::default(),
-    }
-}
+use prm_scene::analytic::furnace_box;
 
 fn scene_path(rel: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..").join(rel)
