@@ -99,35 +99,52 @@ fn flush(cluster: u32, i: u32, acc: vec3<f32>) {
     panes[k] = panes[k] + vec4<f32>(acc, 0.0);
 }
 
+const TILE: u32 = 64u;
+// The batch's VPLs pass through workgroup memory a tile at a time: every invocation reads every
+// VPL, and on lavapipe a storage-buffer read at a varying index costs a per-lane loop, while a
+// workgroup-memory read is a plain load.
+var<workgroup> tile: array<Vpl, TILE>;
+
 @compute @workgroup_size(64)
-fn main(@builtin(global_invocation_id) id: vec3<u32>) {
+fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
     let i = id.x;
-    if (i >= g.exit_count || g.vpl_count == 0u) {
-        return;
-    }
-    let x = exits[i];
-    var current = vpls[0].cluster;
+    // No early return: every invocation must reach the barriers.
+    let live = i < g.exit_count;
+    let x = exits[min(i, max(g.exit_count, 1u) - 1u)];
+    var current = g.first_cluster;
     var acc = vec3<f32>(0.0);
-    for (var j = 0u; j < g.vpl_count; j = j + 1u) {
-        let v = vpls[j];
-        if (v.cluster != current) {
-            flush(current, i, acc);
-            acc = vec3<f32>(0.0);
-            current = v.cluster;
+    for (var base = 0u; base < g.vpl_count; base = base + TILE) {
+        if (base + lid < g.vpl_count) {
+            tile[lid] = vpls[base + lid];
         }
-        let d = v.position - x.position;
-        let r2 = dot(d, d);
-        if (r2 <= 0.0) {
-            continue;
+        workgroupBarrier();
+        let n = min(TILE, g.vpl_count - base);
+        for (var t = 0u; t < n; t = t + 1u) {
+            let v = tile[t];
+            if (v.cluster != current) {
+                if (live && any(acc != vec3<f32>(0.0))) {
+                    flush(current, i, acc);
+                }
+                acc = vec3<f32>(0.0);
+                current = v.cluster;
+            }
+            let d = v.position - x.position;
+            let r2 = dot(d, d);
+            if (r2 <= 0.0) {
+                continue;
+            }
+            let r = sqrt(r2);
+            let cx = dot(x.normal, d) / r;
+            let cv = -dot(v.normal, d) / r;
+            if (cx <= 0.0 || cv <= 0.0) {
+                continue;
+            }
+            let e = v.power * (INV_PI * cx * cv * inverse_square(r2, v.area));
+            acc = acc + e * visibility(base + t, v, x, cx);
         }
-        let r = sqrt(r2);
-        let cx = dot(x.normal, d) / r;
-        let cv = -dot(v.normal, d) / r;
-        if (cx <= 0.0 || cv <= 0.0) {
-            continue;
-        }
-        let e = v.power * (INV_PI * cx * cv * inverse_square(r2, v.area));
-        acc = acc + e * visibility(j, v, x, cx);
+        workgroupBarrier();
     }
-    flush(current, i, acc);
+    if (live && any(acc != vec3<f32>(0.0))) {
+        flush(current, i, acc);
+    }
 }

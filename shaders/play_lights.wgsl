@@ -88,6 +88,12 @@ fn visibility(l: Light, p: vec3<f32>, n: vec3<f32>, dist: f32) -> f32 {
 
 // Direct irradiance (RGB, W/m²) at `p` with unit normal `n` from light `i`.
 fn light_irradiance(i: u32, p: vec3<f32>, n: vec3<f32>) -> vec3<f32> {
+    return light_irradiance_disk(i, p, n, 0.0);
+}
+
+// Irradiance from light i at p, a point that stands for a disk of radius² `disk`: the
+// inverse square of point and spot lights becomes 1 / (r² + disk) (0: the plain point value).
+fn light_irradiance_disk(i: u32, p: vec3<f32>, n: vec3<f32>, disk: f32) -> vec3<f32> {
     let l = lights[i];
     var wi: vec3<f32>;
     var scale: vec3<f32>;
@@ -99,7 +105,7 @@ fn light_irradiance(i: u32, p: vec3<f32>, n: vec3<f32>) -> vec3<f32> {
         let d = l.position.xyz - p;
         dist = max(length(d), 1e-6);
         wi = d / dist;
-        scale = l.color.rgb / (dist * dist);
+        scale = l.color.rgb / (dist * dist + disk);
         if l.kind == 1u && dot(-wi, l.direction.xyz) < l.cos_cutoff {
             return vec3<f32>(0.0);
         }
@@ -112,9 +118,13 @@ fn light_irradiance(i: u32, p: vec3<f32>, n: vec3<f32>) -> vec3<f32> {
 }
 
 fn direct_irradiance(p: vec3<f32>, n: vec3<f32>) -> vec3<f32> {
+    return direct_irradiance_disk(p, n, 0.0);
+}
+
+fn direct_irradiance_disk(p: vec3<f32>, n: vec3<f32>, disk: f32) -> vec3<f32> {
     var e = vec3<f32>(0.0);
     for (var i = 0u; i < frame.counts.x; i++) {
-        e += light_irradiance(i, p, n);
+        e += light_irradiance_disk(i, p, n, disk);
     }
     return e;
 }

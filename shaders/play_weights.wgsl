@@ -33,7 +33,8 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     var sum = vec3<f32>(0.0);
     for (var k = 0u; k < cl.count; k++) {
         let e = entries[cl.first + k];
-        sum += direct_irradiance(e.position.xyz, e.normal.xyz);
+        // Bounded: the entry stands for a disk (position.w = its radius²), see entry_irradiance.
+        sum += direct_irradiance_disk(e.position.xyz, e.normal.xyz, e.position.w);
     }
     let w = sum / f32(max(cl.count, 1u));
     weights[c] = vec4<f32>(w, dot(w, cl.energy.rgb));

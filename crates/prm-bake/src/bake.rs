@@ -3,7 +3,7 @@
 use anyhow::{bail, Context, Result};
 use glam::Vec3;
 use prm_format::{ArchiveWriter, AtlasSection, Cluster, Entry, Metadata};
-use prm_gpu::{Backend, GpuContext, PaneRenderParams};
+use prm_gpu::{Backend, GpuContext, PaneOutput, PaneRenderParams};
 use prm_scene::{Atlas, AtlasParams, Sizing};
 use prm_trace::{Bvh, BvhParams, ClusterParams, Clustering, EntryParams, PaneParams, WalkParams};
 use std::cell::OnceCell;
@@ -59,6 +59,10 @@ pub struct BakeArgs {
     /// Clusters blended per frame at run time (recorded in the archive for the player).
     #[arg(long)]
     pub top_k: Option<usize>,
+    /// Longest bake, in seconds, that the automatic sizes (preset `default`) may plan for; they
+    /// shrink to fit it (default 600). Explicit sizes are never changed.
+    #[arg(long, value_name = "SECONDS")]
+    pub time_budget: Option<f64>,
     /// TOML file with any of the parameters above (and budgets); the command line wins.
     #[arg(long, value_name = "FILE.toml")]
     pub config: Option<PathBuf>,
@@ -71,6 +75,10 @@ pub struct BakeArgs {
     /// Print nothing but warnings and errors.
     #[arg(long)]
     pub quiet: bool,
+    /// Only print the parameters the bake would use, why, and the time it expects (and write them
+    /// to --report); no archive is written.
+    #[arg(long)]
+    pub plan: bool,
 }
 
 impl BakeArgs {
@@ -84,6 +92,7 @@ impl BakeArgs {
             paths_per_entry: self.paths_per_entry,
             seed: self.seed,
             top_k: self.top_k,
+            time_budget_s: self.time_budget,
             ..Default::default()
         }
     }
@@ -113,6 +122,36 @@ fn tile_size(resolution: u32) -> u32 {
         .into_iter()
         .find(|&t| resolution.is_multiple_of(t))
         .unwrap_or(1)
+}
+
+/// Directories a bake created for its output; those still empty are removed again when the bake
+/// fails (the guard drops without [`MadeDirs::keep`]), so a failed bake leaves nothing behind.
+struct MadeDirs(Vec<PathBuf>);
+
+impl MadeDirs {
+    fn create(dir: &Path) -> Result<MadeDirs> {
+        let mut missing = Vec::new();
+        let mut d = Some(dir);
+        while let Some(p) = d.filter(|p| !p.as_os_str().is_empty() && !p.exists()) {
+            missing.push(p.to_path_buf());
+            d = p.parent();
+        }
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        Ok(MadeDirs(missing))
+    }
+
+    fn keep(mut self) {
+        self.0.clear();
+    }
+}
+
+impl Drop for MadeDirs {
+    fn drop(&mut self) {
+        // Innermost first; remove_dir refuses non-empty directories.
+        for d in &self.0 {
+            let _ = std::fs::remove_dir(d);
+        }
+    }
 }
 
 /// `to` relative to directory `from`, with `/` separators (absolute when they share no root).
@@ -159,7 +198,7 @@ pub fn run(args: &BakeArgs) -> Result<()> {
     };
     let params = BakeParams::resolve(&config, &scene, probe)?;
     progress.say(&format!(
-        "bake: {} entries, {} clusters, atlas {}, {} walks per entry, seed {}, top-k {} ({:?} preset)",
+        "bake: {} entries, {} clusters, atlas {}, {} walk{} per entry, seed {}, top-k {} ({:?} preset)",
         params.entries,
         params.clusters,
         match params.atlas {
@@ -167,12 +206,28 @@ pub fn run(args: &BakeArgs) -> Result<()> {
             AtlasSize::TexelSize(s) => format!("texel {s}"),
         },
         params.paths_per_entry,
+        crate::params::plural(params.paths_per_entry as usize),
         params.seed,
         params.top_k,
         params.preset
     ));
     for r in &params.reasons {
         progress.say(&format!("  auto: {r}"));
+    }
+    progress.say(&format!(
+        "  expected: about {:.0} s on the reference machine (time budget {:.0} s)",
+        params.estimated_seconds, params.time_budget_s
+    ));
+    if args.plan {
+        if let Some(path) = &args.report {
+            // The same shape as a bake's report, which nests them under "params".
+            std::fs::write(
+                path,
+                serde_json::to_string_pretty(&serde_json::json!({ "params": params }))?,
+            )
+            .with_context(|| format!("writing {}", path.display()))?;
+        }
+        return Ok(());
     }
 
     // Open the device before the long CPU work, so a missing driver fails at once.
@@ -257,7 +312,9 @@ pub fn run(args: &BakeArgs) -> Result<()> {
             seed: params.seed,
             ..ClusterParams::with_clusters(params.clusters)
         };
-        Clustering::kmeans(&entries, scene.bounds().diagonal(), &cp).context("clustering entry points")?
+        Clustering::kmeans(&entries, scene.bounds().diagonal(), &cp)
+            .context("clustering entry points")?
+            .separate_by_visibility(&entries, &bvh)
     };
     timings.insert(
         "clustering".to_string(),
@@ -296,7 +353,7 @@ pub fn run(args: &BakeArgs) -> Result<()> {
         .parent()
         .filter(|d| !d.as_os_str().is_empty())
         .unwrap_or(Path::new("."));
-    std::fs::create_dir_all(out_dir).with_context(|| format!("creating {}", out_dir.display()))?;
+    let made = MadeDirs::create(out_dir)?;
     metadata.source_scene = relative_path(out_dir, &args.scene);
     if let serde_json::Value::Object(map) = serde_json::to_value(&params)? {
         metadata.params = map;
@@ -324,26 +381,30 @@ pub fn run(args: &BakeArgs) -> Result<()> {
         write_s += t.elapsed().as_secs_f64();
         Ok(())
     };
-    let mut phase = progress.phase("pane rendering", clustering.len() as u64);
     let t = Instant::now();
     let shadow_rays;
-    match &gpu {
+    let phase = match &gpu {
         Some(ctx) => {
             let rp = PaneRenderParams {
                 bound: params.bound(),
                 face_resolution: params.face_resolution,
                 ..PaneRenderParams::DEFAULT
             };
-            let stats = prm_gpu::render_panes_with(ctx, &scene, &atlas.exits, &vpls, &clustering, &rp, |_, pane| {
-                emit(pane, &mut writer)?;
-                phase.inc(1);
+            // Progress counts VPLs: a group of panes can take minutes on a big scene.
+            let mut phase = progress.phase("pane rendering", vpls.vpls.len() as u64);
+            let stats = prm_gpu::render_panes_with(ctx, &scene, &atlas.exits, &vpls, &clustering, &rp, |out| {
+                match out {
+                    PaneOutput::Pane { irradiance, .. } => emit(irradiance, &mut writer)?,
+                    PaneOutput::Progress(s) => phase.inc(s.vpls - phase.done()),
+                }
                 Ok::<(), anyhow::Error>(())
             })
             .context("rendering panes on the GPU")?;
             progress.say(&format!(
-                "  GPU: {} batches, {} depth faces {:.2} s, {} evaluations {:.2} s ({:.0} M/s)",
+                "  GPU: {} batches, {} depth faces ({:.0} triangles each after culling) {:.2} s, {} evaluations {:.2} s ({:.0} M/s)",
                 stats.batches,
                 stats.faces,
+                stats.triangles as f64 / stats.faces.max(1) as f64,
                 stats.depth_seconds,
                 stats.evaluations,
                 stats.gather_seconds,
@@ -352,6 +413,7 @@ pub fn run(args: &BakeArgs) -> Result<()> {
             timings.insert("pane_depth_maps".to_string(), stats.depth_seconds);
             timings.insert("pane_gather".to_string(), stats.gather_seconds);
             shadow_rays = 0;
+            phase
         }
         None => {
             let panes = prm_trace::evaluate_panes(
@@ -363,12 +425,14 @@ pub fn run(args: &BakeArgs) -> Result<()> {
             )
             .context("evaluating panes on the CPU")?;
             shadow_rays = panes.rays;
+            let mut phase = progress.phase("pane rendering", panes.clusters as u64);
             for c in 0..panes.clusters {
                 emit(panes.pane(c), &mut writer)?;
                 phase.inc(1);
             }
+            phase
         }
-    }
+    };
     let render_s = t.elapsed().as_secs_f64() - write_s;
     phase.finish(&format!(
         "{} panes, {} VPLs on {}",
@@ -389,6 +453,7 @@ pub fn run(args: &BakeArgs) -> Result<()> {
     let bytes = writer
         .finish()
         .with_context(|| format!("finishing {}", args.output.display()))?;
+    made.keep();
     timings.insert("compression_write".to_string(), write_s + t.elapsed().as_secs_f64());
     timings.insert("total".to_string(), started.elapsed().as_secs_f64());
 

@@ -50,6 +50,8 @@ pub struct BakeConfig {
     pub archive_budget_mib: Option<f64>,
     /// Largest run-time pane memory (all panes resident as RGB9E5), MiB.
     pub memory_budget_mib: Option<f64>,
+    /// Longest bake the automatic sizes may plan for, seconds (by [`CostModel`]).
+    pub time_budget_s: Option<f64>,
 }
 
 impl BakeConfig {
@@ -74,6 +76,7 @@ impl BakeConfig {
             vpl_disk_scale: over.vpl_disk_scale.or(self.vpl_disk_scale),
             archive_budget_mib: over.archive_budget_mib.or(self.archive_budget_mib),
             memory_budget_mib: over.memory_budget_mib.or(self.memory_budget_mib),
+            time_budget_s: over.time_budget_s.or(self.time_budget_s),
         }
     }
 }
@@ -112,6 +115,10 @@ pub struct BakeParams {
     pub archive_budget_mib: f64,
     /// Run-time pane memory budget, MiB.
     pub memory_budget_mib: f64,
+    /// Bake time budget of the automatic sizes, seconds.
+    pub time_budget_s: f64,
+    /// What [`CostModel`] expects these parameters to cost, seconds.
+    pub estimated_seconds: f64,
     /// One line per automatic choice.
     pub reasons: Vec<String>,
 }
@@ -159,29 +166,98 @@ fn preset_values(p: Preset) -> Option<PresetValues> {
 pub const DEFAULT_ARCHIVE_BUDGET_MIB: f64 = 512.0;
 /// Default run-time pane memory budget.
 pub const DEFAULT_MEMORY_BUDGET_MIB: f64 = 256.0;
+/// Default bake time budget: ten minutes.
+pub const DEFAULT_TIME_BUDGET_S: f64 = 600.0;
+
+/// What a GPU bake costs, from rates measured on the reference machine (2 cores, lavapipe; see
+/// ARCHITECTURE.md): the pane passes dominate, so the model counts hemicube faces, the triangles
+/// they draw after culling, and VPL × exit point evaluations.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct CostModel {
+    /// Fixed cost of one hemicube face, seconds.
+    pub face_seconds: f64,
+    /// Cost of one triangle drawn into a face, seconds.
+    pub triangle_seconds: f64,
+    /// Fraction of the scene's triangles a face draws after chunk culling.
+    pub drawn_fraction: f64,
+    /// VPL × exit point evaluations per second in the gather pass.
+    pub evaluations_per_second: f64,
+    /// VPLs traced per second (walks, on the CPU).
+    pub vpls_per_second: f64,
+}
+
+impl CostModel {
+    /// Rates measured with `cargo run --release -p prm-gpu --example bench_panes` on the
+    /// reference machine.
+    pub const REFERENCE: CostModel = CostModel {
+        face_seconds: 1.0e-4,
+        triangle_seconds: 3.0e-7,
+        drawn_fraction: 0.2,
+        evaluations_per_second: 12.0e6,
+        vpls_per_second: 1.0e6,
+    };
+
+    /// Expected seconds for `vpls` VPLs over `exits` exit points in a scene of `triangles`.
+    pub fn seconds(&self, vpls: f64, exits: f64, triangles: f64) -> f64 {
+        let faces = 5.0 * vpls;
+        faces * (self.face_seconds + self.triangle_seconds * self.drawn_fraction * triangles)
+            + vpls * exits / self.evaluations_per_second
+            + vpls / self.vpls_per_second
+    }
+}
+
+/// "s" unless `n` is one.
+pub fn plural(n: usize) -> &'static str {
+    if n == 1 {
+        ""
+    } else {
+        "s"
+    }
+}
+
+/// Expected VPLs per walk: a walk stores a VPL per bounce and survives a bounce with the
+/// roulette's probability, so on average 1 / (1 − q̄) VPLs, q̄ the area-weighted survival.
+fn vpls_per_walk(scene: &Scene) -> f64 {
+    let roulette = prm_trace::Roulette::DEFAULT;
+    let (mut q, mut area) = (0.0f64, 0.0f64);
+    for (i, t) in scene.triangles.iter().enumerate() {
+        let a = t.area() as f64;
+        q += a * roulette.survival(scene.albedo(i, 1.0 / 3.0, 1.0 / 3.0)) as f64;
+        area += a;
+    }
+    1.0 / (1.0 - (q / area.max(1e-30)).min(0.95))
+}
 
 impl BakeParams {
     /// Resolves `config` for `scene`; `probe` builds the automatic atlas when one is needed.
     ///
     /// Automatic rules (preset `default`, each overridable):
     /// - atlas: the atlas's own automatic size (about 12 texels per triangle, 256 to 4096 a side),
-    ///   shrunk until 32 panes fit the run-time memory budget;
+    ///   shrunk until 128 panes fit the run-time memory budget;
     /// - entries: 4 per chart (charts are the scene's distinct flat pieces), 1024 to 16384, a
     ///   multiple of 256;
+    /// - walks per entry: enough for about 8192 walks in all, 1 to 16;
+    /// - then, while [`CostModel::REFERENCE`] expects the bake to take longer than the time budget,
+    ///   fewer walks, fewer entries (down to 1024) or a smaller atlas (down to 128²), whichever is
+    ///   furthest above its floor;
     /// - clusters: entries / 16, 32 to 1024, then as many as the memory budget and the archive
     ///   budget allow (archive estimate: 1.5 bytes per covered texel per pane, the measured
-    ///   RGB9E5 + filter + zstd rate on smooth panes, doubled for safety);
-    /// - walks per entry: enough for about 8192 walks in all, 1 to 16.
+    ///   RGB9E5 + filter + zstd rate on smooth panes, doubled for safety).
     pub fn resolve(config: &BakeConfig, scene: &Scene, probe: impl Fn() -> Result<Atlas>) -> Result<BakeParams> {
         let preset = config.preset.unwrap_or(Preset::Default);
         let archive_budget_mib = config.archive_budget_mib.unwrap_or(DEFAULT_ARCHIVE_BUDGET_MIB);
         let memory_budget_mib = config.memory_budget_mib.unwrap_or(DEFAULT_MEMORY_BUDGET_MIB);
-        if !(archive_budget_mib > 0.0 && memory_budget_mib > 0.0) {
-            bail!("budgets must be positive (archive {archive_budget_mib} MiB, memory {memory_budget_mib} MiB)");
+        let time_budget_s = config.time_budget_s.unwrap_or(DEFAULT_TIME_BUDGET_S);
+        if !(archive_budget_mib > 0.0 && memory_budget_mib > 0.0 && time_budget_s > 0.0) {
+            bail!(
+                "budgets must be positive (archive {archive_budget_mib} MiB, memory {memory_budget_mib} MiB, \
+                 time {time_budget_s} s)"
+            );
         }
         let mut reasons = Vec::new();
         let fixed = preset_values(preset);
-        let atlas = match (config.resolution, config.texel_size, &fixed) {
+        let mut auto_resolution = None;
+        let mut atlas = match (config.resolution, config.texel_size, &fixed) {
             (Some(r), _, _) => AtlasSize::Resolution(r),
             (None, Some(s), _) => AtlasSize::TexelSize(s),
             (None, None, Some(v)) => AtlasSize::Resolution(v.resolution),
@@ -189,22 +265,24 @@ impl BakeParams {
                 let auto = probe()?;
                 let mut r = auto.resolution;
                 let memory_texels = memory_budget_mib * 1024.0 * 1024.0 / 4.0;
-                while r > 64 && (32.0 * (r as f64).powi(2)) > memory_texels {
+                while r > 64 && (128.0 * (r as f64).powi(2)) > memory_texels {
                     r -= 64;
                 }
                 reasons.push(format!(
                     "atlas {r}² texels: {} triangles want about 12 texels each{}",
                     scene.triangles.len(),
                     if r < auto.resolution {
-                        ", shrunk so 32 panes fit the memory budget"
+                        ", shrunk so 128 panes fit the memory budget"
                     } else {
                         ""
                     }
                 ));
+                auto_resolution = Some(r);
                 AtlasSize::Resolution(r)
             }
         };
-        let entries = match (config.entries, &fixed) {
+        let mut auto_entries = false;
+        let mut entries = match (config.entries, &fixed) {
             (Some(n), _) => n,
             (None, Some(v)) => v.entries,
             (None, None) => {
@@ -213,13 +291,83 @@ impl BakeParams {
                 reasons.push(format!(
                     "{n} entry points: 4 per chart of the scene's {charts} charts, 1024..16384"
                 ));
+                auto_entries = true;
                 n
             }
         };
-        let texels_per_pane = match atlas {
+        let mut auto_paths = false;
+        let mut paths_per_entry = match (config.paths_per_entry, &fixed) {
+            (Some(m), _) => m,
+            (None, Some(v)) => v.paths,
+            (None, None) => {
+                let m = 8192usize.div_ceil(entries.max(1)).clamp(1, 16) as u32;
+                reasons.push(format!(
+                    "{m} walk{} per entry point: about 8192 walks in all",
+                    plural(m as usize)
+                ));
+                auto_paths = true;
+                m
+            }
+        };
+
+        // The time budget: estimate, and shrink what was chosen automatically until it fits.
+        let utilization = match auto_resolution {
+            Some(_) => probe()?.stats.utilization as f64,
+            None => 0.5,
+        };
+        let per_walk = vpls_per_walk(scene);
+        let triangles = scene.triangles.len() as f64;
+        let texels = |atlas: AtlasSize| match atlas {
             AtlasSize::Resolution(r) => (r as f64).powi(2),
             AtlasSize::TexelSize(s) => scene.area() / (s as f64).powi(2) * 2.0,
         };
+        let estimate = |entries: usize, paths: u32, atlas: AtlasSize| {
+            let vpls = entries as f64 * paths as f64 * per_walk;
+            CostModel::REFERENCE.seconds(vpls, utilization * texels(atlas), triangles)
+        };
+        // Every chart needs a texel and its gutters: a 3×3 block at the least.
+        let atlas_floor = match auto_resolution {
+            Some(_) => ((3.0 * (probe()?.stats.charts as f64).sqrt() / 32.0).ceil() as u32 * 32).max(128),
+            None => 128,
+        };
+        let planned = estimate(entries, paths_per_entry, atlas);
+        let mut estimated_seconds = planned;
+        while estimated_seconds > time_budget_s {
+            // Each step drops about a quarter of one size; take the one that saves the most time.
+            let fewer_walks = (auto_paths && paths_per_entry > 1).then(|| (entries, paths_per_entry - 1, atlas));
+            let fewer_entries = (auto_entries && entries > 1024)
+                .then(|| (((entries * 3 / 4) / 256 * 256).max(1024), paths_per_entry, atlas));
+            let smaller_atlas = match atlas {
+                AtlasSize::Resolution(r) if auto_resolution.is_some() && r > atlas_floor => Some((
+                    entries,
+                    paths_per_entry,
+                    AtlasSize::Resolution(((r * 7 / 8) / 32 * 32).max(atlas_floor)),
+                )),
+                _ => None,
+            };
+            let Some((e, m, a, t)) = [fewer_walks, fewer_entries, smaller_atlas]
+                .into_iter()
+                .flatten()
+                .map(|(e, m, a)| (e, m, a, estimate(e, m, a)))
+                .min_by(|x, y| x.3.total_cmp(&y.3))
+            else {
+                break;
+            };
+            (entries, paths_per_entry, atlas, estimated_seconds) = (e, m, a, t);
+        }
+        if estimated_seconds < planned {
+            reasons.push(format!(
+                "shrunk to fit the {time_budget_s:.0} s time budget: {planned:.0} s expected at the sizes above, \
+                 {estimated_seconds:.0} s with {entries} entries, {paths_per_entry} walk{} each{}",
+                plural(paths_per_entry as usize),
+                match atlas {
+                    AtlasSize::Resolution(r) => format!(", atlas {r}²"),
+                    AtlasSize::TexelSize(_) => String::new(),
+                }
+            ));
+        }
+
+        let texels_per_pane = texels(atlas);
         let clusters = match (config.clusters, &fixed) {
             (Some(c), _) => c,
             (None, Some(v)) => v.clusters.min(entries),
@@ -232,15 +380,6 @@ impl BakeParams {
                     "{c} clusters: entries/16 = {wanted}, memory budget allows {by_memory}, archive budget {by_archive}"
                 ));
                 c
-            }
-        };
-        let paths_per_entry = match (config.paths_per_entry, &fixed) {
-            (Some(m), _) => m,
-            (None, Some(v)) => v.paths,
-            (None, None) => {
-                let m = 8192usize.div_ceil(entries.max(1)).clamp(1, 16) as u32;
-                reasons.push(format!("{m} walks per entry point: about 8192 walks in all"));
-                m
             }
         };
         let top_k = config
@@ -261,6 +400,8 @@ impl BakeParams {
             vpl_disk_scale: config.vpl_disk_scale.unwrap_or(1.0),
             archive_budget_mib,
             memory_budget_mib,
+            time_budget_s,
+            estimated_seconds,
             reasons,
         };
         params.validate(texels_per_pane)?;

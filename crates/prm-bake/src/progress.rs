@@ -77,6 +77,11 @@ pub struct Phase {
 }
 
 impl Phase {
+    /// Steps done so far.
+    pub fn done(&self) -> u64 {
+        self.done
+    }
+
     /// Records `n` more steps done.
     pub fn inc(&mut self, n: u64) {
         self.done += n;

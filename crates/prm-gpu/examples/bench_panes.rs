@@ -52,16 +52,17 @@ fn main() -> anyhow::Result<()> {
     );
     let sum = |p: &prm_trace::Panes| p.combine(&vec![glam::Vec3::ONE; p.clusters]);
     let mut reference: Option<Vec<glam::Vec3>> = None;
-    for (filter, face) in [
-        (DepthFilter::Pcf2x2, 256),
-        (DepthFilter::Pcf2x2, 128),
-        (DepthFilter::Nearest, 128),
-        (DepthFilter::Pcf2x2, 64),
-        (DepthFilter::Nearest, 64),
+    for (filter, face, batch) in [
+        (DepthFilter::Pcf2x2, 256, 256),
+        (DepthFilter::Pcf2x2, 128, 256),
+        (DepthFilter::Nearest, 128, 256),
+        (DepthFilter::Pcf2x2, 128, 64),
+        (DepthFilter::Pcf2x2, 64, 256),
     ] {
         let params = PaneRenderParams {
             filter,
             face_resolution: face,
+            vpls_per_batch: batch,
             ..PaneRenderParams::DEFAULT
         };
         let t = Instant::now();
@@ -83,10 +84,12 @@ fn main() -> anyhow::Result<()> {
             }
         };
         println!(
-            "{filter:?}/{face}: total {total:.2} s, depth {:.2} s ({} faces, {:.3} ms each), gather {:.2} s ({:.1} M eval/s), rel. RMSE vs Pcf2x2/256 {rmse:.4}",
+            "{filter:?}/{face}/batch {batch}: total {total:.2} s, depth {:.2} s ({} faces, {:.3} ms each, {:.0} triangles in {:.1} draws each), gather {:.2} s ({:.1} M eval/s), rel. RMSE vs Pcf2x2/256 {rmse:.4}",
             stats.depth_seconds,
             stats.faces,
             1e3 * stats.depth_seconds / stats.faces.max(1) as f64,
+            stats.triangles as f64 / stats.faces.max(1) as f64,
+            stats.draws as f64 / stats.faces.max(1) as f64,
             stats.gather_seconds,
             stats.evaluations as f64 / stats.gather_seconds.max(1e-9) / 1e6,
         );

@@ -12,4 +12,6 @@ pub mod smoke;
 pub mod vpl_depth;
 
 pub use context::{Backend, GpuContext, GpuError};
-pub use pane::{render_panes, render_panes_with, DepthFilter, PaneRenderParams, PaneRenderStats, ShadowBias};
+pub use pane::{
+    render_panes, render_panes_with, DepthFilter, PaneOutput, PaneRenderParams, PaneRenderStats, ShadowBias,
+};

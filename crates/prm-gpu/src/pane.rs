@@ -17,7 +17,7 @@ use prm_trace::{Clustering, Panes, VplBound, VplSet};
 use wgpu::util::DeviceExt;
 
 use crate::pane_gather::{GatherParams, GpuExit, PaneGatherPass};
-use crate::vpl_depth::{DepthFrame, GpuVpl, VplDepthPass, FACES};
+use crate::vpl_depth::{ChunkedScene, DepthFrame, GpuVpl, VplDepthPass, FACES};
 use crate::{GpuContext, GpuError};
 
 /// Parameters of GPU pane rendering.
@@ -96,6 +96,10 @@ pub struct PaneRenderStats {
     pub vpls: u64,
     /// Depth faces rendered.
     pub faces: u64,
+    /// Triangles drawn into them (whole culling chunks, padding included).
+    pub triangles: u64,
+    /// Draws issued for them (runs of chunks).
+    pub draws: u64,
     /// Batches submitted.
     pub batches: u64,
     /// Cluster groups read back.
@@ -108,8 +112,23 @@ pub struct PaneRenderStats {
     pub gather_seconds: f64,
 }
 
-/// Renders every cluster's pane over `exits` and hands each to `sink(cluster, pane)` in cluster
-/// order, one group at a time; `sink`'s errors stop the work and are returned as they are.
+/// What [`render_panes_with`] hands its sink.
+#[derive(Debug)]
+pub enum PaneOutput<'a> {
+    /// A finished pane: irradiance at every exit point per unit irradiance on the cluster.
+    Pane {
+        /// Its cluster.
+        cluster: usize,
+        /// One value per exit point.
+        irradiance: &'a [Vec3],
+    },
+    /// The counters after another batch of VPLs (for progress bars on long bakes).
+    Progress(&'a PaneRenderStats),
+}
+
+/// Renders every cluster's pane over `exits` and hands each to `sink` in cluster order, one
+/// group at a time, with a [`PaneOutput::Progress`] after every batch; `sink`'s errors stop the
+/// work and are returned as they are.
 pub fn render_panes_with<E: From<GpuError>>(
     ctx: &GpuContext,
     scene: &Scene,
@@ -117,7 +136,7 @@ pub fn render_panes_with<E: From<GpuError>>(
     vpls: &VplSet,
     clustering: &Clustering,
     params: &PaneRenderParams,
-    mut sink: impl FnMut(usize, &[Vec3]) -> Result<(), E>,
+    mut sink: impl FnMut(PaneOutput) -> Result<(), E>,
 ) -> Result<PaneRenderStats, E> {
     let device = &ctx.device;
     let limits = device.limits();
@@ -129,12 +148,9 @@ pub fn render_panes_with<E: From<GpuError>>(
     }
     let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
 
-    // Scene geometry as a flat vertex list, and the frame of the hemicubes.
-    let positions: Vec<[f32; 3]> = scene
-        .triangles
-        .iter()
-        .flat_map(|t| t.positions.map(|p| p.to_array()))
-        .collect();
+    // Scene geometry in culling chunks, and the frame of the hemicubes.
+    let triangles: Vec<[Vec3; 3]> = scene.triangles.iter().map(|t| t.positions).collect();
+    let chunked = ChunkedScene::new(&triangles);
     let diagonal = scene.bounds().diagonal().max(1e-12);
     let frame = DepthFrame {
         near: 5e-4 * diagonal,
@@ -161,8 +177,11 @@ pub fn render_panes_with<E: From<GpuError>>(
     }
     cluster_start.push(sorted.len());
 
+    // Each face of a batch may need a draw for every other chunk; keep them in one buffer.
+    let list_cap = limits.max_buffer_size / (16 * FACES as u64 * chunked.chunks().div_ceil(2).max(1) as u64);
     let batch_cap = params
         .vpls_per_batch
+        .min(list_cap.min(u32::MAX as u64) as u32)
         .clamp(1, (limits.max_texture_array_layers / FACES).max(1));
     let group_bytes = params
         .max_group_bytes
@@ -173,7 +192,7 @@ pub fn render_panes_with<E: From<GpuError>>(
 
     let scene_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
         label: Some("pane scene"),
-        contents: bytemuck::cast_slice(&positions),
+        contents: bytemuck::cast_slice(&chunked.vertices),
         usage: wgpu::BufferUsages::VERTEX,
     });
     let gpu_exits: Vec<GpuExit> = exits
@@ -224,7 +243,7 @@ pub fn render_panes_with<E: From<GpuError>>(
         usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
         mapped_at_creation: false,
     });
-    let depth = VplDepthPass::new(device, batch_cap, face_res, &vpl_buffer, &frame_buffer);
+    let mut depth = VplDepthPass::new(device, batch_cap, face_res, &vpl_buffer, &frame_buffer, &chunked);
     let gather = PaneGatherPass::new(
         device,
         &vpl_buffer,
@@ -278,7 +297,9 @@ pub fn render_panes_with<E: From<GpuError>>(
             // Two submissions so each pass can be timed (the device runs them in order anyway).
             let t = std::time::Instant::now();
             let mut encoder = device.create_command_encoder(&Default::default());
-            depth.encode(&mut encoder, &scene_buffer, positions.len() as u32, batch.len() as u32);
+            let (triangles, draws) = depth.encode(&mut encoder, &ctx.queue, &chunked, &scene_buffer, frame.lift, batch);
+            stats.triangles += triangles;
+            stats.draws += draws;
             ctx.queue.submit([encoder.finish()]);
             ctx.wait()?;
             stats.depth_seconds += t.elapsed().as_secs_f64();
@@ -299,6 +320,7 @@ pub fn render_panes_with<E: From<GpuError>>(
             stats.faces += (batch.len() as u32 * FACES) as u64;
             stats.batches += 1;
             stats.evaluations += batch.len() as u64 * exits.len() as u64;
+            sink(PaneOutput::Progress(&stats))?;
             at = end;
         }
         let bytes = ((last - first) as u64) * 16 * n_exit;
@@ -314,7 +336,10 @@ pub fn render_panes_with<E: From<GpuError>>(
                 let t = texels[base + i];
                 *p = Vec3::new(t[0], t[1], t[2]);
             }
-            sink(c, &pane)?;
+            sink(PaneOutput::Pane {
+                cluster: c,
+                irradiance: &pane,
+            })?;
         }
         stats.groups += 1;
         first = last;
@@ -333,8 +358,10 @@ pub fn render_panes(
 ) -> Result<(Panes, PaneRenderStats), GpuError> {
     let mut data = vec![Vec3::ZERO; clustering.len() * exits.len()];
     let n = exits.len();
-    let stats = render_panes_with(ctx, scene, exits, vpls, clustering, params, |c, pane| {
-        data[c * n..(c + 1) * n].copy_from_slice(pane);
+    let stats = render_panes_with(ctx, scene, exits, vpls, clustering, params, |out| {
+        if let PaneOutput::Pane { cluster, irradiance } = out {
+            data[cluster * n..(cluster + 1) * n].copy_from_slice(irradiance);
+        }
         Ok::<(), GpuError>(())
     })?;
     Ok((

@@ -1,82 +1,239 @@
-//! Frame time of `gi` vs `direct` at 1024×768 on the Cornell box (synthetic archive), on Vulkan.
+//! Frame time of `gi` vs `direct` at 1024×768 on baked archives of three scenes, on Vulkan.
 //!
-//! `cargo bench -p prm-play --bench frame [-- FRAMES]`: prints mean and median wall time per
-//! frame (recording to GPU completion) and mean GPU time per pass, then the gi/direct ratio.
+//! `cargo bench -p prm-play --bench frame [-- FRAMES]` (default 20 frames per mode and scene):
+//! for the Cornell box (`scenes/cornell-box/cornell-box.gltf`), the dining room
+//! (`scenes/chairs/chairs.gltf`) and `../shared/scenes/cornell-box/CornellBox-Sphere.obj`
+//! (skipped, with a message, when `../shared/scenes` is absent) it prints the median and minimum
+//! wall time per frame (recording to GPU completion; measured without timestamp queries, which
+//! are synchronisation points on lavapipe), then the mean GPU time per pass (timestamp queries),
+//! and the gi/direct ratios of the frame times and of the summed GPU pass times. The modes are
+//! interleaved frame by frame so that load from other processes hits both alike; with 2 shared
+//! cores the wall-time ratio still swings by several per cent from run to run.
+//!
+//! Archives: `target/prm-bench/NAME.prm`, baked once with `prm-bake bake SCENE -o OUT --preset
+//! preview` (`cargo run --release -p prm-bake`, or the binary `$PRM_BAKE` names) and reused while
+//! they open and match their scene. Scenes without lights (the OBJ Cornell box: its lamp is an
+//! emissive quad) get a point light just below the middle of the ceiling.
 
-use prm_play::synthetic::{cornell_box_path, write_archive, SyntheticParams};
-use prm_play::{FrameInput, FrameTimings, Mode, PlayOptions, Renderer};
+use std::path::{Path, PathBuf};
+use std::process::Command;
 
-fn stats(name: &str, t: &[FrameTimings]) -> f64 {
-    let mut ms: Vec<f64> = t.iter().map(|f| f.cpu_ms).collect();
-    ms.sort_by(f64::total_cmp);
-    let mean = ms.iter().sum::<f64>() / ms.len() as f64;
-    let median = ms[ms.len() / 2];
-    print!("{name:>8}: mean {mean:7.2} ms, median {median:7.2} ms;");
-    let mut passes: Vec<(&str, f64)> = Vec::new();
-    for f in t {
-        for (p, v) in &f.gpu_ms {
-            match passes.iter_mut().find(|(q, _)| q == p) {
-                Some(e) => e.1 += v,
-                None => passes.push((p, *v)),
-            }
-        }
-    }
-    for (p, v) in passes {
-        print!(" {p} {:.2}", v / t.len() as f64);
-    }
-    println!(" (GPU ms/frame)");
-    median
+use prm_play::{FrameInput, FrameTimings, Mode, PlayOptions, Renderer, PASS_NAMES};
+use prm_scene::{Light, Scene};
+
+type Result<T> = std::result::Result<T, Box<dyn std::error::Error>>;
+
+/// Wall times of a series of frames, or their mean GPU time per pass.
+struct Stats {
+    median_ms: f64,
+    min_ms: f64,
+    passes: Vec<(&'static str, f64)>,
 }
 
-fn main() {
-    let frames: usize = std::env::args().skip(1).find_map(|a| a.parse().ok()).unwrap_or(20);
-    let scene_path = cornell_box_path();
-    let scene = prm_scene::load(&scene_path).expect("Cornell box");
-    let dir = std::env::temp_dir().join(format!("prm-play-bench-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let archive_path = dir.join("cornell-bench.prm");
-    let params = SyntheticParams {
-        resolution: 128,
-        clusters: 256,
-        entries_per_cluster: 16,
-        seed: 7,
-    };
-    write_archive(&scene, &scene_path, &archive_path, params).unwrap();
-    let (mut archive, scene) = prm_play::open(&archive_path, None).unwrap();
-    let ctx = prm_play::open_vulkan().expect("a Vulkan device");
-    println!("GPU: {}", ctx.describe());
-    let opts = PlayOptions {
-        width: 1024,
-        height: 768,
-        top_k: 32,
-        timestamps: true,
-        ..Default::default()
-    };
-    println!(
-        "1024x768, atlas {}², {} clusters, top K {}, shadow maps {}², {frames} frames per mode",
-        params.resolution, params.clusters, opts.top_k, opts.shadow_resolution
-    );
-    let mut r = Renderer::new(ctx, &scene, &mut archive, opts).unwrap();
-    let camera = prm_play::default_camera(&scene);
-    // Modes interleaved frame by frame, so that load from other processes hits both alike.
-    let mut direct = Vec::new();
-    let mut gi = Vec::new();
+impl Stats {
+    fn of(t: &[FrameTimings]) -> Stats {
+        let mut ms: Vec<f64> = t.iter().map(|f| f.cpu_ms).collect();
+        ms.sort_by(f64::total_cmp);
+        let passes = PASS_NAMES
+            .iter()
+            .filter_map(|&p| {
+                let v: Vec<f64> = t
+                    .iter()
+                    .flat_map(|f| f.gpu_ms.iter().filter(|(q, _)| *q == p).map(|(_, v)| *v))
+                    .collect();
+                (!v.is_empty()).then(|| (p, v.iter().sum::<f64>() / v.len() as f64))
+            })
+            .collect();
+        Stats {
+            median_ms: ms.get(ms.len() / 2).copied().unwrap_or(f64::NAN),
+            min_ms: ms.first().copied().unwrap_or(f64::NAN),
+            passes,
+        }
+    }
+
+    fn gpu_total(&self) -> f64 {
+        self.passes.iter().map(|(_, v)| v).sum()
+    }
+
+    fn print_passes(&self, name: &str) {
+        print!("  {name:>6} GPU ms/frame:");
+        for (p, v) in &self.passes {
+            print!(" {p} {v:.2}");
+        }
+        println!(" = {:.2}", self.gpu_total());
+    }
+}
+
+/// Renders `frames` frames of each mode, interleaved (after 3 of warm-up).
+fn run(
+    r: &mut Renderer,
+    camera: prm_scene::Camera,
+    lights: &[Light],
+    frames: usize,
+) -> Result<(Vec<FrameTimings>, Vec<FrameTimings>)> {
+    let (mut direct, mut gi) = (Vec::new(), Vec::new());
     for i in 0..frames + 3 {
         for (mode, out) in [(Mode::Direct, &mut direct), (Mode::Gi, &mut gi)] {
-            let t = r
-                .render(&FrameInput {
-                    camera,
-                    lights: &scene.lights,
-                    mode,
-                })
-                .unwrap();
+            let t = r.render(&FrameInput { camera, lights, mode })?;
             if i >= 3 {
                 out.push(t);
             }
         }
     }
-    let d = stats("direct", &direct);
-    let g = stats("gi", &gi);
-    println!("gi / direct frame time (median): {:.3}", g / d);
-    let _ = std::fs::remove_dir_all(&dir);
+    Ok((direct, gi))
+}
+
+fn workspace() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+/// Bakes `scene` into `archive` with the preview preset.
+fn bake(scene: &Path, archive: &Path) -> Result<()> {
+    let mut cmd = match std::env::var_os("PRM_BAKE") {
+        Some(bin) => Command::new(bin),
+        None => {
+            let mut c = Command::new(std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into()));
+            c.current_dir(workspace())
+                .args(["run", "--quiet", "--release", "-p", "prm-bake", "--"]);
+            c
+        }
+    };
+    cmd.arg("bake")
+        .arg(scene)
+        .arg("-o")
+        .arg(archive)
+        .args(["--preset", "preview", "--quiet"]);
+    println!("baking {} -> {} ...", scene.display(), archive.display());
+    let status = cmd.status()?;
+    if !status.success() {
+        return Err(format!("prm-bake bake {} failed ({status})", scene.display()).into());
+    }
+    Ok(())
+}
+
+/// The scene and its archive, baked unless a matching one exists.
+fn open(scene_path: &Path, archive: &Path) -> Result<(prm_play::FileArchive, Scene)> {
+    if archive.exists() {
+        match prm_play::open(archive, Some(scene_path)) {
+            Ok(r) => return Ok(r),
+            Err(e) => println!("re-baking: {e}"),
+        }
+    }
+    if let Some(dir) = archive.parent() {
+        std::fs::create_dir_all(dir)?;
+    }
+    bake(scene_path, archive)?;
+    Ok(prm_play::open(archive, Some(scene_path))?)
+}
+
+/// The scene's lights, or a point light just below the middle of the ceiling.
+fn lights(scene: &Scene) -> Vec<Light> {
+    if !scene.lights.is_empty() {
+        return scene.lights.clone();
+    }
+    let b = scene.bounds();
+    let e = b.extent();
+    let c = (b.min + b.max) * 0.5;
+    vec![Light::Point {
+        position: glam::Vec3::new(c.x, b.min.y + 0.95 * e.y, c.z),
+        intensity: glam::Vec3::splat(0.75 * e.y * e.y),
+    }]
+}
+
+/// Benchmarks one scene; returns (median ratio, GPU ratio).
+fn bench(name: &str, scene_path: &Path, frames: usize) -> Result<(f64, f64)> {
+    let archive_path = workspace().join("target/prm-bench").join(format!("{name}.prm"));
+    let (mut archive, scene) = open(scene_path, &archive_path)?;
+    let ctx = prm_play::open_vulkan()?;
+    let opts = PlayOptions {
+        width: 1024,
+        height: 768,
+        top_k: prm_play::archive_top_k(&archive),
+        timestamps: true,
+        ..Default::default()
+    };
+    let lights = lights(&scene);
+    let res = archive.atlas().resolution;
+    let mut r = Renderer::new(ctx, &scene, &mut archive, opts.clone())?;
+    println!(
+        "{name}: {} triangles, {} light(s), atlas/panes {res}², {} clusters, top K {}, shadow maps {}²",
+        scene.triangles.len(),
+        lights.len(),
+        r.cluster_count(),
+        opts.top_k,
+        opts.shadow_resolution
+    );
+    if !r.has_timestamps() {
+        println!("  (no timestamp queries on this device: wall times only)");
+    }
+    let camera = prm_play::default_camera(&scene);
+    // Frame times without timestamp queries (on lavapipe each one is a synchronisation point),
+    // then per-pass GPU times with them.
+    r.set_timing(false);
+    let (direct, gi) = run(&mut r, camera, &lights, frames)?;
+    let (d, g) = (Stats::of(&direct), Stats::of(&gi));
+    println!(
+        "  frame time (median, min): direct {:.2} ms, {:.2} ms; gi {:.2} ms, {:.2} ms",
+        d.median_ms, d.min_ms, g.median_ms, g.min_ms
+    );
+    r.set_timing(true);
+    let (direct, gi) = run(&mut r, camera, &lights, frames)?;
+    let (dt, gt) = (Stats::of(&direct), Stats::of(&gi));
+    dt.print_passes("direct");
+    gt.print_passes("gi");
+    // The last frame (gi) for a look: target/prm-bench/NAME-gi.png.
+    let png = archive_path.with_file_name(format!("{name}-gi.png"));
+    prm_play::output::write_png(&png, &r.read_image()?, 1.0)?;
+    let ratio = g.median_ms / d.median_ms;
+    let gpu_ratio = gt.gpu_total() / dt.gpu_total();
+    println!(
+        "  gi / direct: frame time (median) {ratio:.3}, GPU time {gpu_ratio:.3}   [{}]",
+        png.display()
+    );
+    Ok((ratio, gpu_ratio))
+}
+
+fn main() {
+    let frames: usize = std::env::args().skip(1).find_map(|a| a.parse().ok()).unwrap_or(20);
+    let root = workspace();
+    let shared = root.join("../shared/scenes");
+    let mut scenes = vec![
+        ("cornell-box", root.join("scenes/cornell-box/cornell-box.gltf")),
+        ("chairs", root.join("scenes/chairs/chairs.gltf")),
+    ];
+    if shared.is_dir() {
+        scenes.push(("CornellBox-Sphere", shared.join("cornell-box/CornellBox-Sphere.obj")));
+    } else {
+        println!("skipping CornellBox-Sphere: {} is absent", shared.display());
+    }
+    match prm_play::open_vulkan() {
+        Ok(ctx) => println!("GPU: {}", ctx.describe()),
+        Err(e) => {
+            eprintln!("error: {e}");
+            std::process::exit(1);
+        }
+    }
+    println!(
+        "1024x768; modes interleaved; 3 warm-up + {frames} frames per mode for frame times (no timestamp \
+         queries), then as many with them for GPU times per pass\n"
+    );
+    let mut summary = Vec::new();
+    let mut failed = false;
+    for (name, path) in &scenes {
+        match bench(name, path, frames) {
+            Ok(r) => summary.push((name, r)),
+            Err(e) => {
+                eprintln!("error: {name}: {e}");
+                failed = true;
+            }
+        }
+        println!();
+    }
+    println!("summary, gi / direct (target <= 1.10):");
+    for (name, (ratio, gpu)) in &summary {
+        println!("  {name:>18}: frame time {ratio:.3}, GPU time {gpu:.3}");
+    }
+    if failed {
+        std::process::exit(1);
+    }
 }

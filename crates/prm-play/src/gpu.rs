@@ -113,7 +113,7 @@ const _: () = assert!(std::mem::size_of::<GpuCluster>() == 32);
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
 pub struct GpuEntry {
-    /// Position (w unused).
+    /// Position; w: area it stands for over π (r² of its disk), the bound of its irradiance.
     pub position: [f32; 4],
     /// Unit normal (w unused).
     pub normal: [f32; 4],

@@ -9,15 +9,15 @@ use prm_play::{output, FrameInput, Mode, PlayOptions, Renderer};
 
 /// Real-time global illumination from a Precomputed Radiance Map.
 #[derive(Parser, Debug)]
-#[command(name = "prm-play", version)]
+#[command(name = "prm-play", version, after_help = prm_play::window::CONTROLS)]
 struct Args {
     /// The baked archive.
     archive: PathBuf,
     /// Scene file (default: the archive's `source_scene`, relative to the archive).
     #[arg(long)]
     scene: Option<PathBuf>,
-    /// Render `--frames` frames to `--out` without a window (default: open a window; keys 1-4
-    /// gi/direct/indirect/split, +/- top K, space pause, Esc quit; drag orbits, wheel zooms).
+    /// Render `--frames` frames to `--out` without a window (default: open a window; its mouse
+    /// and keys are listed below).
     #[arg(long)]
     headless: bool,
     /// Image size, WxH.
@@ -36,15 +36,20 @@ struct Args {
     /// Clusters kept per frame (default: the archive's params.top_k, else 32).
     #[arg(long)]
     top_k: Option<u32>,
-    /// Frames to render.
-    #[arg(long, default_value_t = 1)]
-    frames: u32,
+    /// Frames to render (headless: default 1). In a window: quit after this many presented
+    /// frames (default: run until closed).
+    #[arg(long)]
+    frames: Option<u32>,
     /// Keyframed lights and camera (TOML; see the prm_play::animation docs).
     #[arg(long)]
     animation: Option<PathBuf>,
-    /// Output directory.
+    /// Output directory (headless).
     #[arg(long, default_value = "out")]
     out: PathBuf,
+    /// Also save the last frame as a PNG here: in a window, the last presented frame (read back
+    /// from the swapchain) when the window closes; headless, a copy of the last frame's PNG.
+    #[arg(long, value_name = "FILE.png")]
+    screenshot: Option<PathBuf>,
     /// Write per-pass GPU times and frame times as JSON.
     #[arg(long)]
     timings: Option<PathBuf>,
@@ -95,6 +100,8 @@ fn main() -> Result<()> {
             animation,
             mode: args.mode,
             exposure: args.exposure,
+            frames: args.frames,
+            screenshot: args.screenshot,
         })
         .context("window mode");
     }
@@ -115,7 +122,8 @@ fn main() -> Result<()> {
     }
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
     let mut frames = Vec::new();
-    for i in 0..args.frames {
+    let frame_count = args.frames.unwrap_or(1);
+    for i in 0..frame_count {
         let (camera, lights) = match &animation {
             Some(a) => {
                 let t = a.time(i);
@@ -137,6 +145,9 @@ fn main() -> Result<()> {
         let stem = args.out.join(format!("frame{i:04}"));
         output::write_exr(&stem.with_extension("exr"), &image)?;
         output::write_png(&stem.with_extension("png"), &image, args.exposure)?;
+        if let (Some(path), true) = (&args.screenshot, i + 1 == frame_count) {
+            output::write_png(path, &image, args.exposure)?;
+        }
         eprintln!("frame {i}: {:.2} ms", t.cpu_ms);
         frames.push(t);
     }

@@ -46,6 +46,15 @@ impl Mode {
             Mode::Split => 3,
         }
     }
+    /// The mode's name as `--mode` takes it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Mode::Gi => "gi",
+            Mode::Direct => "direct",
+            Mode::Indirect => "indirect",
+            Mode::Split => "split",
+        }
+    }
     fn needs_indirect(self) -> bool {
         self != Mode::Direct
     }
@@ -197,6 +206,8 @@ pub struct Renderer {
     shade_resources: ShadeResources,
     shadow: ShadowMaps,
     timestamps: Option<Timestamps>,
+    /// Whether this frame writes the timestamps (see [`Renderer::set_timing`]).
+    timing: bool,
 }
 
 struct ShadeResources {
@@ -476,12 +487,15 @@ impl Renderer {
             wgpu::BufferUsages::VERTEX,
         );
 
-        // Entries and clusters.
+        // Entries (each stands for a disk of area A/N: its bound, see play_weights.wgsl) and
+        // clusters.
+        let disk = prm_trace::ENTRY_DISK
+            * (scene.area() / archive.entries().len().max(1) as f64 / std::f64::consts::PI) as f32;
         let entries: Vec<GpuEntry> = archive
             .entries()
             .iter()
             .map(|e| GpuEntry {
-                position: [e.position[0], e.position[1], e.position[2], 1.0],
+                position: [e.position[0], e.position[1], e.position[2], disk],
                 normal: [e.normal[0], e.normal[1], e.normal[2], 0.0],
             })
             .collect();
@@ -841,6 +855,7 @@ impl Renderer {
             shade_group,
             shade_resources,
             shadow,
+            timing: timestamps.is_some(),
             timestamps,
             ctx,
             opts,
@@ -995,6 +1010,12 @@ impl Renderer {
         self.timestamps.is_some()
     }
 
+    /// Pauses (`false`) or resumes per-pass timestamp queries; nothing changes without them.
+    /// On lavapipe a timestamp is a synchronisation point, so frame times are cleanest without.
+    pub fn set_timing(&mut self, on: bool) {
+        self.timing = on;
+    }
+
     /// The last frame (linear radiance, `rgba32float`), for presenting.
     pub fn color_view(&self) -> &wgpu::TextureView {
         &self.color_view
@@ -1069,7 +1090,8 @@ impl Renderer {
             queue.write_buffer(&self.shadow.matrices, 0, &mats);
         }
 
-        let ts = |pass: usize, first: bool, last: bool| self.timestamps.as_ref().map(|t| (t, pass, first, last));
+        let timestamps = self.timestamps.as_ref().filter(|_| self.timing);
+        let ts = |pass: usize, first: bool, last: bool| timestamps.map(|t| (t, pass, first, last));
         let mut enc = self.ctx.device.create_command_encoder(&Default::default());
         let mut ran = [false; PASS_NAMES.len()];
         // Shadow maps: one depth pass per view.
@@ -1161,7 +1183,7 @@ impl Renderer {
             pass.draw(0..self.vertex_count, 0..1);
             ran[5] = true;
         }
-        if let Some(t) = &self.timestamps {
+        if let Some(t) = timestamps {
             for (p, _) in ran.iter().enumerate().filter(|(_, r)| **r) {
                 let p = p as u32;
                 enc.resolve_query_set(&t.set, 2 * p..2 * p + 2, &t.resolve, p as u64 * 256);
@@ -1173,7 +1195,7 @@ impl Renderer {
         check(&self.ctx, scope, "frame")?;
         let cpu_ms = start.elapsed().as_secs_f64() * 1e3;
         let mut gpu_ms = Vec::new();
-        if let Some(t) = &self.timestamps {
+        if let Some(t) = timestamps {
             let bytes = self.ctx.read_buffer(&t.read)?;
             let period = queue.get_timestamp_period() as f64;
             for (p, _) in ran.iter().enumerate().filter(|(_, r)| **r) {

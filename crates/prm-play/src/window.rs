@@ -1,13 +1,15 @@
 //! Window mode (winit): the same renderer presented to a window, with an orbit camera.
 //!
-//! Mouse: left drag orbits around the camera's target, wheel zooms. Keys: `1` gi, `2` direct,
-//! `3` indirect, `4` split, `+`/`-` double/halve K, `space` pauses the animation, `Esc` quits.
-//! The title shows the mode, K and the frame rate.
+//! See [`CONTROLS`] for the mouse and keys. The title shows the mode, K, the frame time and the
+//! selected light. [`WindowConfig::frames`] quits by itself after that many presented frames and
+//! [`WindowConfig::screenshot`] saves the last presented frame as a PNG (read back from the
+//! swapchain image itself when the surface allows copies), so the mode can be tested under Xvfb.
 
+use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Instant;
 
-use glam::Vec3;
+use glam::{Quat, Vec3};
 use prm_scene::{Camera, Light, Scene};
 use winit::application::ApplicationHandler;
 use winit::event::{ElementState, MouseButton, MouseScrollDelta, WindowEvent};
@@ -17,6 +19,26 @@ use winit::window::{Window, WindowId};
 
 use crate::animation::Animation;
 use crate::{FileArchive, FrameInput, Mode, PlayError, PlayOptions, Renderer};
+
+/// The window's mouse and key bindings (also printed by `prm-play --help`).
+pub const CONTROLS: &str = "\
+Window controls:
+  left drag          orbit the camera around its target
+  wheel              zoom (move the camera towards / away from the target)
+  1 / 2 / 3 / 4      mode gi / direct / indirect / split
+  + (or =) / -       double / halve K, the clusters blended per frame
+  Tab                select the next light
+  arrows             move the selected light left/right and away/towards (relative to the view);
+                     a directional light turns instead
+  PageUp / PageDown  move the selected light up / down
+  space              pause / resume the animation
+  Esc                quit
+The title shows the mode, K / clusters, the frame time and frame rate, and the selected light.";
+
+/// Fraction of the scene's bounding-box diagonal a light moves per key press.
+pub const LIGHT_STEP: f32 = 0.02;
+/// Degrees a directional light turns per key press.
+pub const LIGHT_TURN_DEG: f32 = 5.0;
 
 /// What window mode starts with.
 pub struct WindowConfig {
@@ -36,6 +58,51 @@ pub struct WindowConfig {
     pub mode: Mode,
     /// Exposure of the displayed image.
     pub exposure: f32,
+    /// Quit after this many presented frames (`None`: run until closed).
+    pub frames: Option<u32>,
+    /// Save the last presented frame here (PNG, 8-bit sRGB) when the window closes.
+    pub screenshot: Option<PathBuf>,
+}
+
+/// Moves `light` by key presses: `right`, `forward` and `up` in steps of `step` scene units along
+/// the camera's right, its forward direction flattened onto the horizontal plane, and +Y. A
+/// directional light turns instead: `right` about +Y, `forward` towards/away from vertical, by
+/// [`LIGHT_TURN_DEG`] per step.
+pub fn nudge_light(light: &mut Light, camera: &Camera, right: f32, forward: f32, up: f32, step: f32) {
+    let fwd = {
+        let f = camera.target - camera.eye;
+        Vec3::new(f.x, 0.0, f.z).try_normalize().unwrap_or(Vec3::NEG_Z)
+    };
+    let side = fwd.cross(Vec3::Y);
+    let offset = (side * right + fwd * forward + Vec3::Y * up) * step;
+    match light {
+        Light::Point { position, .. } | Light::Spot { position, .. } => *position += offset,
+        Light::Directional { direction, .. } => {
+            let turn = LIGHT_TURN_DEG.to_radians();
+            let mut d = Quat::from_rotation_y(-right * turn) * *direction;
+            // Tilt about the horizontal axis across the light (the view's side for a vertical one).
+            let (axis, vertical) = match d.cross(Vec3::Y).try_normalize() {
+                Some(a) => (a, false),
+                None => (side, true),
+            };
+            let tilted = Quat::from_axis_angle(axis, forward * turn) * d;
+            // Never tip over the vertical (the turn about +Y would flip).
+            if vertical || tilted.cross(Vec3::Y).dot(axis) > 0.0 {
+                d = tilted;
+            }
+            *direction = d.normalize_or(*direction);
+        }
+    }
+}
+
+/// The selected light for the title: kind and position (direction for a directional light).
+fn light_label(light: &Light) -> String {
+    let v = |p: Vec3| format!("({:.2}, {:.2}, {:.2})", p.x, p.y, p.z);
+    match light {
+        Light::Point { position, .. } => format!("point at {}", v(*position)),
+        Light::Spot { position, .. } => format!("spot at {}", v(*position)),
+        Light::Directional { direction, .. } => format!("directional towards {}", v(*direction)),
+    }
 }
 
 /// The present pass (`play_present.wgsl`): the renderer's linear frame, × exposure, clamped and
@@ -134,20 +201,168 @@ impl Presenter {
     }
 }
 
+/// Where the last presented frame is kept for `--screenshot`.
+enum Capture {
+    /// A copy of the swapchain image (same format), made just before presenting.
+    Swapchain(wgpu::Texture),
+    /// The surface cannot be copied from (or has an unusual format): the present pass drawn a
+    /// second time into an `Rgba8Unorm` texture.
+    Offscreen(wgpu::Texture, Box<Presenter>),
+}
+
+impl Capture {
+    fn texture(&self) -> &wgpu::Texture {
+        match self {
+            Capture::Swapchain(t) | Capture::Offscreen(t, _) => t,
+        }
+    }
+}
+
 struct Gpu {
     window: Arc<Window>,
     surface: wgpu::Surface<'static>,
     config: wgpu::SurfaceConfiguration,
     renderer: Renderer,
     presenter: Presenter,
+    /// Whether `--screenshot` can copy the swapchain image.
+    copyable: bool,
+    capture: Option<Capture>,
+}
+
+/// 8-bit formats whose bytes a PNG can take (after swapping B and R for the BGRA ones).
+fn png_compatible(format: wgpu::TextureFormat) -> bool {
+    use wgpu::TextureFormat as F;
+    matches!(
+        format,
+        F::Rgba8Unorm | F::Rgba8UnormSrgb | F::Bgra8Unorm | F::Bgra8UnormSrgb
+    )
+}
+
+/// A capture texture: of the swapchain's `format` when it can be copied (`Some`), else an
+/// `Rgba8Unorm` one with its own present pass.
+fn new_capture(
+    renderer: &Renderer,
+    width: u32,
+    height: u32,
+    swapchain_format: Option<wgpu::TextureFormat>,
+    exposure: f32,
+) -> Capture {
+    let ctx = renderer.context();
+    let format = swapchain_format.unwrap_or(wgpu::TextureFormat::Rgba8Unorm);
+    let texture = ctx.device.create_texture(&wgpu::TextureDescriptor {
+        label: Some("prm-play screenshot"),
+        size: wgpu::Extent3d {
+            width,
+            height,
+            depth_or_array_layers: 1,
+        },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format,
+        usage: wgpu::TextureUsages::COPY_DST | wgpu::TextureUsages::COPY_SRC | wgpu::TextureUsages::RENDER_ATTACHMENT,
+        view_formats: &[],
+    });
+    match swapchain_format {
+        Some(_) => Capture::Swapchain(texture),
+        None => {
+            let mut p = Presenter::new(ctx, format, exposure);
+            p.bind(renderer);
+            Capture::Offscreen(texture, Box::new(p))
+        }
+    }
+}
+
+impl Gpu {
+    /// The capture texture for the current size, (re)created when the size changed.
+    fn capture_target(&mut self, exposure: f32) -> &Capture {
+        let (w, h) = (self.config.width, self.config.height);
+        if self
+            .capture
+            .as_ref()
+            .is_some_and(|c| (c.texture().width(), c.texture().height()) != (w, h))
+        {
+            self.capture = None;
+        }
+        let swapchain = self.copyable && png_compatible(self.config.format);
+        let (renderer, format) = (&self.renderer, self.config.format);
+        self.capture
+            .get_or_insert_with(|| new_capture(renderer, w, h, swapchain.then_some(format), exposure))
+    }
+
+    /// Reads the captured frame back and writes it as an RGB PNG.
+    fn save_capture(&self, path: &std::path::Path) -> Result<(), PlayError> {
+        let Some(capture) = &self.capture else {
+            return Err(PlayError::Window(format!(
+                "no frame was presented, so there is no screenshot for {}",
+                path.display()
+            )));
+        };
+        let texture = capture.texture();
+        let ctx = self.renderer.context();
+        let (w, h) = (texture.width(), texture.height());
+        let padded = (w * 4).div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
+        let buffer = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("prm-play screenshot"),
+            size: u64::from(padded) * u64::from(h),
+            usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+            mapped_at_creation: false,
+        });
+        let mut enc = ctx.device.create_command_encoder(&Default::default());
+        enc.copy_texture_to_buffer(
+            texture.as_image_copy(),
+            wgpu::TexelCopyBufferInfo {
+                buffer: &buffer,
+                layout: wgpu::TexelCopyBufferLayout {
+                    offset: 0,
+                    bytes_per_row: Some(padded),
+                    rows_per_image: Some(h),
+                },
+            },
+            texture.size(),
+        );
+        ctx.queue.submit([enc.finish()]);
+        let bytes = ctx.read_buffer(&buffer)?;
+        let bgra = matches!(
+            texture.format(),
+            wgpu::TextureFormat::Bgra8Unorm | wgpu::TextureFormat::Bgra8UnormSrgb
+        );
+        let mut rgb = Vec::with_capacity((w * h * 3) as usize);
+        for y in 0..h as usize {
+            let row = &bytes[y * padded as usize..y * padded as usize + w as usize * 4];
+            for p in row.chunks_exact(4) {
+                if bgra {
+                    rgb.extend([p[2], p[1], p[0]]);
+                } else {
+                    rgb.extend([p[0], p[1], p[2]]);
+                }
+            }
+        }
+        if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+            std::fs::create_dir_all(dir).map_err(|e| PlayError::Output {
+                path: path.to_path_buf(),
+                message: e.to_string(),
+            })?;
+        }
+        image::save_buffer(path, &rgb, w, h, image::ExtendedColorType::Rgb8).map_err(|e| PlayError::Output {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        })
+    }
 }
 
 struct App {
     config: Option<WindowConfig>,
     lights: Vec<Light>,
+    /// The user moved a light: the animation no longer drives the lights.
+    user_lights: bool,
+    selected: usize,
+    step: f32,
     animation: Option<Animation>,
     mode: Mode,
     exposure: f32,
+    frame_limit: Option<u32>,
+    screenshot: bool,
     gpu: Option<Gpu>,
     error: Option<PlayError>,
     target: Vec3,
@@ -161,13 +376,13 @@ struct App {
     paused: bool,
     clock: f32,
     last: Instant,
-    frames: u32,
-    fps_since: Instant,
-    fps: f32,
+    presented: u32,
+    /// Smoothed interval between presented frames, milliseconds.
+    frame_ms: Option<f32>,
 }
 
 impl App {
-    fn camera(&self) -> Camera {
+    fn orbit_camera(&self) -> Camera {
         let dir = Vec3::new(
             self.pitch.cos() * self.yaw.sin(),
             self.pitch.sin(),
@@ -178,6 +393,26 @@ impl App {
             target: self.target,
             fov_y_deg: self.fov,
         }
+    }
+
+    /// The camera and lights of the current moment.
+    fn frame_state(&self) -> (Camera, Vec<Light>) {
+        let (lights, anim_camera) = match &self.animation {
+            Some(a) => (
+                if a.lights.is_empty() || self.user_lights {
+                    self.lights.clone()
+                } else {
+                    a.lights_at(self.clock)
+                },
+                a.camera_at(self.clock),
+            ),
+            None => (self.lights.clone(), None),
+        };
+        let camera = match anim_camera {
+            Some(c) if !self.user_camera => c,
+            _ => self.orbit_camera(),
+        };
+        (camera, lights)
     }
 
     fn start(&mut self, event_loop: &ActiveEventLoop) -> Result<(), PlayError> {
@@ -197,11 +432,19 @@ impl App {
             .create_surface(window.clone())
             .map_err(|e| PlayError::Window(e.to_string()))?;
         let (ctx, adapter) = crate::open_vulkan_for(&instance, Some(&surface))?;
+        eprintln!("GPU: {}", ctx.describe());
         let size = window.inner_size();
         let mut config = surface
             .get_default_config(&adapter, size.width.max(1), size.height.max(1))
             .ok_or_else(|| PlayError::Window("the surface does not fit the adapter".into()))?;
         config.present_mode = wgpu::PresentMode::AutoVsync;
+        let copyable = surface
+            .get_capabilities(&adapter)
+            .usages
+            .contains(wgpu::TextureUsages::COPY_SRC);
+        if self.screenshot && copyable {
+            config.usage |= wgpu::TextureUsages::COPY_SRC;
+        }
         surface.configure(&ctx.device, &config);
         let mut presenter = Presenter::new(&ctx, config.format, self.exposure);
         cfg.options.width = config.width;
@@ -214,35 +457,24 @@ impl App {
             config,
             renderer,
             presenter,
+            copyable,
+            capture: None,
         });
         Ok(())
     }
 
-    fn redraw(&mut self) -> Result<(), PlayError> {
+    /// Renders and presents a frame; `true` once the frame limit is reached.
+    fn redraw(&mut self) -> Result<bool, PlayError> {
         let now = Instant::now();
         let dt = (now - self.last).as_secs_f32();
         self.last = now;
         if !self.paused {
             self.clock += dt;
         }
-        let (lights, anim_camera) = match &self.animation {
-            Some(a) => (
-                if a.lights.is_empty() {
-                    self.lights.clone()
-                } else {
-                    a.lights_at(self.clock)
-                },
-                a.camera_at(self.clock),
-            ),
-            None => (self.lights.clone(), None),
-        };
-        let camera = match anim_camera {
-            Some(c) if !self.user_camera => c,
-            _ => self.camera(),
-        };
-        let mode = self.mode;
+        let (camera, lights) = self.frame_state();
+        let (mode, exposure, screenshot) = (self.mode, self.exposure, self.screenshot);
         let Some(gpu) = self.gpu.as_mut() else {
-            return Ok(());
+            return Ok(false);
         };
         gpu.renderer.render(&FrameInput {
             camera,
@@ -255,35 +487,105 @@ impl App {
                 let device = &gpu.renderer.context().device;
                 gpu.surface.configure(device, &gpu.config);
                 gpu.window.request_redraw();
-                return Ok(());
+                return Ok(false);
             }
             _ => {
                 gpu.window.request_redraw();
-                return Ok(());
+                return Ok(false);
             }
         };
-        let ctx = gpu.renderer.context();
         let view = frame.texture.create_view(&Default::default());
-        let mut enc = ctx.device.create_command_encoder(&Default::default());
+        let mut enc = gpu
+            .renderer
+            .context()
+            .device
+            .create_command_encoder(&Default::default());
         gpu.presenter.draw(&mut enc, &view);
+        if screenshot {
+            match gpu.capture_target(exposure) {
+                Capture::Swapchain(t) => {
+                    enc.copy_texture_to_texture(frame.texture.as_image_copy(), t.as_image_copy(), frame.texture.size())
+                }
+                Capture::Offscreen(t, p) => p.draw(&mut enc, &t.create_view(&Default::default())),
+            }
+        }
+        let ctx = gpu.renderer.context();
         ctx.queue.submit([enc.finish()]);
         ctx.queue.present(frame);
-        self.frames += 1;
-        let since = self.fps_since.elapsed().as_secs_f32();
-        if since >= 1.0 {
-            self.fps = self.frames as f32 / since;
-            self.frames = 0;
-            self.fps_since = Instant::now();
-        }
+        self.presented += 1;
+        // Frame time: the interval between presented frames, smoothed.
+        let ms = dt * 1e3;
+        self.frame_ms = Some(match self.frame_ms {
+            Some(m) if self.presented > 2 => m * 0.8 + ms * 0.2,
+            _ => ms,
+        });
+        let ms = self.frame_ms.unwrap_or(ms);
+        let light = match lights.get(self.selected) {
+            Some(l) => format!(", light {}/{} {}", self.selected + 1, lights.len(), light_label(l)),
+            None => ", no lights".to_string(),
+        };
         gpu.window.set_title(&format!(
-            "prm-play — {:?}, K = {}, {:.1} fps{}",
-            self.mode,
+            "prm-play — {}, K {}/{}, {:.1} ms ({:.1} fps){}{}",
+            self.mode.name(),
             gpu.renderer.options().top_k,
-            self.fps,
+            gpu.renderer.cluster_count(),
+            ms,
+            1e3 / ms.max(1e-3),
+            light,
             if self.paused { " (paused)" } else { "" }
         ));
+        if self.frame_limit.is_some_and(|n| self.presented >= n) {
+            return Ok(true);
+        }
         gpu.window.request_redraw();
-        Ok(())
+        Ok(false)
+    }
+
+    /// Moves (or turns) the selected light; the animation stops driving the lights.
+    fn nudge(&mut self, right: f32, forward: f32, up: f32) {
+        let (camera, lights) = self.frame_state();
+        if lights.is_empty() {
+            return;
+        }
+        self.lights = lights;
+        self.user_lights = true;
+        let i = self.selected % self.lights.len();
+        nudge_light(&mut self.lights[i], &camera, right, forward, up, self.step);
+    }
+
+    fn key(&mut self, event_loop: &ActiveEventLoop, key: Key<&str>) {
+        match key {
+            Key::Named(NamedKey::Escape) => event_loop.exit(),
+            Key::Named(NamedKey::Space) => self.paused = !self.paused,
+            Key::Named(NamedKey::Tab) => {
+                let n = self.frame_state().1.len().max(1);
+                self.selected = (self.selected + 1) % n;
+            }
+            Key::Named(NamedKey::ArrowLeft) => self.nudge(-1.0, 0.0, 0.0),
+            Key::Named(NamedKey::ArrowRight) => self.nudge(1.0, 0.0, 0.0),
+            Key::Named(NamedKey::ArrowUp) => self.nudge(0.0, 1.0, 0.0),
+            Key::Named(NamedKey::ArrowDown) => self.nudge(0.0, -1.0, 0.0),
+            Key::Named(NamedKey::PageUp) => self.nudge(0.0, 0.0, 1.0),
+            Key::Named(NamedKey::PageDown) => self.nudge(0.0, 0.0, -1.0),
+            Key::Character("1") => self.mode = Mode::Gi,
+            Key::Character("2") => self.mode = Mode::Direct,
+            Key::Character("3") => self.mode = Mode::Indirect,
+            Key::Character("4") => self.mode = Mode::Split,
+            Key::Character("+") | Key::Character("=") => {
+                if let Some(g) = self.gpu.as_mut() {
+                    let k = g.renderer.options().top_k;
+                    g.renderer
+                        .set_top_k(k.saturating_mul(2).min(g.renderer.cluster_count().max(1)));
+                }
+            }
+            Key::Character("-") => {
+                if let Some(g) = self.gpu.as_mut() {
+                    let k = g.renderer.options().top_k;
+                    g.renderer.set_top_k(k.min(g.renderer.cluster_count().max(1)) / 2);
+                }
+            }
+            _ => {}
+        }
     }
 }
 
@@ -309,6 +611,8 @@ impl ApplicationHandler for App {
                     g.surface.configure(&g.renderer.context().device, &g.config);
                     g.renderer.resize(g.config.width, g.config.height);
                     g.presenter.bind(&g.renderer);
+                    // The offscreen capture binds the renderer's image too: rebuilt on demand.
+                    g.capture = None;
                 }
             }
             WindowEvent::MouseInput {
@@ -336,55 +640,46 @@ impl ApplicationHandler for App {
                 self.user_camera = true;
             }
             WindowEvent::KeyboardInput { event, .. } if event.state == ElementState::Pressed => {
-                match event.logical_key.as_ref() {
-                    Key::Named(NamedKey::Escape) => event_loop.exit(),
-                    Key::Named(NamedKey::Space) => self.paused = !self.paused,
-                    Key::Character("1") => self.mode = Mode::Gi,
-                    Key::Character("2") => self.mode = Mode::Direct,
-                    Key::Character("3") => self.mode = Mode::Indirect,
-                    Key::Character("4") => self.mode = Mode::Split,
-                    Key::Character("+") | Key::Character("=") => {
-                        if let Some(g) = self.gpu.as_mut() {
-                            let k = g.renderer.options().top_k;
-                            g.renderer
-                                .set_top_k(k.saturating_mul(2).min(g.renderer.cluster_count().max(1)));
-                        }
-                    }
-                    Key::Character("-") => {
-                        if let Some(g) = self.gpu.as_mut() {
-                            let k = g.renderer.options().top_k;
-                            g.renderer.set_top_k(k.min(g.renderer.cluster_count().max(1)) / 2);
-                        }
-                    }
-                    _ => {}
-                }
+                self.key(event_loop, event.logical_key.as_ref());
             }
-            WindowEvent::RedrawRequested => {
-                if let Err(e) = self.redraw() {
+            WindowEvent::RedrawRequested => match self.redraw() {
+                Ok(true) => event_loop.exit(),
+                Ok(false) => {}
+                Err(e) => {
                     self.error = Some(e);
                     event_loop.exit();
                 }
-            }
+            },
             _ => {}
         }
     }
 }
 
-/// Opens a window and plays until it is closed. Fails with a clear error when no display is
-/// available (use headless mode then).
+/// Opens a window and plays until it is closed (or `config.frames` frames were presented), then
+/// writes `config.screenshot`. Fails with a clear error when no display is available (use
+/// headless mode then).
 pub fn run(config: WindowConfig) -> Result<(), PlayError> {
     let no_display =
         |e: String| PlayError::Window(format!("cannot open a window ({e}); without a display use --headless"));
+    if config.frames == Some(0) {
+        return Err(PlayError::Window("--frames 0: nothing to show".into()));
+    }
     let event_loop = EventLoop::new().map_err(|e| no_display(e.to_string()))?;
     let c = config.camera;
     let offset = c.eye - c.target;
     let distance = offset.length().max(1e-3);
     let dir = offset / distance;
+    let screenshot = config.screenshot.clone();
     let mut app = App {
         lights: config.lights.clone(),
+        user_lights: false,
+        selected: 0,
+        step: config.scene.bounds().diagonal().max(1e-3) * LIGHT_STEP,
         animation: config.animation.clone(),
         mode: config.mode,
         exposure: config.exposure,
+        frame_limit: config.frames,
+        screenshot: screenshot.is_some(),
         gpu: None,
         error: None,
         target: c.target,
@@ -398,14 +693,29 @@ pub fn run(config: WindowConfig) -> Result<(), PlayError> {
         paused: false,
         clock: 0.0,
         last: Instant::now(),
-        frames: 0,
-        fps_since: Instant::now(),
-        fps: 0.0,
+        presented: 0,
+        frame_ms: None,
         config: Some(config),
     };
     event_loop.run_app(&mut app).map_err(|e| no_display(e.to_string()))?;
-    match app.error {
-        Some(e) => Err(e),
-        None => Ok(()),
+    if let Some(e) = app.error {
+        return Err(e);
     }
+    if let Some(path) = &screenshot {
+        let gpu = app
+            .gpu
+            .as_ref()
+            .ok_or_else(|| PlayError::Window("the window never opened, so there is no screenshot".into()))?;
+        gpu.save_capture(path)?;
+        let how = match gpu.capture {
+            Some(Capture::Swapchain(_)) => "copied from the swapchain image",
+            _ => "present pass drawn offscreen: the surface allows no copies",
+        };
+        eprintln!(
+            "{} frames presented; screenshot {} ({how})",
+            app.presented,
+            path.display()
+        );
+    }
+    Ok(())
 }

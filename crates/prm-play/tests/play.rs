@@ -1,5 +1,6 @@
 //! Integration tests of the player on Vulkan (lavapipe): GPU blend vs CPU, mode consistency,
-//! golden Cornell box frame, top-K selection, fingerprint check, multi-light animation, CLI.
+//! golden Cornell box frame, top-K selection, fingerprint check, multi-light animation, CLI,
+//! window mode under Xvfb.
 
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
@@ -308,8 +309,9 @@ fn cornell_box_matches_golden() {
     }
 }
 
-/// K < C: exactly the top K clusters contribute, faded weights never exceed the raw ones, ranks
-/// are a permutation, and the lightmap is Σ effective weight × pane.
+/// K < C: exactly the top K clusters contribute, ranks are a permutation, the kept clusters carry
+/// the expected energy (score) of all of them, faded ones less than the best one's share, and the
+/// lightmap is Σ effective weight × pane.
 #[test]
 fn top_k_keeps_the_strongest_clusters() {
     let k = 8;
@@ -327,18 +329,30 @@ fn top_k_keeps_the_strongest_clusters() {
     assert_eq!(ranks, (0..w.len() as u32).collect::<Vec<_>>());
     let mut by_score: Vec<usize> = (0..w.len()).collect();
     by_score.sort_by(|&a, &b| w[b].score.total_cmp(&w[a].score).then(a.cmp(&b)));
+    // Effective = weight × fade × factor, factor = Σ_all score / Σ_kept score × fade; the best
+    // cluster is far above the threshold (fade 1), so its ratio is the factor itself.
+    let best = &w[by_score[0]];
+    let factor = best.effective[0] / best.weight[0];
+    assert!(
+        factor > 1.0,
+        "dropping clusters must hand their energy to the kept ones"
+    );
+    let (mut all, mut kept) = (0f64, 0f64);
     for (rank, &c) in by_score.iter().enumerate() {
         assert_eq!(w[c].rank, rank as u32);
+        all += w[c].score as f64;
         for ch in 0..3 {
             if rank as u32 >= k {
                 assert_eq!(w[c].effective[ch], 0.0);
             } else {
-                assert!(w[c].effective[ch] <= w[c].weight[ch] * (1.0 + 1e-6));
+                assert!(w[c].effective[ch] <= w[c].weight[ch] * factor * (1.0 + 1e-5));
             }
         }
+        if (rank as u32) < k {
+            kept += (w[c].score * w[c].effective[0] / w[c].weight[0]) as f64;
+        }
     }
-    // The best cluster is far above the threshold: unfaded.
-    assert_eq!(w[by_score[0]].effective, w[by_score[0]].weight);
+    assert!((kept / all - 1.0).abs() < 1e-4, "kept energy {kept} vs all {all}");
     let gpu = r.read_lightmap().unwrap();
     let mut archive = Archive::open(cornell_archive()).unwrap();
     let mut cpu = vec![[0f32; 3]; gpu.len()];
@@ -572,4 +586,146 @@ fn present_pass_matches_png_tone_mapping() {
             }
         }
     }
+}
+
+/// Runs `cmd`, killing it after `limit` (a hung window must not hang the test run).
+fn output_within(mut cmd: std::process::Command, limit: std::time::Duration) -> std::process::Output {
+    use std::process::Stdio;
+    let mut child = cmd.stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().unwrap();
+    let start = std::time::Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        if start.elapsed() > limit {
+            let _ = child.kill();
+            let out = child.wait_with_output().unwrap();
+            panic!(
+                "still running after {limit:?}, killed; stderr:\n{}",
+                String::from_utf8_lossy(&out.stderr)
+            );
+        }
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    child.wait_with_output().unwrap()
+}
+
+/// Window mode under Xvfb on lavapipe (Vulkan): the window opens, presents `--frames` frames,
+/// quits by itself and saves the last presented frame (read back from the swapchain), which is
+/// not blank and equals the headless PNG of the same frame.
+#[test]
+fn window_mode_under_xvfb_presents_frames() {
+    let on_path =
+        std::env::var_os("PATH").is_some_and(|p| std::env::split_paths(&p).any(|d| d.join("xvfb-run").is_file()));
+    assert!(
+        on_path,
+        "xvfb-run not found: the window-mode test needs a virtual X server (apt-get install xvfb xauth)"
+    );
+    let dir = out_dir("window");
+    let shot = dir.join("window.png");
+    let _ = std::fs::remove_file(&shot);
+    let common = ["--size", "160x120", "--mode", "split", "--top-k", "8"];
+    let mut cmd = std::process::Command::new("xvfb-run");
+    cmd.args(["-a", "-s", "-screen 0 640x480x24"])
+        .arg(env!("CARGO_BIN_EXE_prm-play"))
+        .arg(cornell_archive())
+        .args(common)
+        .args(["--frames", "3", "--screenshot"])
+        .arg(&shot);
+    let out = output_within(cmd, std::time::Duration::from_secs(180));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        out.status.success(),
+        "prm-play in a window under xvfb-run failed:\n{stderr}"
+    );
+    assert!(stderr.contains("3 frames presented"), "{stderr}");
+    let img = image::open(&shot)
+        .unwrap_or_else(|e| panic!("screenshot {}: {e}\n{stderr}", shot.display()))
+        .to_rgb8();
+    assert_eq!(img.dimensions(), (160, 120));
+    let v: Vec<f64> = img.as_raw().iter().map(|&b| f64::from(b)).collect();
+    let mean = v.iter().sum::<f64>() / v.len() as f64;
+    let var = v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / v.len() as f64;
+    assert!(
+        mean > 20.0 && mean < 235.0 && var > 100.0,
+        "blank screenshot: mean {mean:.1}, variance {var:.1}"
+    );
+    // The same frame headless: the presented image is the tone-mapped frame, within one step.
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_prm-play"))
+        .arg(cornell_archive())
+        .args(common)
+        .arg("--headless")
+        .arg("--out")
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let headless = image::open(dir.join("frame0000.png")).unwrap().to_rgb8();
+    let worst = img
+        .as_raw()
+        .iter()
+        .zip(headless.as_raw())
+        .map(|(&a, &b)| (i32::from(a) - i32::from(b)).abs())
+        .max()
+        .unwrap_or(0);
+    assert!(
+        worst <= 1,
+        "window frame differs from the headless PNG by up to {worst} steps"
+    );
+}
+
+/// Window keys move the selected light relative to the view; a directional light turns.
+#[test]
+fn light_keys_move_and_turn_lights() {
+    use prm_play::window::{nudge_light, LIGHT_TURN_DEG};
+    let camera = prm_scene::Camera {
+        eye: Vec3::new(0.0, 1.0, 3.0),
+        target: Vec3::new(0.0, 0.5, 0.0),
+        fov_y_deg: 40.0,
+    };
+    let mut l = Light::Point {
+        position: Vec3::ZERO,
+        intensity: Vec3::ONE,
+    };
+    nudge_light(&mut l, &camera, 1.0, 0.0, 0.0, 0.5);
+    nudge_light(&mut l, &camera, 0.0, 1.0, 0.0, 0.5);
+    nudge_light(&mut l, &camera, 0.0, 0.0, -1.0, 0.5);
+    match l {
+        // Right is +X, forward (flattened) is -Z, up is +Y for this camera.
+        Light::Point { position, .. } => assert!((position - Vec3::new(0.5, -0.5, -0.5)).length() < 1e-5, "{position}"),
+        _ => unreachable!(),
+    }
+    let start = Vec3::new(0.0, -1.0, -1.0).normalize();
+    let mut d = Light::Directional {
+        direction: start,
+        irradiance: Vec3::ONE,
+    };
+    nudge_light(&mut d, &camera, 1.0, 0.0, 0.0, 0.5);
+    nudge_light(&mut d, &camera, 0.0, 1.0, 0.0, 0.5);
+    match d {
+        Light::Directional { direction, .. } => {
+            assert!((direction.length() - 1.0).abs() < 1e-5);
+            let angle = direction.dot(start).clamp(-1.0, 1.0).acos().to_degrees();
+            assert!(angle > 0.5 * LIGHT_TURN_DEG && angle < 2.5 * LIGHT_TURN_DEG, "{angle}");
+        }
+        _ => unreachable!(),
+    }
+    // Straight down (the usual sun) still tilts, and never flips over the vertical.
+    let mut sun = Light::Directional {
+        direction: Vec3::NEG_Y,
+        irradiance: Vec3::ONE,
+    };
+    nudge_light(&mut sun, &camera, 0.0, 1.0, 0.0, 0.5);
+    let Light::Directional { direction, .. } = sun else {
+        unreachable!()
+    };
+    let angle = direction.dot(Vec3::NEG_Y).clamp(-1.0, 1.0).acos().to_degrees();
+    assert!((angle - LIGHT_TURN_DEG).abs() < 1e-2, "{angle}");
+    for _ in 0..100 {
+        nudge_light(&mut sun, &camera, 0.0, -1.0, 0.0, 0.5);
+    }
+    let Light::Directional { direction, .. } = sun else {
+        unreachable!()
+    };
+    assert!(
+        direction.is_finite() && (direction.length() - 1.0).abs() < 1e-4,
+        "{direction}"
+    );
 }

@@ -27,7 +27,7 @@ pub mod walk;
 
 pub use bvh::{BuildQuality, Bvh, BvhKind, BvhParams, Hit};
 pub use cluster::{ClusterParams, Clustering};
-pub use direct::{direct_irradiance, entry_irradiance};
+pub use direct::{direct_irradiance, entry_irradiance, ENTRY_DISK};
 pub use error::{SpecError, TraceError};
 pub use pane::{evaluate_panes, PaneParams, Panes};
 pub use reference::{Estimate, ImageMode, Lighting, ReferenceParams, ReferenceTracer};
