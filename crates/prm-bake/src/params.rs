@@ -188,7 +188,9 @@ pub struct CostModel {
 
 impl CostModel {
     /// Rates measured with `cargo run --release -p prm-gpu --example bench_panes` on the
-    /// reference machine.
+    /// reference machine while it was shared (the job got about 60% of its two cores), so on a
+    /// quiet one bakes take about half the estimate: Sibenik's default bake, expected 510 s, took
+    /// 246 s quiet and 606 s shared.
     pub const REFERENCE: CostModel = CostModel {
         face_seconds: 1.0e-4,
         triangle_seconds: 3.0e-7,
