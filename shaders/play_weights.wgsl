@@ -23,19 +23,33 @@ struct Entry {
 // xyz: weight, w: score
 @group(0) @binding(6) var<storage, read_write> weights: array<vec4<f32>>;
 
-@compute @workgroup_size(64)
-fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
-    let c = gid.x;
+// One workgroup per cluster (x + 65535·y), its invocations sharing the members: with one
+// invocation per cluster, 64 clusters made a single workgroup, which lavapipe runs on one thread.
+const WEIGHT_LANES: u32 = 32u;
+var<workgroup> partial: array<vec3<f32>, WEIGHT_LANES>;
+
+@compute @workgroup_size(32)
+fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_index) lane: u32) {
+    let c = wid.x + wid.y * 65535u;
+    // Uniform per workgroup, so the barrier below stays in uniform control flow.
     if c >= frame.clusters.x {
         return;
     }
     let cl = clusters[c];
     var sum = vec3<f32>(0.0);
-    for (var k = 0u; k < cl.count; k++) {
+    for (var k = lane; k < cl.count; k += WEIGHT_LANES) {
         let e = entries[cl.first + k];
         // Bounded: the entry stands for a disk (position.w = its radius²), see entry_irradiance.
         sum += direct_irradiance_disk(e.position.xyz, e.normal.xyz, e.position.w);
     }
-    let w = sum / f32(max(cl.count, 1u));
-    weights[c] = vec4<f32>(w, dot(w, cl.energy.rgb));
+    partial[lane] = sum;
+    workgroupBarrier();
+    if lane == 0u {
+        var total = vec3<f32>(0.0);
+        for (var i = 0u; i < WEIGHT_LANES; i++) {
+            total += partial[i];
+        }
+        let w = total / f32(max(cl.count, 1u));
+        weights[c] = vec4<f32>(w, dot(w, cl.energy.rgb));
+    }
 }

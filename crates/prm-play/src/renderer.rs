@@ -1128,7 +1128,12 @@ impl Renderer {
             let groups = self.cluster_count.div_ceil(64);
             let lm = self.lightmap_resolution.div_ceil(8);
             let passes: [(&wgpu::ComputePipeline, &wgpu::BindGroup, [u32; 2]); 4] = [
-                (&self.weights_pipeline, &self.weights_group, [groups, 1]),
+                // One workgroup per cluster (play_weights.wgsl), in rows of 65535.
+                (
+                    &self.weights_pipeline,
+                    &self.weights_group,
+                    [self.cluster_count.min(65535), self.cluster_count.div_ceil(65535)],
+                ),
                 (&self.rank_pipeline, &self.rank_group, [groups, 1]),
                 (&self.select_pipeline, &self.select_group, [groups, 1]),
                 (&self.blend_pipeline, &self.blend_group, [lm, lm]),
