@@ -537,6 +537,30 @@ mod tests {
     }
 
     #[test]
+    fn time_budget_shrinks_automatic_sizes_only() {
+        let scene = cornell();
+        let roomy = BakeParams::resolve(&BakeConfig::default(), &scene, probe(&scene)).unwrap();
+        let budget = roomy.estimated_seconds / 4.0;
+        let tight = BakeConfig {
+            time_budget_s: Some(budget),
+            ..Default::default()
+        };
+        let p = BakeParams::resolve(&tight, &scene, probe(&scene)).unwrap();
+        assert!(p.estimated_seconds <= budget, "{p:?}");
+        assert!(p.estimated_seconds < roomy.estimated_seconds);
+        assert!(p.reasons.iter().any(|r| r.contains("time budget")), "{:?}", p.reasons);
+        // Explicit sizes are never changed, only estimated.
+        let fixed = BakeConfig {
+            preset: Some(Preset::Paper),
+            time_budget_s: Some(1.0),
+            ..Default::default()
+        };
+        let q = BakeParams::resolve(&fixed, &scene, probe(&scene)).unwrap();
+        assert_eq!((q.entries, q.clusters, q.paths_per_entry), (4096, 256, 1));
+        assert!(q.estimated_seconds > 1.0);
+    }
+
+    #[test]
     fn impossible_parameters_are_refused() {
         let scene = cornell();
         for (cfg, needle) in [
