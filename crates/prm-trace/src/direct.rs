@@ -15,13 +15,19 @@ use crate::sampling::SurfaceSample;
 /// Direct irradiance (W/m²) at `p` on triangle `tri` with unit geometric normal `ng`, using `n`
 /// (unit) as the receiving normal.
 pub fn direct_irradiance(bvh: &Bvh, lights: &[Light], p: Vec3, ng: Vec3, n: Vec3, tri: u32) -> Vec3 {
+    bounded_irradiance(bvh, lights, p, ng, n, tri, 0.0)
+}
+
+/// [`direct_irradiance`] at a point standing for a disk of radius² `disk`: the inverse square of
+/// point and spot lights becomes `1 / (d² + disk)`.
+fn bounded_irradiance(bvh: &Bvh, lights: &[Light], p: Vec3, ng: Vec3, n: Vec3, tri: u32, disk: f32) -> Vec3 {
     let mut e = Vec3::ZERO;
     for light in lights {
         let (to_light, dist, radiometric) = match *light {
             Light::Point { position, intensity } => {
                 let d = position - p;
                 let r = d.length();
-                (d / r, r, intensity / (r * r))
+                (d / r, r, intensity / (r * r + disk))
             }
             Light::Spot {
                 position,
@@ -35,7 +41,7 @@ pub fn direct_irradiance(bvh: &Bvh, lights: &[Light], p: Vec3, ng: Vec3, n: Vec3
                 if (-l).dot(direction) < angle.cos() {
                     continue;
                 }
-                (l, r, intensity / (r * r))
+                (l, r, intensity / (r * r + disk))
             }
             Light::Directional { direction, irradiance } => (-direction, f32::INFINITY, irradiance),
         };
@@ -79,38 +85,7 @@ pub fn entry_irradiance(bvh: &Bvh, lights: &[Light], entries: &[SurfaceSample]) 
         .par_iter()
         .map(|e| {
             let disk = ENTRY_DISK * e.weight / std::f32::consts::PI;
-            let bounded: Vec<Light> = lights.iter().map(|l| soften(*l, e.position, disk)).collect();
-            direct_irradiance(bvh, &bounded, e.position, e.normal, e.normal, e.triangle)
+            bounded_irradiance(bvh, lights, e.position, e.normal, e.normal, e.triangle, disk)
         })
         .collect()
-}
-
-/// `light` with its intensity scaled by r² / (r² + disk) as seen from `p` (point and spot lights).
-fn soften(light: Light, p: Vec3, disk: f32) -> Light {
-    let scale = |position: Vec3| {
-        let r2 = position.distance_squared(p);
-        if r2 > 0.0 {
-            r2 / (r2 + disk)
-        } else {
-            0.0
-        }
-    };
-    match light {
-        Light::Point { position, intensity } => Light::Point {
-            position,
-            intensity: intensity * scale(position),
-        },
-        Light::Spot {
-            position,
-            direction,
-            angle,
-            intensity,
-        } => Light::Spot {
-            position,
-            direction,
-            angle,
-            intensity: intensity * scale(position),
-        },
-        directional => directional,
-    }
 }
