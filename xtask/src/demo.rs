@@ -1,4 +1,5 @@
-//! `cargo xtask demo`: the main job end to end: bake the Cornell box, render a frame headless.
+//! `cargo xtask demo`: the main job end to end (bake the Cornell box, render a frame headless),
+//! and `cargo xtask eval`, which runs the `xtask-eval` package.
 
 use anyhow::{bail, Context, Result};
 use std::process::Command;
@@ -12,6 +13,26 @@ fn cargo_run(package: &str, args: &[&str]) -> Result<()> {
         .with_context(|| format!("starting cargo run -p {package}"))?;
     if !status.success() {
         bail!("{package} {} failed ({status})", args.join(" "));
+    }
+    Ok(())
+}
+
+/// `cargo xtask eval ARGS`: runs the `xtask-eval` package (dev profile for `--quick`, which CI's
+/// test build has already compiled; release for `--full`).
+pub fn run_eval(args: &[String]) -> Result<()> {
+    let mut cmd = Command::new(env!("CARGO"));
+    cmd.args(["run", "--quiet", "-p", "xtask-eval"]);
+    if args.iter().any(|a| a == "--full") {
+        cmd.arg("--release");
+    }
+    let status = cmd
+        .arg("--")
+        .args(args)
+        .status()
+        .context("starting cargo run -p xtask-eval")?;
+    if !status.success() {
+        // The evaluation printed its own reason; pass its exit code on.
+        std::process::exit(status.code().unwrap_or(1));
     }
     Ok(())
 }

@@ -1,7 +1,6 @@
 //! Project automation tasks: `cargo run -p xtask -- <task> [args]`.
 
 mod demo;
-mod eval;
 mod scenes;
 
 fn main() -> anyhow::Result<()> {
@@ -9,7 +8,7 @@ fn main() -> anyhow::Result<()> {
     match args.first().map(String::as_str) {
         Some("scenes") => scenes::run(&args[1..]),
         Some("demo") => demo::run(&args[1..]),
-        Some("eval") => eval::run(&args[1..]),
+        Some("eval") => demo::run_eval(&args[1..]),
         _ => {
             eprintln!("usage: cargo run -p xtask -- <task>\n\ntasks:\n  demo [SCENE]                    bake a scene (default: the Cornell box) and render a frame headless into out/\n  eval [--quick|--full] [--out DIR]  accuracy against speed: bake a sweep of settings, measure cost and error, write CSV and charts\n  scenes [--out DIR] [--check]   write (or verify) the test scenes in scenes/");
             std::process::exit(2);

@@ -154,6 +154,41 @@ impl Drop for MadeDirs {
     }
 }
 
+/// Opens the device the panes are rendered on, checked to run the pane passes
+/// ([`prm_gpu::check_support`]). `auto` tries Vulkan, then OpenGL, then bakes on the CPU, and
+/// says why it passed over each; an explicit GPU backend that cannot bake is an error.
+fn open_backend(arg: BackendArg, progress: &Progress) -> Result<Option<GpuContext>> {
+    let open = |b: Backend| -> Result<GpuContext, prm_gpu::GpuError> {
+        let ctx = GpuContext::new(b)?;
+        prm_gpu::check_support(&ctx)?;
+        Ok(ctx)
+    };
+    let explicit = match arg {
+        BackendArg::Cpu => return Ok(None),
+        BackendArg::Vulkan => Backend::Vulkan,
+        BackendArg::Gl => Backend::Gl,
+        BackendArg::Auto => {
+            for b in [Backend::Vulkan, Backend::Gl] {
+                match open(b) {
+                    Ok(ctx) => return Ok(Some(ctx)),
+                    Err(e) => progress.warn(&format!("backend auto: passing over {b}: {e}")),
+                }
+            }
+            progress.warn(
+                "backend auto: no GPU backend can render panes, baking on the CPU (exact ray-cast \
+                 visibility; slower). For the GPU path on a machine without a GPU: \
+                 `apt-get install mesa-vulkan-drivers`",
+            );
+            return Ok(None);
+        }
+    };
+    open(explicit).map(Some).with_context(|| {
+        format!(
+            "the {explicit} backend cannot render panes (use --backend auto, or --backend cpu to bake without a GPU)"
+        )
+    })
+}
+
 /// `to` relative to directory `from`, with `/` separators (absolute when they share no root).
 fn relative_path(from: &Path, to: &Path) -> String {
     let (Ok(from), Ok(to)) = (from.canonicalize(), to.canonicalize()) else {
@@ -170,6 +205,16 @@ fn relative_path(from: &Path, to: &Path) -> String {
 }
 
 pub fn run(args: &BakeArgs) -> Result<()> {
+    // Before any work: refuse an unusable -o (a directory, a device, a directory where no file
+    // can be created), follow a symlink to the file it names, and have SIGINT, SIGTERM and
+    // SIGHUP remove the bake's temporary file.
+    let destination = if args.plan {
+        args.output.clone()
+    } else {
+        let d = prm_format::check_destination(&args.output)?;
+        crate::signals::install(d.clone());
+        d
+    };
     let progress = Progress::new(args.quiet);
     let started = Instant::now();
     let mut timings = BTreeMap::new();
@@ -231,19 +276,10 @@ pub fn run(args: &BakeArgs) -> Result<()> {
     }
 
     // Open the device before the long CPU work, so a missing driver fails at once.
-    let gpu = match args.backend {
-        BackendArg::Cpu => None,
-        b => {
-            let backend = match b {
-                BackendArg::Vulkan => Backend::Vulkan,
-                BackendArg::Gl => Backend::Gl,
-                _ => Backend::Auto,
-            };
-            let ctx = GpuContext::new(backend).context("opening the GPU (use --backend cpu to bake without one)")?;
-            progress.say(&format!("  device: {}", ctx.describe()));
-            Some(ctx)
-        }
-    };
+    let gpu = open_backend(args.backend, &progress)?;
+    if let Some(ctx) = &gpu {
+        progress.say(&format!("  device: {}", ctx.describe()));
+    }
     let backend_name = gpu.as_ref().map_or_else(|| "cpu".to_string(), |g| g.describe());
 
     let t = Instant::now();
@@ -348,8 +384,7 @@ pub fn run(args: &BakeArgs) -> Result<()> {
     let mut metadata = Metadata::new("prm-bake", env!("CARGO_PKG_VERSION"));
     metadata.seed = params.seed;
     metadata.scene_fingerprint = scene.fingerprint();
-    let out_dir = args
-        .output
+    let out_dir = destination
         .parent()
         .filter(|d| !d.as_os_str().is_empty())
         .unwrap_or(Path::new("."));
@@ -362,6 +397,11 @@ pub fn run(args: &BakeArgs) -> Result<()> {
         .params
         .insert("atlas_stats".into(), serde_json::to_value(&atlas.stats)?);
     metadata.params.insert("backend".into(), backend_name.clone().into());
+    // The player refuses other geometry (scene_fingerprint) but only warns about other albedos.
+    metadata.params.insert(
+        "materials_fingerprint".into(),
+        format!("{:016x}", scene.materials_fingerprint()).into(),
+    );
     let mut writer = ArchiveWriter::create(&args.output, metadata, &atlas_section, &table_entries, &table_clusters)
         .with_context(|| format!("starting {}", args.output.display()))?;
 
@@ -442,14 +482,10 @@ pub fn run(args: &BakeArgs) -> Result<()> {
     ));
     timings.insert("pane_rendering".to_string(), render_s);
 
+    // Timings go to stdout and --report only: the archive's bytes depend on nothing but the
+    // scene, the parameters and the backend, so caches and content-addressed pipelines can key
+    // on them (tested by `bake_is_byte_identical_across_runs_and_threads`).
     let t = Instant::now();
-    let total_so_far = started.elapsed().as_secs_f64();
-    {
-        let m = writer.metadata_mut();
-        m.timings = timings.clone();
-        m.timings.insert("compression_write".to_string(), write_s);
-        m.timings.insert("total".to_string(), total_so_far);
-    }
     let bytes = writer
         .finish()
         .with_context(|| format!("finishing {}", args.output.display()))?;

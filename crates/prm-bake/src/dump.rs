@@ -317,8 +317,33 @@ const OVERVIEW_MAX_SIDE: usize = 4096;
 /// Writes `pane_NNNNN.exr` for every pane and `overview.exr` with all panes
 /// in a grid (each cell box-filtered down so the overview's width stays
 /// within 4096 pixels). Returns the number of panes written.
+///
+/// All or nothing: the files are written into a staging directory inside `dir` and moved into
+/// place only once every pane has been read, so a damaged archive leaves no partial export (and
+/// a `dir` this call created is removed again).
 pub fn export_exr<R: Read + Seek>(archive: &mut Archive<R>, dir: &Path) -> Result<usize> {
+    let created = !dir.exists();
     std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    let staging = dir.join(format!(".prm-export-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&staging);
+    std::fs::create_dir(&staging).with_context(|| format!("cannot create {}", staging.display()))?;
+    let written = write_exr_files(archive, &staging).and_then(|(n, names)| {
+        for name in &names {
+            std::fs::rename(staging.join(name), dir.join(name))
+                .with_context(|| format!("cannot move {name} into {}", dir.display()))?;
+        }
+        Ok(n)
+    });
+    let _ = std::fs::remove_dir_all(&staging);
+    if written.is_err() && created {
+        let _ = std::fs::remove_dir(dir);
+    }
+    written
+}
+
+/// [`export_exr`]'s files, written into `dir`; returns the pane count and the file names.
+fn write_exr_files<R: Read + Seek>(archive: &mut Archive<R>, dir: &Path) -> Result<(usize, Vec<String>)> {
+    let mut names = Vec::new();
     let res = archive.atlas().resolution as usize;
     let n = archive.pane_count();
     let cols = (n as f64).sqrt().ceil().max(1.0) as usize;
@@ -328,7 +353,9 @@ pub fn export_exr<R: Read + Seek>(archive: &mut Archive<R>, dir: &Path) -> Resul
     let mut overview = vec![[0f32; 3]; width * height];
     for p in 0..n {
         let pane = archive.read_pane(p).with_context(|| format!("cannot read pane {p}"))?;
-        let path = dir.join(format!("pane_{p:05}.exr"));
+        let name = format!("pane_{p:05}.exr");
+        let path = dir.join(&name);
+        names.push(name);
         exr::prelude::write_rgb_file(&path, res, res, |x, y| {
             let t = pane[y * res + x];
             (t[0], t[1], t[2])
@@ -359,8 +386,9 @@ pub fn export_exr<R: Read + Seek>(archive: &mut Archive<R>, dir: &Path) -> Resul
             (t[0], t[1], t[2])
         })
         .with_context(|| format!("cannot write {}", path.display()))?;
+        names.push("overview.exr".to_string());
     }
-    Ok(n)
+    Ok((n, names))
 }
 
 #[cfg(test)]
@@ -487,6 +515,36 @@ mod tests {
             ..args
         };
         assert!(format!("{:#}", run(&missing).unwrap_err()).contains("cannot open archive"));
+        std::fs::remove_dir_all(dir).unwrap();
+    }
+
+    #[test]
+    fn export_of_a_damaged_archive_leaves_nothing_behind() {
+        let dir = temp_dir("exr-damaged");
+        let path = dir.join("a.prm");
+        write_archive(&path);
+        let mut bytes = std::fs::read(&path).unwrap();
+        // Damage the last stored tile, so the first panes read and export before it fails.
+        let a = Archive::open(&path).unwrap();
+        let panes = a.info().sections.iter().find(|s| s.name == "panes").unwrap();
+        let at = (panes.offset + panes.stored_size - 3) as usize;
+        bytes[at] ^= 0x40;
+        let bad = dir.join("bad.prm");
+        std::fs::write(&bad, &bytes).unwrap();
+        let out = dir.join("exr");
+        let mut a = Archive::open(&bad).unwrap();
+        let err = format!("{:#}", export_exr(&mut a, &out).unwrap_err());
+        assert!(err.contains("cannot read pane"), "{err}");
+        assert!(!out.exists(), "a failed export left {}", out.display());
+        // Into an existing directory: its other files stay, no pane file appears.
+        std::fs::create_dir_all(&out).unwrap();
+        std::fs::write(out.join("keep.txt"), "x").unwrap();
+        assert!(export_exr(&mut a, &out).is_err());
+        let left: Vec<_> = std::fs::read_dir(&out)
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .collect();
+        assert_eq!(left, vec![std::ffi::OsString::from("keep.txt")]);
         std::fs::remove_dir_all(dir).unwrap();
     }
 

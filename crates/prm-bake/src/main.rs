@@ -6,6 +6,7 @@ mod dump;
 mod params;
 mod progress;
 mod reference;
+mod signals;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
@@ -46,6 +47,8 @@ enum Command {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    // Every subcommand is headless.
+    prm_gpu::silence_wayland_probe();
     let result = match &cli.command {
         Command::Bake(args) => bake::run(args),
         Command::Atlas(args) => atlas::run(args),

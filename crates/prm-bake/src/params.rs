@@ -418,6 +418,23 @@ impl BakeParams {
         if self.clusters == 0 {
             bail!("--clusters must be at least 1");
         }
+        if self.entries as u64 > prm_format::limits::MAX_ENTRIES {
+            bail!(
+                "--entries {} is over the archive format's limit of {} entry points",
+                self.entries,
+                prm_format::limits::MAX_ENTRIES
+            );
+        }
+        if self.clusters as u64 > prm_format::limits::MAX_CLUSTERS {
+            bail!(
+                "--clusters {} is over the archive format's limit of {} clusters",
+                self.clusters,
+                prm_format::limits::MAX_CLUSTERS
+            );
+        }
+        if self.top_k == 0 {
+            bail!("--top-k must be at least 1 (the clusters blended per frame)");
+        }
         if self.clusters > self.entries {
             bail!(
                 "{} clusters for {} entry points: there cannot be more clusters than entries",

@@ -35,7 +35,7 @@ pub struct ReferenceArgs {
     #[arg(long, value_name = "TEXELS", requires = "lightmap")]
     pub resolution: Option<u32>,
     /// Paths per pixel/texel in total (split into progressive passes).
-    #[arg(long, default_value_t = 256)]
+    #[arg(long, default_value_t = 256, value_parser = clap::value_parser!(u32).range(1..))]
     pub spp: u32,
     /// Only the indirect part: radiance ρ/π·E_ind (camera) or irradiance E_ind (lightmap).
     #[arg(long)]
@@ -47,6 +47,10 @@ pub struct ReferenceArgs {
     #[arg(short, long, value_name = "FILE.exr")]
     pub output: PathBuf,
 }
+
+/// Largest image the reference renders: its mean and variance estimates take 24 bytes a pixel,
+/// 1.5 GiB at this size, so a mistyped size fails at once instead of aborting on allocation.
+const MAX_PIXELS: u64 = 8192 * 8192;
 
 /// Runs `prm-bake reference`.
 pub fn run(args: &ReferenceArgs) -> Result<()> {
@@ -126,6 +130,13 @@ pub fn run(args: &ReferenceArgs) -> Result<()> {
                 .with_context(|| format!("{} has no camera; give --camera SPEC", args.scene.display()))?,
         };
         let (w, h) = parse_size(&args.size).with_context(|| format!("bad --size {:?}", args.size))?;
+        if w as u64 * h as u64 > MAX_PIXELS {
+            bail!(
+                "--size {w}x{h} is {} pixels; the reference tracer renders at most {MAX_PIXELS} \
+                 (8192x8192): it keeps a mean and a variance per pixel",
+                w as u64 * h as u64
+            );
+        }
         let mode = if args.indirect_only {
             ImageMode::IndirectOnly
         } else {

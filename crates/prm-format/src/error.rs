@@ -1,4 +1,12 @@
 //! The error type shared by the archive reader and writer.
+//!
+//! Decision: an underlying error (today only [`std::io::Error`]) is exposed
+//! as the variant's `source()` and is **not** interpolated into its
+//! `Display`. `anyhow`'s `{:#}` and `{:?}` walk the source chain, so
+//! interpolating it as well printed the OS text twice ("I/O error: No such
+//! file (os error 2): No such file (os error 2)"). Every variant follows this
+//! rule; callers that print a bare `{}` see the variant's own sentence only
+//! and should print the chain (`{:#}` with anyhow) to see the cause.
 
 /// Everything that can go wrong reading or writing a `.prm` archive.
 ///
@@ -10,8 +18,9 @@
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum Error {
-    /// An operating-system level read, write, rename or sync failed.
-    #[error("I/O error: {0}")]
+    /// An operating-system level read, write, rename or sync failed. The OS
+    /// error is the `source()`, not part of the message.
+    #[error("I/O error")]
     Io(#[from] std::io::Error),
     /// The file ends before a structure it declares.
     #[error("archive is truncated: {what}")]
@@ -59,6 +68,20 @@ pub enum Error {
     /// non-finite values, cluster ranges that do not tile the entries, …).
     #[error("invalid input: {0}")]
     InvalidInput(String),
+    /// The writer's destination cannot receive an archive: it exists and is
+    /// not a regular file (directory, device, FIFO, socket), its directory
+    /// is missing, or no file can be created there. Raised before any data
+    /// is written (see [`check_destination`](crate::check_destination)).
+    #[error("cannot write an archive to {}: {reason}", path.display())]
+    Destination {
+        /// The destination as given (or the symlink target it resolved to).
+        path: std::path::PathBuf,
+        /// What is wrong with it, e.g. `"it is a directory"`.
+        reason: String,
+        /// The OS error behind it, if any.
+        #[source]
+        source: Option<std::io::Error>,
+    },
 }
 
 /// `Result` with [`Error`].

@@ -6,7 +6,8 @@
 //! tiles. The byte layout is specified in `formats/prm.md`.
 //!
 //! * [`ArchiveWriter`] streams panes tile by tile into a temporary file and
-//!   renames it into place atomically.
+//!   renames it into place atomically; [`check_destination`] lets a binary
+//!   refuse a bad destination before any work.
 //! * [`Archive`] opens an archive from a path, a byte slice or any
 //!   `Read + Seek`, validates it as it goes and reads panes on demand;
 //!   [`Archive::verify`] checks everything.
@@ -33,4 +34,4 @@ pub use rgb9e5::{
     RGB9E5_MIN_ABS_ERROR, RGB9E5_MIN_NORMAL, RGB9E5_NAME,
 };
 pub use sections::{AtlasSection, Cluster, Entry};
-pub use writer::{ArchiveWriter, WriterOptions};
+pub use writer::{check_destination, own_temp_files, ArchiveWriter, WriterOptions};

@@ -9,12 +9,15 @@ use xxhash_rust::xxh3::Xxh3Default;
 use crate::error::{Error, Result};
 use crate::filter::TileFilter;
 use crate::layout::{
-    checksum, compression, kind, limits, Cursor, Header, SectionRecord, TileRecord, HEADER_SIZE, PANES_HEADER_SIZE,
-    SECTION_RECORD_SIZE, TEXEL_FORMAT_RGB9E5, TILE_RECORD_SIZE,
+    checksum, compression, kind, limits, Cursor, Header, SectionRecord, TileRecord, ATLAS_HEADER_SIZE,
+    CLUSTER_RECORD_SIZE, ENTRY_RECORD_SIZE, HEADER_SIZE, PANES_HEADER_SIZE, SECTION_RECORD_SIZE, TEXEL_FORMAT_RGB9E5,
+    TILE_RECORD_SIZE,
 };
 use crate::metadata::Metadata;
 use crate::rgb9e5::decode_rgb9e5;
-use crate::sections::{decode_clusters, decode_entries, validate_entries_clusters, AtlasSection, Cluster, Entry};
+use crate::sections::{
+    decode_clusters, decode_entries, entries_covered, validate_entries_clusters, AtlasSection, Cluster, Entry,
+};
 
 /// Largest raw size this reader decompresses for a section kind it does not
 /// interpret (see [`Archive::read_custom_section`]).
@@ -226,28 +229,31 @@ impl<R: Read + Seek> Archive<R> {
         let clusters_rec = find(kind::CLUSTERS)?;
         let panes_rec = find(kind::PANES)?;
 
-        let raw = load_section(&mut src, &meta_rec, limits::MAX_METADATA_BYTES)?;
+        // Every section's raw size is checked against what the counts read so
+        // far imply *before* it is decompressed, so a small stream cannot make
+        // the reader produce (or hold) more than those counts need. Hence the
+        // order: metadata (16 MiB cap), atlas (its own 16-byte header gives R
+        // and N), the panes header and tile index (uncompressed, bounded by
+        // real file bytes; gives the pane count), clusters (56 × panes), and
+        // last entries (28 × the entries the cluster ranges cover).
+        let meta = open_section(&mut src, &meta_rec)?;
+        if meta.record.raw_size > limits::MAX_METADATA_BYTES {
+            return Err(Error::inconsistent(format!(
+                "metadata section declares {} raw bytes, more than the limit {}",
+                meta.record.raw_size,
+                limits::MAX_METADATA_BYTES
+            )));
+        }
+        let raw = meta.read_all()?;
+        drop(meta);
         let metadata: Metadata =
             serde_json::from_slice(&raw).map_err(|e| Error::inconsistent(format!("metadata JSON: {e}")))?;
         metadata
             .validate()
             .map_err(|e| Error::inconsistent(format!("metadata: {e}")))?;
-
-        let max_atlas = AtlasSection::raw_size_for(limits::MAX_RESOLUTION, limits::MAX_TRIANGLES).unwrap_or(u64::MAX);
-        let raw = load_section(&mut src, &atlas_rec, max_atlas)?;
-        let atlas = AtlasSection::decode(&raw, strict).map_err(Error::inconsistent)?;
         drop(raw);
 
-        let max_entries = limits::MAX_ENTRIES * crate::layout::ENTRY_RECORD_SIZE as u64;
-        let raw = load_section(&mut src, &entries_rec, max_entries)?;
-        let entries = decode_entries(&raw).map_err(Error::inconsistent)?;
-        drop(raw);
-
-        let max_clusters = limits::MAX_CLUSTERS * crate::layout::CLUSTER_RECORD_SIZE as u64;
-        let raw = load_section(&mut src, &clusters_rec, max_clusters)?;
-        let clusters = decode_clusters(&raw).map_err(Error::inconsistent)?;
-        drop(raw);
-        validate_entries_clusters(&entries, &clusters).map_err(Error::inconsistent)?;
+        let atlas = read_atlas(&mut src, &atlas_rec, strict)?;
 
         // Panes: fixed header and tile index, checked by the index checksum.
         if panes_rec.compression != compression::NONE {
@@ -258,16 +264,29 @@ impl<R: Read + Seek> Archive<R> {
         if panes_rec.raw_size != panes_rec.stored_size {
             return Err(Error::inconsistent("panes section raw size differs from stored size"));
         }
+        if panes_rec.stored_size < PANES_HEADER_SIZE as u64 {
+            return Err(Error::inconsistent(format!(
+                "panes section has {} bytes, less than its {PANES_HEADER_SIZE}-byte header",
+                panes_rec.stored_size
+            )));
+        }
+        let fixed = read_at(&mut src, panes_rec.offset, PANES_HEADER_SIZE as u64, "panes header")?;
+        let declared_panes = Cursor::new(&fixed[8..12], "panes header").u32()?;
+        if u64::from(declared_panes) > limits::MAX_CLUSTERS {
+            return Err(Error::inconsistent(format!(
+                "{declared_panes} panes exceed the limit {}",
+                limits::MAX_CLUSTERS
+            )));
+        }
         let tps = u64::from(atlas.tiles_per_side());
         let tiles_per_pane = tps * tps;
-        let tile_count = clusters.len() as u64 * tiles_per_pane;
+        let tile_count = u64::from(declared_panes) * tiles_per_pane;
         let index_len = tile_count * TILE_RECORD_SIZE as u64;
         let data_start = PANES_HEADER_SIZE as u64 + index_len;
         if panes_rec.stored_size < data_start {
             return Err(Error::inconsistent(format!(
-                "panes section has {} bytes, its header and tile index for {} panes need {data_start}",
+                "panes section ({} bytes) is smaller than its tile index ({declared_panes} panes × {tiles_per_pane} tiles)",
                 panes_rec.stored_size,
-                clusters.len()
             )));
         }
         let head = read_at(&mut src, panes_rec.offset, data_start, "panes tile index")?;
@@ -281,12 +300,6 @@ impl<R: Read + Seek> Archive<R> {
         let texel_format = c.u32()?;
         let filter_code = c.u32()?;
         let reserved = c.u64()?;
-        if u64::from(pane_count) != clusters.len() as u64 {
-            return Err(Error::inconsistent(format!(
-                "{pane_count} panes for {} clusters",
-                clusters.len()
-            )));
-        }
         if u64::from(stored_tps) != tps {
             return Err(Error::inconsistent(format!(
                 "panes have {stored_tps} tiles per side, the atlas implies {tps}"
@@ -333,6 +346,31 @@ impl<R: Read + Seek> Archive<R> {
             }
             tiles.push(t);
         }
+        drop(head);
+
+        // Clusters: exactly one record per pane.
+        let expected = u64::from(pane_count) * CLUSTER_RECORD_SIZE as u64;
+        let section = open_section(&mut src, &clusters_rec)?;
+        section.expect_raw_size(expected, || format!("{pane_count} panes"))?;
+        let clusters = section.read_records(pane_count as usize, CLUSTER_RECORD_SIZE, decode_clusters)?;
+        drop(section);
+
+        // Entries: exactly as many as the cluster ranges cover.
+        let entry_count = entries_covered(&clusters).map_err(Error::inconsistent)?;
+        if entry_count > limits::MAX_ENTRIES {
+            return Err(Error::inconsistent(format!(
+                "clusters cover {entry_count} entries, more than the limit {}",
+                limits::MAX_ENTRIES
+            )));
+        }
+        let expected = entry_count * ENTRY_RECORD_SIZE as u64;
+        let section = open_section(&mut src, &entries_rec)?;
+        section.expect_raw_size(expected, || {
+            format!("{entry_count} entries covered by the cluster ranges")
+        })?;
+        let entries = section.read_records(entry_count as usize, ENTRY_RECORD_SIZE, decode_entries)?;
+        drop(section);
+        validate_entries_clusters(&entries, &clusters).map_err(Error::inconsistent)?;
 
         let info = ArchiveInfo {
             major: header.major,
@@ -522,7 +560,14 @@ impl<R: Read + Seek> Archive<R> {
                 "section kind {kind} is defined by the format; use the typed accessors"
             )));
         }
-        load_section(&mut self.src, &rec, MAX_CUSTOM_SECTION_BYTES).map(Some)
+        let section = open_section(&mut self.src, &rec)?;
+        if rec.raw_size > MAX_CUSTOM_SECTION_BYTES {
+            return Err(Error::inconsistent(format!(
+                "{} section declares {} raw bytes, more than the limit {MAX_CUSTOM_SECTION_BYTES}",
+                section.name, rec.raw_size
+            )));
+        }
+        section.read_all().map(Some)
     }
 
     /// Checks everything: every tile's checksum and decompression, every
@@ -605,16 +650,32 @@ pub fn pane_energy_peak(texels: &[u32], resolution: u32, tile_size: u32) -> ([f3
     (energy.map(|e| e as f32), peak)
 }
 
-/// Reads a known-size section, checks its checksum and decompresses it with
-/// the output capped at the declared raw size (which must not exceed `max_raw`).
-fn load_section<R: Read + Seek>(src: &mut R, r: &SectionRecord, max_raw: u64) -> Result<Vec<u8>> {
-    let name = section_name(r.kind);
-    if r.raw_size > max_raw {
-        return Err(Error::inconsistent(format!(
-            "{name} section declares {} raw bytes, more than the limit {max_raw}",
-            r.raw_size
-        )));
+/// Raw bytes decoded per step while streaming a section: memory grows with
+/// the data the stream actually produces, one chunk at a time.
+const RAW_CHUNK: usize = 1 << 20;
+
+/// Grows `v` so that `extra` more items fit, doubling but never past `total`
+/// items: a vector filled as data arrives ends at most twice its length, and
+/// exactly `total` when the data is complete.
+fn reserve_capped<T>(v: &mut Vec<T>, extra: usize, total: usize) {
+    if v.capacity() - v.len() < extra {
+        let target = v.capacity().saturating_mul(2).min(total).max(v.len() + extra);
+        v.reserve_exact(target - v.len());
     }
+}
+
+/// A section whose placement and compression code are known good and whose
+/// stored bytes (real file bytes, so bounded by the file) passed their
+/// checksum. Its raw bytes are produced on demand, capped at `raw_size`.
+struct StoredSection {
+    name: String,
+    record: SectionRecord,
+    stored: Vec<u8>,
+}
+
+/// Reads a section's stored bytes and checks its compression code and checksum.
+fn open_section<R: Read + Seek>(src: &mut R, r: &SectionRecord) -> Result<StoredSection> {
+    let name = section_name(r.kind);
     match r.compression {
         compression::NONE => {
             if r.raw_size != r.stored_size {
@@ -635,28 +696,187 @@ fn load_section<R: Read + Seek>(src: &mut R, r: &SectionRecord, max_raw: u64) ->
     if checksum(&stored) != r.checksum {
         return Err(Error::checksum(name));
     }
-    if r.compression == compression::NONE {
-        return Ok(stored);
+    Ok(StoredSection {
+        name,
+        record: r.clone(),
+        stored,
+    })
+}
+
+impl StoredSection {
+    /// Refuses the section unless its declared raw size is exactly what the
+    /// counts read so far imply (`counts` describes them for the message).
+    fn expect_raw_size(&self, expected: u64, counts: impl FnOnce() -> String) -> Result<()> {
+        if self.record.raw_size != expected {
+            return Err(Error::inconsistent(format!(
+                "{} section declares {} raw bytes, {} need {expected}",
+                self.name,
+                self.record.raw_size,
+                counts()
+            )));
+        }
+        Ok(())
     }
-    let decompress_err = |reason: String| Error::Decompress {
-        section: name.clone(),
-        reason,
-    };
-    // Streamed so memory grows only with output actually produced, and
-    // capped one byte past the declared size to detect overlong streams.
-    let decoder = zstd::stream::read::Decoder::with_buffer(&stored[..]).map_err(|e| decompress_err(e.to_string()))?;
-    let mut raw = Vec::new();
-    decoder
-        .take(r.raw_size + 1)
-        .read_to_end(&mut raw)
-        .map_err(|e| decompress_err(e.to_string()))?;
-    if raw.len() as u64 != r.raw_size {
-        return Err(decompress_err(format!(
-            "decompressed to {}{} bytes, the section table declares {}",
-            raw.len(),
-            if raw.len() as u64 > r.raw_size { "+" } else { "" },
-            r.raw_size
+
+    /// A reader of the raw bytes, producing at most `raw_size + 1` of them.
+    fn raw(&self) -> Result<RawReader<'_>> {
+        let inner: Box<dyn Read + '_> = if self.record.compression == compression::NONE {
+            Box::new(&self.stored[..])
+        } else {
+            Box::new(
+                zstd::stream::read::Decoder::with_buffer(&self.stored[..]).map_err(|e| Error::Decompress {
+                    section: self.name.clone(),
+                    reason: e.to_string(),
+                })?,
+            )
+        };
+        Ok(RawReader {
+            section: self,
+            inner: inner.take(self.record.raw_size.saturating_add(1)),
+            produced: 0,
+        })
+    }
+
+    /// All raw bytes, grown as they are decompressed.
+    fn read_all(&self) -> Result<Vec<u8>> {
+        let mut raw = self.raw()?;
+        let total = usize::try_from(self.record.raw_size)
+            .map_err(|_| Error::inconsistent(format!("{} section too large", self.name)))?;
+        let bytes = raw.bytes(total)?;
+        raw.finish()?;
+        Ok(bytes)
+    }
+
+    /// Decodes exactly `count` records of `size` bytes (the raw size was
+    /// checked to be `count × size`), a chunk at a time.
+    fn read_records<T>(
+        &self,
+        count: usize,
+        size: usize,
+        decode: impl Fn(&[u8]) -> Result<Vec<T>, String>,
+    ) -> Result<Vec<T>> {
+        let mut raw = self.raw()?;
+        let records = raw.records(count, size, decode)?;
+        raw.finish()?;
+        Ok(records)
+    }
+}
+
+/// The raw bytes of a [`StoredSection`], as they are produced.
+struct RawReader<'a> {
+    section: &'a StoredSection,
+    inner: std::io::Take<Box<dyn Read + 'a>>,
+    produced: u64,
+}
+
+impl RawReader<'_> {
+    fn error(&self, reason: String) -> Error {
+        Error::Decompress {
+            section: self.section.name.clone(),
+            reason,
+        }
+    }
+
+    fn read_exact(&mut self, buf: &mut [u8]) -> Result<()> {
+        match self.inner.read_exact(buf) {
+            Ok(()) => {
+                self.produced += buf.len() as u64;
+                Ok(())
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::UnexpectedEof => Err(self.error(format!(
+                "the stream ends before the {} bytes the section table declares",
+                self.section.record.raw_size
+            ))),
+            Err(e) => Err(self.error(e.to_string())),
+        }
+    }
+
+    /// The next `n` bytes, grown a chunk at a time.
+    fn bytes(&mut self, n: usize) -> Result<Vec<u8>> {
+        let mut out = Vec::new();
+        while out.len() < n {
+            let k = (n - out.len()).min(RAW_CHUNK);
+            let start = out.len();
+            reserve_capped(&mut out, k, n);
+            out.resize(start + k, 0);
+            self.read_exact(&mut out[start..])?;
+        }
+        Ok(out)
+    }
+
+    /// The next `count` records of `size` bytes, decoded a chunk at a time.
+    fn records<T>(
+        &mut self,
+        count: usize,
+        size: usize,
+        decode: impl Fn(&[u8]) -> Result<Vec<T>, String>,
+    ) -> Result<Vec<T>> {
+        let per_chunk = (RAW_CHUNK / size).max(1);
+        let mut buf = vec![0u8; per_chunk.min(count) * size];
+        let mut out = Vec::new();
+        while out.len() < count {
+            let n = (count - out.len()).min(per_chunk);
+            self.read_exact(&mut buf[..n * size])?;
+            let decoded = decode(&buf[..n * size]).map_err(Error::inconsistent)?;
+            reserve_capped(&mut out, decoded.len(), count);
+            out.extend(decoded);
+        }
+        Ok(out)
+    }
+
+    /// Requires the stream to end exactly at the declared raw size.
+    fn finish(mut self) -> Result<()> {
+        let mut probe = [0u8; 1];
+        loop {
+            match self.inner.read(&mut probe) {
+                Ok(0) => break,
+                Ok(_) => {
+                    return Err(self.error(format!(
+                        "the stream holds more than the {} bytes the section table declares",
+                        self.section.record.raw_size
+                    )))
+                }
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                Err(e) => return Err(self.error(e.to_string())),
+            }
+        }
+        if self.produced != self.section.record.raw_size {
+            return Err(self.error(format!(
+                "decompressed to {} bytes, the section table declares {}",
+                self.produced, self.section.record.raw_size
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// Reads the atlas section: its 16-byte header first, whose resolution and
+/// triangle count fix the raw size, checked before the rest is decompressed.
+fn read_atlas<R: Read + Seek>(src: &mut R, rec: &SectionRecord, strict: bool) -> Result<AtlasSection> {
+    let section = open_section(src, rec)?;
+    if section.record.raw_size < ATLAS_HEADER_SIZE as u64 {
+        return Err(Error::inconsistent(format!(
+            "atlas section has {} raw bytes, less than its {ATLAS_HEADER_SIZE}-byte header",
+            section.record.raw_size
         )));
     }
-    Ok(raw)
+    let mut raw = section.raw()?;
+    let mut head = [0u8; ATLAS_HEADER_SIZE];
+    raw.read_exact(&mut head)?;
+    let (resolution, tile_size, triangles) = AtlasSection::decode_header(&head, strict).map_err(Error::inconsistent)?;
+    let expected = AtlasSection::raw_size_for(resolution, u64::from(triangles)).unwrap_or(u64::MAX);
+    section.expect_raw_size(expected, || {
+        format!("resolution {resolution} and {triangles} triangles")
+    })?;
+    let triangle_uvs = raw.records(triangles as usize, 24, AtlasSection::decode_uvs)?;
+    let coverage = raw.bytes(AtlasSection::coverage_len(resolution))?;
+    raw.finish()?;
+    let atlas = AtlasSection {
+        resolution,
+        tile_size,
+        triangle_uvs,
+        coverage,
+    };
+    atlas.validate().map_err(Error::inconsistent)?;
+    Ok(atlas)
 }

@@ -142,10 +142,13 @@ impl AtlasSection {
         b
     }
 
-    /// Decodes raw section bytes; `strict` demands zero reserved fields.
-    pub(crate) fn decode(raw: &[u8], strict: bool) -> Result<Self, String> {
+    /// Parses the fixed 16-byte header: `(resolution, tile_size, triangles)`.
+    /// Checks the reserved field (if `strict`), the resolution and the
+    /// triangle limit, which fix the section's raw size; the tile size is
+    /// checked by [`validate`](Self::validate).
+    pub(crate) fn decode_header(head: &[u8], strict: bool) -> Result<(u32, u32, u32), String> {
         let err = |e: crate::Error| e.to_string();
-        let mut c = Cursor::new(raw, "atlas");
+        let mut c = Cursor::new(head, "atlas");
         let resolution = c.u32().map_err(err)?;
         let tile_size = c.u32().map_err(err)?;
         let triangles = c.u32().map_err(err)?;
@@ -159,6 +162,34 @@ impl AtlasSection {
                 limits::MAX_RESOLUTION
             ));
         }
+        if u64::from(triangles) > limits::MAX_TRIANGLES {
+            return Err(format!(
+                "{triangles} atlas triangles exceed the limit {}",
+                limits::MAX_TRIANGLES
+            ));
+        }
+        Ok((resolution, tile_size, triangles))
+    }
+
+    /// Decodes whole 24-byte triangle UV records.
+    pub(crate) fn decode_uvs(raw: &[u8]) -> Result<Vec<[[f32; 2]; 3]>, String> {
+        let mut c = Cursor::new(raw, "atlas");
+        let mut out = Vec::with_capacity(raw.len() / 24);
+        while out.len() < raw.len() / 24 {
+            let mut tri = [[0.0f32; 2]; 3];
+            for uv in &mut tri {
+                *uv = [c.f32().map_err(|e| e.to_string())?, c.f32().map_err(|e| e.to_string())?];
+            }
+            out.push(tri);
+        }
+        Ok(out)
+    }
+
+    /// Decodes raw section bytes; `strict` demands zero reserved fields.
+    #[cfg(test)]
+    pub(crate) fn decode(raw: &[u8], strict: bool) -> Result<Self, String> {
+        let head = raw.get(..ATLAS_HEADER_SIZE).ok_or("atlas record runs past its end")?;
+        let (resolution, tile_size, triangles) = Self::decode_header(head, strict)?;
         let expected = Self::raw_size_for(resolution, u64::from(triangles));
         if expected != Some(raw.len() as u64) {
             return Err(format!(
@@ -166,20 +197,12 @@ impl AtlasSection {
                 raw.len()
             ));
         }
-        let mut triangle_uvs = Vec::with_capacity(triangles as usize);
-        for _ in 0..triangles {
-            let mut tri = [[0.0f32; 2]; 3];
-            for uv in &mut tri {
-                *uv = [c.f32().map_err(err)?, c.f32().map_err(err)?];
-            }
-            triangle_uvs.push(tri);
-        }
-        let coverage = c.bytes(Self::coverage_len(resolution)).map_err(err)?.to_vec();
+        let uv_end = ATLAS_HEADER_SIZE + triangles as usize * 24;
         let atlas = AtlasSection {
             resolution,
             tile_size,
-            triangle_uvs,
-            coverage,
+            triangle_uvs: Self::decode_uvs(&raw[ATLAS_HEADER_SIZE..uv_end])?,
+            coverage: raw[uv_end..].to_vec(),
         };
         atlas.validate()?;
         Ok(atlas)
@@ -309,6 +332,23 @@ pub(crate) fn decode_clusters(raw: &[u8]) -> Result<Vec<Cluster>, String> {
         out.push(cl);
     }
     Ok(out)
+}
+
+/// Number of entries the cluster ranges cover, checking that they tile
+/// `[0, n)` in order (cluster 0 starts at 0, each starts where the previous
+/// ended). Read before the entries section, whose raw size it fixes.
+pub(crate) fn entries_covered(clusters: &[Cluster]) -> Result<u64, String> {
+    let mut next = 0u64;
+    for (ci, c) in clusters.iter().enumerate() {
+        if u64::from(c.first) != next {
+            return Err(format!(
+                "cluster {ci} starts at entry {}, expected {next} (ranges must tile the entries in order)",
+                c.first
+            ));
+        }
+        next += u64::from(c.count);
+    }
+    Ok(next)
 }
 
 /// Checks entries and clusters against each other: finite values, entries

@@ -1,5 +1,33 @@
 //! Streaming, atomic archive writer: panes are encoded and compressed tile by tile.
+//!
+//! Decisions about the destination and the temporary file:
+//!
+//! * **Symlinks are written through.** A destination that is a symbolic link
+//!   (possibly a chain, possibly dangling) is resolved to its final target;
+//!   the temporary file is created beside that target and renamed onto it,
+//!   so the link itself stays. Relative link targets are resolved against
+//!   the link's own directory, without lexical `..` normalisation (the OS
+//!   resolves `..` after following symlinked directories).
+//! * **Only regular files are replaced.** A destination that exists and is
+//!   a directory, device, FIFO or socket is refused with
+//!   [`Error::Destination`] naming the path and what it is, before anything
+//!   is written (renaming over `/dev/full` as root would otherwise replace
+//!   the device node). [`check_destination`] runs the same checks plus a
+//!   probe file, so a binary can fail before a long bake.
+//! * **Stale temporary files are swept.** The temporary file is
+//!   `.<name>.tmp-<pid>-<n>` beside the target. A process killed with
+//!   SIGKILL cannot remove its own, so creating a writer removes the files
+//!   of that pattern, for the same destination name, whose `<pid>` is not a
+//!   live process. Liveness is `/proc/<pid>` on Linux (only when `/proc`
+//!   shows our own pid, i.e. is mounted for our pid namespace); elsewhere
+//!   nothing is swept. Files of live processes, including our own, are never
+//!   touched. Caveat: a directory shared with another pid namespace (a
+//!   container volume) can hold a live writer's file whose pid we cannot see.
+//! * **Signals are the binary's business.** The library keeps no global
+//!   registry; [`ArchiveWriter::temp_path`] tells a binary which file to
+//!   remove from its own signal handler.
 
+use std::ffi::OsStr;
 use std::fs::{self, File, OpenOptions};
 use std::io::{BufWriter, Read, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
@@ -57,6 +85,238 @@ impl Drop for TempFile {
 
 static TEMP_COUNTER: AtomicU64 = AtomicU64::new(0);
 
+/// Longest chain of symbolic links followed to reach the destination (Linux's own limit).
+const MAX_SYMLINK_HOPS: usize = 40;
+
+/// The directory holding `path` (`.` for a bare file name).
+fn parent_dir(path: &Path) -> PathBuf {
+    match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    }
+}
+
+fn destination_error(path: &Path, reason: impl Into<String>, source: Option<std::io::Error>) -> Error {
+    Error::Destination {
+        path: path.to_path_buf(),
+        reason: reason.into(),
+        source,
+    }
+}
+
+/// "a directory", "a character device", … for a file that is not regular.
+fn describe_file_type(t: fs::FileType) -> &'static str {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt;
+        if t.is_char_device() {
+            return "a character device";
+        }
+        if t.is_block_device() {
+            return "a block device";
+        }
+        if t.is_fifo() {
+            return "a FIFO (named pipe)";
+        }
+        if t.is_socket() {
+            return "a socket";
+        }
+    }
+    if t.is_dir() {
+        "a directory"
+    } else if t.is_symlink() {
+        "a symbolic link"
+    } else {
+        "not a regular file"
+    }
+}
+
+/// Follows symbolic links from `given` to the path the archive will really
+/// replace, and refuses a target that exists and is not a regular file. A
+/// target that does not exist is fine here (its directory is checked by the
+/// callers).
+fn resolve_destination(given: &Path) -> Result<PathBuf> {
+    let mut path = given.to_path_buf();
+    let via = |p: &Path| {
+        if p == given {
+            String::new()
+        } else {
+            format!(" (reached through the symbolic link {})", given.display())
+        }
+    };
+    for _ in 0..=MAX_SYMLINK_HOPS {
+        match fs::symlink_metadata(&path) {
+            Ok(m) if m.file_type().is_symlink() => {
+                let target = fs::read_link(&path)
+                    .map_err(|e| destination_error(&path, "cannot read the symbolic link", Some(e)))?;
+                path = if target.is_absolute() {
+                    target
+                } else {
+                    parent_dir(&path).join(target)
+                };
+            }
+            Ok(m) if m.is_file() => return Ok(path),
+            Ok(m) => {
+                let reason = format!(
+                    "it is {}, not a regular file{}",
+                    describe_file_type(m.file_type()),
+                    via(&path)
+                );
+                return Err(destination_error(&path, reason, None));
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(path),
+            Err(e) => {
+                let reason = format!("cannot inspect it{}", via(&path));
+                return Err(destination_error(&path, reason, Some(e)));
+            }
+        }
+    }
+    Err(destination_error(
+        given,
+        format!("more than {MAX_SYMLINK_HOPS} levels of symbolic links"),
+        None,
+    ))
+}
+
+/// `.<name>.tmp-<pid>-<n>` in `dir`.
+fn temp_path_for(dir: &Path, name: &OsStr) -> PathBuf {
+    dir.join(format!(
+        ".{}.tmp-{}-{}",
+        name.to_string_lossy(),
+        std::process::id(),
+        TEMP_COUNTER.fetch_add(1, Ordering::Relaxed)
+    ))
+}
+
+/// The pid of a temporary file name `.<name>.tmp-<pid>-<n>` of destination `name`.
+fn temp_file_pid(file: &str, name: &str) -> Option<u32> {
+    let rest = file.strip_prefix('.')?.strip_prefix(name)?.strip_prefix(".tmp-")?;
+    let (pid, n) = rest.split_once('-')?;
+    let digits = |s: &str| !s.is_empty() && s.bytes().all(|b| b.is_ascii_digit());
+    if !digits(pid) || !digits(n) {
+        return None;
+    }
+    pid.parse().ok()
+}
+
+/// Removes the temporary files of destination `name` in `dir` left by
+/// processes that no longer exist (see the module docs); returns how many.
+fn remove_stale_temps(dir: &Path, name: &OsStr) -> usize {
+    #[cfg(target_os = "linux")]
+    {
+        let me = std::process::id();
+        let proc = Path::new("/proc");
+        let (Some(name), true) = (name.to_str(), proc.join(me.to_string()).exists()) else {
+            return 0;
+        };
+        let Ok(listing) = fs::read_dir(dir) else {
+            return 0;
+        };
+        let mut removed = 0;
+        for entry in listing.flatten() {
+            let file = entry.file_name();
+            let Some(pid) = file.to_str().and_then(|f| temp_file_pid(f, name)) else {
+                continue;
+            };
+            if pid == me || proc.join(pid.to_string()).exists() {
+                continue;
+            }
+            // Never follow a symlink or remove anything but a plain file.
+            let path = entry.path();
+            if fs::symlink_metadata(&path).is_ok_and(|m| m.is_file()) && fs::remove_file(&path).is_ok() {
+                removed += 1;
+            }
+        }
+        removed
+    }
+    #[cfg(not(target_os = "linux"))]
+    {
+        let _ = (dir, name);
+        0
+    }
+}
+
+/// The temporary files that writers of *this* process currently have for
+/// destination `path` (symbolic links resolved as the writer resolves them).
+///
+/// Global-state free: it lists `.<name>.tmp-<our pid>-<n>` beside the
+/// target. Meant for a binary's signal handler, which knows its `-o` path
+/// but not the writer (see also [`ArchiveWriter::temp_path`]); removing the
+/// files while a writer is alive makes its `finish` fail.
+pub fn own_temp_files(path: impl AsRef<Path>) -> Vec<PathBuf> {
+    let path = path.as_ref();
+    let dest = resolve_destination(path).unwrap_or_else(|_| path.to_path_buf());
+    let (Some(name), dir) = (dest.file_name().and_then(OsStr::to_str), parent_dir(&dest)) else {
+        return Vec::new();
+    };
+    let me = std::process::id();
+    let Ok(listing) = fs::read_dir(&dir) else {
+        return Vec::new();
+    };
+    let mut files: Vec<PathBuf> = listing
+        .flatten()
+        .filter(|e| e.file_name().to_str().and_then(|f| temp_file_pid(f, name)) == Some(me))
+        .map(|e| e.path())
+        .collect();
+    files.sort();
+    files
+}
+
+/// Checks, before any work, that an archive can be written at `path`, and
+/// returns the path the writer will replace (symbolic links resolved).
+///
+/// Refuses ([`Error::Destination`]) a destination that exists and is not a
+/// regular file (directory, device, FIFO, socket), one whose nearest
+/// existing ancestor is not a directory, and one whose directory exists but
+/// where no file can be created (checked by creating and removing a probe
+/// file named like the writer's temporary files). Missing directories are
+/// accepted: a caller may create them before [`ArchiveWriter::create`].
+pub fn check_destination(path: impl AsRef<Path>) -> Result<PathBuf> {
+    let dest = resolve_destination(path.as_ref())?;
+    let name = dest
+        .file_name()
+        .ok_or_else(|| destination_error(&dest, "it has no file name", None))?
+        .to_os_string();
+    let dir = parent_dir(&dest);
+    let mut ancestor = dir.as_path();
+    loop {
+        match fs::metadata(ancestor) {
+            Ok(m) if m.is_dir() => break,
+            Ok(m) => {
+                let reason = format!(
+                    "{} is {}, not a directory",
+                    ancestor.display(),
+                    describe_file_type(m.file_type())
+                );
+                return Err(destination_error(&dest, reason, None));
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => match ancestor.parent() {
+                Some(p) if !p.as_os_str().is_empty() => ancestor = p,
+                _ => return Ok(dest),
+            },
+            Err(e) => {
+                let reason = format!("cannot inspect {}", ancestor.display());
+                return Err(destination_error(&dest, reason, Some(e)));
+            }
+        }
+    }
+    if ancestor != dir {
+        return Ok(dest); // the directory is still to be created
+    }
+    let probe = temp_path_for(&dir, &name);
+    match OpenOptions::new().write(true).create_new(true).open(&probe) {
+        Ok(f) => {
+            drop(f);
+            let _ = fs::remove_file(&probe);
+            Ok(dest)
+        }
+        Err(e) => {
+            let reason = format!("cannot create a file in {}", dir.display());
+            Err(destination_error(&dest, reason, Some(e)))
+        }
+    }
+}
+
 /// Writes a `.prm` archive.
 ///
 /// The archive is written to a temporary file in the destination's
@@ -81,6 +341,9 @@ static TEMP_COUNTER: AtomicU64 = AtomicU64::new(0);
 /// # Ok::<(), prm_format::Error>(())
 /// ```
 pub struct ArchiveWriter {
+    /// The path as given to `create`.
+    given: PathBuf,
+    /// The file the archive replaces: `given` with symlinks resolved.
     dest: PathBuf,
     temp: TempFile,
     options: WriterOptions,
@@ -142,25 +405,27 @@ impl ArchiveWriter {
         }
         validate_entries_clusters(entries, &clusters).map_err(Error::InvalidInput)?;
 
-        let dest = path.as_ref().to_path_buf();
+        let given = path.as_ref().to_path_buf();
+        if given.file_name().is_none() {
+            return Err(Error::InvalidInput(format!("{} has no file name", given.display())));
+        }
+        let dest = resolve_destination(&given)?;
         let file_name = dest
             .file_name()
-            .ok_or_else(|| Error::InvalidInput(format!("{} has no file name", dest.display())))?;
-        let dir = match dest.parent() {
-            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-            _ => PathBuf::from("."),
-        };
-        let temp_path = dir.join(format!(
-            ".{}.tmp-{}-{}",
-            file_name.to_string_lossy(),
-            std::process::id(),
-            TEMP_COUNTER.fetch_add(1, Ordering::Relaxed)
-        ));
+            .ok_or_else(|| destination_error(&dest, "it has no file name", None))?
+            .to_os_string();
+        let dir = parent_dir(&dest);
+        remove_stale_temps(&dir, &file_name);
+        let temp_path = temp_path_for(&dir, &file_name);
         let file = OpenOptions::new()
             .read(true)
             .write(true)
             .create_new(true)
-            .open(&temp_path)?;
+            .open(&temp_path)
+            .map_err(|e| {
+                let reason = format!("cannot create the temporary file {}", temp_path.display());
+                destination_error(&dest, reason, Some(e))
+            })?;
         let temp = TempFile {
             path: temp_path,
             file: Some(BufWriter::with_capacity(1 << 20, file)),
@@ -170,6 +435,7 @@ impl ArchiveWriter {
         let tile_texels = atlas.tile_size as usize * atlas.tile_size as usize;
         let tile_count = clusters.len() * tiles_per_side as usize * tiles_per_side as usize;
         let mut w = ArchiveWriter {
+            given,
             dest,
             temp,
             compressor: zstd::bulk::Compressor::new(options.zstd_level)?,
@@ -201,6 +467,21 @@ impl ArchiveWriter {
         let pos = w.pos;
         w.file()?.seek(SeekFrom::Start(pos))?;
         Ok(w)
+    }
+
+    /// The temporary file being written, renamed onto
+    /// [`destination`](Self::destination) by [`finish`](Self::finish).
+    ///
+    /// For a binary's signal handler: the writer removes this file itself on
+    /// failure or drop, but not when the process is ended by a signal.
+    pub fn temp_path(&self) -> &Path {
+        &self.temp.path
+    }
+
+    /// The file the archive will replace: the path given to `create`, with
+    /// symbolic links resolved.
+    pub fn destination(&self) -> &Path {
+        &self.dest
     }
 
     /// Atlas resolution (texels per pane side).
@@ -413,6 +694,20 @@ impl ArchiveWriter {
         file.flush()?;
         file.get_ref().sync_all()?;
         drop(self.temp.file.take());
+        // The destination may have changed during the write: refuse it now
+        // rather than rename over a directory, a device or a new symlink.
+        let now = resolve_destination(&self.given)?;
+        if now != self.dest {
+            return Err(destination_error(
+                &self.given,
+                format!(
+                    "it now leads to {} instead of {}; changed while the archive was written",
+                    now.display(),
+                    self.dest.display()
+                ),
+                None,
+            ));
+        }
         fs::rename(&self.temp.path, &self.dest)?;
         // The temp path no longer exists; make the guard's removal a no-op.
         self.temp.path = PathBuf::new();

@@ -11,7 +11,8 @@ pub mod pane_gather;
 pub mod smoke;
 pub mod vpl_depth;
 
-pub use context::{Backend, GpuContext, GpuError};
+pub use context::{instance, silence_wayland_probe, Backend, ContextOptions, ErrorScopes, GpuContext, GpuError};
 pub use pane::{
-    render_panes, render_panes_with, DepthFilter, PaneOutput, PaneRenderParams, PaneRenderStats, ShadowBias,
+    check_support, render_panes, render_panes_with, DepthFilter, PaneOutput, PaneRenderParams, PaneRenderStats,
+    ShadowBias,
 };

@@ -18,7 +18,7 @@ use wgpu::util::DeviceExt;
 
 use crate::pane_gather::{GatherParams, GpuExit, PaneGatherPass};
 use crate::vpl_depth::{ChunkedScene, DepthFrame, GpuVpl, VplDepthPass, FACES};
-use crate::{GpuContext, GpuError};
+use crate::{ErrorScopes, GpuContext, GpuError};
 
 /// Parameters of GPU pane rendering.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -146,7 +146,7 @@ pub fn render_panes_with<E: From<GpuError>>(
     if clusters == 0 {
         return Ok(stats);
     }
-    let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+    let scope = ErrorScopes::push(device);
 
     // Scene geometry in culling chunks, and the frame of the hemicubes.
     let triangles: Vec<[Vec3; 3]> = scene.triangles.iter().map(|t| t.positions).collect();
@@ -252,13 +252,8 @@ pub fn render_panes_with<E: From<GpuError>>(
         &params_buffer,
         &depth.array_view,
     );
-    if let Some(e) = pollster::block_on(scope.pop()) {
-        return Err(GpuError::Validation {
-            pass: "pane setup",
-            message: e.to_string(),
-        }
-        .into());
-    }
+    scope.pop("pane setup")?;
+    ctx.take_uncaptured()?;
 
     // A face spans 90°: one texel subtends about π/2 / resolution at its centre.
     let texel = std::f32::consts::FRAC_PI_2 / face_res as f32;
@@ -273,7 +268,7 @@ pub fn render_panes_with<E: From<GpuError>>(
         while at < v1 {
             let end = (at + batch_cap as usize).min(v1);
             let batch = &sorted[at..end];
-            let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+            let scope = ErrorScopes::push(device);
             ctx.queue.write_buffer(&vpl_buffer, 0, bytemuck::cast_slice(batch));
             let gp = GatherParams {
                 exit_count: exits.len() as u32,
@@ -309,13 +304,7 @@ pub fn render_panes_with<E: From<GpuError>>(
             ctx.queue.submit([encoder.finish()]);
             ctx.wait()?;
             stats.gather_seconds += t.elapsed().as_secs_f64();
-            if let Some(e) = pollster::block_on(scope.pop()) {
-                return Err(GpuError::Validation {
-                    pass: "pane batch",
-                    message: e.to_string(),
-                }
-                .into());
-            }
+            scope.pop("pane batch")?;
             stats.vpls += batch.len() as u64;
             stats.faces += (batch.len() as u32 * FACES) as u64;
             stats.batches += 1;
@@ -345,6 +334,35 @@ pub fn render_panes_with<E: From<GpuError>>(
         first = last;
     }
     Ok(stats)
+}
+
+/// Checks that `ctx` can run the pane passes at all, in a few milliseconds: creates both passes
+/// over a one-triangle scene. A backend whose shader translation lacks what the passes use
+/// (GLSL has no `textureLoad` of depth textures, which the gather needs) fails here with the
+/// backend's own reason, before a bake has done any work.
+pub fn check_support(ctx: &GpuContext) -> Result<(), GpuError> {
+    let device = &ctx.device;
+    let scope = ErrorScopes::push(device);
+    let chunked = ChunkedScene::new(&[[Vec3::ZERO, Vec3::X, Vec3::Y]]);
+    let buffer = |label: &str, size: u64, usage: wgpu::BufferUsages| {
+        device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(label),
+            size,
+            usage,
+            mapped_at_creation: false,
+        })
+    };
+    let storage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST;
+    let vpls = buffer("check vpls", std::mem::size_of::<GpuVpl>() as u64, storage);
+    let exits = buffer("check exits", std::mem::size_of::<GpuExit>() as u64, storage);
+    let panes = buffer("check panes", 16, storage);
+    let uniform = wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST;
+    let frame = buffer("check frame", std::mem::size_of::<DepthFrame>() as u64, uniform);
+    let params = buffer("check params", std::mem::size_of::<GatherParams>() as u64, uniform);
+    let depth = VplDepthPass::new(device, 1, 8, &vpls, &frame, &chunked);
+    let _gather = PaneGatherPass::new(device, &vpls, &exits, &panes, &params, &depth.array_view);
+    scope.pop("pane passes")?;
+    ctx.wait()
 }
 
 /// Renders all panes into memory (cluster-major, like [`prm_trace::Panes`]).

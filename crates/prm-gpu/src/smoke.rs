@@ -23,7 +23,7 @@ const _: () = assert!(std::mem::size_of::<SmokeParams>() == 16);
 /// Computes `a·x + b` for every element of `xs` on the GPU and reads the result back.
 pub fn run(ctx: &GpuContext, a: f32, b: f32, xs: &[f32]) -> Result<Vec<f32>, GpuError> {
     let device = &ctx.device;
-    let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+    let scope = crate::ErrorScopes::push(device);
     let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
         label: Some("smoke"),
         source: wgpu::ShaderSource::Wgsl(include_str!("../../../shaders/smoke.wgsl").into()),
@@ -97,12 +97,7 @@ pub fn run(ctx: &GpuContext, a: f32, b: f32, xs: &[f32]) -> Result<Vec<f32>, Gpu
     }
     encoder.copy_buffer_to_buffer(&output, 0, &readback, 0, size);
     ctx.queue.submit([encoder.finish()]);
-    if let Some(e) = pollster::block_on(scope.pop()) {
-        return Err(GpuError::Validation {
-            pass: "smoke",
-            message: e.to_string(),
-        });
-    }
+    scope.pop("smoke")?;
     let bytes = ctx.read_buffer(&readback)?;
     Ok(bytemuck::cast_slice::<u8, f32>(&bytes)[..xs.len()].to_vec())
 }

@@ -306,3 +306,36 @@ mod furnace {
         }
     }
 }
+
+/// OpenGL (llvmpipe): plain compute works, the pane passes are refused with the backend's own
+/// reason (GLSL has no `textureLoad` of depth textures) instead of wgpu's panic, which is what
+/// lets `prm-bake bake --backend auto` pass over GL. CI installs the GL driver (`.ci/run`:
+/// libegl1, libgl1-mesa-dri), so there a missing adapter fails; elsewhere it is reported.
+#[test]
+fn gl_runs_compute_and_refuses_the_pane_passes_cleanly() {
+    let ctx = match GpuContext::new(Backend::Gl) {
+        Ok(ctx) => ctx,
+        Err(e) if std::env::var_os("CI").is_none() => {
+            eprintln!("no OpenGL adapter here ({e}); not tested (apt-get install libegl1 libgl1-mesa-dri)");
+            return;
+        }
+        Err(e) => panic!("CI installs the GL driver: {e}"),
+    };
+    eprintln!("adapter: {}", ctx.describe());
+    assert_eq!(ctx.info.backend, wgpu::Backend::Gl);
+    let xs: Vec<f32> = (0..64).map(|i| i as f32).collect();
+    let ys = prm_gpu::smoke::run(&ctx, 2.0, 1.0, &xs).expect("compute on GL");
+    assert!(xs.iter().zip(&ys).all(|(x, y)| *y == 2.0 * x + 1.0));
+    let err = prm_gpu::check_support(&ctx).expect_err(
+        "the pane passes now run on GL: make prm-bake's auto backend use it and test GL panes against the CPU",
+    );
+    assert!(err.to_string().contains("textureLoad"), "{err}");
+    // The device is still usable after the refused pipeline.
+    assert_eq!(prm_gpu::smoke::run(&ctx, 1.0, 0.0, &xs).unwrap(), xs);
+}
+
+/// On Vulkan the pane passes are supported.
+#[test]
+fn vulkan_supports_the_pane_passes() {
+    prm_gpu::check_support(&vulkan()).expect("pane passes on Vulkan");
+}

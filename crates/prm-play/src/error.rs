@@ -6,10 +6,18 @@ use std::path::PathBuf;
 #[derive(Debug, thiserror::Error)]
 pub enum PlayError {
     /// The archive could not be read.
-    #[error("cannot read archive {path}: {source}")]
+    #[error("cannot read archive {path}")]
     Archive {
         /// The archive.
         path: PathBuf,
+        /// The reader's reason.
+        source: prm_format::Error,
+    },
+    /// A pane of an opened archive could not be read (the caller knows the file and adds it).
+    #[error("cannot read pane {pane} of the archive")]
+    Pane {
+        /// The pane (cluster) index.
+        pane: usize,
         /// The reader's reason.
         source: prm_format::Error,
     },
@@ -17,7 +25,7 @@ pub enum PlayError {
     #[error("archive {0} records no source scene: pass --scene")]
     NoSourceScene(PathBuf),
     /// The scene could not be loaded.
-    #[error("cannot load scene {path}: {source}")]
+    #[error("cannot load scene {path}")]
     Scene {
         /// The scene file.
         path: PathBuf,
@@ -49,6 +57,14 @@ pub enum PlayError {
         panes: usize,
         /// The device's `max_texture_array_layers`.
         max: u32,
+    },
+    /// An option is out of range, or beyond what this device can allocate.
+    #[error("{option}: {message}")]
+    Option {
+        /// The option, named as `prm-play` spells it.
+        option: &'static str,
+        /// What is wrong and which limit it breaks.
+        message: String,
     },
     /// A GPU error (no device, validation, device lost).
     #[error(transparent)]

@@ -2,47 +2,29 @@
 //! `#[repr(C)]` structs shared with the `play_*.wgsl` shaders.
 
 use bytemuck::{Pod, Zeroable};
-use prm_gpu::{Backend, GpuContext, GpuError};
+use prm_gpu::{Backend, ContextOptions, GpuContext, GpuError};
 
-/// Opens a Vulkan device (lavapipe on a machine without a GPU), requesting
-/// `TIMESTAMP_QUERY` when the adapter supports it. A copy of `prm_gpu::GpuContext::new` that
-/// adds the feature; fails loudly when no Vulkan driver exists.
+/// Opens a headless Vulkan device (lavapipe on a machine without a GPU) with timestamp queries
+/// when the adapter has them; fails with the driver to install when no Vulkan driver exists.
 pub fn open_vulkan() -> Result<GpuContext, GpuError> {
-    Ok(open_vulkan_for(&vulkan_instance(), None)?.0)
+    GpuContext::open(&ContextOptions {
+        optional_features: wgpu::Features::TIMESTAMP_QUERY,
+        ..ContextOptions::headless(Backend::Vulkan)
+    })
 }
 
-/// A Vulkan-only wgpu instance.
+/// A Vulkan-only wgpu instance (window mode creates its surface on it).
 pub fn vulkan_instance() -> wgpu::Instance {
-    let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
-    desc.backends = wgpu::Backends::VULKAN;
-    wgpu::Instance::new(desc)
+    prm_gpu::instance(wgpu::Backends::VULKAN)
 }
 
-/// Opens a device on `instance` (a real GPU before a software one), able to present to
-/// `surface` if given; returns the adapter too (for surface configuration).
-pub fn open_vulkan_for(
-    instance: &wgpu::Instance,
-    surface: Option<&wgpu::Surface>,
-) -> Result<(GpuContext, wgpu::Adapter), GpuError> {
-    let mut adapters = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::VULKAN));
-    adapters.retain(|a| surface.is_none_or(|s| a.is_surface_supported(s)));
-    adapters.sort_by_key(|a| a.get_info().device_type == wgpu::DeviceType::Cpu);
-    let adapter = adapters.into_iter().next().ok_or(GpuError::NoAdapter {
+/// Opens a Vulkan device on `instance` able to present to `surface`.
+pub fn open_vulkan_for(instance: &wgpu::Instance, surface: &wgpu::Surface) -> Result<GpuContext, GpuError> {
+    GpuContext::open(&ContextOptions {
         backend: Backend::Vulkan,
-    })?;
-    let info = adapter.get_info();
-    let features = adapter.features() & wgpu::Features::TIMESTAMP_QUERY;
-    let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
-        label: Some("prm-play"),
-        required_features: features,
-        required_limits: adapter.limits(),
-        ..Default::default()
-    }))
-    .map_err(|source| GpuError::Device {
-        adapter: info.name.clone(),
-        source,
-    })?;
-    Ok((GpuContext { device, queue, info }, adapter))
+        optional_features: wgpu::Features::TIMESTAMP_QUERY,
+        surface: Some((instance, surface)),
+    })
 }
 
 /// Per-frame constants; `Frame` in the shaders.

@@ -28,7 +28,7 @@ pub use renderer::{ClusterWeight, FrameInput, FrameTimings, Image, Mode, PlayOpt
 use std::path::{Path, PathBuf};
 
 use prm_format::Archive;
-use prm_scene::{Camera, Scene};
+use prm_scene::{Camera, Light, Scene};
 
 /// The archive type [`open`] returns.
 pub type FileArchive = Archive<std::io::BufReader<std::fs::File>>;
@@ -71,6 +71,23 @@ pub fn open(archive: &Path, scene: Option<&Path>) -> Result<(FileArchive, Scene)
     Ok((a, s))
 }
 
+/// A warning when `scene`'s materials differ from those `archive` was baked with (its
+/// `params.materials_fingerprint`): the panes then hold another albedo's indirect light, which
+/// plays but is no longer right. Geometry must match ([`open`] refuses otherwise); materials
+/// only warn, so an artist can preview a colour change before re-baking. `None` when they match
+/// or the archive records no materials fingerprint (bakes before it existed).
+pub fn materials_warning<R: std::io::Read + std::io::Seek>(archive: &Archive<R>, scene: &Scene) -> Option<String> {
+    let recorded = archive.metadata().params.get("materials_fingerprint")?.as_str()?;
+    let found = format!("{:016x}", scene.materials_fingerprint());
+    (recorded != found).then(|| {
+        format!(
+            "the scene's materials differ from those the archive was baked with (materials \
+             fingerprint {found}, baked {recorded}): the indirect light is that of the old \
+             albedos until you re-bake"
+        )
+    })
+}
+
 /// The top K an archive asks for (`params.top_k`), else [`DEFAULT_TOP_K`].
 pub fn archive_top_k<R: std::io::Read + std::io::Seek>(archive: &Archive<R>) -> u32 {
     archive
@@ -80,6 +97,58 @@ pub fn archive_top_k<R: std::io::Read + std::io::Seek>(archive: &Archive<R>) -> 
         .and_then(|v| v.as_u64())
         .map(|k| k.clamp(1, u32::MAX as u64) as u32)
         .unwrap_or(DEFAULT_TOP_K)
+}
+
+/// The light the player places in a scene that has none: a white point light on the vertical
+/// axis of the bounds, a quarter of the height below the top, bright enough (intensity = the
+/// squared half-diagonal, in W/sr) for about 1 W/m² at half the diagonal's distance.
+pub fn default_light(scene: &Scene) -> Light {
+    let b = scene.bounds();
+    let centre = (b.min + b.max) * 0.5;
+    let half = (b.diagonal() * 0.5).max(1e-3);
+    Light::Point {
+        position: glam::Vec3::new(centre.x, b.max.y - 0.25 * b.extent().y, centre.z),
+        intensity: glam::Vec3::splat(half * half),
+    }
+}
+
+/// `light` as a `--light` spec.
+pub fn light_spec(light: &Light) -> String {
+    let v = |v: glam::Vec3| format!("{},{},{}", v.x, v.y, v.z);
+    match *light {
+        Light::Point { position, intensity } => format!("point:{}:{}", v(position), v(intensity)),
+        Light::Spot {
+            position,
+            direction,
+            angle,
+            intensity,
+        } => format!(
+            "spot:{}:{}:{}:{}",
+            v(position),
+            v(direction),
+            angle.to_degrees(),
+            v(intensity)
+        ),
+        Light::Directional { direction, irradiance } => format!("dir:{}:{}", v(direction), v(irradiance)),
+    }
+}
+
+/// `light` in words, for messages.
+pub fn describe_light(light: &Light) -> String {
+    match *light {
+        Light::Point { position, intensity } => format!(
+            "a point light at ({:.3}, {:.3}, {:.3}) of {:.3} W/sr",
+            position.x, position.y, position.z, intensity.x
+        ),
+        Light::Spot { position, .. } => format!(
+            "a spot light at ({:.3}, {:.3}, {:.3})",
+            position.x, position.y, position.z
+        ),
+        Light::Directional { direction, .. } => format!(
+            "a directional light along ({:.3}, {:.3}, {:.3})",
+            direction.x, direction.y, direction.z
+        ),
+    }
 }
 
 /// The scene's first camera, or a view of its bounds from +Z.

@@ -34,7 +34,7 @@ struct Args {
     #[arg(long, default_value = "gi")]
     mode: Mode,
     /// Clusters kept per frame (default: the archive's params.top_k, else 32).
-    #[arg(long)]
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..))]
     top_k: Option<u32>,
     /// Frames to render (headless: default 1). In a window: quit after this many presented
     /// frames (default: run until closed).
@@ -58,17 +58,32 @@ struct Args {
     shadow_resolution: u32,
     /// Fade band: kept clusters scoring within (1 + band) × the first dropped cluster's score are
     /// faded by a smoothstep (0: hard cut).
-    #[arg(long, default_value_t = 0.25)]
+    #[arg(long, default_value_t = 0.25, value_parser = non_negative, allow_negative_numbers = true)]
     fade_band: f32,
     /// Exposure of the tone-mapped PNG (multiplies radiance before clamping and sRGB).
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, value_parser = non_negative, allow_negative_numbers = true)]
     exposure: f32,
+}
+
+/// A finite number >= 0, for `--exposure` and `--fade-band`.
+fn non_negative(s: &str) -> Result<f32, String> {
+    match s.trim().parse::<f32>() {
+        Ok(v) if v.is_finite() && v >= 0.0 => Ok(v),
+        Ok(v) => Err(format!("{v} is not a finite number >= 0")),
+        Err(e) => Err(format!("{s:?} is not a number: {e}")),
+    }
 }
 
 fn main() -> Result<()> {
     let args = Args::parse();
+    if args.headless {
+        prm_gpu::silence_wayland_probe();
+    }
     let (width, height) = prm_trace::parse_size(&args.size)?;
     let (mut archive, scene) = prm_play::open(&args.archive, args.scene.as_deref())?;
+    if let Some(w) = prm_play::materials_warning(&archive, &scene) {
+        eprintln!("warning: {w}");
+    }
     let top_k = args.top_k.unwrap_or_else(|| prm_play::archive_top_k(&archive));
     let base_camera = match &args.camera {
         Some(s) => prm_trace::parse_camera(s)?,
@@ -83,6 +98,19 @@ fn main() -> Result<()> {
             .collect::<Result<Vec<_>, _>>()?
     };
     let animation = args.animation.as_deref().map(Animation::load).transpose()?;
+    let base_lights = if base_lights.is_empty() && animation.as_ref().is_none_or(|a| a.lights.is_empty()) {
+        // A black frame helps nobody: light the scene, and say where and how to choose.
+        let light = prm_play::default_light(&scene);
+        eprintln!(
+            "warning: the scene has no lights of its own and no --light was given; placing {} \
+             (pass --light SPEC to choose, e.g. --light {}; in a window, arrows and PageUp/PageDown move it)",
+            prm_play::describe_light(&light),
+            prm_play::light_spec(&light)
+        );
+        vec![light]
+    } else {
+        base_lights
+    };
     if !args.headless {
         return prm_play::window::run(prm_play::window::WindowConfig {
             scene,
@@ -92,7 +120,7 @@ fn main() -> Result<()> {
                 height,
                 top_k,
                 shadow_resolution: args.shadow_resolution,
-                fade_band: args.fade_band.max(0.0),
+                fade_band: args.fade_band,
                 ..Default::default()
             },
             camera: base_camera,
@@ -103,7 +131,7 @@ fn main() -> Result<()> {
             frames: args.frames,
             screenshot: args.screenshot,
         })
-        .context("window mode");
+        .with_context(|| format!("playing {} in a window", args.archive.display()));
     }
     let ctx = prm_play::open_vulkan()?;
     eprintln!("GPU: {}", ctx.describe());
@@ -113,10 +141,11 @@ fn main() -> Result<()> {
         top_k,
         shadow_resolution: args.shadow_resolution,
         timestamps: args.timings.is_some(),
-        fade_band: args.fade_band.max(0.0),
+        fade_band: args.fade_band,
         ..Default::default()
     };
-    let mut renderer = Renderer::new(ctx, &scene, &mut archive, opts)?;
+    let mut renderer = Renderer::new(ctx, &scene, &mut archive, opts)
+        .with_context(|| format!("playing {}", args.archive.display()))?;
     if args.timings.is_some() && !renderer.has_timestamps() {
         eprintln!("note: this device has no timestamp queries; --timings records CPU frame times only");
     }

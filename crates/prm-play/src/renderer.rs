@@ -6,7 +6,7 @@ use std::time::Instant;
 
 use glam::{Mat4, Vec3};
 use prm_format::Archive;
-use prm_gpu::{GpuContext, GpuError};
+use prm_gpu::{ErrorScopes, GpuContext};
 use prm_scene::{Aabb, Camera, Light, Scene};
 use wgpu::util::DeviceExt;
 
@@ -93,6 +93,74 @@ pub struct PlayOptions {
     pub depth_bias: f32,
     /// Time every pass with GPU timestamp queries (when the device has them).
     pub timestamps: bool,
+}
+
+/// Largest shadow-map side [`PlayOptions::validate`] accepts: a point light's six faces take
+/// 6 × 8192² × 4 bytes = 1.5 GiB of depth at this size; beyond it lavapipe runs out of memory
+/// with a single light.
+pub const MAX_SHADOW_RESOLUTION: u32 = 8192;
+
+impl PlayOptions {
+    /// Checks the options against each other and `limits` before any GPU allocation, naming
+    /// the `prm-play` option and the limit it breaks.
+    pub fn validate(&self, limits: &wgpu::Limits) -> Result<(), PlayError> {
+        let bad = |option: &'static str, message: String| Err(PlayError::Option { option, message });
+        let max_dim = limits.max_texture_dimension_2d;
+        if self.width == 0 || self.height == 0 || self.width > max_dim || self.height > max_dim {
+            return bad(
+                "--size",
+                format!(
+                    "{}x{} is outside this device's 1..={max_dim} texels per side (max_texture_dimension_2d)",
+                    self.width, self.height
+                ),
+            );
+        }
+        let readback = readback_bytes(self.width, self.height);
+        if readback > limits.max_buffer_size {
+            return bad(
+                "--size",
+                format!(
+                    "{}x{} needs a {readback}-byte image buffer (16 bytes a pixel), over this device's \
+                     max_buffer_size of {} bytes",
+                    self.width, self.height, limits.max_buffer_size
+                ),
+            );
+        }
+        let max_shadow = max_dim.min(MAX_SHADOW_RESOLUTION);
+        if !(16..=max_shadow).contains(&self.shadow_resolution) {
+            return bad(
+                "--shadow-resolution",
+                format!(
+                    "{} is outside 16..={max_shadow} (the least of this device's max_texture_dimension_2d \
+                     {max_dim} and {MAX_SHADOW_RESOLUTION}, where one point light's six faces take 1.5 GiB)",
+                    self.shadow_resolution
+                ),
+            );
+        }
+        if self.top_k == 0 {
+            return bad("--top-k", "must be at least 1".into());
+        }
+        if !(self.fade_band.is_finite() && self.fade_band >= 0.0) {
+            return bad(
+                "--fade-band",
+                format!("{} must be a finite number >= 0", self.fade_band),
+            );
+        }
+        for (option, v) in [("normal_offset", self.normal_offset), ("depth_bias", self.depth_bias)] {
+            if !(v.is_finite() && v >= 0.0) {
+                return bad(option, format!("{v} must be a finite number >= 0"));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Bytes of the buffer a `width × height` frame is read back through (rgba32float rows padded
+/// to wgpu's copy alignment).
+fn readback_bytes(width: u32, height: u32) -> u64 {
+    let row = width as u64 * 16;
+    let align = wgpu::COPY_BYTES_PER_ROW_ALIGNMENT as u64;
+    row.div_ceil(align) * align * height as u64
 }
 
 impl Default for PlayOptions {
@@ -266,15 +334,9 @@ fn group(
     })
 }
 
-fn check(ctx: &GpuContext, scope: wgpu::ErrorScopeGuard, pass: &'static str) -> Result<(), PlayError> {
-    if let Some(e) = pollster::block_on(scope.pop()) {
-        return Err(GpuError::Validation {
-            pass,
-            message: e.to_string(),
-        }
-        .into());
-    }
-    let _ = ctx;
+fn check(ctx: &GpuContext, scope: ErrorScopes, pass: &'static str) -> Result<(), PlayError> {
+    scope.pop(pass)?;
+    ctx.take_uncaptured()?;
     Ok(())
 }
 
@@ -314,7 +376,7 @@ fn read_texture_rgb(ctx: &GpuContext, texture: &wgpu::Texture) -> Result<Vec<[f3
     let padded = row.div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
     let buffer = ctx.device.create_buffer(&wgpu::BufferDescriptor {
         label: Some("readback"),
-        size: (padded * h) as u64,
+        size: readback_bytes(w, h),
         usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
         mapped_at_creation: false,
     });
@@ -432,6 +494,7 @@ impl Renderer {
         archive: &mut Archive<R>,
         opts: PlayOptions,
     ) -> Result<Renderer, PlayError> {
+        opts.validate(&ctx.device.limits())?;
         let device = &ctx.device;
         let atlas = archive.atlas().clone();
         if atlas.triangle_uvs.len() != scene.triangles.len() {
@@ -449,7 +512,7 @@ impl Renderer {
                 max: max_layers,
             });
         }
-        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let scope = ErrorScopes::push(device);
 
         // Geometry: positions for the shadow pass, full vertices for shading.
         let mut positions = Vec::with_capacity(scene.triangles.len() * 3);
@@ -556,12 +619,10 @@ impl Renderer {
             view_formats: &[],
         });
         for p in 0..cluster_count {
-            let words = archive
-                .read_pane_rgb9e5(p as usize)
-                .map_err(|source| PlayError::Archive {
-                    path: "(archive)".into(),
-                    source,
-                })?;
+            let words = archive.read_pane_rgb9e5(p as usize).map_err(|source| PlayError::Pane {
+                pane: p as usize,
+                source,
+            })?;
             ctx.queue.write_texture(
                 wgpu::TexelCopyTextureInfo {
                     texture: &pane_texture,
@@ -1058,8 +1119,8 @@ impl Renderer {
         }
         let start = Instant::now();
         let (lights, views) = shadow::build(input.lights, &self.bounds, self.opts.shadow_resolution);
+        let scope = ErrorScopes::push(&self.ctx.device);
         self.ensure_shadow_capacity(views.len() as u32);
-        let scope = self.ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let queue = &self.ctx.queue;
         let frame = GpuFrame {
             view_proj: self.camera_matrix(&input.camera).to_cols_array_2d(),

@@ -139,6 +139,10 @@ pub fn write_archive(scene: &Scene, scene_path: &Path, out: &Path, p: SyntheticP
     let mut metadata = Metadata::new("prm-play-synthetic", env!("CARGO_PKG_VERSION"));
     metadata.seed = p.seed;
     metadata.params.insert("synthetic".into(), true.into());
+    metadata.params.insert(
+        "materials_fingerprint".into(),
+        format!("{:016x}", scene.materials_fingerprint()).into(),
+    );
     let dir = out.parent().unwrap_or(Path::new("."));
     metadata.source_scene = relative_path(dir, scene_path);
     metadata.scene_fingerprint = scene.fingerprint();

@@ -431,7 +431,8 @@ impl App {
         let surface = instance
             .create_surface(window.clone())
             .map_err(|e| PlayError::Window(e.to_string()))?;
-        let (ctx, adapter) = crate::open_vulkan_for(&instance, Some(&surface))?;
+        let ctx = crate::open_vulkan_for(&instance, &surface)?;
+        let adapter = ctx.adapter.clone();
         eprintln!("GPU: {}", ctx.describe());
         let size = window.inner_size();
         let mut config = surface

@@ -729,3 +729,140 @@ fn light_keys_move_and_turn_lights() {
         "{direction}"
     );
 }
+
+/// Runs the `prm-play` binary headless on the synthetic archive with `args` into `dir`.
+fn play_cli(dir: &Path, args: &[&str]) -> std::process::Output {
+    std::process::Command::new(env!("CARGO_BIN_EXE_prm-play"))
+        .arg(cornell_archive())
+        .arg("--headless")
+        .arg("--out")
+        .arg(dir)
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+/// Options out of range, or beyond the device, are refused before any GPU allocation with a
+/// message naming the option (and, for sizes, the device limit), exit 1, never a panic inside
+/// wgpu (which is exit 101). Found by a QA sweep: each of these used to panic or pass silently.
+#[test]
+fn cli_refuses_hostile_options_naming_them() {
+    let dir = out_dir("hostile-options");
+    let cases: &[(&[&str], &str, &str)] = &[
+        (&["--size", "16384x16384"], "--size", "max_buffer_size"),
+        (&["--size", "12000x12000"], "--size", "max_buffer_size"),
+        (&["--size", "16384x8192"], "--size", "max_buffer_size"),
+        (&["--size", "0x10"], "size", "1..=16384"),
+        (&["--shadow-resolution", "16384"], "--shadow-resolution", "16..="),
+        (&["--shadow-resolution", "0"], "--shadow-resolution", "16..="),
+        (&["--shadow-resolution", "100000"], "--shadow-resolution", "16..="),
+        (&["--top-k", "0"], "--top-k", "0"),
+        (&["--exposure", "nan"], "--exposure", "finite"),
+        (&["--fade-band", "nan"], "--fade-band", "finite"),
+        (&["--fade-band", "-1"], "--fade-band", ">= 0"),
+    ];
+    for (args, option, limit) in cases {
+        let out = play_cli(&dir, args);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{args:?} was accepted:\n{stderr}");
+        assert_ne!(out.status.code(), Some(101), "{args:?} panicked:\n{stderr}");
+        assert!(!stderr.contains("panicked"), "{args:?} panicked:\n{stderr}");
+        assert!(
+            stderr.contains(option) && stderr.contains(limit),
+            "{args:?}: the message should name {option} and {limit}:\n{stderr}"
+        );
+    }
+}
+
+/// A scene without lights (the OBJ Cornell box carries none) is not played black in silence:
+/// the player warns, says how to add a light, and places one.
+#[test]
+fn cli_lights_a_scene_without_lights_and_says_so() {
+    let dir = out_dir("no-lights");
+    let obj = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/cornell-box/cornell-box.obj");
+    let out = play_cli(&dir, &["--scene", obj.to_str().unwrap(), "--size", "64x48"]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("no lights") && stderr.contains("--light point:"),
+        "{stderr}"
+    );
+    let img = output::read_exr(&dir.join("frame0000.exr")).unwrap();
+    let sum: f64 = img.rgb.iter().map(|p| (p[0] + p[1] + p[2]) as f64).sum();
+    assert!(sum > 0.0, "the frame is black");
+}
+
+/// A damaged archive's error names the file (it used to say `(archive)`).
+#[test]
+fn cli_names_a_damaged_archive() {
+    let dir = out_dir("damaged");
+    let mut damaged = std::fs::read(cornell_archive()).unwrap();
+    // Damage the last stored tile, so that the header and tables still read and the damage
+    // shows when the panes are uploaded.
+    let a = Archive::open(cornell_archive()).unwrap();
+    let panes = a.info().sections.iter().find(|s| s.name == "panes").unwrap();
+    let at = (panes.offset + panes.stored_size - 3) as usize;
+    damaged[at] ^= 0x40;
+    let path = dir.join("damaged.prm");
+    std::fs::write(&path, &damaged).unwrap();
+    let scene = cornell_box_path();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_prm-play"))
+        .arg(&path)
+        .args(["--headless", "--size", "32x32", "--scene"])
+        .arg(&scene)
+        .arg("--out")
+        .arg(&dir)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "a damaged archive played:\n{stderr}");
+    assert!(
+        stderr.contains("damaged.prm"),
+        "the error should name the file:\n{stderr}"
+    );
+    assert!(!stderr.contains("(archive)"), "{stderr}");
+}
+
+/// Other albedos on the same geometry play the old archive with a warning (the geometry
+/// fingerprint still refuses other geometry; see `refuses_archive_of_other_geometry`).
+#[test]
+fn cli_warns_when_materials_changed_since_the_bake() {
+    let dir = out_dir("materials");
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/cornell-box");
+    let obj = std::fs::read_to_string(src.join("cornell-box.obj")).unwrap();
+    let mtl = std::fs::read_to_string(src.join("cornell-box.mtl")).unwrap();
+    std::fs::write(dir.join("cornell-box.obj"), obj).unwrap();
+    std::fs::write(dir.join("cornell-box.mtl"), &mtl).unwrap();
+    let same = play_cli(
+        &dir,
+        &[
+            "--scene",
+            dir.join("cornell-box.obj").to_str().unwrap(),
+            "--size",
+            "16x16",
+        ],
+    );
+    let stderr = String::from_utf8_lossy(&same.stderr);
+    assert!(same.status.success(), "{stderr}");
+    assert!(!stderr.contains("materials differ"), "same materials warned:\n{stderr}");
+    std::fs::write(
+        dir.join("cornell-box.mtl"),
+        mtl.replace("Kd 0.7378 0.7361 0.7374", "Kd 0.2 0.2 0.2"),
+    )
+    .unwrap();
+    let changed = play_cli(
+        &dir,
+        &[
+            "--scene",
+            dir.join("cornell-box.obj").to_str().unwrap(),
+            "--size",
+            "16x16",
+        ],
+    );
+    let stderr = String::from_utf8_lossy(&changed.stderr);
+    assert!(changed.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("materials differ"),
+        "no warning for changed albedo:\n{stderr}"
+    );
+}

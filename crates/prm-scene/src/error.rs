@@ -29,6 +29,55 @@ pub enum SceneError {
         /// What is wrong.
         message: String,
     },
+    /// An external glTF buffer file (`.bin`) could not be read: names that file, not the scene.
+    #[error("{path}: buffer {buffer} of {scene} could not be read: {source}")]
+    BufferFile {
+        /// The buffer file the glTF refers to.
+        path: PathBuf,
+        /// The glTF file that refers to it.
+        scene: PathBuf,
+        /// Index of the buffer in the glTF.
+        buffer: usize,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// A glTF buffer holds fewer bytes than its declared `byteLength`.
+    #[error("{path}: buffer {buffer} declares {declared} bytes but holds only {actual}")]
+    BufferLength {
+        /// The buffer file (the scene itself for GLB and data-URI buffers).
+        path: PathBuf,
+        /// Index of the buffer.
+        buffer: usize,
+        /// Its declared `byteLength`.
+        declared: u64,
+        /// How many bytes it really holds.
+        actual: u64,
+    },
+    /// A glTF bufferView reaches past the end of its buffer.
+    #[error("{path}: bufferView {view} needs {needed} bytes of buffer {buffer}, which is {actual} bytes long")]
+    BufferView {
+        /// The glTF file.
+        path: PathBuf,
+        /// Index of the bufferView.
+        view: usize,
+        /// Index of the buffer it reads.
+        buffer: usize,
+        /// `byteOffset + byteLength` of the view.
+        needed: u64,
+        /// The buffer's real length.
+        actual: u64,
+    },
+    /// A glTF accessor cannot be read: its range overruns its bufferView, its count is
+    /// absurd, or its type does not fit its use.
+    #[error("{path}: accessor {accessor}: {message}")]
+    Accessor {
+        /// The glTF file.
+        path: PathBuf,
+        /// Index of the accessor.
+        accessor: usize,
+        /// What is wrong.
+        message: String,
+    },
     /// A coordinate is NaN or infinite.
     #[error("{path}: non-finite coordinate ({what})")]
     NonFinite {

@@ -4,6 +4,12 @@
 //! (candela in the spec) are read as W/sr per channel after multiplying by the colour, and
 //! directional intensities (lux) as W/m². Texture coordinates are flipped (`v → 1 − v`) to the
 //! OBJ convention the texture sampler uses.
+//!
+//! Hostile input: buffers, bufferViews and accessors are validated here with checked arithmetic
+//! before anything is read (a bufferView must fit its buffer, an accessor's
+//! `byteOffset + stride × (count − 1) + element size` must fit its bufferView, attribute counts
+//! must agree), so a forged count is an error naming the accessor, never a huge allocation, a
+//! panic or a silently shortened mesh. Accessors are decoded here rather than by `gltf`'s reader.
 
 use glam::{Mat3, Mat4, Vec2, Vec3};
 use std::collections::HashMap;
@@ -19,15 +25,20 @@ pub(crate) fn load(path: &Path) -> Result<Scene, SceneError> {
         line: None,
         message,
     };
-    let gltf::Gltf { document, blob } = gltf::Gltf::open(path).map_err(|e| match e {
-        gltf::Error::Io(source) => SceneError::Io {
-            path: path.to_path_buf(),
-            source,
-        },
-        e => malformed(e.to_string()),
+    let bytes = crate::obj::read_regular_file(path).map_err(|source| SceneError::Io {
+        path: path.to_path_buf(),
+        source,
     })?;
+    // `gltf`'s validation indexes the accessor of every POSITION without a bounds check: parse
+    // without validation first and check those indices, then parse again with validation.
+    let unvalidated = gltf::Gltf::from_slice_without_validation(&bytes).map_err(|e| malformed(e.to_string()))?;
+    check_position_indices(&unvalidated.document).map_err(malformed)?;
+    drop(unvalidated);
+    let gltf::Gltf { document, blob } = gltf::Gltf::from_slice(&bytes).map_err(|e| malformed(e.to_string()))?;
+    drop(bytes);
     let base = path.parent().unwrap_or(Path::new("."));
-    let buffers = gltf::import_buffers(&document, Some(base), blob).map_err(|e| malformed(e.to_string()))?;
+    let buffers = load_buffers(path, base, &document, blob)?;
+    check_views(path, &document, &buffers)?;
 
     let mut report = LoadReport::default();
     // Images are decoded lazily, once each, only when a material uses them.
@@ -48,7 +59,14 @@ pub(crate) fn load(path: &Path) -> Result<Scene, SceneError> {
             }
             let img = info.texture().source();
             texture = *image_ids.entry(img.index()).or_insert_with(|| {
-                match gltf::image::Data::from_source(img.source(), Some(base), &buffers) {
+                let data = match img.source() {
+                    // `gltf` panics on a relative URI that percent-decodes to invalid UTF-8.
+                    gltf::image::Source::Uri { uri, .. } if !uri.contains(':') && percent_decode(uri).is_none() => {
+                        Err(gltf::Error::UnsupportedScheme)
+                    }
+                    source => gltf::image::Data::from_source(source, Some(base), &buffers),
+                };
+                match data {
                     Ok(data) => match texture_from_gltf(data) {
                         Some(t) => {
                             textures.push(t);
@@ -96,7 +114,24 @@ pub(crate) fn load(path: &Path) -> Result<Scene, SceneError> {
         None => Vec::new(),
     };
     let mut stack: Vec<(gltf::Node, Mat4)> = roots.into_iter().map(|n| (n, Mat4::IDENTITY)).collect();
+    let mut visited = vec![false; document.nodes().len()];
+    let light_count = document.lights().map_or(0, |l| l.len());
     while let Some((node, parent)) = stack.pop() {
+        // A node reached twice is a cycle (which would never end) or a shared child: both invalid.
+        if std::mem::replace(&mut visited[node.index()], true) {
+            return Err(malformed(format!(
+                "node {} appears twice in the node hierarchy (a cycle or a shared child)",
+                node.index()
+            )));
+        }
+        if let Some(l) = node_light_index(&document, node.index()) {
+            if l >= light_count {
+                return Err(malformed(format!(
+                    "node {} refers to light {l}, but the file has {light_count} lights",
+                    node.index()
+                )));
+            }
+        }
         let world = parent * Mat4::from_cols_array_2d(&node.transform().matrix());
         if !world.is_finite() {
             return Err(SceneError::NonFinite {
@@ -153,8 +188,19 @@ pub(crate) fn load(path: &Path) -> Result<Scene, SceneError> {
         let normal_matrix = Mat3::from_mat4(*world).inverse().transpose();
         let mirrored = Mat3::from_mat4(*world).determinant() < 0.0;
         for prim in mesh.primitives() {
-            let reader = prim.reader(|b| buffers.get(b.index()).map(|d| &d.0[..]));
-            let Some(positions) = reader.read_positions() else {
+            let mode = prim.mode();
+            if !matches!(
+                mode,
+                gltf::mesh::Mode::Triangles | gltf::mesh::Mode::TriangleStrip | gltf::mesh::Mode::TriangleFan
+            ) {
+                report.warnings.push(format!(
+                    "{}: mesh {} has a {mode:?} primitive; only triangles are lit, skipped",
+                    path.display(),
+                    mesh.index()
+                ));
+                continue;
+            }
+            let Some(pos_acc) = prim.get(&gltf::Semantic::Positions) else {
                 report.warnings.push(format!(
                     "{}: mesh {} has a primitive without positions; skipped",
                     path.display(),
@@ -162,7 +208,11 @@ pub(crate) fn load(path: &Path) -> Result<Scene, SceneError> {
                 ));
                 continue;
             };
-            let positions: Vec<Vec3> = positions.map(|p| world.transform_point3(Vec3::from_array(p))).collect();
+            let local: Vec<[f32; 3]> = read_floats(path, &pos_acc, &buffers, "POSITION")?;
+            let positions: Vec<Vec3> = local
+                .iter()
+                .map(|&p| world.transform_point3(Vec3::from_array(p)))
+                .collect();
             if let Some(i) = positions.iter().position(|p| !p.is_finite()) {
                 return Err(SceneError::NonFinite {
                     path: path.to_path_buf(),
@@ -170,18 +220,54 @@ pub(crate) fn load(path: &Path) -> Result<Scene, SceneError> {
                 });
             }
             positions.iter().for_each(|&p| bounds.grow(p));
-            let normals: Option<Vec<Vec3>> = reader.read_normals().map(|n| {
-                n.map(|n| (normal_matrix * Vec3::from_array(n)).normalize_or_zero())
-                    .collect()
-            });
-            let uv0: Option<Vec<Vec2>> = reader
-                .read_tex_coords(0)
-                .map(|t| t.into_f32().map(|[u, v]| Vec2::new(u, 1.0 - v)).collect());
-            let uv1: Option<Vec<Vec2>> = reader
-                .read_tex_coords(1)
-                .map(|t| t.into_f32().map(|[u, v]| Vec2::new(u, v)).collect());
-            let indices: Vec<u32> = match reader.read_indices() {
-                Some(i) => i.into_u32().collect(),
+            // Every other attribute has one element per position.
+            let attribute = |semantic: gltf::Semantic, what: &str| -> Result<Option<gltf::Accessor>, SceneError> {
+                let Some(acc) = prim.get(&semantic) else {
+                    return Ok(None);
+                };
+                if acc.count() != positions.len() {
+                    return Err(SceneError::Accessor {
+                        path: path.to_path_buf(),
+                        accessor: acc.index(),
+                        message: format!(
+                            "{what} has {} elements but POSITION (accessor {}) has {}",
+                            acc.count(),
+                            pos_acc.index(),
+                            positions.len()
+                        ),
+                    });
+                }
+                Ok(Some(acc))
+            };
+            let normals: Option<Vec<Vec3>> = match attribute(gltf::Semantic::Normals, "NORMAL")? {
+                Some(acc) => Some(
+                    read_floats::<3>(path, &acc, &buffers, "NORMAL")?
+                        .into_iter()
+                        .map(|n| (normal_matrix * Vec3::from_array(n)).normalize_or_zero())
+                        .collect(),
+                ),
+                None => None,
+            };
+            let uv0: Option<Vec<Vec2>> = match attribute(gltf::Semantic::TexCoords(0), "TEXCOORD_0")? {
+                Some(acc) => Some(
+                    read_floats::<2>(path, &acc, &buffers, "TEXCOORD_0")?
+                        .into_iter()
+                        .map(|[u, v]| Vec2::new(u, 1.0 - v))
+                        .collect(),
+                ),
+                None => None,
+            };
+            let uv1: Option<Vec<Vec2>> = match attribute(gltf::Semantic::TexCoords(1), "TEXCOORD_1")? {
+                Some(acc) => Some(
+                    read_floats::<2>(path, &acc, &buffers, "TEXCOORD_1")?
+                        .into_iter()
+                        .map(Vec2::from_array)
+                        .collect(),
+                ),
+                None => None,
+            };
+            let indices: Vec<u32> = match prim.indices() {
+                Some(acc) => read_indices(path, &acc, &buffers)?,
                 None => (0..positions.len() as u32).collect(),
             };
             if let Some(&bad) = indices.iter().find(|&&i| i as usize >= positions.len()) {
@@ -191,8 +277,7 @@ pub(crate) fn load(path: &Path) -> Result<Scene, SceneError> {
                     positions.len()
                 )));
             }
-            let corners: Vec<[u32; 3]> = match prim.mode() {
-                gltf::mesh::Mode::Triangles => indices.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
+            let corners: Vec<[u32; 3]> = match mode {
                 gltf::mesh::Mode::TriangleStrip => (2..indices.len())
                     .map(|i| {
                         if i % 2 == 0 {
@@ -205,14 +290,7 @@ pub(crate) fn load(path: &Path) -> Result<Scene, SceneError> {
                 gltf::mesh::Mode::TriangleFan => (2..indices.len())
                     .map(|i| [indices[0], indices[i - 1], indices[i]])
                     .collect(),
-                other => {
-                    report.warnings.push(format!(
-                        "{}: mesh {} has a {other:?} primitive; only triangles are lit, skipped",
-                        path.display(),
-                        mesh.index()
-                    ));
-                    continue;
-                }
+                _ => indices.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
             };
             let material = prim.material().index().map_or(default_material, |i| i as u32);
             for mut c in corners {
@@ -259,6 +337,338 @@ pub(crate) fn load(path: &Path) -> Result<Scene, SceneError> {
         scene.lightmap_uvs = Some(lightmap_uvs);
     }
     scene.finish_load()
+}
+
+/// Most elements an accessor without a bufferView (all zeros, plus any sparse values) may have:
+/// nothing in the file bounds its count, so this does.
+const MAX_VIEWLESS_COUNT: usize = 1 << 20;
+
+/// Reads every buffer: the GLB binary chunk, a data URI, or an external file (reported by its
+/// own path when missing). Each must hold at least its declared `byteLength`.
+fn load_buffers(
+    path: &Path,
+    base: &Path,
+    document: &gltf::Document,
+    mut blob: Option<Vec<u8>>,
+) -> Result<Vec<gltf::buffer::Data>, SceneError> {
+    let mut buffers = Vec::with_capacity(document.buffers().len());
+    for buffer in document.buffers() {
+        let index = buffer.index();
+        let (data, origin) = match buffer.source() {
+            gltf::buffer::Source::Bin => match blob.take() {
+                Some(b) => (b, path.to_path_buf()),
+                None => {
+                    return Err(SceneError::Malformed {
+                        path: path.to_path_buf(),
+                        line: None,
+                        message: format!("buffer {index} refers to the GLB binary chunk, which is missing"),
+                    })
+                }
+            },
+            gltf::buffer::Source::Uri(uri) => match external_file(base, uri) {
+                Some(Ok(file)) => {
+                    let data = read_regular_file(&file).map_err(|source| SceneError::BufferFile {
+                        path: file.clone(),
+                        scene: path.to_path_buf(),
+                        buffer: index,
+                        source,
+                    })?;
+                    (data, file)
+                }
+                Some(Err(message)) => {
+                    return Err(SceneError::Malformed {
+                        path: path.to_path_buf(),
+                        line: None,
+                        message: format!("buffer {index}: {message}"),
+                    })
+                }
+                None => {
+                    let data = gltf::buffer::Data::from_source(buffer.source(), Some(base)).map_err(|e| {
+                        SceneError::Malformed {
+                            path: path.to_path_buf(),
+                            line: None,
+                            message: format!("buffer {index}: {e}"),
+                        }
+                    })?;
+                    (data.0, path.to_path_buf())
+                }
+            },
+        };
+        if (data.len() as u64) < buffer.length() as u64 {
+            return Err(SceneError::BufferLength {
+                path: origin,
+                buffer: index,
+                declared: buffer.length() as u64,
+                actual: data.len() as u64,
+            });
+        }
+        buffers.push(gltf::buffer::Data(data));
+    }
+    Ok(buffers)
+}
+
+/// Every primitive's POSITION must name an existing accessor (checked before `gltf` validates).
+fn check_position_indices(document: &gltf::Document) -> Result<(), String> {
+    use gltf::json::validation::Checked;
+    let root = document.as_json();
+    for (m, mesh) in root.meshes.iter().enumerate() {
+        for (p, prim) in mesh.primitives.iter().enumerate() {
+            if let Some(i) = prim
+                .attributes
+                .get(&Checked::Valid(gltf::json::mesh::Semantic::Positions))
+            {
+                if i.value() >= root.accessors.len() {
+                    return Err(format!(
+                        "mesh {m}, primitive {p}: POSITION refers to accessor {}, but the file has {}",
+                        i.value(),
+                        root.accessors.len()
+                    ));
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The file a buffer URI names: `None` for a data URI (or another scheme `gltf` reads itself),
+/// `Some(Err)` for a relative URI that does not percent-decode to UTF-8.
+fn external_file(base: &Path, uri: &str) -> Option<Result<std::path::PathBuf, String>> {
+    if let Some(rest) = uri.strip_prefix("file://").or_else(|| uri.strip_prefix("file:")) {
+        return Some(Ok(Path::new(rest).to_path_buf()));
+    }
+    if uri.contains(':') {
+        return None;
+    }
+    Some(match percent_decode(uri) {
+        Some(rel) => Ok(base.join(rel)),
+        None => Err(format!("URI '{uri}' is not valid percent-encoded UTF-8")),
+    })
+}
+
+/// Decodes `%XX` escapes; `None` when the result is not UTF-8.
+fn percent_decode(uri: &str) -> Option<String> {
+    let b = uri.as_bytes();
+    let mut out = Vec::with_capacity(b.len());
+    let mut i = 0;
+    while i < b.len() {
+        let hex = |c: u8| (c as char).to_digit(16);
+        if b[i] == b'%' && i + 2 < b.len() {
+            if let (Some(h), Some(l)) = (hex(b[i + 1]), hex(b[i + 2])) {
+                out.push((h * 16 + l) as u8);
+                i += 3;
+                continue;
+            }
+        }
+        out.push(b[i]);
+        i += 1;
+    }
+    String::from_utf8(out).ok()
+}
+
+/// Reads a regular file whole (a device or a directory is refused rather than read forever).
+fn read_regular_file(file: &Path) -> std::io::Result<Vec<u8>> {
+    if !std::fs::metadata(file)?.is_file() {
+        return Err(std::io::Error::other("not a regular file"));
+    }
+    std::fs::read(file)
+}
+
+/// Every bufferView must lie inside its buffer (`byteOffset + byteLength ≤ buffer length`).
+fn check_views(path: &Path, document: &gltf::Document, buffers: &[gltf::buffer::Data]) -> Result<(), SceneError> {
+    for view in document.views() {
+        let buffer = view.buffer().index();
+        let actual = buffers[buffer].0.len().min(view.buffer().length()) as u64;
+        let needed = (view.offset() as u64).checked_add(view.length() as u64);
+        if needed.is_none_or(|n| n > actual) {
+            return Err(SceneError::BufferView {
+                path: path.to_path_buf(),
+                view: view.index(),
+                buffer,
+                needed: needed.unwrap_or(u64::MAX),
+                actual,
+            });
+        }
+    }
+    Ok(())
+}
+
+/// The bytes of a (validated) bufferView.
+fn view_bytes<'b>(view: &gltf::buffer::View, buffers: &'b [gltf::buffer::Data]) -> &'b [u8] {
+    &buffers[view.buffer().index()].0[view.offset()..view.offset() + view.length()]
+}
+
+/// The `KHR_lights_punctual` light index of a node, if it has one.
+fn node_light_index(document: &gltf::Document, node: usize) -> Option<usize> {
+    let n = document.as_json().nodes.get(node)?;
+    Some(n.extensions.as_ref()?.khr_lights_punctual.as_ref()?.light.value())
+}
+
+fn component_size(t: gltf::accessor::DataType) -> usize {
+    use gltf::accessor::DataType::*;
+    match t {
+        I8 | U8 => 1,
+        I16 | U16 => 2,
+        U32 | F32 => 4,
+    }
+}
+
+/// One component as a float, normalised as the glTF spec says when `normalized`.
+fn component_f32(t: gltf::accessor::DataType, b: &[u8], normalized: bool) -> f32 {
+    use gltf::accessor::DataType::*;
+    match (t, normalized) {
+        (F32, _) => f32::from_le_bytes([b[0], b[1], b[2], b[3]]),
+        (I8, false) => b[0] as i8 as f32,
+        (U8, false) => b[0] as f32,
+        (I16, false) => i16::from_le_bytes([b[0], b[1]]) as f32,
+        (U16, false) => u16::from_le_bytes([b[0], b[1]]) as f32,
+        (U32, false) => u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as f32,
+        (I8, true) => (b[0] as i8 as f32 / 127.0).max(-1.0),
+        (U8, true) => b[0] as f32 / 255.0,
+        (I16, true) => (i16::from_le_bytes([b[0], b[1]]) as f32 / 32767.0).max(-1.0),
+        (U16, true) => u16::from_le_bytes([b[0], b[1]]) as f32 / 65535.0,
+        (U32, true) => u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as f32 / u32::MAX as f32,
+    }
+}
+
+/// Checks that `count` elements of `elem` bytes, `stride` apart from `offset`, fit in `len`
+/// bytes: `offset + stride × (count − 1) + elem ≤ len`, in checked arithmetic.
+fn range_fits(offset: usize, stride: usize, count: usize, elem: usize, len: usize) -> Result<(), String> {
+    let end = (count as u64)
+        .checked_sub(1)
+        .and_then(|n| n.checked_mul(stride as u64))
+        .and_then(|n| n.checked_add(offset as u64))
+        .and_then(|n| n.checked_add(elem as u64));
+    match end {
+        Some(end) if end <= len as u64 => Ok(()),
+        Some(end) => Err(format!(
+            "count {count} × stride {stride} from byteOffset {offset} needs {end} bytes, its bufferView has {len}"
+        )),
+        None => Err(format!(
+            "count {count} × stride {stride} from byteOffset {offset} overflows"
+        )),
+    }
+}
+
+/// Decodes an accessor element by element (dense data, then sparse substitutions), after
+/// checking every range it reads. `decode` receives one element's bytes.
+fn read_accessor<T: Copy>(
+    path: &Path,
+    acc: &gltf::Accessor,
+    buffers: &[gltf::buffer::Data],
+    zero: T,
+    decode: impl Fn(&[u8]) -> T,
+) -> Result<Vec<T>, SceneError> {
+    let err = |message: String| SceneError::Accessor {
+        path: path.to_path_buf(),
+        accessor: acc.index(),
+        message,
+    };
+    let count = acc.count();
+    if count == 0 {
+        return Err(err("count is 0".into()));
+    }
+    let elem = component_size(acc.data_type()) * acc.dimensions().multiplicity();
+    let mut out = match acc.view() {
+        Some(view) => {
+            let stride = view.stride().unwrap_or(elem);
+            if stride < elem {
+                return Err(err(format!(
+                    "bufferView {} has byteStride {stride}, less than the element size {elem}",
+                    view.index()
+                )));
+            }
+            let bytes = view_bytes(&view, buffers);
+            range_fits(acc.offset(), stride, count, elem, bytes.len())
+                .map_err(|m| err(format!("{m} (bufferView {})", view.index())))?;
+            (0..count)
+                .map(|i| decode(&bytes[acc.offset() + i * stride..][..elem]))
+                .collect::<Vec<T>>()
+        }
+        None if count > MAX_VIEWLESS_COUNT => {
+            return Err(err(format!(
+                "count {count} without a bufferView exceeds the limit of {MAX_VIEWLESS_COUNT}"
+            )))
+        }
+        None => vec![zero; count],
+    };
+    if let Some(sparse) = acc.sparse() {
+        let n = sparse.count();
+        if n == 0 || n > count {
+            return Err(err(format!("sparse count {n} is not in 1..={count}")));
+        }
+        let indices = sparse.indices();
+        let index_size = indices.index_type().size();
+        let index_view = indices.view();
+        let index_bytes = view_bytes(&index_view, buffers);
+        range_fits(indices.offset(), index_size, n, index_size, index_bytes.len())
+            .map_err(|m| err(format!("sparse indices: {m} (bufferView {})", index_view.index())))?;
+        let values = sparse.values();
+        let value_view = values.view();
+        let value_bytes = view_bytes(&value_view, buffers);
+        range_fits(values.offset(), elem, n, elem, value_bytes.len())
+            .map_err(|m| err(format!("sparse values: {m} (bufferView {})", value_view.index())))?;
+        for k in 0..n {
+            let b = &index_bytes[indices.offset() + k * index_size..][..index_size];
+            let i = match index_size {
+                1 => b[0] as usize,
+                2 => u16::from_le_bytes([b[0], b[1]]) as usize,
+                _ => u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as usize,
+            };
+            let slot = out
+                .get_mut(i)
+                .ok_or_else(|| err(format!("sparse index {i} out of range (count {count})")))?;
+            *slot = decode(&value_bytes[values.offset() + k * elem..][..elem]);
+        }
+    }
+    Ok(out)
+}
+
+/// Reads a float attribute of `N` components (`VEC2` or `VEC3`), any component type.
+fn read_floats<const N: usize>(
+    path: &Path,
+    acc: &gltf::Accessor,
+    buffers: &[gltf::buffer::Data],
+    what: &str,
+) -> Result<Vec<[f32; N]>, SceneError> {
+    let dims = acc.dimensions();
+    if dims.multiplicity() != N
+        || !matches!(
+            dims,
+            gltf::accessor::Dimensions::Vec2 | gltf::accessor::Dimensions::Vec3
+        )
+    {
+        return Err(SceneError::Accessor {
+            path: path.to_path_buf(),
+            accessor: acc.index(),
+            message: format!("{what} must be VEC{N}, found {dims:?}"),
+        });
+    }
+    let (t, normalized) = (acc.data_type(), acc.normalized());
+    let size = component_size(t);
+    read_accessor(path, acc, buffers, [0.0; N], |b| {
+        std::array::from_fn(|c| component_f32(t, &b[c * size..], normalized))
+    })
+}
+
+/// Reads an index accessor: `SCALAR` of unsigned bytes, shorts or ints.
+fn read_indices(path: &Path, acc: &gltf::Accessor, buffers: &[gltf::buffer::Data]) -> Result<Vec<u32>, SceneError> {
+    use gltf::accessor::DataType::*;
+    let t = acc.data_type();
+    if acc.dimensions() != gltf::accessor::Dimensions::Scalar || !matches!(t, U8 | U16 | U32) {
+        return Err(SceneError::Accessor {
+            path: path.to_path_buf(),
+            accessor: acc.index(),
+            message: format!(
+                "indices must be SCALAR of unsigned byte, short or int, found {:?} of {t:?}",
+                acc.dimensions()
+            ),
+        });
+    }
+    read_accessor(path, acc, buffers, 0, |b| match t {
+        U8 => b[0] as u32,
+        U16 => u16::from_le_bytes([b[0], b[1]]) as u32,
+        _ => u32::from_le_bytes([b[0], b[1], b[2], b[3]]),
+    })
 }
 
 /// Converts a decoded glTF image to an 8-bit RGB texture; `None` for float formats.

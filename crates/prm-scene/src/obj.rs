@@ -1,4 +1,13 @@
 //! Wavefront OBJ + MTL loading through `tobj`.
+//!
+//! The file is read as bytes and pre-scanned line by line before `tobj` sees it, so that
+//! malformed input is reported as `file:line` ([`SceneError::Malformed`]): numbers that do not
+//! parse or are not finite, `f` lines with fewer than 3 vertices, and vertex, texture-coordinate
+//! or normal indices that are out of range (a `vt` index in a file without `vt` lines included)
+//! are all **errors**, never silently dropped. Comments (`#` at the start of a word) are removed
+//! first, so non-UTF-8 bytes inside them are harmless; non-UTF-8 bytes elsewhere are replaced by
+//! U+FFFD with a warning naming the line (or, where that makes the line unreadable, the error
+//! names it). Polylines and points (`l`, `p`) are not lit and are removed before `tobj` parses.
 
 use glam::{Vec2, Vec3};
 use std::collections::HashMap;
@@ -12,18 +21,51 @@ use crate::SceneError;
 pub(crate) const DEFAULT_GREY: Vec3 = Vec3::splat(0.5);
 
 pub(crate) fn load(path: &Path) -> Result<Scene, SceneError> {
+    let bytes = read_regular_file(path).map_err(|source| SceneError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let mut report = LoadReport::default();
+    let prepared = prepare(&bytes);
+    for line in &prepared.lossy_lines {
+        report
+            .warnings
+            .push(format!("{}:{line}: non-UTF-8 bytes replaced by U+FFFD", path.display()));
+    }
+    if let Some((line, why)) = first_bad_line(&prepared.text) {
+        let why = if prepared.lossy_lines.contains(&line) {
+            format!("{why} (the line has non-UTF-8 bytes)")
+        } else {
+            why
+        };
+        return Err(SceneError::Malformed {
+            path: path.to_path_buf(),
+            line: Some(line),
+            message: why,
+        });
+    }
     let options = tobj::LoadOptions {
         triangulate: true,
         single_index: true,
         ignore_points: true,
         ignore_lines: true,
     };
-    let (models, materials) = match tobj::load_obj(path, &options) {
-        Ok(r) => r,
-        Err(e) => return Err(locate_error(path, &e.to_string())),
-    };
-    let mut report = LoadReport::default();
     let dir = path.parent().unwrap_or(Path::new("."));
+    // MTL files too are read as bytes and decoded lossily, so one stray byte cannot lose them,
+    // and their colour lines are checked first (`tobj` panics on `Kd` with 2 numbers).
+    let mtl_warnings = std::cell::RefCell::new(Vec::new());
+    let load_mtl = |mtl: &Path| {
+        let file = dir.join(mtl);
+        let bytes = read_regular_file(&file).map_err(|_| tobj::LoadError::OpenFileFailed)?;
+        let text = prepare_mtl(&file, &bytes, &mut mtl_warnings.borrow_mut());
+        tobj::load_mtl_buf(&mut std::io::Cursor::new(text.as_bytes()))
+    };
+    let mut reader = std::io::Cursor::new(prepared.text.as_bytes());
+    let (models, materials) = match tobj::load_obj_buf(&mut reader, &options, load_mtl) {
+        Ok(r) => r,
+        Err(e) => return Err(locate_error(path, &prepared.text, &e.to_string())),
+    };
+    report.warnings.append(&mut mtl_warnings.into_inner());
     let obj_materials = match materials {
         Ok(m) => m,
         Err(e) => {
@@ -87,7 +129,7 @@ pub(crate) fn load(path: &Path) -> Result<Scene, SceneError> {
         for (i, p) in model.mesh.positions.chunks_exact(3).enumerate() {
             let p = Vec3::new(p[0], p[1], p[2]);
             if !p.is_finite() {
-                let err = locate_error(path, "non-finite coordinate");
+                let err = locate_error(path, &prepared.text, "non-finite coordinate");
                 if matches!(err, SceneError::Malformed { line: Some(_), .. }) {
                     return Err(err);
                 }
@@ -156,19 +198,83 @@ pub(crate) fn load(path: &Path) -> Result<Scene, SceneError> {
     scene.finish_load()
 }
 
-/// `tobj` reports what went wrong but not where: scan the file for the first line that is
-/// malformed in the way `message` says (or in any way), so the error can name it.
-fn locate_error(path: &Path, message: &str) -> SceneError {
-    let text = match std::fs::read(path) {
-        Ok(b) => String::from_utf8_lossy(&b).into_owned(),
-        Err(source) => {
-            return SceneError::Io {
-                path: path.to_path_buf(),
-                source,
-            }
+/// Reads a regular file whole (a device or a directory is refused rather than read forever).
+pub(crate) fn read_regular_file(file: &Path) -> std::io::Result<Vec<u8>> {
+    if !std::fs::metadata(file)?.is_file() {
+        return Err(std::io::Error::other("not a regular file"));
+    }
+    std::fs::read(file)
+}
+
+/// An OBJ file made ready for `tobj`: one line per input line (so line numbers are kept).
+struct Prepared {
+    /// The text: comments removed, `l`/`p` lines blanked, vertex colours dropped.
+    text: String,
+    /// 1-based lines whose non-comment part had non-UTF-8 bytes (replaced by U+FFFD).
+    lossy_lines: Vec<usize>,
+}
+
+/// Turns raw OBJ bytes into text `tobj` can read without losing line numbers.
+fn prepare(bytes: &[u8]) -> Prepared {
+    let mut text = String::with_capacity(bytes.len());
+    let mut lossy_lines = Vec::new();
+    for (i, raw) in bytes.split(|&b| b == b'\n').enumerate() {
+        let raw = raw.strip_suffix(b"\r").unwrap_or(raw);
+        // A comment starts at a '#' that begins a word (so `usemtl a#1` keeps its name).
+        let cut = (0..raw.len())
+            .find(|&k| raw[k] == b'#' && (k == 0 || raw[k - 1].is_ascii_whitespace()))
+            .unwrap_or(raw.len());
+        let line = String::from_utf8_lossy(&raw[..cut]);
+        if matches!(line, std::borrow::Cow::Owned(_)) {
+            lossy_lines.push(i + 1);
         }
-    };
-    let line = first_bad_line(&text);
+        let mut words = line.split_whitespace();
+        match words.next() {
+            // Not lit; and `tobj` would turn an `l` of 3 or more vertices into a triangle.
+            Some("l" | "p") => {}
+            // `v x y z r g b`: the colours are not used, and `tobj` trips on partial ones.
+            Some("v") if line.split_whitespace().count() == 7 => {
+                text.push_str("v ");
+                text.push_str(&words.take(3).collect::<Vec<_>>().join(" "));
+            }
+            _ => text.push_str(line.trim_end()),
+        }
+        text.push('\n');
+    }
+    Prepared { text, lossy_lines }
+}
+
+/// Decodes an MTL file lossily and fixes its colour lines for `tobj`: `Ka`/`Kd`/`Ks`/`Ke` with one
+/// number mean grey (`r r r`, as the MTL spec says); with 0 or 2 numbers the line is dropped with
+/// a warning naming it.
+fn prepare_mtl(file: &Path, bytes: &[u8], warnings: &mut Vec<String>) -> String {
+    let text = String::from_utf8_lossy(bytes);
+    let mut out = String::with_capacity(text.len());
+    for (i, line) in text.lines().enumerate() {
+        let words: Vec<&str> = line.split_whitespace().collect();
+        match words.as_slice() {
+            [key @ ("Ka" | "Kd" | "Ks" | "Ke"), grey] => {
+                out.push_str(&format!("{key} {grey} {grey} {grey}"));
+            }
+            [key @ ("Ka" | "Kd" | "Ks" | "Ke")] | [key @ ("Ka" | "Kd" | "Ks" | "Ke"), _, _] => {
+                warnings.push(format!(
+                    "{}:{}: {key} needs 3 numbers (or 1), found {}; line ignored",
+                    file.display(),
+                    i + 1,
+                    words.len() - 1
+                ));
+            }
+            _ => out.push_str(line),
+        }
+        out.push('\n');
+    }
+    out
+}
+
+/// `tobj` reports what went wrong but not where: scan the text for the first line that is
+/// malformed in the way `message` says (or in any way), so the error can name it.
+fn locate_error(path: &Path, text: &str, message: &str) -> SceneError {
+    let line = first_bad_line(text);
     let message = match &line {
         Some((_, why)) => format!("{message}: {why}"),
         None => message.to_string(),
@@ -181,16 +287,33 @@ fn locate_error(path: &Path, message: &str) -> SceneError {
 }
 
 /// The first line (1-based) of an OBJ text that cannot be read, with the reason.
+///
+/// Relative (negative) indices count back from the elements defined so far, as `tobj` resolves
+/// them; positive ones may refer to any element of the file.
 fn first_bad_line(text: &str) -> Option<(usize, String)> {
-    let (mut nv, mut nvt, mut nvn) = (0i64, 0i64, 0i64);
+    let mut total = [0i64; 3];
+    for line in text.lines() {
+        match line.split_whitespace().next() {
+            Some("v") => total[0] += 1,
+            Some("vt") => total[1] += 1,
+            Some("vn") => total[2] += 1,
+            _ => {}
+        }
+    }
+    let mut so_far = [0i64; 3];
     for (i, raw) in text.lines().enumerate() {
-        let line = raw.split('#').next().unwrap_or("").trim();
-        let mut words = line.split_whitespace();
+        // Comments were removed by `prepare`; a '#' left is inside a word.
+        let mut words = raw.split_whitespace();
         let Some(key) = words.next() else { continue };
         let rest: Vec<&str> = words.collect();
-        let floats = |min: usize| -> Result<(), String> {
-            if rest.len() < min {
-                return Err(format!("expected {min} numbers, found {}", rest.len()));
+        let floats = |counts: &[usize]| -> Result<(), String> {
+            if !counts.contains(&rest.len()) {
+                let expected: Vec<String> = counts.iter().map(|c| c.to_string()).collect();
+                return Err(format!(
+                    "expected {} numbers, found {}",
+                    expected.join(" or "),
+                    rest.len()
+                ));
             }
             for w in &rest {
                 match w.parse::<f32>() {
@@ -202,10 +325,17 @@ fn first_bad_line(text: &str) -> Option<(usize, String)> {
             Ok(())
         };
         let result = match key {
-            "v" => floats(3).map(|_| nv += 1),
-            "vt" => floats(1).map(|_| nvt += 1),
-            "vn" => floats(3).map(|_| nvn += 1),
-            "f" => check_face(&rest, nv, nvt, nvn),
+            "v" => floats(&[3, 4, 6]).and_then(|_| match rest.get(3).map(|w| w.parse::<f32>()) {
+                Some(Ok(w)) if rest.len() == 4 && w == 0.0 => Err("weight w is 0".to_string()),
+                _ => {
+                    so_far[0] += 1;
+                    Ok(())
+                }
+            }),
+            "vt" => floats(&[2, 3]).map(|_| so_far[1] += 1),
+            "vn" => floats(&[3]).map(|_| so_far[2] += 1),
+            "f" => check_face(&rest, so_far, total),
+            "usemtl" if rest.is_empty() => Err("usemtl needs a material name".to_string()),
             _ => Ok(()),
         };
         if let Err(why) = result {
@@ -215,19 +345,40 @@ fn first_bad_line(text: &str) -> Option<(usize, String)> {
     None
 }
 
-fn check_face(verts: &[&str], nv: i64, nvt: i64, nvn: i64) -> Result<(), String> {
+/// Checks one `f` line: at least 3 vertices, each `v[/vt[/vn]]` with indices in range.
+fn check_face(verts: &[&str], so_far: [i64; 3], total: [i64; 3]) -> Result<(), String> {
     if verts.len() < 3 {
         return Err(format!("a face needs 3 vertices, found {}", verts.len()));
     }
+    const NAMES: [&str; 3] = ["vertex", "texture coordinate", "normal"];
+    const KEYS: [&str; 3] = ["v", "vt", "vn"];
     for v in verts {
-        for (k, (part, count)) in v.split('/').zip([nv, nvt, nvn]).enumerate() {
+        let parts: Vec<&str> = v.split('/').collect();
+        if parts.len() > 3 {
+            return Err(format!("bad face vertex '{v}' (more than v/vt/vn)"));
+        }
+        for (k, part) in parts.iter().enumerate() {
             if part.is_empty() && k > 0 {
                 continue;
             }
             let idx: i64 = part.parse().map_err(|_| format!("bad index '{part}'"))?;
-            let resolved = if idx < 0 { count + idx + 1 } else { idx };
-            if idx == 0 || resolved < 1 || resolved > count {
-                return Err(format!("index {idx} out of range (1..={count} defined so far)"));
+            let (name, key) = (NAMES[k], KEYS[k]);
+            if total[k] == 0 {
+                return Err(format!("{name} index {idx} but the file has no '{key}' lines"));
+            }
+            if idx < 0 {
+                let count = so_far[k];
+                let resolved = count + idx + 1;
+                if resolved < 1 {
+                    return Err(format!(
+                        "relative {name} index {idx} out of range ({count} defined so far)"
+                    ));
+                }
+            } else if idx == 0 || idx > total[k] {
+                return Err(format!(
+                    "{name} index {idx} out of range (1..={} in the file)",
+                    total[k]
+                ));
             }
         }
     }
@@ -237,6 +388,17 @@ fn check_face(verts: &[&str], nv: i64, nvt: i64, nvn: i64) -> Result<(), String>
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn prepare_keeps_lines_and_strips_comments() {
+        let p = prepare(b"# \xff\r\nusemtl a#1 # c\nl 1 2 3\nv 1 2 3 0.1 0.2 0.3\no \xe9\n");
+        assert_eq!(p.text, "\nusemtl a#1\n\nv 1 2 3\no \u{fffd}\n\n");
+        assert_eq!(p.lossy_lines, vec![5], "the comment's byte is not reported");
+        assert_eq!(first_bad_line("v 0 0 0\nvt 0 0\nf 1/1 1/1 1/2\n").map(|l| l.0), Some(3));
+        assert_eq!(first_bad_line("v 0 0 0\nf 1/1 1 1\n").map(|l| l.0), Some(2));
+        // Positive indices may refer forward (tobj resolves them at the end); relative may not.
+        assert_eq!(first_bad_line("f 1 2 3\nv 0 0 0\nv 1 0 0\nv 0 1 0\n"), None);
+    }
 
     #[test]
     fn bad_line_finder() {

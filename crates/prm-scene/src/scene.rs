@@ -203,6 +203,10 @@ impl Scene {
     /// A stable 64-bit fingerprint of the geometry: triangle count and every corner position's
     /// bits, in order (xxh3). Materials, lights and cameras do not enter it, so an archive stays
     /// valid when only those change.
+    ///
+    /// A **geometry mismatch means refuse**: an archive whose recorded fingerprint differs from
+    /// the scene's was baked for other geometry and must not be played. Albedo changes are
+    /// caught by [`Scene::materials_fingerprint`] instead, which only warrants a warning.
     pub fn fingerprint(&self) -> u64 {
         let mut h = xxhash_rust::xxh3::Xxh3::new();
         h.update(&(self.triangles.len() as u64).to_le_bytes());
@@ -211,6 +215,55 @@ impl Scene {
                 for c in p.to_array() {
                     h.update(&c.to_bits().to_le_bytes());
                 }
+            }
+        }
+        h.digest()
+    }
+
+    /// A stable 64-bit fingerprint of what the baked panes depend on besides geometry: for every
+    /// triangle, in order, its material's albedo bits and, when textured, the texture's size and
+    /// texels plus the triangle's material UVs (xxh3). Material names, lights and cameras do not
+    /// enter it; neither does the material table's order, only what each triangle ends up with.
+    ///
+    /// A **materials mismatch means warn**: the archive's indirect light was computed with other
+    /// albedos, so it is still usable but no longer exact. A geometry mismatch
+    /// ([`Scene::fingerprint`]) means refuse.
+    pub fn materials_fingerprint(&self) -> u64 {
+        // Each texture is hashed once; triangles then refer to its digest.
+        let texture_digests: Vec<u64> = self
+            .textures
+            .iter()
+            .map(|t| {
+                let mut h = xxhash_rust::xxh3::Xxh3::new();
+                h.update(&t.width.to_le_bytes());
+                h.update(&t.height.to_le_bytes());
+                for texel in &t.texels {
+                    h.update(texel);
+                }
+                h.digest()
+            })
+            .collect();
+        let mut h = xxhash_rust::xxh3::Xxh3::new();
+        h.update(&(self.triangles.len() as u64).to_le_bytes());
+        for t in &self.triangles {
+            let Some(m) = self.materials.get(t.material as usize) else {
+                h.update(&[0xff]);
+                continue;
+            };
+            for c in m.albedo.to_array() {
+                h.update(&c.to_bits().to_le_bytes());
+            }
+            match m.texture.and_then(|i| texture_digests.get(i as usize)) {
+                Some(d) => {
+                    h.update(&[1]);
+                    h.update(&d.to_le_bytes());
+                    for uv in t.uvs {
+                        for c in uv.to_array() {
+                            h.update(&c.to_bits().to_le_bytes());
+                        }
+                    }
+                }
+                None => h.update(&[0]),
             }
         }
         h.digest()

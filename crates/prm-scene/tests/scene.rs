@@ -411,3 +411,359 @@ fn fingerprint_tracks_geometry_only() {
     b.triangles[3].positions[0].x += 1e-4;
     assert_ne!(a.fingerprint(), b.fingerprint());
 }
+
+// ---- Hostile input: regression tests of the QA findings on bad scene files. ----
+
+/// A fresh directory under the system temp dir, unique to this test and process; removed
+/// when dropped.
+struct TempDir(PathBuf);
+
+impl std::ops::Deref for TempDir {
+    type Target = Path;
+    fn deref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+fn temp_case(name: &str) -> TempDir {
+    let dir = std::env::temp_dir().join(format!("prm-scene-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    TempDir(dir)
+}
+
+/// Little-endian bytes of floats and u32s.
+fn le_f32(v: &[f32]) -> Vec<u8> {
+    v.iter().flat_map(|x| x.to_le_bytes()).collect()
+}
+
+/// A glTF of one mesh: POSITION accessor 0 (3 vertices in bufferView 0), index accessor 1
+/// (`index_count` u32 indices in bufferView 1). The buffer `buffer.bin` holds `bin`.
+fn indexed_gltf(dir: &Path, bin: &[u8], buffer_len: usize, views: [(usize, usize); 2], counts: [u64; 2]) -> PathBuf {
+    std::fs::write(dir.join("buffer.bin"), bin).unwrap();
+    let json = format!(
+        r#"{{
+      "asset": {{"version": "2.0"}},
+      "buffers": [{{"uri": "buffer.bin", "byteLength": {buffer_len}}}],
+      "bufferViews": [{{"buffer": 0, "byteOffset": {}, "byteLength": {}}}, {{"buffer": 0, "byteOffset": {}, "byteLength": {}}}],
+      "accessors": [
+        {{"bufferView": 0, "componentType": 5126, "count": {}, "type": "VEC3", "min": [0,0,0], "max": [1,1,0]}},
+        {{"bufferView": 1, "componentType": 5125, "count": {}, "type": "SCALAR"}}],
+      "meshes": [{{"primitives": [{{"attributes": {{"POSITION": 0}}, "indices": 1}}]}}],
+      "nodes": [{{"mesh": 0}}],
+      "scenes": [{{"nodes": [0]}}],
+      "scene": 0
+    }}"#,
+        views[0].0, views[0].1, views[1].0, views[1].1, counts[0], counts[1]
+    );
+    write(dir, "scene.gltf", &json)
+}
+
+/// 3 vertices and 30 triangles' worth of indices (all the same triangle, shifted corners).
+fn thirty_triangles() -> Vec<u8> {
+    let mut bin = le_f32(&[0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0]);
+    for _ in 0..30 {
+        for i in [0u32, 1, 2] {
+            bin.extend_from_slice(&i.to_le_bytes());
+        }
+    }
+    bin
+}
+
+#[test]
+fn gltf_valid_indexed_mesh_loads() {
+    let dir = temp_case("gltf-indexed-ok");
+    let bin = thirty_triangles();
+    let p = indexed_gltf(&dir, &bin, bin.len(), [(0, 36), (36, 360)], [3, 90]);
+    let scene = prm_scene::load(&p).unwrap();
+    assert_eq!(scene.triangles.len(), 30);
+}
+
+#[test]
+fn gltf_buffer_shorter_than_its_views_is_an_error() {
+    let dir = temp_case("gltf-short-buffer");
+    let full = thirty_triangles();
+    // The buffer really holds (and declares) half of what the index view needs.
+    let bin = &full[..36 + 180];
+    let p = indexed_gltf(&dir, bin, bin.len(), [(0, 36), (36, 360)], [3, 90]);
+    let e = prm_scene::load(&p).expect_err("a truncated buffer must not bake half the mesh");
+    assert!(
+        matches!(
+            e,
+            SceneError::BufferView {
+                view: 1,
+                buffer: 0,
+                needed: 396,
+                actual: 216,
+                ..
+            }
+        ),
+        "{e}"
+    );
+    let s = e.to_string();
+    assert!(
+        s.contains("bufferView 1") && s.contains("396") && s.contains("216"),
+        "{s}"
+    );
+}
+
+#[test]
+fn gltf_accessor_count_overrunning_its_view_is_an_error() {
+    let dir = temp_case("gltf-huge-count");
+    let bin = thirty_triangles();
+    let p = indexed_gltf(&dir, &bin, bin.len(), [(0, 36), (36, 360)], [1_000_000, 90]);
+    let e = prm_scene::load(&p).expect_err("count 1e6 over a 36-byte view");
+    assert!(matches!(e, SceneError::Accessor { accessor: 0, .. }), "{e}");
+    assert!(e.to_string().contains("accessor 0"), "{e}");
+    assert!(!e.to_string().contains("without positions"), "{e}");
+}
+
+#[test]
+fn gltf_index_accessor_with_count_4e9_is_an_error() {
+    let dir = temp_case("gltf-4e9-indices");
+    let bin = thirty_triangles();
+    let p = indexed_gltf(&dir, &bin, bin.len(), [(0, 36), (36, 360)], [3, 4_000_000_000]);
+    let e = prm_scene::load(&p).expect_err("4e9 indices in a 360-byte view");
+    assert!(matches!(e, SceneError::Accessor { accessor: 1, .. }), "{e}");
+    assert!(e.to_string().contains("accessor 1"), "{e}");
+}
+
+#[test]
+fn gltf_missing_bin_is_named() {
+    let dir = temp_case("gltf-missing-bin");
+    let bin = thirty_triangles();
+    let p = indexed_gltf(&dir, &bin, bin.len(), [(0, 36), (36, 360)], [3, 90]);
+    std::fs::remove_file(dir.join("buffer.bin")).unwrap();
+    let e = prm_scene::load(&p).expect_err("missing buffer file");
+    match &e {
+        SceneError::BufferFile {
+            path, scene, buffer, ..
+        } => {
+            assert_eq!(path, &dir.join("buffer.bin"));
+            assert_eq!(scene, &p);
+            assert_eq!(*buffer, 0);
+        }
+        other => panic!("expected BufferFile, got {other}"),
+    }
+    assert!(
+        e.to_string().starts_with(&dir.join("buffer.bin").display().to_string()),
+        "{e}"
+    );
+}
+
+#[test]
+fn gltf_buffer_shorter_than_declared_is_an_error() {
+    let dir = temp_case("gltf-declared-length");
+    let bin = thirty_triangles();
+    let p = indexed_gltf(&dir, &bin[..100], bin.len(), [(0, 36), (36, 360)], [3, 90]);
+    let e = prm_scene::load(&p).expect_err("buffer shorter than its byteLength");
+    assert!(
+        matches!(
+            e,
+            SceneError::BufferLength {
+                buffer: 0,
+                declared: 396,
+                actual: 100,
+                ..
+            }
+        ),
+        "{e}"
+    );
+    assert!(e.to_string().contains("buffer.bin"), "{e}");
+}
+
+/// The error of loading `text` as an OBJ; it must be `Malformed` at `line`.
+fn obj_error_at(name: &str, text: &[u8], line: usize) -> String {
+    let dir = temp_case(name);
+    let p = dir.join(format!("{name}.obj"));
+    std::fs::write(&p, text).unwrap();
+    let e = prm_scene::load(&p).expect_err("must fail");
+    assert!(
+        matches!(e, SceneError::Malformed { line: Some(l), .. } if l == line),
+        "expected {name}.obj:{line}, got {e}"
+    );
+    let s = e.to_string();
+    assert!(s.contains(&format!("{name}.obj:{line}")), "{s}");
+    s
+}
+
+const TRIANGLE: &str = "v 0 0 0\nv 1 0 0\nv 0 1 0\n";
+
+#[test]
+fn obj_face_with_two_vertices_is_an_error() {
+    let s = obj_error_at("two-vertex-face", format!("{TRIANGLE}f 1 2 3\nf 1 2\n").as_bytes(), 5);
+    assert!(s.contains("3 vertices"), "{s}");
+}
+
+#[test]
+fn obj_face_with_one_vertex_is_an_error() {
+    obj_error_at("one-vertex-face", format!("{TRIANGLE}f 1\nf 1 2 3\n").as_bytes(), 4);
+}
+
+#[test]
+fn obj_texcoord_index_without_vt_is_an_error() {
+    let s = obj_error_at("no-vt", format!("{TRIANGLE}f 1/2 2 3\n").as_bytes(), 4);
+    assert!(s.contains("no 'vt'"), "{s}");
+}
+
+#[test]
+fn obj_texcoord_index_out_of_range_is_an_error() {
+    obj_error_at(
+        "vt-range",
+        format!("{TRIANGLE}vt 0 0\nvt 1 0\nf 1/1 2/2 3/3\n").as_bytes(),
+        6,
+    );
+}
+
+#[test]
+fn obj_normal_index_out_of_range_is_an_error() {
+    obj_error_at(
+        "vn-range",
+        format!("{TRIANGLE}vn 0 0 1\nf 1//1 2//2 3//1\n").as_bytes(),
+        5,
+    );
+}
+
+#[test]
+fn obj_non_utf8_in_comment_is_tolerated() {
+    let dir = temp_case("non-utf8-comment");
+    let p = dir.join("c.obj");
+    let mut text = b"# caf\xe9 \xff\n".to_vec();
+    text.extend_from_slice(TRIANGLE.as_bytes());
+    text.extend_from_slice(b"f 1 2 3 # end \xfe\n");
+    std::fs::write(&p, text).unwrap();
+    let scene = prm_scene::load(&p).unwrap();
+    assert_eq!(scene.triangles.len(), 1);
+    assert!(scene.report.warnings.is_empty(), "{:?}", scene.report.warnings);
+}
+
+#[test]
+fn obj_non_utf8_in_a_name_is_a_warning_with_its_line() {
+    let dir = temp_case("non-utf8-name");
+    let p = dir.join("n.obj");
+    let mut text = b"o chaise-\xe9\n".to_vec();
+    text.extend_from_slice(format!("{TRIANGLE}f 1 2 3\n").as_bytes());
+    std::fs::write(&p, text).unwrap();
+    let scene = prm_scene::load(&p).unwrap();
+    assert_eq!(scene.triangles.len(), 1);
+    assert!(
+        scene
+            .report
+            .warnings
+            .iter()
+            .any(|w| w.contains("n.obj:1") && w.contains("non-UTF-8")),
+        "{:?}",
+        scene.report.warnings
+    );
+}
+
+#[test]
+fn obj_non_utf8_in_a_vertex_is_an_error_with_its_line() {
+    let s = obj_error_at("non-utf8-vertex", b"v 0 0 0\nv 1 \xff 0\nv 0 1 0\nf 1 2 3\n", 2);
+    assert!(s.contains("non-UTF-8"), "{s}");
+}
+
+#[test]
+fn obj_trailing_comments_and_vertex_colours_load() {
+    let dir = temp_case("obj-comments-colours");
+    let p = write(
+        &dir,
+        "c.obj",
+        "v 0 0 0 1 0 0 # red\nv 1 0 0\nv 0 1 0 0 0 1\nl 1 2 3\nf 1 2 3 # one\n",
+    );
+    let scene = prm_scene::load(&p).unwrap();
+    assert_eq!(scene.triangles.len(), 1, "the polyline is not a triangle");
+}
+
+#[test]
+fn materials_fingerprint_tracks_albedo_not_geometry() {
+    let dir = temp_case("materials-fingerprint");
+    let obj = "mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl a\nf 1 2 3\n";
+    write(&dir, "m.mtl", "newmtl a\nKd 0.5 0.5 0.5\n");
+    let p = write(&dir, "s.obj", obj);
+    let grey = prm_scene::load(&p).unwrap();
+    write(&dir, "m.mtl", "newmtl a\nKd 0.8 0.1 0.1\n");
+    let red = prm_scene::load(&p).unwrap();
+    assert_eq!(grey.fingerprint(), red.fingerprint(), "geometry unchanged");
+    assert_ne!(
+        grey.materials_fingerprint(),
+        red.materials_fingerprint(),
+        "albedo changed"
+    );
+    // Deterministic, and blind to names.
+    let again = prm_scene::load(&p).unwrap();
+    assert_eq!(red.materials_fingerprint(), again.materials_fingerprint());
+    let mut renamed = red.clone();
+    renamed.materials[0].name = "other".into();
+    assert_eq!(red.materials_fingerprint(), renamed.materials_fingerprint());
+    // A texture's content enters it.
+    let mut textured = red.clone();
+    textured.textures.push(prm_scene::Texture {
+        width: 1,
+        height: 1,
+        texels: vec![[255, 0, 0]],
+    });
+    textured.materials[0].texture = Some(0);
+    let fp = textured.materials_fingerprint();
+    assert_ne!(fp, red.materials_fingerprint());
+    textured.textures[0].texels[0] = [0, 255, 0];
+    assert_ne!(fp, textured.materials_fingerprint());
+    assert_eq!(textured.fingerprint(), red.fingerprint());
+}
+
+#[test]
+fn mtl_colour_with_two_numbers_is_a_warning_not_a_panic() {
+    // Found by the fuzzer: tobj panics on `Kd` with two numbers.
+    let dir = temp_case("mtl-two-numbers");
+    write(&dir, "m.mtl", "newmtl a\nKd 0.8 0.1\nnewmtl b\nKd 0.3\n");
+    let p = write(
+        &dir,
+        "s.obj",
+        "mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl a\nf 1 2 3\nusemtl b\nf 1 3 2\n",
+    );
+    let scene = prm_scene::load(&p).unwrap();
+    assert!(
+        scene
+            .report
+            .warnings
+            .iter()
+            .any(|w| w.contains("m.mtl:2") && w.contains("Kd")),
+        "{:?}",
+        scene.report.warnings
+    );
+    let b = &scene.materials[scene.triangles[1].material as usize];
+    assert_eq!(b.albedo, Vec3::splat(0.3), "one number means grey");
+}
+
+#[test]
+fn gltf_position_accessor_out_of_range_is_an_error_not_a_panic() {
+    // Found by the fuzzer: gltf's validation indexes the POSITION accessor unchecked.
+    let dir = temp_case("gltf-position-index");
+    let p = write(
+        &dir,
+        "s.gltf",
+        r#"{"asset": {"version": "2.0"}, "meshes": [{"primitives": [{"attributes": {"POSITION": 7}}]}],
+            "nodes": [{"mesh": 0}], "scenes": [{"nodes": [0]}]}"#,
+    );
+    let e = prm_scene::load(&p).expect_err("no accessor 7");
+    assert!(e.to_string().contains("accessor 7"), "{e}");
+}
+
+#[test]
+fn gltf_node_cycle_is_an_error() {
+    let dir = temp_case("gltf-node-cycle");
+    let p = write(
+        &dir,
+        "s.gltf",
+        r#"{"asset": {"version": "2.0"}, "nodes": [{"children": [1]}, {"children": [0]}],
+            "scenes": [{"nodes": [0]}]}"#,
+    );
+    let e = prm_scene::load(&p).expect_err("a cycle");
+    assert!(e.to_string().contains("appears twice"), "{e}");
+}

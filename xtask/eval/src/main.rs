@@ -1,5 +1,9 @@
 //! `cargo xtask eval [--quick|--full] [--out DIR]`: accuracy against speed, a sweep of bake and run-time settings.
 //!
+//! A package of its own (`xtask-eval`), which `cargo xtask eval` runs, so that the light `xtask`
+//! binary behind `cargo xtask demo` does not compile the player, the charts and FLIP first: the
+//! README's main job builds wgpu once (release) instead of twice.
+//!
 //! For every scene: the automatic choice (`prm-bake bake --plan`), then one parameter at a time
 //! around it (entries, clusters, run-time K, resolution, walks per entry, VPL bound) and the
 //! presets. Every bake runs the `prm-bake` binary (cached under `target/eval/bakes` by its
@@ -122,7 +126,12 @@ fn target_dir(root: &Path) -> PathBuf {
         .unwrap_or_else(|| root.join("target"))
 }
 
-pub fn run(args: &[String]) -> Result<()> {
+fn main() -> Result<()> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    run(&args)
+}
+
+fn run(args: &[String]) -> Result<()> {
     let mut mode = Mode::Quick;
     let mut out = None;
     let mut it = args.iter();
@@ -135,8 +144,9 @@ pub fn run(args: &[String]) -> Result<()> {
         }
     }
     let root = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .parent()
-        .context("xtask has no parent directory")?
+        .ancestors()
+        .nth(2)
+        .context("xtask/eval has no workspace root above it")?
         .to_path_buf();
     let target = target_dir(&root);
     let out = out.map(|o| {
