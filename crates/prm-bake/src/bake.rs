@@ -226,7 +226,7 @@ pub fn run(args: &BakeArgs) -> Result<()> {
     let config = file_config.overridden_by(&args.config());
 
     let t = Instant::now();
-    let scene = prm_scene::load(&args.scene).with_context(|| format!("loading {}", args.scene.display()))?;
+    let scene = prm_scene::load(&args.scene).context("loading the scene")?;
     for w in &scene.report.warnings {
         progress.warn(w);
     }
