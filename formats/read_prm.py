@@ -23,8 +23,9 @@ import sys
 
 MAGIC = b"\x89PRM\r\n\x1a\n"
 SUPPORTED_MAJOR = 1
-SUPPORTED_MINOR = 0
-KINDS = {1: "metadata", 2: "atlas", 3: "entries", 4: "clusters", 5: "panes"}
+SUPPORTED_MINOR = 1
+KINDS = {1: "metadata", 2: "atlas", 3: "entries", 4: "clusters", 5: "panes", 6: "entry_energy"}
+OPTIONAL = {6}
 MAX_RESOLUTION = 8192
 MAX_TILE_SIZE = 1024
 MAX_TRIANGLES = 1 << 24
@@ -300,7 +301,7 @@ class Reader:
                 # unknown kinds are skipped, but their stored bytes are checked
                 self.check(d[s["offset"]:s["offset"] + s["stored_size"]], s["_sum"], s["name"])
         for k, name in KINDS.items():
-            if k not in by_kind:
+            if k not in by_kind and k not in OPTIONAL:
                 raise InvalidArchive(f"missing {name} section")
         self.version = f"{major}.{minor}"
         self.file_length = n
@@ -324,6 +325,16 @@ class Reader:
 
         self.parse_atlas(raw[2])
         self.parse_entries_clusters(raw[3], raw[4])
+        self.entry_energy = None
+        if 6 in by_kind:
+            # 1.1: one RGB f32 record per entry, finite and >= 0.
+            er = self.load(by_kind[6], 12 * len(self.entries))
+            if len(er) != 12 * len(self.entries):
+                raise InvalidArchive("entry_energy: not one record per entry")
+            vals = [list(struct.unpack_from("<3f", er, 12 * i)) for i in range(len(self.entries))]
+            if any(v != v or v < 0 or v == float("inf") for r in vals for v in r):
+                raise InvalidArchive("entry_energy: values must be finite and non-negative")
+            self.entry_energy = vals
         self.parse_panes(by_kind[5])
 
     def load(self, s, max_raw):
@@ -461,6 +472,7 @@ class Reader:
             triangles=self.triangles,
             covered_texels=self.covered,
             entries=self.entries,
+            entry_energy=self.entry_energy,
             clusters=self.clusters,
             tile_filter=self.tile_filter,
             stored_tiles=sum(1 for t in self.tiles if t[1]),

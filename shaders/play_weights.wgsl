@@ -1,5 +1,8 @@
 // prm-play weights pass: irradiance of every entry point from the lights (shadow-mapped), and
-// each cluster's weight = mean over its entry points; score = Σ_rgb weight × pane energy.
+// each cluster's weight = its members' irradiance weighed by their pane energy,
+// Σ E_i e_i / Σ e_i per channel (the mean when every e_i is 1, archives before 1.1), so the
+// cluster gives the indirect energy its members would give unclustered; score = Σ_rgb weight ×
+// pane energy.
 
 struct Cluster {
     first: u32,
@@ -12,6 +15,8 @@ struct Cluster {
 struct Entry {
     position: vec4<f32>,
     normal: vec4<f32>,
+    // xyz: pane energy e_i
+    energy: vec4<f32>,
 };
 
 @group(0) @binding(0) var<uniform> frame: Frame;
@@ -27,6 +32,7 @@ struct Entry {
 // invocation per cluster, 64 clusters made a single workgroup, which lavapipe runs on one thread.
 const WEIGHT_LANES: u32 = 32u;
 var<workgroup> partial: array<vec3<f32>, WEIGHT_LANES>;
+var<workgroup> partial_energy: array<vec3<f32>, WEIGHT_LANES>;
 
 @compute @workgroup_size(32)
 fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_index) lane: u32) {
@@ -37,19 +43,25 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_index) 
     }
     let cl = clusters[c];
     var sum = vec3<f32>(0.0);
+    var sum_energy = vec3<f32>(0.0);
     for (var k = lane; k < cl.count; k += WEIGHT_LANES) {
         let e = entries[cl.first + k];
         // Bounded: the entry stands for a disk (position.w = its radius²), see entry_irradiance.
-        sum += direct_irradiance_disk(e.position.xyz, e.normal.xyz, e.position.w);
+        sum += direct_irradiance_disk(e.position.xyz, e.normal.xyz, e.position.w) * e.energy.xyz;
+        sum_energy += e.energy.xyz;
     }
     partial[lane] = sum;
+    partial_energy[lane] = sum_energy;
     workgroupBarrier();
     if lane == 0u {
         var total = vec3<f32>(0.0);
+        var total_energy = vec3<f32>(0.0);
         for (var i = 0u; i < WEIGHT_LANES; i++) {
             total += partial[i];
+            total_energy += partial_energy[i];
         }
-        let w = total / f32(max(cl.count, 1u));
+        // A channel whose members carry no energy contributes nothing whatever its weight.
+        let w = select(vec3<f32>(0.0), total / total_energy, total_energy > vec3<f32>(0.0));
         weights[c] = vec4<f32>(w, dot(w, cl.energy.rgb));
     }
 }

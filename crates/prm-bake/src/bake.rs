@@ -422,6 +422,9 @@ pub fn run(args: &BakeArgs) -> Result<()> {
         Ok(())
     };
     let t = Instant::now();
+    // Entry indices in the archive's order (cluster by cluster), and their pane energies.
+    let order: Vec<u32> = clustering.members.iter().flatten().copied().collect();
+    let mut entry_energy = vec![[0f32; 3]; entries.len()];
     let shadow_rays;
     let phase = match &gpu {
         Some(ctx) => {
@@ -432,9 +435,21 @@ pub fn run(args: &BakeArgs) -> Result<()> {
             };
             // Progress counts VPLs: a group of panes can take minutes on a big scene.
             let mut phase = progress.phase("pane rendering", vpls.vpls.len() as u64);
+            let mut at = 0;
             let stats = prm_gpu::render_panes_with(ctx, &scene, &atlas.exits, &vpls, &clustering, &rp, |out| {
                 match out {
-                    PaneOutput::Pane { irradiance, .. } => emit(irradiance, &mut writer)?,
+                    PaneOutput::Pane {
+                        irradiance,
+                        member_energy,
+                        ..
+                    } => {
+                        // Members arrive cluster by cluster: the archive's entry order.
+                        for e in member_energy {
+                            entry_energy[at] = e.to_array();
+                            at += 1;
+                        }
+                        emit(irradiance, &mut writer)?
+                    }
                     PaneOutput::Progress(s) => phase.inc(s.vpls - phase.done()),
                 }
                 Ok::<(), anyhow::Error>(())
@@ -465,6 +480,9 @@ pub fn run(args: &BakeArgs) -> Result<()> {
             )
             .context("evaluating panes on the CPU")?;
             shadow_rays = panes.rays;
+            for (j, &k) in order.iter().enumerate() {
+                entry_energy[j] = panes.entry_energy[k as usize].to_array();
+            }
             let mut phase = progress.phase("pane rendering", panes.clusters as u64);
             for c in 0..panes.clusters {
                 emit(panes.pane(c), &mut writer)?;
@@ -473,6 +491,9 @@ pub fn run(args: &BakeArgs) -> Result<()> {
             phase
         }
     };
+    writer
+        .set_entry_energy(entry_energy)
+        .context("recording the entry energies")?;
     let render_s = t.elapsed().as_secs_f64() - write_s;
     phase.finish(&format!(
         "{} panes, {} VPLs on {}",

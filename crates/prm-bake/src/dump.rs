@@ -150,6 +150,7 @@ pub fn summary_json<R: Read + Seek>(archive: &Archive<R>, file: &Path, report: O
         "triangles": atlas.triangle_uvs.len(),
         "covered_texels": atlas.covered_texels(),
         "entries": archive.entries().len(),
+        "entry_energy": archive.entry_energy().is_some(),
         "clusters": archive.clusters().len(),
         "tiles": {
             "filter": archive.tile_filter().name(),
@@ -226,7 +227,16 @@ pub fn write_summary<W: Write, R: Read + Seek>(
         r = atlas.resolution,
         t = atlas.tile_size,
     )?;
-    writeln!(out, "entries      {}", archive.entries().len())?;
+    writeln!(
+        out,
+        "entries      {}{}",
+        archive.entries().len(),
+        if archive.entry_energy().is_some() {
+            " (with pane energies: cluster weights weigh members by them)"
+        } else {
+            " (no pane energies: cluster weights are the members' mean; re-bake for 1.1)"
+        }
+    )?;
     writeln!(out, "clusters     {} (one pane each)", archive.clusters().len())?;
 
     writeln!(out, "\nsections")?;

@@ -10,8 +10,10 @@ pub const MAGIC: [u8; 8] = *b"\x89PRM\r\n\x1a\n";
 
 /// Major version written by this library; a reader refuses any other major.
 pub const VERSION_MAJOR: u16 = 1;
-/// Minor version written by this library; a reader accepts every minor.
-pub const VERSION_MINOR: u16 = 0;
+/// Highest minor version this library writes (and knows); a reader accepts every minor. The
+/// writer writes the lowest minor whose features an archive uses: 1.1 adds the entry energy
+/// section.
+pub const VERSION_MINOR: u16 = 1;
 
 /// Size of the fixed file header.
 pub const HEADER_SIZE: usize = 64;
@@ -21,6 +23,8 @@ pub const SECTION_RECORD_SIZE: usize = 48;
 pub const ATLAS_HEADER_SIZE: usize = 16;
 /// Size of one entry record.
 pub const ENTRY_RECORD_SIZE: usize = 28;
+/// Size of one entry energy record (since 1.1).
+pub const ENTRY_ENERGY_RECORD_SIZE: usize = 12;
 /// Size of one cluster record.
 pub const CLUSTER_RECORD_SIZE: usize = 56;
 /// Size of the panes section's fixed header.
@@ -42,6 +46,8 @@ pub mod kind {
     pub const CLUSTERS: u32 = 4;
     /// Tiled, per-tile compressed panes.
     pub const PANES: u32 = 5;
+    /// Per-entry pane energy (since 1.1, optional).
+    pub const ENTRY_ENERGY: u32 = 6;
     /// First kind reserved for private extensions (never assigned by the spec).
     pub const PRIVATE_FIRST: u32 = 0x8000_0000;
 
@@ -53,6 +59,7 @@ pub mod kind {
             ENTRIES => Some("entries"),
             CLUSTERS => Some("clusters"),
             PANES => Some("panes"),
+            ENTRY_ENERGY => Some("entry_energy"),
             _ => None,
         }
     }
@@ -242,8 +249,6 @@ impl Header {
 
     /// Whether reserved fields must be zero: only for minors this library
     /// knows (a later minor may give them a meaning).
-    // Always `==` while VERSION_MINOR is 0; `<=` is the rule for later minors.
-    #[allow(clippy::absurd_extreme_comparisons)]
     pub(crate) fn strict_reserved(&self) -> bool {
         self.minor <= VERSION_MINOR
     }

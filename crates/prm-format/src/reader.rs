@@ -10,13 +10,14 @@ use crate::error::{Error, Result};
 use crate::filter::TileFilter;
 use crate::layout::{
     checksum, compression, kind, limits, Cursor, Header, SectionRecord, TileRecord, ATLAS_HEADER_SIZE,
-    CLUSTER_RECORD_SIZE, ENTRY_RECORD_SIZE, HEADER_SIZE, PANES_HEADER_SIZE, SECTION_RECORD_SIZE, TEXEL_FORMAT_RGB9E5,
-    TILE_RECORD_SIZE,
+    CLUSTER_RECORD_SIZE, ENTRY_ENERGY_RECORD_SIZE, ENTRY_RECORD_SIZE, HEADER_SIZE, PANES_HEADER_SIZE,
+    SECTION_RECORD_SIZE, TEXEL_FORMAT_RGB9E5, TILE_RECORD_SIZE,
 };
 use crate::metadata::Metadata;
 use crate::rgb9e5::decode_rgb9e5;
 use crate::sections::{
-    decode_clusters, decode_entries, entries_covered, validate_entries_clusters, AtlasSection, Cluster, Entry,
+    decode_clusters, decode_entries, decode_entry_energy, entries_covered, validate_entries_clusters, AtlasSection,
+    Cluster, Entry,
 };
 
 /// Largest raw size this reader decompresses for a section kind it does not
@@ -89,6 +90,7 @@ pub struct Archive<R> {
     metadata: Metadata,
     atlas: AtlasSection,
     entries: Vec<Entry>,
+    entry_energy: Option<Vec<[f32; 3]>>,
     clusters: Vec<Cluster>,
     tiles: Vec<TileRecord>,
     panes_offset: u64,
@@ -228,6 +230,11 @@ impl<R: Read + Seek> Archive<R> {
         let entries_rec = find(kind::ENTRIES)?;
         let clusters_rec = find(kind::CLUSTERS)?;
         let panes_rec = find(kind::PANES)?;
+        let mut energy_recs = records.iter().filter(|r| r.kind == kind::ENTRY_ENERGY);
+        let energy_rec = energy_recs.next().cloned();
+        if energy_recs.next().is_some() {
+            return Err(Error::inconsistent("entry_energy section appears more than once"));
+        }
 
         // Every section's raw size is checked against what the counts read so
         // far imply *before* it is decompressed, so a small stream cannot make
@@ -372,6 +379,19 @@ impl<R: Read + Seek> Archive<R> {
         drop(section);
         validate_entries_clusters(&entries, &clusters).map_err(Error::inconsistent)?;
 
+        // Entry energy (1.1, optional): exactly one record per entry.
+        let entry_energy = match &energy_rec {
+            None => None,
+            Some(rec) => {
+                let expected = entry_count * ENTRY_ENERGY_RECORD_SIZE as u64;
+                let section = open_section(&mut src, rec)?;
+                section.expect_raw_size(expected, || format!("{entry_count} entries"))?;
+                let e = section.read_records(entry_count as usize, ENTRY_ENERGY_RECORD_SIZE, decode_entry_energy)?;
+                drop(section);
+                Some(e)
+            }
+        };
+
         let info = ArchiveInfo {
             major: header.major,
             minor: header.minor,
@@ -401,6 +421,7 @@ impl<R: Read + Seek> Archive<R> {
             metadata,
             atlas,
             entries,
+            entry_energy,
             clusters,
             tiles,
             panes_offset: panes_rec.offset,
@@ -427,6 +448,14 @@ impl<R: Read + Seek> Archive<R> {
     /// Entry points, sorted by cluster.
     pub fn entries(&self) -> &[Entry] {
         &self.entries
+    }
+
+    /// Every entry's pane energy (RGB, the sum over the atlas of the indirect irradiance its
+    /// own VPLs give for unit irradiance on it), in [`entries`](Self::entries)' order; `None` in
+    /// archives before 1.1. A player weighs a cluster's members by it, so that the cluster gives
+    /// the indirect energy its members would give unclustered (formats/prm.md §5.1).
+    pub fn entry_energy(&self) -> Option<&[[f32; 3]]> {
+        self.entry_energy.as_deref()
     }
 
     /// Clusters; cluster `i` owns pane `i`.

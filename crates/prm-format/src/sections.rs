@@ -3,7 +3,9 @@
 use std::ops::Range;
 
 use crate::error::Result;
-use crate::layout::{limits, Cursor, PutLe, ATLAS_HEADER_SIZE, CLUSTER_RECORD_SIZE, ENTRY_RECORD_SIZE};
+use crate::layout::{
+    limits, Cursor, PutLe, ATLAS_HEADER_SIZE, CLUSTER_RECORD_SIZE, ENTRY_ENERGY_RECORD_SIZE, ENTRY_RECORD_SIZE,
+};
 
 /// The lightmap atlas shared by every pane.
 #[derive(Clone, Debug, PartialEq)]
@@ -289,6 +291,34 @@ pub(crate) fn decode_entries(raw: &[u8]) -> Result<Vec<Entry>, String> {
             })
         })()
         .map_err(|e| e.to_string())?;
+        out.push(e);
+    }
+    Ok(out)
+}
+
+pub(crate) fn encode_entry_energy(energy: &[[f32; 3]]) -> Vec<u8> {
+    let mut b = Vec::with_capacity(energy.len() * ENTRY_ENERGY_RECORD_SIZE);
+    for e in energy {
+        b.put_vec3(*e);
+    }
+    b
+}
+
+pub(crate) fn decode_entry_energy(raw: &[u8]) -> Result<Vec<[f32; 3]>, String> {
+    if !raw.len().is_multiple_of(ENTRY_ENERGY_RECORD_SIZE) {
+        return Err(format!(
+            "entry_energy section size {} is not a multiple of {ENTRY_ENERGY_RECORD_SIZE}",
+            raw.len()
+        ));
+    }
+    let n = raw.len() / ENTRY_ENERGY_RECORD_SIZE;
+    let mut c = Cursor::new(raw, "entry_energy");
+    let mut out = Vec::with_capacity(n);
+    for i in 0..n {
+        let e = c.vec3().map_err(|e| e.to_string())?;
+        if !e.iter().all(|v| v.is_finite() && *v >= 0.0) {
+            return Err(format!("entry {i}'s energy {e:?} is not finite and non-negative"));
+        }
         out.push(e);
     }
     Ok(out)

@@ -39,11 +39,13 @@ use crate::error::{Error, Result};
 use crate::filter::TileFilter;
 use crate::layout::{
     checksum, compression, kind, Header, PutLe, SectionRecord, TileRecord, HEADER_SIZE, PANES_HEADER_SIZE,
-    TEXEL_FORMAT_RGB9E5, TILE_RECORD_SIZE, VERSION_MAJOR, VERSION_MINOR,
+    TEXEL_FORMAT_RGB9E5, TILE_RECORD_SIZE, VERSION_MAJOR,
 };
 use crate::metadata::Metadata;
 use crate::rgb9e5::{decode_rgb9e5, encode_rgb9e5, RGB9E5_MAX_RELATIVE_ERROR, RGB9E5_NAME};
-use crate::sections::{encode_clusters, encode_entries, validate_entries_clusters, AtlasSection, Cluster, Entry};
+use crate::sections::{
+    encode_clusters, encode_entries, encode_entry_energy, validate_entries_clusters, AtlasSection, Cluster, Entry,
+};
 
 /// Tuning knobs of [`ArchiveWriter`].
 #[derive(Clone, Debug)]
@@ -350,6 +352,8 @@ pub struct ArchiveWriter {
     compressor: zstd::bulk::Compressor<'static>,
     metadata: Metadata,
     clusters: Vec<Cluster>,
+    entry_count: usize,
+    entry_energy: Option<Vec<[f32; 3]>>,
     custom: Vec<(u32, Vec<u8>)>,
     records: Vec<SectionRecord>,
     resolution: u32,
@@ -442,6 +446,8 @@ impl ArchiveWriter {
             options,
             metadata,
             clusters,
+            entry_count: entries.len(),
+            entry_energy: None,
             custom: Vec::new(),
             records: Vec::new(),
             resolution: atlas.resolution,
@@ -503,6 +509,30 @@ impl ArchiveWriter {
     /// panes are being added.
     pub fn metadata_mut(&mut self) -> &mut Metadata {
         &mut self.metadata
+    }
+
+    /// Records every entry's pane energy (RGB, in the entries' order; finite, ≥ 0), written as the
+    /// entry energy section of format 1.1 (formats/prm.md §5.1). An archive with it is 1.1, one
+    /// without stays 1.0.
+    pub fn set_entry_energy(&mut self, energy: Vec<[f32; 3]>) -> Result<()> {
+        if energy.len() != self.entry_count {
+            return Err(Error::InvalidInput(format!(
+                "{} entry energies for {} entries",
+                energy.len(),
+                self.entry_count
+            )));
+        }
+        if let Some((i, e)) = energy
+            .iter()
+            .enumerate()
+            .find(|(_, e)| !e.iter().all(|v| v.is_finite() && *v >= 0.0))
+        {
+            return Err(Error::InvalidInput(format!(
+                "entry {i}'s energy {e:?} is not finite and non-negative"
+            )));
+        }
+        self.entry_energy = Some(energy);
+        Ok(())
     }
 
     /// Queues an extension section of a kind v1 does not define (not 0 and not
@@ -668,6 +698,13 @@ impl ArchiveWriter {
             return Err(Error::InvalidInput("metadata JSON exceeds 16 MiB".into()));
         }
         self.write_section(kind::METADATA, &json)?;
+        let minor = match self.entry_energy.take() {
+            Some(e) => {
+                self.write_section(kind::ENTRY_ENERGY, &encode_entry_energy(&e))?;
+                1
+            }
+            None => 0,
+        };
         for (k, data) in std::mem::take(&mut self.custom) {
             self.write_section(k, &data)?;
         }
@@ -680,7 +717,7 @@ impl ArchiveWriter {
         self.write_all(&table)?;
         let header = Header {
             major: VERSION_MAJOR,
-            minor: VERSION_MINOR,
+            minor,
             section_count: self.records.len() as u32,
             table_offset,
             file_length: self.pos,

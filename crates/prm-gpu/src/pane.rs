@@ -121,15 +121,93 @@ pub enum PaneOutput<'a> {
         cluster: usize,
         /// One value per exit point.
         irradiance: &'a [Vec3],
+        /// The pane energy of each of the cluster's members, in `clustering.members` order: the
+        /// sum over the exit points of what the member's own VPLs give (formats/prm.md §5.1).
+        member_energy: &'a [Vec3],
     },
     /// The counters after another batch of VPLs (for progress bars on long bakes).
     Progress(&'a PaneRenderStats),
 }
 
-/// Renders every cluster's pane over `exits` and hands each to `sink` in cluster order, one
-/// group at a time, with a [`PaneOutput::Progress`] after every batch; `sink`'s errors stop the
-/// work and are returned as they are.
+/// Renders every cluster's pane over `exits` and hands each to `sink` in cluster order, with
+/// its members' pane energies, and a [`PaneOutput::Progress`] after every batch; `sink`'s errors
+/// stop the work and are returned as they are.
+///
+/// The GPU renders one pane per *entry point* (members in cluster order) and the cluster's pane
+/// is their sum, so each member's energy comes for free: the work per VPL is the same as for a
+/// pane per cluster, only the accumulator is flushed at every member instead of every cluster.
 pub fn render_panes_with<E: From<GpuError>>(
+    ctx: &GpuContext,
+    scene: &Scene,
+    exits: &[ExitPoint],
+    vpls: &VplSet,
+    clustering: &Clustering,
+    params: &PaneRenderParams,
+    mut sink: impl FnMut(PaneOutput) -> Result<(), E>,
+) -> Result<PaneRenderStats, E> {
+    let order: Vec<u32> = clustering.members.iter().flatten().copied().collect();
+    let mut of_entry = vec![0u32; clustering.of_entry.len()];
+    for (j, &k) in order.iter().enumerate() {
+        of_entry[k as usize] = j as u32;
+    }
+    let singletons = Clustering {
+        of_entry,
+        centroids: order
+            .iter()
+            .map(|&k| clustering.centroids[clustering.of_entry[k as usize] as usize])
+            .collect(),
+        normals: order
+            .iter()
+            .map(|&k| clustering.normals[clustering.of_entry[k as usize] as usize])
+            .collect(),
+        members: order.iter().map(|&k| vec![k]).collect(),
+    };
+    // The cluster being summed, its pane and its members' energies.
+    let mut current = 0usize;
+    let mut pane = vec![Vec3::ZERO; exits.len()];
+    let mut energy: Vec<Vec3> = Vec::new();
+    let stats = render_entry_panes(ctx, scene, exits, vpls, &singletons, params, |out| match out {
+        PaneOutput::Pane {
+            cluster: j, irradiance, ..
+        } => {
+            let c = clustering.of_entry[order[j] as usize] as usize;
+            emit_clusters_before(c, &mut current, &mut pane, &mut energy, &mut sink)?;
+            for (a, v) in pane.iter_mut().zip(irradiance) {
+                *a += *v;
+            }
+            energy.push(irradiance.iter().sum());
+            Ok(())
+        }
+        progress => sink(progress),
+    })?;
+    emit_clusters_before(clustering.len(), &mut current, &mut pane, &mut energy, &mut sink)?;
+    Ok(stats)
+}
+
+/// Hands `sink` the summed pane of cluster `current` and of every (empty) cluster after it up to
+/// `until`, resetting the sums after each.
+fn emit_clusters_before<E>(
+    until: usize,
+    current: &mut usize,
+    pane: &mut [Vec3],
+    energy: &mut Vec<Vec3>,
+    sink: &mut impl FnMut(PaneOutput) -> Result<(), E>,
+) -> Result<(), E> {
+    while *current < until {
+        sink(PaneOutput::Pane {
+            cluster: *current,
+            irradiance: pane,
+            member_energy: energy,
+        })?;
+        pane.fill(Vec3::ZERO);
+        energy.clear();
+        *current += 1;
+    }
+    Ok(())
+}
+
+/// The pane of every "cluster" of `clustering` (here: of every entry point), in order.
+fn render_entry_panes<E: From<GpuError>>(
     ctx: &GpuContext,
     scene: &Scene,
     exits: &[ExitPoint],
@@ -328,6 +406,7 @@ pub fn render_panes_with<E: From<GpuError>>(
             sink(PaneOutput::Pane {
                 cluster: c,
                 irradiance: &pane,
+                member_energy: &[],
             })?;
         }
         stats.groups += 1;
@@ -375,10 +454,19 @@ pub fn render_panes(
     params: &PaneRenderParams,
 ) -> Result<(Panes, PaneRenderStats), GpuError> {
     let mut data = vec![Vec3::ZERO; clustering.len() * exits.len()];
+    let mut entry_energy = vec![Vec3::ZERO; clustering.of_entry.len()];
     let n = exits.len();
     let stats = render_panes_with(ctx, scene, exits, vpls, clustering, params, |out| {
-        if let PaneOutput::Pane { cluster, irradiance } = out {
+        if let PaneOutput::Pane {
+            cluster,
+            irradiance,
+            member_energy,
+        } = out
+        {
             data[cluster * n..(cluster + 1) * n].copy_from_slice(irradiance);
+            for (&k, e) in clustering.members[cluster].iter().zip(member_energy) {
+                entry_energy[k as usize] = *e;
+            }
         }
         Ok::<(), GpuError>(())
     })?;
@@ -388,6 +476,7 @@ pub fn render_panes(
             exits: n,
             data,
             rays: 0,
+            entry_energy,
         },
         stats,
     ))

@@ -99,8 +99,11 @@ pub struct GpuEntry {
     pub position: [f32; 4],
     /// Unit normal (w unused).
     pub normal: [f32; 4],
+    /// Pane energy (RGB; w unused) the cluster weight weighs this member by: 1 for archives
+    /// without an entry energy section, which makes the weight the plain mean.
+    pub energy: [f32; 4],
 }
-const _: () = assert!(std::mem::size_of::<GpuEntry>() == 32);
+const _: () = assert!(std::mem::size_of::<GpuEntry>() == 48);
 
 /// A material; `Material` in `play_shade.wgsl`.
 #[repr(C)]

@@ -213,7 +213,8 @@ pub struct Image {
 /// A cluster's weights as the GPU computed them.
 #[derive(Clone, Copy, Debug)]
 pub struct ClusterWeight {
-    /// Mean entry irradiance.
+    /// The members' entry irradiance weighed by their pane energy (their mean in archives
+    /// before 1.1).
     pub weight: [f32; 3],
     /// Σ_rgb weight × pane energy.
     pub score: f32,
@@ -554,12 +555,18 @@ impl Renderer {
         // clusters.
         let disk = prm_trace::ENTRY_DISK
             * (scene.area() / archive.entries().len().max(1) as f64 / std::f64::consts::PI) as f32;
+        let energy = archive.entry_energy();
         let entries: Vec<GpuEntry> = archive
             .entries()
             .iter()
-            .map(|e| GpuEntry {
-                position: [e.position[0], e.position[1], e.position[2], disk],
-                normal: [e.normal[0], e.normal[1], e.normal[2], 0.0],
+            .enumerate()
+            .map(|(i, e)| {
+                let [r, g, b] = energy.map_or([1.0; 3], |en| en[i]);
+                GpuEntry {
+                    position: [e.position[0], e.position[1], e.position[2], disk],
+                    normal: [e.normal[0], e.normal[1], e.normal[2], 0.0],
+                    energy: [r, g, b, 0.0],
+                }
             })
             .collect();
         let clusters: Vec<GpuCluster> = archive

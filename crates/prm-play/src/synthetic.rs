@@ -147,6 +147,10 @@ pub fn write_archive(scene: &Scene, scene_path: &Path, out: &Path, p: SyntheticP
     metadata.source_scene = relative_path(dir, scene_path);
     metadata.scene_fingerprint = scene.fingerprint();
     let mut w = ArchiveWriter::create(out, metadata, &section, &entries, &clusters).map_err(|e| e.to_string())?;
+    // Unequal member energies (1, 2, 3, 1, ...), so the player's weighing by them is exercised;
+    // they need not match the analytic panes.
+    let energy = (0..entries.len()).map(|i| [1.0 + (i % 3) as f32; 3]).collect();
+    w.set_entry_energy(energy).map_err(|e| e.to_string())?;
     let soft = (scene.bounds().diagonal() * 0.05).powi(2);
     for (centre, nc, power) in panes_src {
         let mut texels = vec![[0f32; 3]; (res * res) as usize];

@@ -177,12 +177,18 @@ fn lightmap_equals_cpu_blend_with_all_clusters() {
     let wmax = weights.iter().flat_map(|w| w.weight).fold(0f32, f32::max);
     let mut bad = 0;
     let mut sum_err = 0.0;
+    let energy = archive
+        .entry_energy()
+        .expect("the synthetic archive records entry energies");
     for (c, cl) in clusters.iter().enumerate() {
-        let mut e = Vec3::ZERO;
-        for en in &entries[cl.first as usize..(cl.first + cl.count) as usize] {
-            e += cpu_irradiance(&scene, &lights, Vec3::from(en.position), Vec3::from(en.normal));
+        // The members' irradiance weighed by their pane energy.
+        let (mut e, mut sum) = (Vec3::ZERO, Vec3::ZERO);
+        let range = cl.first as usize..(cl.first + cl.count) as usize;
+        for (en, w) in entries[range.clone()].iter().zip(&energy[range]) {
+            e += cpu_irradiance(&scene, &lights, Vec3::from(en.position), Vec3::from(en.normal)) * Vec3::from(*w);
+            sum += Vec3::from(*w);
         }
-        let e = e / cl.count.max(1) as f32;
+        let e = e / sum.max(Vec3::splat(1e-30));
         let g = Vec3::from(weights[c].weight);
         let err = (g - e).abs().max_element() / wmax;
         sum_err += err;

@@ -269,11 +269,31 @@ impl Clustering {
         self.members.is_empty()
     }
 
-    /// Run-time weight of every cluster: the mean of its members' direct irradiance.
+    /// Weight of every cluster as the paper takes it: the mean of its members' direct irradiance.
     pub fn weights(&self, entry_irradiance: &[Vec3]) -> Vec<Vec3> {
         self.members
             .iter()
             .map(|m| m.iter().map(|&k| entry_irradiance[k as usize]).sum::<Vec3>() / m.len().max(1) as f32)
+            .collect()
+    }
+
+    /// Run-time weight of every cluster as the player takes it: its members' direct irradiance
+    /// weighed by their pane energy `e_i` ([`crate::Panes::entry_energy`]), per channel
+    /// `Σ E_i e_i / Σ e_i`. With the cluster's pane `Σ_i P_i`, of energy `Σ e_i`, the cluster
+    /// then gives exactly the indirect energy `Σ E_i e_i` its members give unclustered; the mean
+    /// loses energy when `E_i` and `e_i` vary together (a light near a surface lights the
+    /// members in the open, whose walks carry more energy, more than those near a corner).
+    pub fn weights_by_energy(&self, entry_irradiance: &[Vec3], entry_energy: &[Vec3]) -> Vec<Vec3> {
+        self.members
+            .iter()
+            .map(|m| {
+                let (mut num, mut den) = (Vec3::ZERO, Vec3::ZERO);
+                for &k in m {
+                    num += entry_irradiance[k as usize] * entry_energy[k as usize];
+                    den += entry_energy[k as usize];
+                }
+                Vec3::select(den.cmpgt(Vec3::ZERO), num / den, Vec3::ZERO)
+            })
             .collect()
     }
 }

@@ -3,8 +3,8 @@
 //! Flow of a bake: [`Bvh::build`] → [`sample_surface`] (entry points) → [`trace_walks`] (VPLs per
 //! entry point) → [`Clustering::kmeans`] → [`evaluate_panes`] (indirect irradiance per cluster at
 //! every exit point of the atlas). At run time `E_ind(x) = Σ_c weight_c · pane_c(x)` where
-//! `weight_c` is the mean direct irradiance of the cluster's entry points
-//! ([`entry_irradiance`], [`Clustering::weights`], [`Panes::combine`]). The estimator and its
+//! `weight_c` is the cluster's members' direct irradiance weighed by their pane energy
+//! ([`entry_irradiance`], [`Clustering::weights_by_energy`], [`Panes::combine`]). The estimator and its
 //! units are written out in [`walk`]. [`ReferenceTracer`] is the ground truth it is tested against.
 //!
 //! Every random decision draws from a stream keyed by `(seed, item, sub-item)` ([`Rng`]), and

@@ -4,8 +4,9 @@
 //! `b` is the bounded `1/r²` ([`VplBound`]) and `V` is a shadow ray ([`Bvh::visible`]); `cos θ_x`
 //! uses the exit point's (shading) normal, `cos θ_v` the VPL's geometric normal. Values are
 //! indirect irradiance in W/m² per W/m² of entry irradiance. At run time
-//! `E_ind(x) = Σ_c weight_c · pane_c(x)` with `weight_c` the mean direct irradiance of the
-//! cluster's members ([`crate::Clustering::weights`], [`Panes::combine`]).
+//! `E_ind(x) = Σ_c weight_c · pane_c(x)` with `weight_c` the direct irradiance of the cluster's
+//! members weighed by their pane energy ([`crate::Clustering::weights_by_energy`],
+//! [`Panes::combine`]).
 //!
 //! Work is parallel over exit points; each exit point sums its VPLs in a fixed order, so the
 //! result does not depend on the thread count. This is the exact yardstick for a GPU renderer.
@@ -51,6 +52,10 @@ pub struct Panes {
     pub data: Vec<Vec3>,
     /// Shadow rays cast.
     pub rays: u64,
+    /// Every entry point's pane energy: the sum over `exits` of the indirect irradiance its own
+    /// VPLs give (RGB), which the player weighs a cluster's members by (formats/prm.md §5.1).
+    /// Empty when the producer did not compute it.
+    pub entry_energy: Vec<Vec3>,
 }
 
 impl Panes {
@@ -72,7 +77,12 @@ impl Panes {
     }
 }
 
-/// Evaluates every cluster's pane at every exit point in `exits`.
+/// Exit points per work item of [`evaluate_panes`]: each item also keeps one energy per VPL, so
+/// items of a thousand exits keep that bookkeeping small against the item's own work.
+const ENERGY_CHUNK: usize = 1024;
+
+/// Evaluates every cluster's pane at every exit point in `exits`, and every entry point's pane
+/// energy.
 pub fn evaluate_panes(
     bvh: &Bvh,
     vpls: &VplSet,
@@ -93,38 +103,61 @@ pub fn evaluate_panes(
         .iter()
         .map(|v| clustering.of_entry[v.entry as usize])
         .collect();
-    let per_exit: Vec<(Vec<Vec3>, u64)> = exits
-        .par_iter()
-        .map(|x| {
-            let mut acc = vec![Vec3::ZERO; c];
+    // Exits in fixed chunks, each summing its VPLs' energy too; the chunks' sums are added in
+    // order, so the energies do not depend on the thread count either.
+    let per_chunk: Vec<(Vec<Vec<Vec3>>, Vec<Vec3>, u64)> = exits
+        .par_chunks(ENERGY_CHUNK)
+        .map(|chunk| {
+            let mut vpl_energy = vec![Vec3::ZERO; vpls.vpls.len()];
             let mut rays = 0u64;
-            let ng = bvh.geometric_normal(x.triangle);
-            for (v, &cl) in vpls.vpls.iter().zip(&cluster_of_vpl) {
-                let e = params.bound.irradiance(v, x.position, x.normal);
-                if e == Vec3::ZERO || v.position.distance_squared(x.position) == 0.0 {
-                    continue;
-                }
-                rays += 1;
-                if bvh.visible(x.position, ng, x.triangle, v.position, v.normal, v.triangle) {
-                    acc[cl as usize] += e;
-                }
-            }
-            (acc, rays)
+            let accs = chunk
+                .iter()
+                .map(|x| {
+                    let mut acc = vec![Vec3::ZERO; c];
+                    let ng = bvh.geometric_normal(x.triangle);
+                    for (j, (v, &cl)) in vpls.vpls.iter().zip(&cluster_of_vpl).enumerate() {
+                        let e = params.bound.irradiance(v, x.position, x.normal);
+                        if e == Vec3::ZERO || v.position.distance_squared(x.position) == 0.0 {
+                            continue;
+                        }
+                        rays += 1;
+                        if bvh.visible(x.position, ng, x.triangle, v.position, v.normal, v.triangle) {
+                            acc[cl as usize] += e;
+                            vpl_energy[j] += e;
+                        }
+                    }
+                    acc
+                })
+                .collect();
+            (accs, vpl_energy, rays)
         })
         .collect();
     let n = exits.len();
     let mut data = vec![Vec3::ZERO; c * n];
     let mut rays = 0;
-    for (i, (acc, r)) in per_exit.into_iter().enumerate() {
+    let mut vpl_energy = vec![Vec3::ZERO; vpls.vpls.len()];
+    let mut i = 0;
+    for (accs, energy, r) in per_chunk {
         rays += r;
-        for (cl, v) in acc.into_iter().enumerate() {
-            data[cl * n + i] = v;
+        for (total, e) in vpl_energy.iter_mut().zip(energy) {
+            *total += e;
         }
+        for acc in accs {
+            for (cl, v) in acc.into_iter().enumerate() {
+                data[cl * n + i] = v;
+            }
+            i += 1;
+        }
+    }
+    let mut entry_energy = vec![Vec3::ZERO; vpls.entries()];
+    for (v, e) in vpls.vpls.iter().zip(vpl_energy) {
+        entry_energy[v.entry as usize] += e;
     }
     Ok(Panes {
         clusters: c,
         exits: n,
         data,
         rays,
+        entry_energy,
     })
 }

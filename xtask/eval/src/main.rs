@@ -14,6 +14,7 @@
 //! scene (SVG and PNG) to the output directory.
 
 mod charts;
+mod compare;
 mod measure;
 mod plan;
 mod reference;
@@ -114,7 +115,7 @@ impl Row {
 
 fn usage() -> ! {
     eprintln!(
-        "usage: cargo xtask eval [--quick|--full] [--out DIR]\n\n  --quick   Cornell box, a handful of settings, small references (CI; dev-profile binaries); default\n  --full    all scenes and sweeps (release binaries; the README's charts)\n  --out DIR output directory (default target/eval-quick or target/eval-full)\n\nBakes and references are cached under target/eval/ (delete it to start over)."
+        "usage: cargo xtask eval [--quick|--full] [--out DIR]\n       cargo xtask eval compare TEST.exr REFERENCE.exr   (error, energy, shape and local error as ../shared/notes/metrics.md defines them)\n\n  --quick   Cornell box, a handful of settings, small references (CI; dev-profile binaries); default\n  --full    all scenes and sweeps (release binaries; the README's charts)\n  --out DIR output directory (default target/eval-quick or target/eval-full)\n\nBakes and references are cached under target/eval/ (delete it to start over)."
     );
     std::process::exit(2);
 }
@@ -132,6 +133,9 @@ fn main() -> Result<()> {
 }
 
 fn run(args: &[String]) -> Result<()> {
+    if args.first().map(String::as_str) == Some("compare") {
+        return compare::run(&args[1..]);
+    }
     let mut mode = Mode::Quick;
     let mut out = None;
     let mut it = args.iter();

@@ -101,11 +101,12 @@ impl Bake {
         }
     }
 
-    /// Indirect irradiance at the exit points with every cluster kept (weights: the clusters' mean
-    /// entry irradiance, as the player computes them).
+    /// Indirect irradiance at the exit points with every cluster kept (weights: the members'
+    /// entry irradiance weighed by their pane energy, as the player computes them).
     fn indirect(&self, lights: &[Light]) -> Vec<Vec3> {
         let irradiance = prm_trace::entry_irradiance(&self.bvh, lights, &self.entries);
-        self.panes.combine(&self.clustering.weights(&irradiance))
+        self.panes
+            .combine(&self.clustering.weights_by_energy(&irradiance, &self.panes.entry_energy))
     }
 
     /// The path tracer's indirect irradiance at the same exit points, and its relative noise.

@@ -1,0 +1,179 @@
+//! Experiment: how a cluster's run-time weight should combine its members' entry irradiance.
+//!
+//! `cargo run --release -p prm-trace --example cluster_weights -- [SCENE] [ENTRIES] [CLUSTERS] [RES]`
+//!
+//! Everything on the CPU with exact visibility, so only the representation differs: per-entry
+//! panes `P_i` (the identity clustering), their sums per k-means cluster `P_c = Σ_{i∈c} P_i`,
+//! and for each light the indirect irradiance at the exit points as
+//! - `unclustered`: `Σ_i E_i P_i`, the target of any compression of the panes;
+//! - `mean`: `Σ_c mean_{i∈c}(E_i) P_c`, the paper's (and the player's) cluster weight;
+//! - `energy`: `Σ_c (Σ_{i∈c} E_i e_i / Σ_{i∈c} e_i) P_c` with `e_i = Σ_x P_i(x)` per channel,
+//!   which gives every cluster exactly the indirect energy its members would give unclustered;
+//! - `lsq`: `P_i ≈ α_i P_c / |c|` with the least-squares `α_i`, weight `Σ α_i E_i / |c|`,
+//!
+//! each against the reference path tracer (relative RMSE over exits, and energy ratio).
+
+use glam::Vec3;
+use prm_scene::{Atlas, AtlasParams, Light, Sizing};
+use prm_trace::{
+    Bvh, BvhParams, ClusterParams, Clustering, EntryParams, Lighting, PaneParams, ReferenceParams, ReferenceTracer,
+    WalkParams,
+};
+
+fn rel_rmse(a: &[Vec3], r: &[Vec3]) -> (f64, f64) {
+    let (mut e, mut n, mut sa, mut sr) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
+    for (a, r) in a.iter().zip(r) {
+        e += (*a - *r).length_squared() as f64;
+        n += r.length_squared() as f64;
+        sa += a.element_sum() as f64;
+        sr += r.element_sum() as f64;
+    }
+    ((e / n.max(1e-30)).sqrt(), sa / sr.max(1e-30))
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let scene_path = args
+        .first()
+        .cloned()
+        .unwrap_or_else(|| concat!(env!("CARGO_MANIFEST_DIR"), "/../../scenes/cornell-box/cornell-box.obj").into());
+    let n_entries: usize = args.get(1).map_or(1024, |s| s.parse().unwrap());
+    let n_clusters: usize = args.get(2).map_or(64, |s| s.parse().unwrap());
+    let res: u32 = args.get(3).map_or(128, |s| s.parse().unwrap());
+    let scene = prm_scene::load(std::path::Path::new(&scene_path)).unwrap();
+    let atlas = Atlas::build(&scene, &AtlasParams::with_sizing(Sizing::Resolution(res))).unwrap();
+    let bvh = Bvh::build(&scene, &BvhParams::DEFAULT).unwrap();
+    let entries = prm_trace::sample_surface(
+        &scene,
+        &EntryParams {
+            count: n_entries,
+            seed: 1,
+        },
+    )
+    .unwrap();
+    let walks = WalkParams {
+        walks_per_entry: 8,
+        seed: 1,
+        ..WalkParams::PREVIEW
+    };
+    let vpls = prm_trace::trace_walks(&scene, &bvh, &entries, &walks).unwrap();
+    let t = std::time::Instant::now();
+    let identity = Clustering::identity(&entries);
+    let per_entry = prm_trace::evaluate_panes(&bvh, &vpls, &identity, &atlas.exits, &PaneParams::DEFAULT).unwrap();
+    eprintln!(
+        "{} entries, {} VPLs, {} exits: per-entry panes in {:.1} s",
+        entries.len(),
+        vpls.vpls.len(),
+        atlas.exits.len(),
+        t.elapsed().as_secs_f64()
+    );
+    let clustering = Clustering::kmeans(
+        &entries,
+        scene.bounds().diagonal(),
+        &ClusterParams {
+            seed: 1,
+            ..ClusterParams::with_clusters(n_clusters)
+        },
+    )
+    .unwrap()
+    .separate_by_visibility(&entries, &bvh);
+    let m = atlas.exits.len();
+    let energy: Vec<Vec3> = (0..entries.len()).map(|i| per_entry.pane(i).iter().sum()).collect();
+    let mut cluster_pane = vec![vec![Vec3::ZERO; m]; clustering.len()];
+    for (c, members) in clustering.members.iter().enumerate() {
+        for &k in members {
+            for (acc, v) in cluster_pane[c].iter_mut().zip(per_entry.pane(k as usize)) {
+                *acc += *v;
+            }
+        }
+    }
+    // Least-squares scale of each member against its cluster's mean shape (luminance).
+    let lum = |v: Vec3| v.dot(Vec3::new(0.2126, 0.7152, 0.0722)) as f64;
+    let alpha: Vec<f64> = (0..entries.len())
+        .map(|k| {
+            let c = clustering.of_entry[k] as usize;
+            let size = clustering.members[c].len() as f64;
+            let (mut num, mut den) = (0.0, 0.0);
+            for (p, q) in per_entry.pane(k).iter().zip(&cluster_pane[c]) {
+                let q = lum(*q) / size;
+                num += lum(*p) * q;
+                den += q * q;
+            }
+            num / den.max(1e-30)
+        })
+        .collect();
+
+    let b = scene.bounds();
+    let at = |fx: f32, fy: f32, fz: f32| b.min + (b.max - b.min) * Vec3::new(fx, fy, fz);
+    let lights = [
+        ("under the ceiling", at(0.5, 0.85, 0.5)),
+        ("near the red wall", at(0.12, 0.35, 0.5)),
+        ("low in a corner", at(0.15, 0.12, 0.2)),
+    ];
+    println!("| light | representation | rel. RMSE | energy |\n| --- | --- | ---: | ---: |");
+    for (name, p) in lights {
+        let light = [Light::Point {
+            position: p,
+            intensity: Vec3::ONE,
+        }];
+        let e = prm_trace::entry_irradiance(&bvh, &light, &entries);
+        let tracer = ReferenceTracer::new(&scene, &bvh, Lighting::Lights(&light));
+        let reference = tracer
+            .indirect_at_exits(&atlas.exits, &ReferenceParams::with_spp(1024), &mut |_, _| {})
+            .unwrap();
+        let noise = {
+            let v: f64 = reference.variance.iter().map(|v| v.element_sum() as f64).sum();
+            let n: f64 = reference.mean.iter().map(|v| v.length_squared() as f64).sum();
+            (v / n).sqrt()
+        };
+        let entry_panes: Vec<&[Vec3]> = (0..entries.len()).map(|i| per_entry.pane(i)).collect();
+        let cluster_panes: Vec<&[Vec3]> = cluster_pane.iter().map(Vec::as_slice).collect();
+        let combine = |w: &dyn Fn(usize) -> Vec3, panes: &[&[Vec3]]| -> Vec<Vec3> {
+            let mut out = vec![Vec3::ZERO; m];
+            for (c, pane) in panes.iter().enumerate() {
+                let wc = w(c);
+                for (o, v) in out.iter_mut().zip(pane.iter()) {
+                    *o += wc * *v;
+                }
+            }
+            out
+        };
+        let unclustered = combine(&|i| e[i], &entry_panes);
+        let mean = combine(
+            &|c| {
+                let mm = &clustering.members[c];
+                mm.iter().map(|&k| e[k as usize]).sum::<Vec3>() / mm.len() as f32
+            },
+            &cluster_panes,
+        );
+        let energy_w = combine(
+            &|c| {
+                let mm = &clustering.members[c];
+                let num: Vec3 = mm.iter().map(|&k| e[k as usize] * energy[k as usize]).sum();
+                let den: Vec3 = mm.iter().map(|&k| energy[k as usize]).sum();
+                num / den.max(Vec3::splat(1e-30))
+            },
+            &cluster_panes,
+        );
+        let lsq = combine(
+            &|c| {
+                let mm = &clustering.members[c];
+                mm.iter()
+                    .map(|&k| e[k as usize] * alpha[k as usize] as f32)
+                    .sum::<Vec3>()
+                    / mm.len() as f32
+            },
+            &cluster_panes,
+        );
+        for (label, est) in [
+            ("unclustered", &unclustered),
+            ("mean", &mean),
+            ("energy", &energy_w),
+            ("lsq", &lsq),
+        ] {
+            let (err, en) = rel_rmse(est, &reference.mean);
+            println!("| {name} | {label} | {:.1}% | {en:.3} |", 100.0 * err);
+        }
+        println!("| {name} | (reference noise) | {:.1}% | |", 100.0 * noise);
+    }
+}
