@@ -413,6 +413,17 @@ mod tests {
         d
     }
 
+    /// A copy of the archive at `path` with its last stored tile damaged, written to `bad`.
+    fn damage_last_tile(path: &Path, bad: &Path) -> PathBuf {
+        let mut bytes = std::fs::read(path).unwrap();
+        let a = Archive::open(path).unwrap();
+        let panes = a.info().sections.iter().find(|s| s.name == "panes").unwrap();
+        let at = (panes.offset + panes.stored_size - 3) as usize;
+        bytes[at] ^= 0x40;
+        std::fs::write(bad, &bytes).unwrap();
+        bad.to_path_buf()
+    }
+
     fn write_archive(path: &Path) {
         let mut meta = Metadata::new("dump-test", "1.0");
         meta.params.insert("bounces".into(), 2.into());
@@ -501,14 +512,7 @@ mod tests {
         let dir = temp_dir("verify");
         let path = dir.join("a.prm");
         write_archive(&path);
-        let mut bytes = std::fs::read(&path).unwrap();
-        // damage the first stored tile: the panes section follows atlas and entries
-        let a = Archive::open(&path).unwrap();
-        let panes = a.info().sections.iter().find(|s| s.name == "panes").unwrap();
-        let at = (panes.offset + panes.stored_size - 3) as usize;
-        bytes[at] ^= 0x40;
-        let bad = dir.join("bad.prm");
-        std::fs::write(&bad, &bytes).unwrap();
+        let bad = damage_last_tile(&path, &dir.join("bad.prm"));
         let args = DumpArgs {
             file: bad.clone(),
             json: true,
@@ -533,14 +537,8 @@ mod tests {
         let dir = temp_dir("exr-damaged");
         let path = dir.join("a.prm");
         write_archive(&path);
-        let mut bytes = std::fs::read(&path).unwrap();
-        // Damage the last stored tile, so the first panes read and export before it fails.
-        let a = Archive::open(&path).unwrap();
-        let panes = a.info().sections.iter().find(|s| s.name == "panes").unwrap();
-        let at = (panes.offset + panes.stored_size - 3) as usize;
-        bytes[at] ^= 0x40;
-        let bad = dir.join("bad.prm");
-        std::fs::write(&bad, &bytes).unwrap();
+        // The first panes read and export before the damaged last one fails.
+        let bad = damage_last_tile(&path, &dir.join("bad.prm"));
         let out = dir.join("exr");
         let mut a = Archive::open(&bad).unwrap();
         let err = format!("{:#}", export_exr(&mut a, &out).unwrap_err());

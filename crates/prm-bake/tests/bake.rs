@@ -53,33 +53,46 @@ fn config_file(dir: &Path) -> PathBuf {
 
 /// Bakes the Cornell box at small settings into `dir/name.prm`; `extra` is appended.
 fn bake(dir: &Path, name: &str, seed: u64, backend: &str, extra: &[&str]) -> (PathBuf, Output, f64) {
+    bake_with(dir, name, seed, backend, extra, |_| {})
+}
+
+/// [`bake`], with `env` setting up the command's environment.
+fn bake_with(
+    dir: &Path,
+    name: &str,
+    seed: u64,
+    backend: &str,
+    extra: &[&str],
+    env: impl FnOnce(&mut Command),
+) -> (PathBuf, Output, f64) {
     let out = dir.join(format!("{name}.prm"));
     let config = config_file(dir);
     let seed = seed.to_string();
     let scene = scene_path();
-    let mut args = vec![
-        "bake",
-        scene.to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-        "--entries",
-        "256",
-        "--clusters",
-        "16",
-        "--resolution",
-        "64",
-        "--paths-per-entry",
-        "1",
-        "--seed",
-        &seed,
-        "--backend",
-        backend,
-        "--config",
-        config.to_str().unwrap(),
-    ];
-    args.extend_from_slice(extra);
+    let mut cmd = Command::new(BIN);
+    cmd.args(["bake", scene.to_str().unwrap(), "-o", out.to_str().unwrap()])
+        .args([
+            "--entries",
+            "256",
+            "--clusters",
+            "16",
+            "--resolution",
+            "64",
+            "--paths-per-entry",
+            "1",
+        ])
+        .args([
+            "--seed",
+            &seed,
+            "--backend",
+            backend,
+            "--config",
+            config.to_str().unwrap(),
+        ])
+        .args(extra);
+    env(&mut cmd);
     let t = Instant::now();
-    let output = run(&args);
+    let output = cmd.output().expect("running prm-bake");
     let seconds = t.elapsed().as_secs_f64();
     assert!(output.status.success(), "bake {name} failed: {}", describe(&output));
     (out, output, seconds)
@@ -218,35 +231,9 @@ fn bake_is_byte_identical_across_runs_and_threads_and_quiet_is_silent() {
     // The repeats are also the `--quiet` check: nothing on stdout or stderr, not even the
     // `XDG_RUNTIME_DIR` line libwayland prints when a window-system probe runs without it.
     for threads in ["1", "2"] {
-        let out = dir.join(format!("threads-{threads}.prm"));
-        let scene = scene_path();
-        let config = config_file(&dir);
-        let output = Command::new(BIN)
-            .args(["bake", scene.to_str().unwrap(), "-o", out.to_str().unwrap()])
-            .args([
-                "--entries",
-                "256",
-                "--clusters",
-                "16",
-                "--resolution",
-                "64",
-                "--paths-per-entry",
-                "1",
-            ])
-            .args([
-                "--seed",
-                "1",
-                "--backend",
-                "vulkan",
-                "--quiet",
-                "--config",
-                config.to_str().unwrap(),
-            ])
-            .env("RAYON_NUM_THREADS", threads)
-            .env_remove("XDG_RUNTIME_DIR")
-            .output()
-            .unwrap();
-        assert!(output.status.success(), "{}", describe(&output));
+        let (out, output, _) = bake_with(&dir, &format!("threads-{threads}"), 1, "vulkan", &["--quiet"], |c| {
+            c.env("RAYON_NUM_THREADS", threads).env_remove("XDG_RUNTIME_DIR");
+        });
         assert!(output.stdout.is_empty(), "--quiet: {}", describe(&output));
         assert!(output.stderr.is_empty(), "--quiet: {}", describe(&output));
         let again = std::fs::read(&out).unwrap();

@@ -5,6 +5,8 @@
 //! to `Ok` or `Err`. A counting global allocator checks that no single allocation, and no peak,
 //! is absurd for inputs of a few hundred bytes. A failure names the seed and keeps the input.
 
+mod common;
+use common::temp_case;
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::{Path, PathBuf};
@@ -186,30 +188,6 @@ fn number_spans(data: &[u8]) -> Vec<(usize, usize)> {
     spans
 }
 
-/// A fresh directory under the system temp dir, unique to this test and process; removed
-/// when dropped.
-struct TempDir(PathBuf);
-
-impl std::ops::Deref for TempDir {
-    type Target = Path;
-    fn deref(&self) -> &Path {
-        &self.0
-    }
-}
-
-impl Drop for TempDir {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
-
-fn temp_case(name: &str) -> TempDir {
-    let dir = std::env::temp_dir().join(format!("prm-scene-fuzz-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    TempDir(dir)
-}
-
 /// Loads `scene` (whether it loaded) and turns a panic or an absurd allocation into a failure
 /// message.
 fn check_load(scene: &Path, what: &str) -> Result<bool, String> {
@@ -248,7 +226,7 @@ fn fuzz(name: &str, cases: u64, build: impl Fn(&mut Rng, &Path) -> PathBuf) {
     for case in 0..cases {
         let seed = 0x9e37_79b9_7f4a_7c15 ^ (case + 1).wrapping_mul(0xbf58_476d_1ce4_e5b9);
         let mut rng = Rng(seed);
-        let dir = temp_case(&format!("{name}-case"));
+        let dir = temp_case(&format!("fuzz-{name}-case"));
         let file = build(&mut rng, &dir);
         let outcome = check_load(&file, &format!("{name} case {case} (seed {seed:#x})"));
         match outcome {
@@ -279,7 +257,7 @@ const MTL: &str = "newmtl red\nKd 0.8 0.1 0.1\nnewmtl white\nKd 0.7 0.7 0.7\nmap
 
 #[test]
 fn fuzz_obj_loader() {
-    let base = temp_case("obj-base");
+    let base = temp_case("fuzz-obj-base");
     std::fs::write(base.join("s.mtl"), MTL).unwrap();
     std::fs::write(base.join("s.obj"), OBJ).unwrap();
     prm_scene::load(&base.join("s.obj")).expect("the unmutated OBJ loads");
@@ -377,7 +355,7 @@ fn glb(json: &str, bin: &[u8]) -> Vec<u8> {
 fn fuzz_gltf_loader() {
     let bin = gltf_bin();
     let json = gltf_json(&format!(r#"{{"uri": "s.bin", "byteLength": {}}}"#, bin.len()));
-    let base = temp_case("gltf-base");
+    let base = temp_case("fuzz-gltf-base");
     std::fs::write(base.join("s.bin"), &bin).unwrap();
     std::fs::write(base.join("s.gltf"), &json).unwrap();
     let scene = prm_scene::load(&base.join("s.gltf")).expect("the unmutated glTF loads");
@@ -402,7 +380,7 @@ fn fuzz_glb_loader() {
     let bin = gltf_bin();
     let json = gltf_json(&format!(r#"{{"byteLength": {}}}"#, bin.len()));
     let file = glb(&json, &bin);
-    let base = temp_case("glb-base");
+    let base = temp_case("fuzz-glb-base");
     std::fs::write(base.join("s.glb"), &file).unwrap();
     let scene = prm_scene::load(&base.join("s.glb")).expect("the unmutated GLB loads");
     assert_eq!(scene.triangles.len(), 2);

@@ -1,5 +1,7 @@
 //! Integration tests of scene loading and atlas building on our scenes, third-party scenes and bad input.
 
+mod common;
+use common::temp_case;
 use glam::Vec3;
 use prm_scene::{Atlas, AtlasParams, Scene, SceneError, Sizing, EMPTY_TEXEL};
 use std::path::{Path, PathBuf};
@@ -413,30 +415,6 @@ fn fingerprint_tracks_geometry_only() {
 }
 
 // ---- Hostile input: regression tests of the QA findings on bad scene files. ----
-
-/// A fresh directory under the system temp dir, unique to this test and process; removed
-/// when dropped.
-struct TempDir(PathBuf);
-
-impl std::ops::Deref for TempDir {
-    type Target = Path;
-    fn deref(&self) -> &Path {
-        &self.0
-    }
-}
-
-impl Drop for TempDir {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
-
-fn temp_case(name: &str) -> TempDir {
-    let dir = std::env::temp_dir().join(format!("prm-scene-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    TempDir(dir)
-}
 
 /// Little-endian bytes of floats and u32s.
 fn le_f32(v: &[f32]) -> Vec<u8> {
