@@ -425,6 +425,7 @@ pub fn run(args: &BakeArgs) -> Result<()> {
     // Entry indices in the archive's order (cluster by cluster), and their pane energies.
     let order: Vec<u32> = clustering.members.iter().flatten().copied().collect();
     let mut entry_energy = vec![[0f32; 3]; entries.len()];
+    let mut entry_energy_known = true;
     let shadow_rays;
     let phase = match &gpu {
         Some(ctx) => {
@@ -436,14 +437,16 @@ pub fn run(args: &BakeArgs) -> Result<()> {
             // Progress counts VPLs: a group of panes can take minutes on a big scene.
             let mut phase = progress.phase("pane rendering", vpls.vpls.len() as u64);
             let mut at = 0;
+            let mut energies_complete = true;
             let stats = prm_gpu::render_panes_with(ctx, &scene, &atlas.exits, &vpls, &clustering, &rp, |out| {
                 match out {
                     PaneOutput::Pane {
+                        cluster,
                         irradiance,
                         member_energy,
-                        ..
                     } => {
                         // Members arrive cluster by cluster: the archive's entry order.
+                        energies_complete &= member_energy.len() == clustering.members[cluster].len();
                         for e in member_energy {
                             entry_energy[at] = e.to_array();
                             at += 1;
@@ -465,6 +468,16 @@ pub fn run(args: &BakeArgs) -> Result<()> {
                 stats.gather_seconds,
                 stats.evaluations as f64 / stats.gather_seconds.max(1e-9) / 1e6
             ));
+            if !energies_complete {
+                entry_energy_known = false;
+                progress.say(&format!(
+                    "  no entry energies: their read-back would take {:.1} GiB, over the {:.1} GiB \
+                     budget, so the panes were rendered per cluster and the player weighs \
+                     members equally (the archive stays format 1.0)",
+                    (entries.len() * atlas.exits.len() * 16) as f64 / (1u64 << 30) as f64,
+                    rp.member_energy_bytes as f64 / (1u64 << 30) as f64
+                ));
+            }
             timings.insert("pane_depth_maps".to_string(), stats.depth_seconds);
             timings.insert("pane_gather".to_string(), stats.gather_seconds);
             shadow_rays = 0;
@@ -491,9 +504,11 @@ pub fn run(args: &BakeArgs) -> Result<()> {
             phase
         }
     };
-    writer
-        .set_entry_energy(entry_energy)
-        .context("recording the entry energies")?;
+    if entry_energy_known {
+        writer
+            .set_entry_energy(entry_energy)
+            .context("recording the entry energies")?;
+    }
     let render_s = t.elapsed().as_secs_f64() - write_s;
     phase.finish(&format!(
         "{} panes, {} VPLs on {}",

@@ -230,7 +230,11 @@ impl<R: Read + Seek> Archive<R> {
         let entries_rec = find(kind::ENTRIES)?;
         let clusters_rec = find(kind::CLUSTERS)?;
         let panes_rec = find(kind::PANES)?;
-        let mut energy_recs = records.iter().filter(|r| r.kind == kind::ENTRY_ENERGY);
+        // Kind 6 is the entry energy section from 1.1 on; a 1.0 file may hold a private section
+        // of that kind (the 1.0 writer allowed it), which is skipped like any unknown one.
+        let mut energy_recs = records
+            .iter()
+            .filter(|r| r.kind == kind::ENTRY_ENERGY && header.minor >= 1);
         let energy_rec = energy_recs.next().cloned();
         if energy_recs.next().is_some() {
             return Err(Error::inconsistent("entry_energy section appears more than once"));

@@ -6,10 +6,19 @@
 //! visibility differs: a five-face hemicube depth map per VPL (each face `face_resolution²`,
 //! sampled with 2×2 percentage-closer filtering) instead of a shadow ray.
 //!
-//! Work is cut twice: clusters into *groups* whose panes fit one storage binding (≤ 128 MiB on
-//! lavapipe), and each group's VPLs (sorted by cluster) into *batches* whose depth faces fit one
-//! texture array. A group's panes are read back and handed to the caller before the next group
-//! starts, so at most one group of panes is in memory.
+//! Work is cut twice: panes into *groups* that fit one storage binding (≤ 128 MiB on lavapipe),
+//! and each group's VPLs (sorted by pane) into *batches* whose depth faces fit one texture array.
+//! A group's panes are read back and handed to the caller before the next group starts, so at
+//! most one group of panes is in memory.
+//!
+//! The panes rendered are those of the entry points (members in cluster order), summed into their
+//! cluster's pane on the CPU, so that every member's pane energy is known (the player weighs a
+//! cluster's members by it, formats/prm.md §5.1). The VPL work is the same as for a pane per
+//! cluster; what grows is the read-back (entries × exits × 16 bytes instead of clusters × exits)
+//! and the number of groups, hence of part-filled batches. Measured on the default Cornell bake
+//! (1024 entries, 64 clusters, 256²): 42 → 46 batches, 56.6 → 58.4 s. Above
+//! [`PaneRenderParams::member_energy_bytes`] of read-back the clusters are rendered directly and
+//! no member energies are produced.
 
 use glam::Vec3;
 use prm_scene::{ExitPoint, Scene};
@@ -35,6 +44,10 @@ pub struct PaneRenderParams {
     pub bias: ShadowBias,
     /// How the depth maps are read.
     pub filter: DepthFilter,
+    /// Largest read-back of per-entry panes (entries × exits × 16 bytes) for which members'
+    /// pane energies are produced; above it, panes are rendered per cluster and
+    /// [`PaneOutput::Pane`]'s `member_energy` is empty.
+    pub member_energy_bytes: u64,
 }
 
 /// How the gather pass reads a VPL's depth map.
@@ -72,7 +85,9 @@ impl ShadowBias {
 }
 
 impl PaneRenderParams {
-    /// 128² faces, 256 VPLs a batch, 64 MiB groups.
+    /// 128² faces, 256 VPLs a batch, 64 MiB groups, member energies up to 4 GiB of read-back
+    /// (the chairs' `paper` preset, 4096 entries × 33k exits, needs 2.2 GiB; Sibenik's default,
+    /// 5120 × 190k, 15.6 GiB, and keeps a pane per cluster).
     pub const DEFAULT: PaneRenderParams = PaneRenderParams {
         bound: VplBound::DEFAULT,
         face_resolution: 128,
@@ -80,6 +95,7 @@ impl PaneRenderParams {
         max_group_bytes: 64 << 20,
         bias: ShadowBias::DEFAULT,
         filter: DepthFilter::Pcf2x2,
+        member_energy_bytes: 4 << 30,
     };
 }
 
@@ -134,8 +150,8 @@ pub enum PaneOutput<'a> {
 /// stop the work and are returned as they are.
 ///
 /// The GPU renders one pane per *entry point* (members in cluster order) and the cluster's pane
-/// is their sum, so each member's energy comes for free: the work per VPL is the same as for a
-/// pane per cluster, only the accumulator is flushed at every member instead of every cluster.
+/// is their sum, so each member's energy is known; see the module docs for the cost, and
+/// [`PaneRenderParams::member_energy_bytes`] for when it renders per cluster instead.
 pub fn render_panes_with<E: From<GpuError>>(
     ctx: &GpuContext,
     scene: &Scene,
@@ -145,6 +161,10 @@ pub fn render_panes_with<E: From<GpuError>>(
     params: &PaneRenderParams,
     mut sink: impl FnMut(PaneOutput) -> Result<(), E>,
 ) -> Result<PaneRenderStats, E> {
+    let readback = clustering.of_entry.len() as u64 * exits.len() as u64 * 16;
+    if readback > params.member_energy_bytes {
+        return render_entry_panes(ctx, scene, exits, vpls, clustering, params, sink);
+    }
     let order: Vec<u32> = clustering.members.iter().flatten().copied().collect();
     let mut of_entry = vec![0u32; clustering.of_entry.len()];
     for (j, &k) in order.iter().enumerate() {
@@ -171,6 +191,7 @@ pub fn render_panes_with<E: From<GpuError>>(
             cluster: j, irradiance, ..
         } => {
             let c = clustering.of_entry[order[j] as usize] as usize;
+            debug_assert!(c >= current, "members and of_entry disagree");
             emit_clusters_before(c, &mut current, &mut pane, &mut energy, &mut sink)?;
             for (a, v) in pane.iter_mut().zip(irradiance) {
                 *a += *v;
@@ -206,7 +227,8 @@ fn emit_clusters_before<E>(
     Ok(())
 }
 
-/// The pane of every "cluster" of `clustering` (here: of every entry point), in order.
+/// The pane of every cluster of `clustering` in order (for [`render_panes_with`]: of every
+/// entry point), with no member energies.
 fn render_entry_panes<E: From<GpuError>>(
     ctx: &GpuContext,
     scene: &Scene,
@@ -455,6 +477,7 @@ pub fn render_panes(
 ) -> Result<(Panes, PaneRenderStats), GpuError> {
     let mut data = vec![Vec3::ZERO; clustering.len() * exits.len()];
     let mut entry_energy = vec![Vec3::ZERO; clustering.of_entry.len()];
+    let mut energies_complete = true;
     let n = exits.len();
     let stats = render_panes_with(ctx, scene, exits, vpls, clustering, params, |out| {
         if let PaneOutput::Pane {
@@ -464,6 +487,7 @@ pub fn render_panes(
         } = out
         {
             data[cluster * n..(cluster + 1) * n].copy_from_slice(irradiance);
+            energies_complete &= member_energy.len() == clustering.members[cluster].len();
             for (&k, e) in clustering.members[cluster].iter().zip(member_energy) {
                 entry_energy[k as usize] = *e;
             }
@@ -476,7 +500,7 @@ pub fn render_panes(
             exits: n,
             data,
             rays: 0,
-            entry_energy,
+            entry_energy: if energies_complete { entry_energy } else { Vec::new() },
         },
         stats,
     ))

@@ -112,6 +112,38 @@ mod panes {
             }
         }
         assert!(summed < 0.02, "GPU vs CPU relative RMSE {summed}");
+
+        // Entry energies: in entry order on both sides, and each cluster's members sum to its
+        // pane's energy.
+        assert_eq!(gpu.entry_energy.len(), entries.len());
+        let energy_err = relative_rmse(&gpu.entry_energy, &cpu.entry_energy);
+        eprintln!("entry energies, GPU vs CPU: relative RMSE {energy_err:.4}");
+        assert!(
+            energy_err < 0.05,
+            "entry energies GPU vs CPU: relative RMSE {energy_err}"
+        );
+        for (c, members) in clustering.members.iter().enumerate() {
+            let pane: glam::Vec3 = gpu.pane(c).iter().sum();
+            let members: glam::Vec3 = members.iter().map(|&k| gpu.entry_energy[k as usize]).sum();
+            assert!(
+                (pane - members).abs().max_element() <= 1e-3 * pane.max_element().max(1e-12),
+                "cluster {c}: pane energy {pane} but its members' sum {members}"
+            );
+        }
+        // Above the read-back budget the clusters are rendered directly, with the same panes
+        // and no energies.
+        let direct = PaneRenderParams {
+            member_energy_bytes: 0,
+            ..params
+        };
+        let (per_cluster, _) =
+            prm_gpu::render_panes(&ctx, &scene, &atlas.exits, &vpls, &clustering, &direct).expect("GPU panes");
+        assert!(per_cluster.entry_energy.is_empty());
+        let same = relative_rmse(&per_cluster.data, &gpu.data);
+        assert!(
+            same < 1e-4,
+            "per-cluster against per-entry rendering: relative RMSE {same}"
+        );
     }
 }
 

@@ -51,7 +51,10 @@ pub fn open(archive: &Path, scene: Option<&Path>) -> Result<(FileArchive, Scene)
             if rel.is_empty() {
                 return Err(PlayError::NoSourceScene(archive.to_path_buf()));
             }
-            archive.parent().unwrap_or(Path::new(".")).join(rel)
+            // Relative to the directory the archive really is in: a bake through a symlink
+            // writes the file where the link points and records the path from there.
+            let real = std::fs::canonicalize(archive).unwrap_or_else(|_| archive.to_path_buf());
+            real.parent().unwrap_or(Path::new(".")).join(rel)
         }
     };
     let s = prm_scene::load(&scene_path).map_err(|source| PlayError::Scene {
@@ -106,8 +109,15 @@ pub fn default_light(scene: &Scene) -> Light {
     let b = scene.bounds();
     let centre = (b.min + b.max) * 0.5;
     let half = (b.diagonal() * 0.5).max(1e-3);
+    // A flat scene (a ground plane) has no height to go below: light it from a quarter of the
+    // diagonal above.
+    let y = if b.extent().y > 1e-3 * b.diagonal() {
+        b.max.y - 0.25 * b.extent().y
+    } else {
+        b.max.y + 0.5 * half
+    };
     Light::Point {
-        position: glam::Vec3::new(centre.x, b.max.y - 0.25 * b.extent().y, centre.z),
+        position: glam::Vec3::new(centre.x, y, centre.z),
         intensity: glam::Vec3::splat(half * half),
     }
 }

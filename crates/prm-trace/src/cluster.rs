@@ -7,8 +7,12 @@
 //! are deterministic for a seed (assignment runs in parallel but is per point; centroid sums are
 //! sequential). Clusters left empty are dropped, so there can be fewer than asked.
 //!
-//! A cluster's pane is the sum of its members' panes and its run-time weight the mean of their
-//! direct irradiances ([`Clustering::weights`]).
+//! A cluster's pane is the sum of its members' panes and its run-time weight their direct
+//! irradiances weighed by their pane energies ([`Clustering::weights_by_energy`]; the paper's
+//! plain mean is [`Clustering::weights`]). Measured with exact visibility on McGuire's
+//! CornellBox-Original, a light 0.26 under the ceiling (`examples/cluster_weights.rs`, lightmap
+//! space, 1024 entries in 64 clusters): unclustered 12.4% error, energy 0.97; the mean 21.8%,
+//! 0.82; weighed by energy 11.8%, 0.97.
 
 use glam::Vec3;
 use rayon::prelude::*;

@@ -77,9 +77,11 @@ impl Panes {
     }
 }
 
-/// Exit points per work item of [`evaluate_panes`]: each item also keeps one energy per VPL, so
-/// items of a thousand exits keep that bookkeeping small against the item's own work.
-const ENERGY_CHUNK: usize = 1024;
+/// Work items of [`evaluate_panes`]: the exits are cut into this many chunks (of 64 to 4096
+/// exits), each keeping one energy per entry point, so the bookkeeping stays at most 256 ×
+/// entries × 12 bytes while 2 cores still get 128 items each. Fixed by the exit count alone, so
+/// the sums' order, hence the result, does not depend on the thread count.
+const WORK_ITEMS: usize = 256;
 
 /// Evaluates every cluster's pane at every exit point in `exits`, and every entry point's pane
 /// energy.
@@ -105,17 +107,18 @@ pub fn evaluate_panes(
         .collect();
     // Exits in fixed chunks, each summing its VPLs' energy too; the chunks' sums are added in
     // order, so the energies do not depend on the thread count either.
+    let chunk_len = exits.len().div_ceil(WORK_ITEMS).clamp(64, 4096);
     let per_chunk: Vec<(Vec<Vec<Vec3>>, Vec<Vec3>, u64)> = exits
-        .par_chunks(ENERGY_CHUNK)
+        .par_chunks(chunk_len)
         .map(|chunk| {
-            let mut vpl_energy = vec![Vec3::ZERO; vpls.vpls.len()];
+            let mut entry_energy = vec![Vec3::ZERO; vpls.entries()];
             let mut rays = 0u64;
             let accs = chunk
                 .iter()
                 .map(|x| {
                     let mut acc = vec![Vec3::ZERO; c];
                     let ng = bvh.geometric_normal(x.triangle);
-                    for (j, (v, &cl)) in vpls.vpls.iter().zip(&cluster_of_vpl).enumerate() {
+                    for (v, &cl) in vpls.vpls.iter().zip(&cluster_of_vpl) {
                         let e = params.bound.irradiance(v, x.position, x.normal);
                         if e == Vec3::ZERO || v.position.distance_squared(x.position) == 0.0 {
                             continue;
@@ -123,23 +126,23 @@ pub fn evaluate_panes(
                         rays += 1;
                         if bvh.visible(x.position, ng, x.triangle, v.position, v.normal, v.triangle) {
                             acc[cl as usize] += e;
-                            vpl_energy[j] += e;
+                            entry_energy[v.entry as usize] += e;
                         }
                     }
                     acc
                 })
                 .collect();
-            (accs, vpl_energy, rays)
+            (accs, entry_energy, rays)
         })
         .collect();
     let n = exits.len();
     let mut data = vec![Vec3::ZERO; c * n];
     let mut rays = 0;
-    let mut vpl_energy = vec![Vec3::ZERO; vpls.vpls.len()];
+    let mut entry_energy = vec![Vec3::ZERO; vpls.entries()];
     let mut i = 0;
     for (accs, energy, r) in per_chunk {
         rays += r;
-        for (total, e) in vpl_energy.iter_mut().zip(energy) {
+        for (total, e) in entry_energy.iter_mut().zip(energy) {
             *total += e;
         }
         for acc in accs {
@@ -148,10 +151,6 @@ pub fn evaluate_panes(
             }
             i += 1;
         }
-    }
-    let mut entry_energy = vec![Vec3::ZERO; vpls.entries()];
-    for (v, e) in vpls.vpls.iter().zip(vpl_energy) {
-        entry_energy[v.entry as usize] += e;
     }
     Ok(Panes {
         clusters: c,
