@@ -74,7 +74,19 @@ fn non_negative(s: &str) -> Result<f32, String> {
     }
 }
 
-fn main() -> Result<()> {
+/// Prints an error as `error: ` and its chain on one line, exit 1 (as `prm-bake` does), rather
+/// than `main`'s default `Error: ` debug dump with a backtrace.
+fn main() -> std::process::ExitCode {
+    match run() {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}
+
+fn run() -> Result<()> {
     let args = Args::parse();
     if args.headless {
         prm_gpu::silence_wayland_probe();
