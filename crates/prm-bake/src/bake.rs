@@ -474,7 +474,7 @@ pub fn run(args: &BakeArgs) -> Result<()> {
                     "  no entry energies: their read-back would take {:.1} GiB, over the {:.1} GiB \
                      budget, so the panes were rendered per cluster and the player weighs \
                      members equally (the archive stays format 1.0)",
-                    (entries.len() * atlas.exits.len() * 16) as f64 / (1u64 << 30) as f64,
+                    prm_gpu::pane::member_readback_bytes(entries.len(), atlas.exits.len()) as f64 / (1u64 << 30) as f64,
                     rp.member_energy_bytes as f64 / (1u64 << 30) as f64
                 ));
             }

@@ -161,9 +161,8 @@ pub fn render_panes_with<E: From<GpuError>>(
     params: &PaneRenderParams,
     mut sink: impl FnMut(PaneOutput) -> Result<(), E>,
 ) -> Result<PaneRenderStats, E> {
-    let readback = clustering.of_entry.len() as u64 * exits.len() as u64 * 16;
-    if readback > params.member_energy_bytes {
-        return render_entry_panes(ctx, scene, exits, vpls, clustering, params, sink);
+    if member_readback_bytes(clustering.of_entry.len(), exits.len()) > params.member_energy_bytes {
+        return render_cluster_panes(ctx, scene, exits, vpls, clustering, params, sink);
     }
     let order: Vec<u32> = clustering.members.iter().flatten().copied().collect();
     let mut of_entry = vec![0u32; clustering.of_entry.len()];
@@ -186,7 +185,7 @@ pub fn render_panes_with<E: From<GpuError>>(
     let mut current = 0usize;
     let mut pane = vec![Vec3::ZERO; exits.len()];
     let mut energy: Vec<Vec3> = Vec::new();
-    let stats = render_entry_panes(ctx, scene, exits, vpls, &singletons, params, |out| match out {
+    let stats = render_cluster_panes(ctx, scene, exits, vpls, &singletons, params, |out| match out {
         PaneOutput::Pane {
             cluster: j, irradiance, ..
         } => {
@@ -227,9 +226,15 @@ fn emit_clusters_before<E>(
     Ok(())
 }
 
+/// Bytes of per-entry panes read back for `entries` entry points over `exits` exit points
+/// (RGBA f32 texels), compared with [`PaneRenderParams::member_energy_bytes`].
+pub fn member_readback_bytes(entries: usize, exits: usize) -> u64 {
+    entries as u64 * exits as u64 * 16
+}
+
 /// The pane of every cluster of `clustering` in order (for [`render_panes_with`]: of every
 /// entry point), with no member energies.
-fn render_entry_panes<E: From<GpuError>>(
+fn render_cluster_panes<E: From<GpuError>>(
     ctx: &GpuContext,
     scene: &Scene,
     exits: &[ExitPoint],
