@@ -5,14 +5,13 @@
 
 #![warn(missing_docs)]
 
-mod context;
 pub mod pane;
 pub mod pane_gather;
 pub mod smoke;
 pub mod vpl_depth;
 
-pub use context::{instance, silence_wayland_probe, Backend, ContextOptions, ErrorScopes, GpuContext, GpuError};
 pub use pane::{
     check_support, render_panes, render_panes_with, DepthFilter, PaneOutput, PaneRenderParams, PaneRenderStats,
     ShadowBias,
 };
+pub use prm_gpu_kit::{instance, silence_wayland_probe, Backend, ContextOptions, ErrorScopes, GpuContext, GpuError};

@@ -152,7 +152,7 @@ impl Animation {
         }
         let camera = cam_keys
             .iter()
-            .map(|(t, s)| prm_trace::parse_camera(s).map(|c| (*t, c)).map_err(|e| e.to_string()))
+            .map(|(t, s)| prm_scene::parse_camera(s).map(|c| (*t, c)).map_err(|e| e.to_string()))
             .collect::<Result<Vec<_>, _>>()?;
         let mut lights = Vec::new();
         for (i, l) in f.light.iter().enumerate() {
@@ -166,7 +166,7 @@ impl Animation {
             let parsed = keys
                 .iter()
                 .map(|(t, s)| {
-                    prm_trace::parse_light(s)
+                    prm_scene::parse_light(s)
                         .map(|l| (*t, l))
                         .map_err(|e| format!("light {i}: {e}"))
                 })

@@ -13,14 +13,6 @@ pub enum PlayError {
         /// The reader's reason.
         source: prm_format::Error,
     },
-    /// A pane of an opened archive could not be read (the caller knows the file and adds it).
-    #[error("cannot read pane {pane} of the archive")]
-    Pane {
-        /// The pane (cluster) index.
-        pane: usize,
-        /// The reader's reason.
-        source: prm_format::Error,
-    },
     /// The archive records no source scene and none was given.
     #[error("archive {0} records no source scene: pass --scene")]
     NoSourceScene(PathBuf),
@@ -47,17 +39,6 @@ pub enum PlayError {
         /// Fingerprint of the scene.
         found: u64,
     },
-    /// The archive and the scene disagree in a way the fingerprint does not catch.
-    #[error("archive does not fit the scene: {0}")]
-    Mismatch(String),
-    /// More panes than the GPU holds in one texture array.
-    #[error("the archive has {panes} panes but this GPU holds at most {max} texture layers")]
-    TooManyPanes {
-        /// Panes in the archive.
-        panes: usize,
-        /// The device's `max_texture_array_layers`.
-        max: u32,
-    },
     /// An option is out of range, or beyond what this device can allocate.
     #[error("{option}: {message}")]
     Option {
@@ -68,7 +49,10 @@ pub enum PlayError {
     },
     /// A GPU error (no device, validation, device lost).
     #[error(transparent)]
-    Gpu(#[from] prm_gpu::GpuError),
+    Gpu(#[from] prm_gpu_kit::GpuError),
+    /// The run time could not load the archive or run a frame.
+    #[error(transparent)]
+    Runtime(prm_runtime::RuntimeError),
     /// Window mode failed (no display, no surface).
     #[error("window mode: {0}")]
     Window(String),
@@ -88,4 +72,14 @@ pub enum PlayError {
         /// Why.
         message: String,
     },
+}
+
+impl From<prm_runtime::RuntimeError> for PlayError {
+    /// GPU errors stay [`PlayError::Gpu`] whichever layer raised them.
+    fn from(e: prm_runtime::RuntimeError) -> PlayError {
+        match e {
+            prm_runtime::RuntimeError::Gpu(g) => PlayError::Gpu(g),
+            e => PlayError::Runtime(e),
+        }
+    }
 }

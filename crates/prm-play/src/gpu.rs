@@ -1,8 +1,8 @@
 //! Device creation (Vulkan, with timestamp queries when the adapter has them) and the
-//! `#[repr(C)]` structs shared with the `play_*.wgsl` shaders.
+//! `#[repr(C)]` structs shared with `shaders/play/shade.wgsl` (checked against it below).
 
 use bytemuck::{Pod, Zeroable};
-use prm_gpu::{Backend, ContextOptions, GpuContext, GpuError};
+use prm_gpu_kit::{Backend, ContextOptions, GpuContext, GpuError};
 
 /// Opens a headless Vulkan device (lavapipe on a machine without a GPU) with timestamp queries
 /// when the adapter has them; fails with the driver to install when no Vulkan driver exists.
@@ -15,7 +15,7 @@ pub fn open_vulkan() -> Result<GpuContext, GpuError> {
 
 /// A Vulkan-only wgpu instance (window mode creates its surface on it).
 pub fn vulkan_instance() -> wgpu::Instance {
-    prm_gpu::instance(wgpu::Backends::VULKAN)
+    prm_gpu_kit::instance(wgpu::Backends::VULKAN)
 }
 
 /// Opens a Vulkan device on `instance` able to present to `surface`.
@@ -27,85 +27,27 @@ pub fn open_vulkan_for(instance: &wgpu::Instance, surface: &wgpu::Surface) -> Re
     })
 }
 
-/// Per-frame constants; `Frame` in the shaders.
+/// The shade pass's camera; `Camera` in `shade.wgsl`.
 #[repr(C)]
-#[derive(Clone, Copy, Debug, Pod, Zeroable)]
-pub struct GpuFrame {
-    /// Camera view-projection.
-    pub view_proj: [[f32; 4]; 4],
-    /// Camera position.
-    pub eye: [f32; 4],
-    /// Light count, mode, width, height.
-    pub counts: [u32; 4],
-    /// Cluster count, top K, entry count, unused.
-    pub clusters: [u32; 4],
-    /// Fade band, shadow-map resolution, normal offset and depth bias (in shadow texels).
-    pub params: [f32; 4],
-}
-const _: () = assert!(std::mem::size_of::<GpuFrame>() == 128);
-
-/// A light; `Light` in `play_lights.wgsl`.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Pod, Zeroable)]
-pub struct GpuLight {
-    /// 0 point, 1 spot, 2 directional.
-    pub kind: u32,
-    /// First shadow view (texture layer).
-    pub first_view: u32,
-    /// 1 or 6 (cube).
-    pub view_count: u32,
-    /// Cosine of a spot light's half angle.
-    pub cos_cutoff: f32,
-    /// Position (point, spot).
-    pub position: [f32; 4],
-    /// Spot axis or directional travel direction.
-    pub direction: [f32; 4],
-    /// Intensity (W/sr) or irradiance (W/m²).
-    pub color: [f32; 4],
-}
-const _: () = assert!(std::mem::size_of::<GpuLight>() == 64);
-
-/// A shadow view; `ShadowView` in `play_lights.wgsl`.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Pod, Zeroable)]
-pub struct GpuView {
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct GpuCamera {
     /// View-projection.
     pub view_proj: [[f32; 4]; 4],
-    /// Texel footprint, near, far, orthographic flag.
-    pub params: [f32; 4],
-}
-const _: () = assert!(std::mem::size_of::<GpuView>() == 80);
-
-/// A cluster; `Cluster` in `play_weights.wgsl`.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Pod, Zeroable)]
-pub struct GpuCluster {
-    /// First entry.
-    pub first: u32,
-    /// Entry count.
-    pub count: u32,
+    /// Eye position.
+    pub eye: [f32; 3],
+    /// [`Mode`](crate::Mode) code.
+    pub mode: u32,
+    /// Image width in pixels.
+    pub width: f32,
     /// Padding.
-    pub pad: [u32; 2],
-    /// Pane energy (RGB, w unused).
-    pub energy: [f32; 4],
+    pub _pad0: f32,
+    /// Padding.
+    pub _pad1: f32,
+    /// Padding.
+    pub _pad2: f32,
 }
-const _: () = assert!(std::mem::size_of::<GpuCluster>() == 32);
 
-/// An entry point; `Entry` in `play_weights.wgsl`.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Pod, Zeroable)]
-pub struct GpuEntry {
-    /// Position; w: area it stands for over π (r² of its disk), the bound of its irradiance.
-    pub position: [f32; 4],
-    /// Unit normal (w unused).
-    pub normal: [f32; 4],
-    /// Pane energy (RGB; w unused) the cluster weight weighs this member by: 1 for archives
-    /// without an entry energy section, which makes the weight the plain mean.
-    pub energy: [f32; 4],
-}
-const _: () = assert!(std::mem::size_of::<GpuEntry>() == 48);
-
-/// A material; `Material` in `play_shade.wgsl`.
+/// A material; `Material` in `shade.wgsl`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
 pub struct GpuMaterial {
@@ -114,18 +56,6 @@ pub struct GpuMaterial {
     /// Texture layer or -1.
     pub texture: i32,
 }
-const _: () = assert!(std::mem::size_of::<GpuMaterial>() == 16);
-
-/// A kept cluster; `Selected` in `play_select.wgsl` and `play_blend.wgsl`.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Pod, Zeroable)]
-pub struct GpuSelected {
-    /// Effective (faded) weight.
-    pub weight: [f32; 3],
-    /// Cluster (= pane layer).
-    pub cluster: u32,
-}
-const _: () = assert!(std::mem::size_of::<GpuSelected>() == 16);
 
 /// A vertex of the shade pass (flat triangles, no index buffer).
 #[repr(C)]
@@ -143,3 +73,34 @@ pub struct GpuVertex {
     pub material: u32,
 }
 const _: () = assert!(std::mem::size_of::<GpuVertex>() == 44);
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::Mode;
+    use prm_gpu_kit::layout::check_consts;
+    use prm_gpu_kit::wgsl_layout;
+
+    #[test]
+    fn shade_structs_and_modes_match_the_shader() {
+        let src = crate::shade::source().join("\n");
+        wgsl_layout!(
+            &src,
+            GpuCamera,
+            "Camera",
+            [view_proj, eye, mode, width, _pad0, _pad1, _pad2]
+        )
+        .unwrap();
+        wgsl_layout!(&src, GpuMaterial, "Material", [albedo, texture]).unwrap();
+        check_consts(
+            &src,
+            &[
+                ("MODE_GI", Mode::Gi as i64),
+                ("MODE_DIRECT", Mode::Direct as i64),
+                ("MODE_INDIRECT", Mode::Indirect as i64),
+                ("MODE_SPLIT", Mode::Split as i64),
+            ],
+        )
+        .unwrap();
+    }
+}

@@ -1,11 +1,9 @@
-//! `prm-play`: real-time weighting and blending of a baked PRM archive on the GPU (wgpu).
+//! `prm-play`: a viewer of baked PRM archives over [`prm_runtime`].
 //!
-//! Per frame, without a CPU–GPU round trip: shadow maps for every light ([`shadow`]), the
-//! irradiance of every entry point and each cluster's weight (`play_weights.wgsl`), the rank of
-//! every cluster by weight × pane energy (`play_rank.wgsl`), the top K with weights faded near the
-//! threshold (`play_select.wgsl`), the blend of the kept panes into an indirect-irradiance
-//! lightmap (`play_blend.wgsl`) and the shading of every pixel as albedo/π × (direct + indirect)
-//! irradiance (`play_shade.wgsl`), in linear HDR. See [`Renderer`].
+//! Per frame, without a CPU–GPU round trip, the run time makes the indirect-irradiance lightmap
+//! (shadow maps, entry irradiance and cluster weights, rank, top-K selection with fade, blend of
+//! the kept panes), and [`shade`] shades every pixel as albedo/π × (direct + indirect)
+//! irradiance, in linear HDR. See [`Renderer`].
 //!
 //! [`open`] loads an archive and its scene (refusing an archive baked for other geometry),
 //! [`window`] presents frames in a window (winit, orbit camera),
@@ -14,16 +12,17 @@
 mod error;
 mod gpu;
 mod renderer;
+pub mod shade;
 
 pub mod animation;
 pub mod output;
-pub mod shadow;
 pub mod synthetic;
 pub mod window;
 
 pub use error::PlayError;
 pub use gpu::{open_vulkan, open_vulkan_for, vulkan_instance};
-pub use renderer::{ClusterWeight, FrameInput, FrameTimings, Image, Mode, PlayOptions, Renderer, PASS_NAMES};
+pub use prm_runtime::{archive_top_k, ClusterWeight};
+pub use renderer::{FrameInput, FrameTimings, Image, Mode, PlayOptions, Renderer, MAX_LIGHTS, PASS_NAMES};
 
 use std::path::{Path, PathBuf};
 
@@ -34,7 +33,7 @@ use prm_scene::{Camera, Light, Scene};
 pub type FileArchive = Archive<std::io::BufReader<std::fs::File>>;
 
 /// Top K when neither `--top-k` nor the archive's `params.top_k` says otherwise.
-pub const DEFAULT_TOP_K: u32 = 32;
+pub const DEFAULT_TOP_K: u32 = prm_runtime::RuntimeOptions::DEFAULT_TOP_K;
 
 /// Opens `archive` and loads its scene: `scene` if given, else the archive's `source_scene`
 /// (relative to the archive's directory). Fails if the scene's fingerprint differs from the one
@@ -89,17 +88,6 @@ pub fn materials_warning<R: std::io::Read + std::io::Seek>(archive: &Archive<R>,
              albedos until you re-bake"
         )
     })
-}
-
-/// The top K an archive asks for (`params.top_k`), else [`DEFAULT_TOP_K`].
-pub fn archive_top_k<R: std::io::Read + std::io::Seek>(archive: &Archive<R>) -> u32 {
-    archive
-        .metadata()
-        .params
-        .get("top_k")
-        .and_then(|v| v.as_u64())
-        .map(|k| k.clamp(1, u32::MAX as u64) as u32)
-        .unwrap_or(DEFAULT_TOP_K)
 }
 
 /// The light the player places in a scene that has none: a white point light on the vertical

@@ -89,16 +89,16 @@ fn main() -> std::process::ExitCode {
 fn run() -> Result<()> {
     let args = Args::parse();
     if args.headless {
-        prm_gpu::silence_wayland_probe();
+        prm_gpu_kit::silence_wayland_probe();
     }
-    let (width, height) = prm_trace::parse_size(&args.size)?;
+    let (width, height) = prm_scene::parse_size(&args.size)?;
     let (mut archive, scene) = prm_play::open(&args.archive, args.scene.as_deref())?;
     if let Some(w) = prm_play::materials_warning(&archive, &scene) {
         eprintln!("warning: {w}");
     }
     let top_k = args.top_k.unwrap_or_else(|| prm_play::archive_top_k(&archive));
     let base_camera = match &args.camera {
-        Some(s) => prm_trace::parse_camera(s)?,
+        Some(s) => prm_scene::parse_camera(s)?,
         None => prm_play::default_camera(&scene),
     };
     let base_lights = if args.lights.is_empty() {
@@ -106,7 +106,7 @@ fn run() -> Result<()> {
     } else {
         args.lights
             .iter()
-            .map(|s| prm_trace::parse_light(s))
+            .map(|s| prm_scene::parse_light(s))
             .collect::<Result<Vec<_>, _>>()?
     };
     let animation = args.animation.as_deref().map(Animation::load).transpose()?;

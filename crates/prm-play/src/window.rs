@@ -105,7 +105,7 @@ fn light_label(light: &Light) -> String {
     }
 }
 
-/// The present pass (`play_present.wgsl`): the renderer's linear frame, × exposure, clamped and
+/// The present pass (`play/present.wgsl`): the renderer's linear frame, × exposure, clamped and
 /// sRGB-encoded (by the shader unless the target format is sRGB), onto a target of `format`.
 pub struct Presenter {
     pipeline: wgpu::RenderPipeline,
@@ -115,10 +115,10 @@ pub struct Presenter {
 
 impl Presenter {
     /// Builds the pass for targets of `format`.
-    pub fn new(ctx: &prm_gpu::GpuContext, format: wgpu::TextureFormat, exposure: f32) -> Presenter {
+    pub fn new(ctx: &prm_gpu_kit::GpuContext, format: wgpu::TextureFormat, exposure: f32) -> Presenter {
         let module = ctx.device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("play_present"),
-            source: wgpu::ShaderSource::Wgsl(include_str!("../../../shaders/play_present.wgsl").into()),
+            source: wgpu::ShaderSource::Wgsl(include_str!("../../../shaders/play/present.wgsl").into()),
         });
         let pipeline = ctx.device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
             label: Some("play_present"),

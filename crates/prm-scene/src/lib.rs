@@ -15,12 +15,21 @@ mod error;
 mod gltf_load;
 mod obj;
 mod scene;
+mod spec;
 mod texture;
 
 pub use atlas::{Atlas, AtlasParams, AtlasStats, ExitPoint, Sizing, EMPTY_TEXEL};
 pub use error::SceneError;
 pub use scene::{Aabb, Camera, Light, LoadReport, Material, Scene, Triangle};
+pub use spec::{parse_camera, parse_light, parse_size, SpecError};
 pub use texture::Texture;
+
+/// Radius² of an entry point's disk bound, as a fraction of `A/(Nπ)` (the disk of its whole
+/// area): an entry point stands for a small disk, so a point or spot light at distance `r` gives
+/// it `I cos θ / (r² + ENTRY_DISK · A/(Nπ))`. Shared by the CPU estimator
+/// (`prm_trace::entry_irradiance`, which records the measurement behind the value) and the
+/// run-time weights pass (`prm-runtime`).
+pub const ENTRY_DISK: f32 = 0.25;
 
 use std::path::Path;
 

@@ -7,6 +7,7 @@
 
 use glam::Vec3;
 use prm_scene::Light;
+use prm_scene::ENTRY_DISK;
 use rayon::prelude::*;
 
 use crate::bvh::Bvh;
@@ -65,10 +66,6 @@ fn bounded_irradiance(bvh: &Bvh, lights: &[Light], p: Vec3, ng: Vec3, n: Vec3, t
     e
 }
 
-/// Radius² of an entry point's disk bound, as a fraction of `A/(Nπ)` (the disk of its whole
-/// area); see [`entry_irradiance`].
-pub const ENTRY_DISK: f32 = 0.25;
-
 /// Direct irradiance at every entry point (the run-time weights before cluster averaging),
 /// bounded like a VPL: an entry point stands for a small disk, so a point or spot light at
 /// distance `r` gives `I cos θ / (r² + ENTRY_DISK · A/(Nπ))` instead of `I cos θ / r²`.
@@ -79,7 +76,7 @@ pub const ENTRY_DISK: f32 = 0.25;
 /// 102% (relative RMSE; the reference's own noise 28%). The bound trades that variance for a
 /// bias near lights: the disk of the whole area (`ENTRY_DISK` = 1) gave 47% there but raised
 /// the error with a light 5 cm from a wall from 24% to 27%; a quarter of it gives 45% and 25%.
-/// The player computes the same bound on the GPU (`play_weights.wgsl`).
+/// The run time computes the same bound on the GPU (prm-runtime's `weights.wgsl`).
 pub fn entry_irradiance(bvh: &Bvh, lights: &[Light], entries: &[SurfaceSample]) -> Vec<Vec3> {
     entries
         .par_iter()

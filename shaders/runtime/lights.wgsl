@@ -1,43 +1,13 @@
-// Shared by the prm-play passes that light points (play_weights.wgsl, play_shade.wgsl): the light
-// and shadow-view layouts and the direct irradiance of a point from every light, with shadow-map
-// visibility. The including pass declares `frame`, `lights`, `views` and `shadow_maps`.
-
-struct Frame {
-    view_proj: mat4x4<f32>,
-    eye: vec4<f32>,
-    // light_count, mode, width, height
-    counts: vec4<u32>,
-    // cluster_count, top_k, entry_count, unused
-    clusters: vec4<u32>,
-    // fade band, shadow-map resolution, normal offset (texels), depth bias (texels)
-    params: vec4<f32>,
-};
-
-struct Light {
-    // 0 point, 1 spot, 2 directional
-    kind: u32,
-    first_view: u32,
-    view_count: u32,
-    cos_cutoff: f32,
-    position: vec4<f32>,
-    // spot axis or directional travel direction
-    direction: vec4<f32>,
-    // W/sr (point, spot) or W/m² (directional)
-    color: vec4<f32>,
-};
-
-struct ShadowView {
-    view_proj: mat4x4<f32>,
-    // x: texel footprint (world units per texel at unit distance for perspective views,
-    // absolute for orthographic ones), y: near, z: far, w: 1 for orthographic
-    params: vec4<f32>,
-};
+// prm-runtime: the direct irradiance of a point from every light, with shadow-map visibility.
+// Shared by the passes that light points (weights.wgsl here, and an engine's or prm-play's
+// shading); comes after shared.wgsl. The including pass declares `frame: Frame`,
+// `lights: array<Light>`, `views: array<ShadowView>` and `shadow_maps: texture_depth_2d_array`.
 
 // Linear depth (distance along the view axis) of a stored depth-buffer value.
 fn linear_depth(z: f32, v: ShadowView) -> f32 {
-    let n = v.params.y;
-    let f = v.params.z;
-    if v.params.w > 0.5 {
+    let n = v.near;
+    let f = v.far;
+    if v.orthographic != 0u {
         return n + z * (f - n);
     }
     return n * f / (f - z * (f - n));
@@ -47,7 +17,7 @@ fn linear_depth(z: f32, v: ShadowView) -> f32 {
 fn visibility(l: Light, p: vec3<f32>, n: vec3<f32>, dist: f32) -> f32 {
     var face = 0u;
     if l.view_count == 6u {
-        let d = p - l.position.xyz;
+        let d = p - l.position;
         let a = abs(d);
         if a.x >= a.y && a.x >= a.z {
             face = select(1u, 0u, d.x > 0.0);
@@ -59,9 +29,9 @@ fn visibility(l: Light, p: vec3<f32>, n: vec3<f32>, dist: f32) -> f32 {
     }
     let layer = l.first_view + face;
     let v = views[layer];
-    let ortho = v.params.w > 0.5;
-    let texel = select(v.params.x * dist, v.params.x, ortho);
-    let q = p + n * (frame.params.z * texel);
+    let ortho = v.orthographic != 0u;
+    let texel = select(v.texel * dist, v.texel, ortho);
+    let q = p + n * (frame.normal_offset * texel);
     let c = v.view_proj * vec4<f32>(q, 1.0);
     let ndc = c.xyz / c.w;
     if c.w <= 0.0 || any(abs(ndc.xy) > vec2<f32>(1.0)) {
@@ -71,8 +41,8 @@ fn visibility(l: Light, p: vec3<f32>, n: vec3<f32>, dist: f32) -> f32 {
     if ortho {
         mine = linear_depth(ndc.z, v);
     }
-    let bias = frame.params.w * texel;
-    let res = frame.params.y;
+    let bias = frame.depth_bias * texel;
+    let res = frame.shadow_resolution;
     let uv = vec2<f32>(ndc.x * 0.5 + 0.5, 0.5 - ndc.y * 0.5) * res - 0.5;
     let base = floor(uv);
     let f = uv - base;
@@ -98,15 +68,15 @@ fn light_irradiance_disk(i: u32, p: vec3<f32>, n: vec3<f32>, disk: f32) -> vec3<
     var wi: vec3<f32>;
     var scale: vec3<f32>;
     var dist = 1.0;
-    if l.kind == 2u {
-        wi = -l.direction.xyz;
-        scale = l.color.rgb;
+    if l.kind == LIGHT_DIRECTIONAL {
+        wi = -l.direction;
+        scale = l.color;
     } else {
-        let d = l.position.xyz - p;
+        let d = l.position - p;
         dist = max(length(d), 1e-6);
         wi = d / dist;
-        scale = l.color.rgb / (dist * dist + disk);
-        if l.kind == 1u && dot(-wi, l.direction.xyz) < l.cos_cutoff {
+        scale = l.color / (dist * dist + disk);
+        if l.kind == LIGHT_SPOT && dot(-wi, l.direction) < l.cos_cutoff {
             return vec3<f32>(0.0);
         }
     }
@@ -123,7 +93,7 @@ fn direct_irradiance(p: vec3<f32>, n: vec3<f32>) -> vec3<f32> {
 
 fn direct_irradiance_disk(p: vec3<f32>, n: vec3<f32>, disk: f32) -> vec3<f32> {
     var e = vec3<f32>(0.0);
-    for (var i = 0u; i < frame.counts.x; i++) {
+    for (var i = 0u; i < frame.light_count; i++) {
         e += light_irradiance_disk(i, p, n, disk);
     }
     return e;

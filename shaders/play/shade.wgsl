@@ -1,6 +1,24 @@
 // prm-play shade pass: radiance of every pixel, albedo/π × (direct irradiance with shadows +
-// indirect irradiance bilinearly sampled from the lightmap), linear HDR. Modes: 0 gi, 1 direct,
-// 2 indirect, 3 split (left half direct, right half gi).
+// indirect irradiance bilinearly sampled from the lightmap), linear HDR. Comes after the run
+// time's shared.wgsl and lights.wgsl (which use `frame`, `lights`, `views`, `shadow_maps`).
+
+// What a frame shows (prm_play::Mode).
+const MODE_GI: u32 = 0u;
+const MODE_DIRECT: u32 = 1u;
+const MODE_INDIRECT: u32 = 2u;
+// Left half direct, right half gi.
+const MODE_SPLIT: u32 = 3u;
+
+struct Camera {
+    view_proj: mat4x4<f32>,
+    eye: vec3<f32>,
+    mode: u32,
+    // image width in pixels (split mode)
+    width: f32,
+    _pad0: f32,
+    _pad1: f32,
+    _pad2: f32,
+};
 
 struct Material {
     albedo: vec3<f32>,
@@ -16,6 +34,7 @@ struct Material {
 @group(0) @binding(5) var lightmap: texture_2d<f32>;
 @group(0) @binding(6) var textures: texture_2d_array<f32>;
 @group(0) @binding(7) var texture_sampler: sampler;
+@group(0) @binding(8) var<uniform> camera: Camera;
 
 struct VsIn {
     @location(0) position: vec3<f32>,
@@ -37,7 +56,7 @@ struct VsOut {
 @vertex
 fn vs_main(v: VsIn) -> VsOut {
     var o: VsOut;
-    o.clip = frame.view_proj * vec4<f32>(v.position, 1.0);
+    o.clip = camera.view_proj * vec4<f32>(v.position, 1.0);
     o.position = v.position;
     o.normal = v.normal;
     o.uv = v.uv;
@@ -69,18 +88,18 @@ fn fs_main(v: VsOut) -> @location(0) vec4<f32> {
         albedo *= textureSampleLevel(textures, texture_sampler, v.uv, m.texture, 0.0).rgb;
     }
     var n = normalize(v.normal);
-    if dot(n, frame.eye.xyz - v.position) < 0.0 {
+    if dot(n, camera.eye - v.position) < 0.0 {
         n = -n;
     }
-    var mode = frame.counts.y;
-    if mode == 3u {
-        mode = select(0u, 1u, v.clip.x < f32(frame.counts.z) * 0.5);
+    var mode = camera.mode;
+    if mode == MODE_SPLIT {
+        mode = select(MODE_GI, MODE_DIRECT, v.clip.x < camera.width * 0.5);
     }
     var e = vec3<f32>(0.0);
-    if mode != 2u {
+    if mode != MODE_INDIRECT {
         e += direct_irradiance(v.position, n);
     }
-    if mode != 1u {
+    if mode != MODE_DIRECT {
         e += indirect(v.lightmap_uv);
     }
     return vec4<f32>(albedo / 3.14159265358979 * e, 1.0);

@@ -1,23 +1,8 @@
-// prm-play weights pass: irradiance of every entry point from the lights (shadow-mapped), and
+// prm-runtime weights pass: irradiance of every entry point from the lights (shadow-mapped), and
 // each cluster's weight = its members' irradiance weighed by their pane energy,
 // Σ E_i e_i / Σ e_i per channel (the mean when every e_i is 1, archives before 1.1), so the
 // cluster gives the indirect energy its members would give unclustered; score = Σ_rgb weight ×
 // pane energy.
-
-struct Cluster {
-    first: u32,
-    count: u32,
-    _pad0: u32,
-    _pad1: u32,
-    energy: vec4<f32>,
-};
-
-struct Entry {
-    position: vec4<f32>,
-    normal: vec4<f32>,
-    // xyz: pane energy e_i
-    energy: vec4<f32>,
-};
 
 @group(0) @binding(0) var<uniform> frame: Frame;
 @group(0) @binding(1) var<storage, read> lights: array<Light>;
@@ -25,8 +10,7 @@ struct Entry {
 @group(0) @binding(3) var shadow_maps: texture_depth_2d_array;
 @group(0) @binding(4) var<storage, read> clusters: array<Cluster>;
 @group(0) @binding(5) var<storage, read> entries: array<Entry>;
-// xyz: weight, w: score
-@group(0) @binding(6) var<storage, read_write> weights: array<vec4<f32>>;
+@group(0) @binding(6) var<storage, read_write> weights: array<Weight>;
 
 // One workgroup per cluster (x + 65535·y), its invocations sharing the members: with one
 // invocation per cluster, 64 clusters made a single workgroup, which lavapipe runs on one thread.
@@ -38,7 +22,7 @@ var<workgroup> partial_energy: array<vec3<f32>, WEIGHT_LANES>;
 fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_index) lane: u32) {
     let c = wid.x + wid.y * 65535u;
     // Uniform per workgroup, so the barrier below stays in uniform control flow.
-    if c >= frame.clusters.x {
+    if c >= frame.cluster_count {
         return;
     }
     let cl = clusters[c];
@@ -46,9 +30,9 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_index) 
     var sum_energy = vec3<f32>(0.0);
     for (var k = lane; k < cl.count; k += WEIGHT_LANES) {
         let e = entries[cl.first + k];
-        // Bounded: the entry stands for a disk (position.w = its radius²), see entry_irradiance.
-        sum += direct_irradiance_disk(e.position.xyz, e.normal.xyz, e.position.w) * e.energy.xyz;
-        sum_energy += e.energy.xyz;
+        // Bounded: the entry stands for a disk of radius² e.disk, see light_irradiance_disk.
+        sum += direct_irradiance_disk(e.position, e.normal, e.disk) * e.energy;
+        sum_energy += e.energy;
     }
     partial[lane] = sum;
     partial_energy[lane] = sum_energy;
@@ -62,6 +46,6 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_index) 
         }
         // A channel whose members carry no energy contributes nothing whatever its weight.
         let w = select(vec3<f32>(0.0), total / total_energy, total_energy > vec3<f32>(0.0));
-        weights[c] = vec4<f32>(w, dot(w, cl.energy.rgb));
+        weights[c] = Weight(w, dot(w, cl.energy));
     }
 }

@@ -9,10 +9,49 @@
 //!   (right-handed, +Y up, pinhole);
 //! * size `WxH`.
 
+use crate::{Camera, Light};
 use glam::Vec3;
-use prm_scene::{Camera, Light};
 
-use crate::SpecError;
+use thiserror::Error;
+
+/// A light, camera or image-size spec that could not be parsed.
+#[derive(Debug, Error, Clone, PartialEq)]
+pub enum SpecError {
+    /// The light kind before the first `:` is not `point`, `spot` or `dir`.
+    #[error("unknown light kind {kind:?} in {spec:?} (expected point, spot or dir)")]
+    UnknownLightKind {
+        /// The whole spec.
+        spec: String,
+        /// The kind found.
+        kind: String,
+    },
+    /// Wrong number of `:`-separated fields.
+    #[error("{what} spec {spec:?} has {found} ':'-separated fields, expected {expected} ({format})")]
+    FieldCount {
+        /// What was being parsed.
+        what: &'static str,
+        /// The whole spec.
+        spec: String,
+        /// Fields found.
+        found: usize,
+        /// Fields expected.
+        expected: usize,
+        /// The expected format.
+        format: &'static str,
+    },
+    /// A field is not a number or not a vector of the right length.
+    #[error("bad {field} {value:?} in {spec:?}: {reason}")]
+    BadField {
+        /// The whole spec.
+        spec: String,
+        /// Which field.
+        field: &'static str,
+        /// Its text.
+        value: String,
+        /// What is wrong with it.
+        reason: String,
+    },
+}
 
 const POINT: &str = "point:X,Y,Z:R,G,B";
 const SPOT: &str = "spot:X,Y,Z:DX,DY,DZ:ANGLE_DEG:R,G,B";

@@ -1,12 +1,14 @@
-//! Shadow views of the lights: a cube (6 perspective views) for point lights, one perspective
-//! view for spot lights of half angle up to [`SPOT_SINGLE_VIEW_MAX_DEG`] (a cube beyond, where a
-//! single frustum would waste its texels), one orthographic view covering the scene's bounds for
-//! directional lights. Depth is [0, 1] (wgpu), linearised in `play_lights.wgsl`.
+//! The lights of a frame as the shaders see them, and their shadow views: a cube (6 perspective
+//! views) for point lights, one perspective view for spot lights of half angle up to
+//! [`SPOT_SINGLE_VIEW_MAX_DEG`] (a cube beyond, where a single frustum would waste its texels),
+//! one orthographic view covering the scene's bounds for directional lights. Depth is [0, 1]
+//! (wgpu), linearised in `lights.wgsl`. An engine that renders its own shadow maps renders these
+//! views, in this order, one layer each ([`Shadows::External`](crate::Shadows)).
 
 use glam::{Mat4, Vec3};
 use prm_scene::{Aabb, Light};
 
-use crate::gpu::{GpuLight, GpuView};
+use crate::shared::{GpuLight, GpuView, LightKind};
 
 /// Right-handed perspective projection with WebGPU's NDC (z in [0, 1], y up).
 pub fn perspective(fov_y: f32, aspect: f32, near: f32, far: f32) -> Mat4 {
@@ -26,7 +28,7 @@ pub fn look_to(eye: Vec3, dir: Vec3, up: Vec3) -> Mat4 {
 /// Largest spot half angle that gets one perspective view.
 pub const SPOT_SINGLE_VIEW_MAX_DEG: f32 = 60.0;
 
-/// The six cube-face directions, in the order `play_lights.wgsl` selects them (+X −X +Y −Y +Z −Z).
+/// The six cube-face directions, in the order `lights.wgsl` selects them (+X −X +Y −Y +Z −Z).
 const CUBE: [(Vec3, Vec3); 6] = [
     (Vec3::X, Vec3::NEG_Y),
     (Vec3::NEG_X, Vec3::NEG_Y),
@@ -53,8 +55,8 @@ fn cols(m: Mat4) -> [[f32; 4]; 4] {
 }
 
 /// GPU lights and their shadow views for `lights` in a scene of bounds `bounds`, shadow maps of
-/// `resolution`² texels.
-pub fn build(lights: &[Light], bounds: &Aabb, resolution: u32) -> (Vec<GpuLight>, Vec<GpuView>) {
+/// `resolution`² texels: light `i`'s views are layers `first_view .. first_view + view_count`.
+pub fn shadow_views(lights: &[Light], bounds: &Aabb, resolution: u32) -> (Vec<GpuLight>, Vec<GpuView>) {
     let res = resolution as f32;
     let diag = bounds.diagonal().max(1e-3);
     let mut out_lights = Vec::with_capacity(lights.len());
@@ -74,7 +76,10 @@ pub fn build(lights: &[Light], bounds: &Aabb, resolution: u32) -> (Vec<GpuLight>
         for (dir, up) in CUBE {
             views.push(GpuView {
                 view_proj: cols(proj * look_to(p, dir, up)),
-                params: [2.0 / res, near, far, 0.0],
+                texel: 2.0 / res,
+                near,
+                far,
+                orthographic: 0,
             });
         }
     };
@@ -84,13 +89,14 @@ pub fn build(lights: &[Light], bounds: &Aabb, resolution: u32) -> (Vec<GpuLight>
             Light::Point { position, intensity } => {
                 cube(&mut views, position);
                 GpuLight {
-                    kind: 0,
+                    kind: LightKind::Point as u32,
                     first_view,
                     view_count: 6,
                     cos_cutoff: -2.0,
-                    position: position.extend(1.0).to_array(),
-                    direction: [0.0; 4],
-                    color: intensity.extend(0.0).to_array(),
+                    position: position.to_array(),
+                    direction: [0.0; 3],
+                    color: intensity.to_array(),
+                    ..Default::default()
                 }
             }
             Light::Spot {
@@ -107,7 +113,10 @@ pub fn build(lights: &[Light], bounds: &Aabb, resolution: u32) -> (Vec<GpuLight>
                     let proj = perspective(fov, 1.0, near, far);
                     views.push(GpuView {
                         view_proj: cols(proj * look_to(position, direction, up)),
-                        params: [2.0 * (fov * 0.5).tan() / res, near, far, 0.0],
+                        texel: 2.0 * (fov * 0.5).tan() / res,
+                        near,
+                        far,
+                        orthographic: 0,
                     });
                     1
                 } else {
@@ -115,13 +124,14 @@ pub fn build(lights: &[Light], bounds: &Aabb, resolution: u32) -> (Vec<GpuLight>
                     6
                 };
                 GpuLight {
-                    kind: 1,
+                    kind: LightKind::Spot as u32,
                     first_view,
                     view_count,
                     cos_cutoff: angle.cos(),
-                    position: position.extend(1.0).to_array(),
-                    direction: direction.normalize().extend(0.0).to_array(),
-                    color: intensity.extend(0.0).to_array(),
+                    position: position.to_array(),
+                    direction: direction.normalize().to_array(),
+                    color: intensity.to_array(),
+                    ..Default::default()
                 }
             }
             Light::Directional { direction, irradiance } => {
@@ -134,16 +144,20 @@ pub fn build(lights: &[Light], bounds: &Aabb, resolution: u32) -> (Vec<GpuLight>
                 let proj = orthographic(-r, r, -r, r, near, far);
                 views.push(GpuView {
                     view_proj: cols(proj * look_to(eye, d, up)),
-                    params: [2.0 * r / res, near, far, 1.0],
+                    texel: 2.0 * r / res,
+                    near,
+                    far,
+                    orthographic: 1,
                 });
                 GpuLight {
-                    kind: 2,
+                    kind: LightKind::Directional as u32,
                     first_view,
                     view_count: 1,
                     cos_cutoff: -2.0,
-                    position: [0.0; 4],
-                    direction: d.extend(0.0).to_array(),
-                    color: irradiance.extend(0.0).to_array(),
+                    position: [0.0; 3],
+                    direction: d.to_array(),
+                    color: irradiance.to_array(),
+                    ..Default::default()
                 }
             }
         };

@@ -1,18 +1,5 @@
-// prm-play blend pass: the indirect-irradiance lightmap, Σ over the kept clusters of
+// prm-runtime blend pass: the indirect-irradiance lightmap, Σ over the kept clusters of
 // weight_eff × pane, per atlas texel; panes are layers of an rgb9e5ufloat texture array.
-
-struct Frame {
-    view_proj: mat4x4<f32>,
-    eye: vec4<f32>,
-    counts: vec4<u32>,
-    clusters: vec4<u32>,
-    params: vec4<f32>,
-};
-
-struct Selected {
-    weight: vec3<f32>,
-    cluster: u32,
-};
 
 @group(0) @binding(0) var<uniform> frame: Frame;
 @group(0) @binding(1) var<storage, read> selected: array<Selected>;
@@ -26,7 +13,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         return;
     }
     let xy = vec2<i32>(gid.xy);
-    let kept = min(frame.clusters.x, frame.clusters.y);
+    let kept = min(frame.cluster_count, frame.top_k);
     var sum = vec3<f32>(0.0);
     for (var k = 0u; k < kept; k++) {
         let s = selected[k];

@@ -1,4 +1,4 @@
-// prm-play select pass: keeps the top K clusters, fades their weights near the threshold and
+// prm-runtime select pass: keeps the top K clusters, fades their weights near the threshold and
 // writes them compactly (slot = rank) for the blend pass.
 //
 // Fade: with t the score of the first dropped cluster (rank K), a kept cluster of score s gets
@@ -12,32 +12,19 @@
 // Cornell box at K = 16 of 64, a third of it, and the frame-to-frame change of a moving light
 // reached 4.6× the reference's); with it only the light's distribution over the kept panes moves.
 
-struct Frame {
-    view_proj: mat4x4<f32>,
-    eye: vec4<f32>,
-    counts: vec4<u32>,
-    clusters: vec4<u32>,
-    params: vec4<f32>,
-};
-
-struct Selected {
-    weight: vec3<f32>,
-    cluster: u32,
-};
-
 @group(0) @binding(0) var<uniform> frame: Frame;
-@group(0) @binding(1) var<storage, read> weights: array<vec4<f32>>;
+@group(0) @binding(1) var<storage, read> weights: array<Weight>;
 @group(0) @binding(2) var<storage, read> ranks: array<u32>;
 @group(0) @binding(3) var<storage, read> threshold: array<f32>;
 @group(0) @binding(4) var<storage, read_write> selected: array<Selected>;
-@group(0) @binding(5) var<storage, read_write> effective: array<vec4<f32>>;
+@group(0) @binding(5) var<storage, read_write> effective: array<Effective>;
 
 fn fade(s: f32) -> f32 {
-    if frame.clusters.x <= frame.clusters.y {
+    if frame.cluster_count <= frame.top_k {
         return 1.0;
     }
     let t = threshold[0];
-    let width = t * frame.params.x;
+    let width = t * frame.fade_band;
     if width <= 0.0 {
         return select(0.0, 1.0, s > t);
     }
@@ -47,15 +34,15 @@ fn fade(s: f32) -> f32 {
 // Σ of all scores over Σ of the kept, faded scores (1 when nothing is dropped). O(C) per
 // invocation, like the rank pass.
 fn energy_factor() -> f32 {
-    if frame.clusters.x <= frame.clusters.y {
+    if frame.cluster_count <= frame.top_k {
         return 1.0;
     }
     var all = 0.0;
     var kept = 0.0;
-    for (var j = 0u; j < frame.clusters.x; j++) {
-        let s = weights[j].w;
+    for (var j = 0u; j < frame.cluster_count; j++) {
+        let s = weights[j].score;
         all += s;
-        if ranks[j] < frame.clusters.y {
+        if ranks[j] < frame.top_k {
             kept += s * fade(s);
         }
     }
@@ -65,15 +52,15 @@ fn energy_factor() -> f32 {
 @compute @workgroup_size(64)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let i = gid.x;
-    if i >= frame.clusters.x {
+    if i >= frame.cluster_count {
         return;
     }
     let w = weights[i];
     let rank = ranks[i];
     var eff = vec3<f32>(0.0);
-    if rank < frame.clusters.y {
-        eff = w.xyz * (fade(w.w) * energy_factor());
+    if rank < frame.top_k {
+        eff = w.weight * (fade(w.score) * energy_factor());
         selected[rank] = Selected(eff, i);
     }
-    effective[i] = vec4<f32>(eff, f32(rank));
+    effective[i] = Effective(eff, rank);
 }

@@ -1,4 +1,4 @@
-// prm-play shadow pass: the scene's depth as seen by one shadow view (a cube face of a point
+// prm-runtime shadow pass: the scene's depth as seen by one shadow view (a cube face of a point
 // light, a spot light's frustum or a directional light's orthographic box), one layer per view.
 
 @group(0) @binding(0) var<uniform> view_proj: mat4x4<f32>;

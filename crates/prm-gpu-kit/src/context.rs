@@ -256,17 +256,12 @@ impl GpuContext {
         }
     }
 
-    /// Copies `buffer` (which must have `MAP_READ`) to the CPU.
+    /// Copies `buffer` (which must have `MAP_READ`) to the CPU; fails if any error escaped
+    /// the error scopes since the last check.
     pub fn read_buffer(&self, buffer: &wgpu::Buffer) -> Result<Vec<u8>, GpuError> {
-        let (tx, rx) = std::sync::mpsc::channel();
-        buffer.map_async(wgpu::MapMode::Read, .., move |r| {
-            let _ = tx.send(r);
-        });
-        self.wait()?;
-        rx.recv().unwrap_or(Err(wgpu::BufferAsyncError))?;
-        let bytes = buffer.get_mapped_range(..).map(|v| v.to_vec());
-        buffer.unmap();
-        bytes.map_err(|_| GpuError::Map(wgpu::BufferAsyncError))
+        let bytes = crate::readback::map_read(&self.device, buffer)?;
+        self.take_uncaptured()?;
+        Ok(bytes)
     }
 }
 

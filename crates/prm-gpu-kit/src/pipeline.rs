@@ -1,0 +1,157 @@
+//! Pipelines, bind groups and buffers in one call each, the way every pass of PRM builds them:
+//! WGSL modules assembled from a shared prelude and the pass's file, compute pipelines with
+//! layouts derived from the shader, bind groups whose bindings are numbered in order.
+
+use wgpu::util::DeviceExt;
+
+/// A WGSL module from `parts` joined in order (shared struct and function files first, the
+/// pass's own file last), labelled `label`.
+pub fn shader(device: &wgpu::Device, label: &str, parts: &[&str]) -> wgpu::ShaderModule {
+    device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some(label),
+        source: wgpu::ShaderSource::Wgsl(parts.join("\n").into()),
+    })
+}
+
+/// A compute pipeline from `parts` (see [`shader`]) with entry point `main` and the layout the
+/// shader implies (read it back with `get_bind_group_layout`).
+pub fn compute(device: &wgpu::Device, label: &str, parts: &[&str]) -> wgpu::ComputePipeline {
+    let module = shader(device, label, parts);
+    device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some(label),
+        layout: None,
+        module: &module,
+        entry_point: Some("main"),
+        compilation_options: Default::default(),
+        cache: None,
+    })
+}
+
+/// A bind group on `layout` whose binding `i` is `resources[i]`.
+pub fn bind_group(
+    device: &wgpu::Device,
+    label: &str,
+    layout: &wgpu::BindGroupLayout,
+    resources: &[wgpu::BindingResource],
+) -> wgpu::BindGroup {
+    let entries: Vec<wgpu::BindGroupEntry> = resources
+        .iter()
+        .enumerate()
+        .map(|(i, r)| wgpu::BindGroupEntry {
+            binding: i as u32,
+            resource: r.clone(),
+        })
+        .collect();
+    device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some(label),
+        layout,
+        entries: &entries,
+    })
+}
+
+/// A bind group for group 0 of a compute pipeline (layout from the shader).
+pub fn compute_group(
+    device: &wgpu::Device,
+    label: &str,
+    pipeline: &wgpu::ComputePipeline,
+    resources: &[wgpu::BindingResource],
+) -> wgpu::BindGroup {
+    bind_group(device, label, &pipeline.get_bind_group_layout(0), resources)
+}
+
+/// An uninitialised storage buffer of `size` bytes (at least 16: wgpu refuses empty bindings)
+/// that can also be written from the CPU, plus `extra` usages.
+pub fn storage(device: &wgpu::Device, label: &str, size: u64, extra: wgpu::BufferUsages) -> wgpu::Buffer {
+    device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size: size.max(16),
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | extra,
+        mapped_at_creation: false,
+    })
+}
+
+/// A uniform buffer of `size` bytes written from the CPU.
+pub fn uniform(device: &wgpu::Device, label: &str, size: u64) -> wgpu::Buffer {
+    device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size,
+        usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    })
+}
+
+/// A buffer holding `contents`, zero-padded to at least 16 bytes (so an empty array still binds).
+pub fn buffer_init(device: &wgpu::Device, label: &str, contents: &[u8], usage: wgpu::BufferUsages) -> wgpu::Buffer {
+    let mut padded = contents.to_vec();
+    padded.resize(contents.len().max(16), 0);
+    device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some(label),
+        contents: &padded,
+        usage,
+    })
+}
+
+/// A 2D texture (array when `layers > 1`) of one mip level and one sample.
+pub fn texture(
+    device: &wgpu::Device,
+    label: &str,
+    [width, height, layers]: [u32; 3],
+    format: wgpu::TextureFormat,
+    usage: wgpu::TextureUsages,
+) -> wgpu::Texture {
+    device.create_texture(&wgpu::TextureDescriptor {
+        label: Some(label),
+        size: wgpu::Extent3d {
+            width,
+            height,
+            depth_or_array_layers: layers,
+        },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format,
+        usage,
+        view_formats: &[],
+    })
+}
+
+/// A view of every layer of `texture` as a 2D array.
+pub fn array_view(texture: &wgpu::Texture) -> wgpu::TextureView {
+    texture.create_view(&wgpu::TextureViewDescriptor {
+        dimension: Some(wgpu::TextureViewDimension::D2Array),
+        ..Default::default()
+    })
+}
+
+/// A 2D view of layer `layer` of `texture`.
+pub fn layer_view(texture: &wgpu::Texture, layer: u32) -> wgpu::TextureView {
+    texture.create_view(&wgpu::TextureViewDescriptor {
+        dimension: Some(wgpu::TextureViewDimension::D2),
+        base_array_layer: layer,
+        array_layer_count: Some(1),
+        ..Default::default()
+    })
+}
+
+/// Writes `data` (rows of `bytes_per_row` bytes) into layer `layer` of `texture`, whole.
+pub fn write_layer(queue: &wgpu::Queue, texture: &wgpu::Texture, layer: u32, data: &[u8], bytes_per_row: u32) {
+    queue.write_texture(
+        wgpu::TexelCopyTextureInfo {
+            texture,
+            mip_level: 0,
+            origin: wgpu::Origin3d { x: 0, y: 0, z: layer },
+            aspect: wgpu::TextureAspect::All,
+        },
+        data,
+        wgpu::TexelCopyBufferLayout {
+            offset: 0,
+            bytes_per_row: Some(bytes_per_row),
+            rows_per_image: Some(texture.height()),
+        },
+        wgpu::Extent3d {
+            width: texture.width(),
+            height: texture.height(),
+            depth_or_array_layers: 1,
+        },
+    );
+}

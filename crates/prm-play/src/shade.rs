@@ -1,0 +1,252 @@
+//! The shade pass (`shaders/play/shade.wgsl`): the radiance of every pixel, albedo/π × (direct
+//! irradiance through the run time's shadow maps + indirect irradiance from its lightmap), in
+//! linear HDR, with the material textures of the scene.
+
+use glam::{Mat4, Vec3};
+use prm_gpu_kit::{pipeline, GpuContext, PassTimer};
+use prm_runtime::Runtime;
+use prm_scene::Scene;
+
+use crate::gpu::{GpuCamera, GpuMaterial, GpuVertex};
+
+/// The colour target's format (linear radiance).
+pub const COLOR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
+/// The depth buffer's format.
+pub const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
+
+/// The shade pass source: the run time's shared structs and direct light, then the pass.
+pub fn source() -> [&'static str; 3] {
+    [
+        prm_runtime::SHARED_WGSL,
+        prm_runtime::LIGHTS_WGSL,
+        include_str!("../../../shaders/play/shade.wgsl"),
+    ]
+}
+
+/// What the bind group holds besides the run time's buffers.
+struct Resources {
+    camera: wgpu::Buffer,
+    materials: wgpu::Buffer,
+    textures: wgpu::TextureView,
+    sampler: wgpu::Sampler,
+    vertices: wgpu::Buffer,
+    vertex_count: u32,
+}
+
+/// Shades the scene.
+pub struct ShadePass {
+    pipeline: wgpu::RenderPipeline,
+    bind_group: wgpu::BindGroup,
+    res: Resources,
+}
+
+impl ShadePass {
+    /// The pass for `scene`, reading `runtime`'s lights, shadow maps and lightmap.
+    pub fn new(ctx: &GpuContext, scene: &Scene, runtime: &Runtime) -> ShadePass {
+        let device = &ctx.device;
+        let uvs = runtime.lightmap_uvs();
+        let vertices: Vec<GpuVertex> = scene
+            .triangles
+            .iter()
+            .zip(uvs)
+            .flat_map(|(tri, luv)| {
+                (0..3).map(move |i| GpuVertex {
+                    position: tri.positions[i].to_array(),
+                    normal: tri.normals[i].to_array(),
+                    uv: tri.uvs[i].to_array(),
+                    lightmap_uv: luv[i],
+                    material: tri.material,
+                })
+            })
+            .collect();
+        let materials: Vec<GpuMaterial> = scene
+            .materials
+            .iter()
+            .map(|m| GpuMaterial {
+                albedo: m.albedo.to_array(),
+                texture: m.texture.map_or(-1, |t| t as i32),
+            })
+            .collect();
+        let res = Resources {
+            camera: pipeline::uniform(device, "play camera", std::mem::size_of::<GpuCamera>() as u64),
+            materials: pipeline::buffer_init(
+                device,
+                "play materials",
+                bytemuck::cast_slice(&materials),
+                wgpu::BufferUsages::STORAGE,
+            ),
+            textures: texture_array(ctx, scene),
+            sampler: device.create_sampler(&wgpu::SamplerDescriptor {
+                label: Some("play textures"),
+                address_mode_u: wgpu::AddressMode::Repeat,
+                address_mode_v: wgpu::AddressMode::Repeat,
+                mag_filter: wgpu::FilterMode::Linear,
+                min_filter: wgpu::FilterMode::Linear,
+                ..Default::default()
+            }),
+            vertex_count: vertices.len() as u32,
+            vertices: pipeline::buffer_init(
+                device,
+                "play vertices",
+                bytemuck::cast_slice(&vertices),
+                wgpu::BufferUsages::VERTEX,
+            ),
+        };
+        let module = pipeline::shader(device, "play shade", &source());
+        let depth = |format| {
+            Some(wgpu::DepthStencilState {
+                format,
+                depth_write_enabled: Some(true),
+                depth_compare: Some(wgpu::CompareFunction::Less),
+                stencil: Default::default(),
+                bias: Default::default(),
+            })
+        };
+        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("play shade"),
+            layout: None,
+            vertex: wgpu::VertexState {
+                module: &module,
+                entry_point: Some("vs_main"),
+                compilation_options: Default::default(),
+                buffers: &[Some(wgpu::VertexBufferLayout {
+                    array_stride: std::mem::size_of::<GpuVertex>() as u64,
+                    step_mode: wgpu::VertexStepMode::Vertex,
+                    attributes: &wgpu::vertex_attr_array![
+                        0 => Float32x3, 1 => Float32x3, 2 => Float32x2, 3 => Float32x2, 4 => Uint32
+                    ],
+                })],
+            },
+            primitive: wgpu::PrimitiveState {
+                cull_mode: None,
+                ..Default::default()
+            },
+            depth_stencil: depth(DEPTH_FORMAT),
+            multisample: Default::default(),
+            fragment: Some(wgpu::FragmentState {
+                module: &module,
+                entry_point: Some("fs_main"),
+                compilation_options: Default::default(),
+                targets: &[Some(wgpu::ColorTargetState {
+                    format: COLOR_FORMAT,
+                    blend: None,
+                    write_mask: wgpu::ColorWrites::ALL,
+                })],
+            }),
+            multiview_mask: None,
+            cache: None,
+        });
+        let bind_group = Self::group(ctx, &pipeline, &res, runtime);
+        ShadePass {
+            pipeline,
+            bind_group,
+            res,
+        }
+    }
+
+    fn group(ctx: &GpuContext, pipeline: &wgpu::RenderPipeline, res: &Resources, runtime: &Runtime) -> wgpu::BindGroup {
+        let d = runtime.direct_light_bindings();
+        pipeline::bind_group(
+            &ctx.device,
+            "play shade",
+            &pipeline.get_bind_group_layout(0),
+            &[
+                d.frame.as_entire_binding(),
+                d.lights.as_entire_binding(),
+                d.views.as_entire_binding(),
+                wgpu::BindingResource::TextureView(d.shadow_maps),
+                res.materials.as_entire_binding(),
+                wgpu::BindingResource::TextureView(runtime.lightmap()),
+                wgpu::BindingResource::TextureView(&res.textures),
+                wgpu::BindingResource::Sampler(&res.sampler),
+                res.camera.as_entire_binding(),
+            ],
+        )
+    }
+
+    /// Binds the pass again after the run time's shadow maps grew.
+    pub fn rebind(&mut self, ctx: &GpuContext, runtime: &Runtime) {
+        self.bind_group = Self::group(ctx, &self.pipeline, &self.res, runtime);
+    }
+
+    /// Uploads the camera: view-projection, eye, [`Mode`](crate::Mode) code and image width.
+    pub fn write_camera(&self, queue: &wgpu::Queue, view_proj: Mat4, eye: Vec3, mode: u32, width: u32) {
+        let camera = GpuCamera {
+            view_proj: view_proj.to_cols_array_2d(),
+            eye: eye.to_array(),
+            mode,
+            width: width as f32,
+            ..Default::default()
+        };
+        queue.write_buffer(&self.res.camera, 0, bytemuck::bytes_of(&camera));
+    }
+
+    /// Draws the scene into `color` with depth buffer `depth`.
+    pub fn encode(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        color: &wgpu::TextureView,
+        depth: &wgpu::TextureView,
+        timer: Option<&PassTimer>,
+    ) {
+        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some("play shade"),
+            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                view: color,
+                depth_slice: None,
+                resolve_target: None,
+                ops: wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
+                    store: wgpu::StoreOp::Store,
+                },
+            })],
+            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                view: depth,
+                depth_ops: Some(wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(1.0),
+                    store: wgpu::StoreOp::Discard,
+                }),
+                stencil_ops: None,
+            }),
+            timestamp_writes: timer.and_then(|t| t.render("shade", true, true)),
+            occlusion_query_set: None,
+            multiview_mask: None,
+        });
+        pass.set_pipeline(&self.pipeline);
+        pass.set_bind_group(0, &self.bind_group, &[]);
+        pass.set_vertex_buffer(0, self.res.vertices.slice(..));
+        pass.draw(0..self.res.vertex_count, 0..1);
+    }
+}
+
+/// Material textures as layers of one sRGB array, all at the largest size (nearest resampling
+/// of the smaller ones); one white layer when the scene has none.
+fn texture_array(ctx: &GpuContext, scene: &Scene) -> wgpu::TextureView {
+    let max = ctx.device.limits().max_texture_dimension_2d.min(2048);
+    let w = scene.textures.iter().map(|t| t.width).max().unwrap_or(1).clamp(1, max);
+    let h = scene.textures.iter().map(|t| t.height).max().unwrap_or(1).clamp(1, max);
+    let layers = scene.textures.len().max(1) as u32;
+    let texture = pipeline::texture(
+        &ctx.device,
+        "play textures",
+        [w, h, layers],
+        wgpu::TextureFormat::Rgba8UnormSrgb,
+        wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+    );
+    for layer in 0..layers {
+        let mut rgba = vec![255u8; (w * h * 4) as usize];
+        if let Some(t) = scene.textures.get(layer as usize) {
+            for y in 0..h {
+                for x in 0..w {
+                    let sx = ((x as u64 * t.width as u64) / w as u64) as usize;
+                    let sy = ((y as u64 * t.height as u64) / h as u64) as usize;
+                    let p = t.texels.get(sy * t.width as usize + sx).copied().unwrap_or([255; 3]);
+                    let at = ((y * w + x) * 4) as usize;
+                    rgba[at..at + 3].copy_from_slice(&p);
+                }
+            }
+        }
+        pipeline::write_layer(&ctx.queue, &texture, layer, &rgba, w * 4);
+    }
+    pipeline::array_view(&texture)
+}

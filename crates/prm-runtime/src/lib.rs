@@ -1,0 +1,589 @@
+//! `prm-runtime`: PRM's run-time passes on the caller's wgpu device: an opened archive and each
+//! frame's lights in, the indirect-irradiance lightmap out.
+//!
+//! Per frame, all on the GPU: shadow maps of every light ([`shadow_views`]; or the caller's own,
+//! [`Shadows::External`]), the shadow-mapped irradiance of every entry point and each cluster's
+//! weight (`weights.wgsl`), the rank of every cluster by score (`rank.wgsl`), the top K with
+//! weights faded near the threshold (`select.wgsl`) and the blend of the kept panes into an
+//! `rgba32float` lightmap of indirect irradiance in W/m² (`blend.wgsl`). The caller samples it
+//! with the lightmap UVs [`Runtime::lightmap_uvs`] gives per triangle and shades as it likes:
+//! radiance = albedo/π × (direct + indirect irradiance). Its direct light can use the same
+//! shadow maps through [`LIGHTS_WGSL`] and [`Runtime::direct_light_bindings`].
+//!
+//! Every resource lives on the device given to [`Runtime::new`]; nothing is global.
+//!
+//! ```no_run
+//! # fn demo(device: &wgpu::Device, queue: &wgpu::Queue) -> Result<(), Box<dyn std::error::Error>> {
+//! use prm_runtime::{Runtime, RuntimeOptions, Shadows};
+//! let scene = prm_scene::load(std::path::Path::new("scenes/cornell/cornell.obj"))?;
+//! let mut archive = prm_format::Archive::open(std::path::Path::new("cornell.prm"))?;
+//! let options = RuntimeOptions::for_archive(&archive);
+//! let mut runtime = Runtime::new(device, queue, &mut archive, &scene, options)?;
+//! let light = prm_scene::Light::Point {
+//!     position: glam::Vec3::new(0.0, 1.5, 0.0),
+//!     intensity: glam::Vec3::splat(2.0),
+//! };
+//! runtime.update(&[light])?;
+//! let mut encoder = device.create_command_encoder(&Default::default());
+//! runtime.encode(&mut encoder, Shadows::Own, None);
+//! queue.submit([encoder.finish()]);
+//! // Sample `runtime.lightmap()` at the triangles' `runtime.lightmap_uvs()`.
+//! # Ok(()) }
+//! ```
+//!
+//! `examples/embed.rs` is a whole program: it opens a device, plays an archive and shades one
+//! frame with its own few lines of WGSL.
+
+#![warn(missing_docs)]
+
+mod blend;
+mod lights;
+mod rank;
+mod select;
+mod shadow;
+mod shared;
+mod weights;
+
+use prm_format::Archive;
+use prm_gpu_kit::{pipeline, readback, ErrorScopes, GpuError, PassTimer};
+use prm_scene::{Aabb, Light, Scene};
+
+pub use lights::{look_to, orthographic, perspective, shadow_views, SPOT_SINGLE_VIEW_MAX_DEG};
+pub use shadow::SHADOW_FORMAT;
+pub use shared::{
+    GpuCluster, GpuEffective, GpuEntry, GpuFrame, GpuLight, GpuSelected, GpuView, GpuWeight, LightKind, LIGHTS_WGSL,
+    SHARED_WGSL,
+};
+
+use blend::BlendPass;
+use rank::RankPass;
+use select::SelectPass;
+use shadow::{ShadowMaps, ShadowPass};
+use weights::WeightsPass;
+
+/// Most lights a frame may have.
+pub const MAX_LIGHTS: usize = 256;
+/// Largest shadow-map side [`RuntimeOptions::validate`] accepts: a point light's six faces take
+/// 6 × 8192² × 4 bytes = 1.5 GiB of depth at this size; beyond it lavapipe runs out of memory
+/// with a single light.
+pub const MAX_SHADOW_RESOLUTION: u32 = 8192;
+/// Names of the timed passes in frame order, for a [`PassTimer`] handed to [`Runtime::encode`].
+pub const PASS_NAMES: [&str; 5] = ["shadow", "weights", "rank", "select", "blend"];
+/// Format of the lightmap [`Runtime::lightmap`] (not filterable everywhere: sample it with
+/// `textureLoad` and filter by hand, as `prm-play`'s shading does).
+pub const LIGHTMAP_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
+
+/// Why the run time could not load an archive or run a frame.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum RuntimeError {
+    /// A GPU error (validation, out of memory, device lost).
+    #[error(transparent)]
+    Gpu(#[from] GpuError),
+    /// A pane of the archive could not be read.
+    #[error("cannot read pane {pane} of the archive")]
+    Pane {
+        /// The pane (cluster) index.
+        pane: usize,
+        /// The reader's reason.
+        source: prm_format::Error,
+    },
+    /// The archive and the scene disagree.
+    #[error("archive does not fit the scene: {0}")]
+    Mismatch(String),
+    /// More panes than the device holds in one texture array.
+    #[error("the archive has {panes} panes but this GPU holds at most {max} texture layers")]
+    TooManyPanes {
+        /// Panes in the archive.
+        panes: usize,
+        /// The device's `max_texture_array_layers`.
+        max: u32,
+    },
+    /// More lights than [`MAX_LIGHTS`].
+    #[error("{count} lights, at most {MAX_LIGHTS} are supported")]
+    TooManyLights {
+        /// Lights given.
+        count: usize,
+    },
+    /// An option is out of range for the run time or this device.
+    #[error("{option}: {message}")]
+    Option {
+        /// The [`RuntimeOptions`] field.
+        option: &'static str,
+        /// What is wrong and which limit it breaks.
+        message: String,
+    },
+}
+
+/// Run-time settings.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RuntimeOptions {
+    /// Clusters kept per frame.
+    pub top_k: u32,
+    /// Shadow-map side in texels (every view).
+    pub shadow_resolution: u32,
+    /// Fade band: kept clusters whose score is within `band × threshold` above the threshold
+    /// (the first dropped cluster's score) are faded by a smoothstep.
+    pub fade_band: f32,
+    /// Shadow lookups move the point this many shadow texels along its normal.
+    pub normal_offset: f32,
+    /// Depth tolerance of a shadow lookup, in shadow texels (world size at the point).
+    pub depth_bias: f32,
+}
+
+impl RuntimeOptions {
+    /// Top K when neither the caller nor the archive's `params.top_k` says otherwise.
+    pub const DEFAULT_TOP_K: u32 = 32;
+
+    /// The defaults with the top K the archive asks for ([`archive_top_k`]).
+    pub fn for_archive<R: std::io::Read + std::io::Seek>(archive: &Archive<R>) -> RuntimeOptions {
+        RuntimeOptions {
+            top_k: archive_top_k(archive),
+            ..RuntimeOptions::default()
+        }
+    }
+
+    /// Checks the options against `limits` before any GPU allocation, naming the field and the
+    /// limit it breaks.
+    pub fn validate(&self, limits: &wgpu::Limits) -> Result<(), RuntimeError> {
+        let bad = |option: &'static str, message: String| Err(RuntimeError::Option { option, message });
+        let max_dim = limits.max_texture_dimension_2d;
+        let max_shadow = max_dim.min(MAX_SHADOW_RESOLUTION);
+        if !(16..=max_shadow).contains(&self.shadow_resolution) {
+            return bad(
+                "shadow_resolution",
+                format!(
+                    "{} is outside 16..={max_shadow} (the least of this device's max_texture_dimension_2d \
+                     {max_dim} and {MAX_SHADOW_RESOLUTION}, where one point light's six faces take 1.5 GiB)",
+                    self.shadow_resolution
+                ),
+            );
+        }
+        if self.top_k == 0 {
+            return bad("top_k", "must be at least 1".into());
+        }
+        for (option, v) in [
+            ("fade_band", self.fade_band),
+            ("normal_offset", self.normal_offset),
+            ("depth_bias", self.depth_bias),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return bad(option, format!("{v} must be a finite number >= 0"));
+            }
+        }
+        Ok(())
+    }
+}
+
+impl Default for RuntimeOptions {
+    fn default() -> Self {
+        RuntimeOptions {
+            top_k: RuntimeOptions::DEFAULT_TOP_K,
+            shadow_resolution: 512,
+            fade_band: 0.25,
+            normal_offset: 1.5,
+            depth_bias: 1.5,
+        }
+    }
+}
+
+/// The top K an archive asks for (`params.top_k`), else [`RuntimeOptions::DEFAULT_TOP_K`].
+pub fn archive_top_k<R: std::io::Read + std::io::Seek>(archive: &Archive<R>) -> u32 {
+    archive
+        .metadata()
+        .params
+        .get("top_k")
+        .and_then(|v| v.as_u64())
+        .map(|k| k.clamp(1, u32::MAX as u64) as u32)
+        .unwrap_or(RuntimeOptions::DEFAULT_TOP_K)
+}
+
+/// Which shadow maps a frame's weights read.
+#[derive(Clone, Copy, Debug)]
+pub enum Shadows<'a> {
+    /// The run time renders its own ([`Runtime::encode`] records the shadow pass first).
+    Own,
+    /// The caller's: a `Depth32Float` 2D-array view with one layer per view of
+    /// [`shadow_views`] for this frame's lights, in that order, rendered with those matrices
+    /// at [`RuntimeOptions::shadow_resolution`]².
+    External(&'a wgpu::TextureView),
+}
+
+/// A cluster's weights as the GPU computed them (read back by [`Runtime::read_weights`]).
+#[derive(Clone, Copy, Debug)]
+pub struct ClusterWeight {
+    /// The members' entry irradiance weighed by their pane energy (their mean in archives
+    /// before 1.1).
+    pub weight: [f32; 3],
+    /// Σ_rgb weight × pane energy.
+    pub score: f32,
+    /// Weight used in the blend (0 if dropped, faded near the threshold).
+    pub effective: [f32; 3],
+    /// Rank by score (0 = largest).
+    pub rank: u32,
+}
+
+/// What a shader needs to compute direct light with [`LIGHTS_WGSL`] on the run time's shadow
+/// maps: bind `frame` as `var<uniform> frame: Frame`, `lights` and `views` as read-only storage
+/// arrays of `Light` and `ShadowView`, `shadow_maps` as `texture_depth_2d_array`.
+pub struct DirectLight<'a> {
+    /// This frame's [`GpuFrame`] (uniform).
+    pub frame: &'a wgpu::Buffer,
+    /// This frame's [`GpuLight`]s (storage).
+    pub lights: &'a wgpu::Buffer,
+    /// This frame's [`GpuView`]s (storage).
+    pub views: &'a wgpu::Buffer,
+    /// The run time's shadow maps.
+    pub shadow_maps: &'a wgpu::TextureView,
+}
+
+/// The buffers the passes share.
+pub(crate) struct Buffers {
+    frame: wgpu::Buffer,
+    lights: wgpu::Buffer,
+    views: wgpu::Buffer,
+    clusters: wgpu::Buffer,
+    entries: wgpu::Buffer,
+    weights: wgpu::Buffer,
+    ranks: wgpu::Buffer,
+    threshold: wgpu::Buffer,
+    selected: wgpu::Buffer,
+    effective: wgpu::Buffer,
+}
+
+/// The run time's GPU state for one archive and scene.
+pub struct Runtime {
+    device: wgpu::Device,
+    queue: wgpu::Queue,
+    options: RuntimeOptions,
+    bounds: Aabb,
+    cluster_count: u32,
+    entry_count: u32,
+    resolution: u32,
+    vertex_count: u32,
+    lightmap_uvs: Vec<[[f32; 2]; 3]>,
+    positions: wgpu::Buffer,
+    buffers: Buffers,
+    lightmap: wgpu::Texture,
+    lightmap_view: wgpu::TextureView,
+    maps: ShadowMaps,
+    shadow: ShadowPass,
+    weights: WeightsPass,
+    rank: RankPass,
+    select: SelectPass,
+    blend: BlendPass,
+    /// This frame's lights and shadow views (set by [`Runtime::update`]).
+    light_count: u32,
+    view_count: u32,
+}
+
+impl Runtime {
+    /// Uploads the scene's positions (for the shadow maps), the archive's entries, clusters and
+    /// panes, and builds the passes on `device`. The archive must belong to the scene (its
+    /// atlas has one UV triangle per scene triangle).
+    pub fn new<R: std::io::Read + std::io::Seek>(
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        archive: &mut Archive<R>,
+        scene: &Scene,
+        options: RuntimeOptions,
+    ) -> Result<Runtime, RuntimeError> {
+        options.validate(&device.limits())?;
+        let atlas = archive.atlas().clone();
+        if atlas.triangle_uvs.len() != scene.triangles.len() {
+            return Err(RuntimeError::Mismatch(format!(
+                "the archive's atlas has {} triangles, the scene {}",
+                atlas.triangle_uvs.len(),
+                scene.triangles.len()
+            )));
+        }
+        let cluster_count = archive.clusters().len() as u32;
+        let max_layers = device.limits().max_texture_array_layers;
+        if cluster_count > max_layers {
+            return Err(RuntimeError::TooManyPanes {
+                panes: cluster_count as usize,
+                max: max_layers,
+            });
+        }
+        let scope = ErrorScopes::push(device);
+        let positions: Vec<[f32; 3]> = scene
+            .triangles
+            .iter()
+            .flat_map(|t| t.positions.map(|p| p.to_array()))
+            .collect();
+        let vertex_count = positions.len() as u32;
+        let positions = pipeline::buffer_init(
+            device,
+            "prm positions",
+            bytemuck::cast_slice(&positions),
+            wgpu::BufferUsages::VERTEX,
+        );
+
+        // Each entry stands for a disk of area A/N (its irradiance bound, see weights.wgsl).
+        let disk = prm_scene::ENTRY_DISK
+            * (scene.area() / archive.entries().len().max(1) as f64 / std::f64::consts::PI) as f32;
+        let energy = archive.entry_energy();
+        let entries: Vec<GpuEntry> = archive
+            .entries()
+            .iter()
+            .enumerate()
+            .map(|(i, e)| GpuEntry {
+                position: e.position,
+                disk,
+                normal: e.normal,
+                energy: energy.map_or([1.0; 3], |en| en[i]),
+                ..Default::default()
+            })
+            .collect();
+        let clusters: Vec<GpuCluster> = archive
+            .clusters()
+            .iter()
+            .map(|c| GpuCluster {
+                first: c.first,
+                count: c.count,
+                energy: c.energy,
+                ..Default::default()
+            })
+            .collect();
+        let entry_count = entries.len() as u32;
+        let st = wgpu::BufferUsages::STORAGE;
+        let src = wgpu::BufferUsages::COPY_SRC;
+        let per_cluster = cluster_count.max(1) as u64 * 16;
+        let buffers = Buffers {
+            frame: pipeline::uniform(device, "prm frame", std::mem::size_of::<GpuFrame>() as u64),
+            lights: pipeline::storage(
+                device,
+                "prm lights",
+                (MAX_LIGHTS * std::mem::size_of::<GpuLight>()) as u64,
+                wgpu::BufferUsages::empty(),
+            ),
+            views: pipeline::storage(
+                device,
+                "prm views",
+                (MAX_LIGHTS * 6 * std::mem::size_of::<GpuView>()) as u64,
+                wgpu::BufferUsages::empty(),
+            ),
+            clusters: pipeline::buffer_init(device, "prm clusters", bytemuck::cast_slice(&clusters), st),
+            entries: pipeline::buffer_init(device, "prm entries", bytemuck::cast_slice(&entries), st),
+            weights: pipeline::storage(device, "prm weights", per_cluster, src),
+            ranks: pipeline::storage(device, "prm ranks", cluster_count.max(1) as u64 * 4, src),
+            threshold: pipeline::storage(device, "prm threshold", 16, src),
+            selected: pipeline::storage(device, "prm selected", per_cluster, src),
+            effective: pipeline::storage(device, "prm effective", per_cluster, src),
+        };
+
+        // Panes: one rgb9e5ufloat layer each.
+        let res = atlas.resolution;
+        let pane_texture = pipeline::texture(
+            device,
+            "prm panes",
+            [res, res, cluster_count.max(1)],
+            wgpu::TextureFormat::Rgb9e5Ufloat,
+            wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+        );
+        for p in 0..cluster_count {
+            let words = archive
+                .read_pane_rgb9e5(p as usize)
+                .map_err(|source| RuntimeError::Pane {
+                    pane: p as usize,
+                    source,
+                })?;
+            pipeline::write_layer(queue, &pane_texture, p, bytemuck::cast_slice(&words), res * 4);
+        }
+        let panes = pipeline::array_view(&pane_texture);
+        let lightmap = pipeline::texture(
+            device,
+            "prm lightmap",
+            [res, res, 1],
+            LIGHTMAP_FORMAT,
+            wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_SRC,
+        );
+        let lightmap_view = lightmap.create_view(&Default::default());
+
+        let maps = ShadowMaps::new(device, options.shadow_resolution, 1);
+        let shadow = ShadowPass::new(device, &maps);
+        let weights = WeightsPass::new(device, &buffers, &maps.array);
+        let rank = RankPass::new(device, &buffers);
+        let select = SelectPass::new(device, &buffers);
+        let blend = BlendPass::new(device, &buffers, &panes, &lightmap_view);
+        scope.pop("runtime setup")?;
+        Ok(Runtime {
+            device: device.clone(),
+            queue: queue.clone(),
+            options,
+            bounds: scene.bounds(),
+            cluster_count,
+            entry_count,
+            resolution: res,
+            vertex_count,
+            lightmap_uvs: atlas.triangle_uvs,
+            positions,
+            buffers,
+            lightmap,
+            lightmap_view,
+            maps,
+            shadow,
+            weights,
+            rank,
+            select,
+            blend,
+            light_count: 0,
+            view_count: 0,
+        })
+    }
+
+    /// Sets this frame's lights: uploads them, their shadow views and the frame constants.
+    /// Returns `true` when the shadow-map array had to grow, which replaces the view
+    /// [`Runtime::direct_light_bindings`] gives: rebuild bind groups that hold it.
+    pub fn update(&mut self, lights: &[Light]) -> Result<bool, RuntimeError> {
+        if lights.len() > MAX_LIGHTS {
+            return Err(RuntimeError::TooManyLights { count: lights.len() });
+        }
+        let (gpu_lights, views) = shadow_views(lights, &self.bounds, self.options.shadow_resolution);
+        let grew = views.len() as u32 > self.maps.capacity;
+        if grew {
+            let capacity = (views.len() as u32).next_power_of_two();
+            self.maps = ShadowMaps::new(&self.device, self.options.shadow_resolution, capacity);
+            self.shadow.rebind(&self.device, &self.maps);
+            self.weights.rebind(&self.device, &self.buffers, &self.maps.array);
+        }
+        self.light_count = gpu_lights.len() as u32;
+        self.view_count = views.len() as u32;
+        let o = &self.options;
+        let frame = GpuFrame {
+            light_count: self.light_count,
+            cluster_count: self.cluster_count,
+            top_k: o.top_k.max(1),
+            entry_count: self.entry_count,
+            fade_band: o.fade_band,
+            shadow_resolution: o.shadow_resolution as f32,
+            normal_offset: o.normal_offset,
+            depth_bias: o.depth_bias,
+        };
+        self.queue
+            .write_buffer(&self.buffers.frame, 0, bytemuck::bytes_of(&frame));
+        if !gpu_lights.is_empty() {
+            self.queue
+                .write_buffer(&self.buffers.lights, 0, bytemuck::cast_slice(&gpu_lights));
+            self.queue
+                .write_buffer(&self.buffers.views, 0, bytemuck::cast_slice(&views));
+            self.maps.write_matrices(&self.queue, &views);
+        }
+        Ok(grew)
+    }
+
+    /// Records the shadow pass alone (for a frame that shows direct light only).
+    pub fn encode_shadow_maps(&self, encoder: &mut wgpu::CommandEncoder, timer: Option<&PassTimer>) {
+        self.shadow.encode(
+            encoder,
+            &self.maps,
+            self.view_count,
+            &self.positions,
+            self.vertex_count,
+            timer,
+        );
+    }
+
+    /// Records the frame set by [`Runtime::update`]: with [`Shadows::Own`] the shadow pass, then
+    /// weights, rank, select and blend into [`Runtime::lightmap`]. Timed passes are named as in
+    /// [`PASS_NAMES`].
+    pub fn encode(&self, encoder: &mut wgpu::CommandEncoder, shadows: Shadows, timer: Option<&PassTimer>) {
+        let external = match shadows {
+            Shadows::Own => {
+                self.encode_shadow_maps(encoder, timer);
+                None
+            }
+            Shadows::External(view) => Some(WeightsPass::group(
+                &self.device,
+                self.weights.pipeline(),
+                &self.buffers,
+                view,
+            )),
+        };
+        if self.cluster_count == 0 {
+            return;
+        }
+        self.weights
+            .encode(encoder, self.cluster_count, external.as_ref(), timer);
+        self.rank.encode(encoder, self.cluster_count, timer);
+        self.select.encode(encoder, self.cluster_count, timer);
+        self.blend.encode(encoder, self.resolution, timer);
+    }
+
+    /// The indirect-irradiance lightmap (W/m², [`LIGHTMAP_FORMAT`]) of the last encoded frame.
+    pub fn lightmap(&self) -> &wgpu::TextureView {
+        &self.lightmap_view
+    }
+
+    /// The lightmap texture (for copies).
+    pub fn lightmap_texture(&self) -> &wgpu::Texture {
+        &self.lightmap
+    }
+
+    /// Lightmap side in texels.
+    pub fn lightmap_resolution(&self) -> u32 {
+        self.resolution
+    }
+
+    /// Lightmap UVs of every scene triangle's corners, in scene order ([0, 1]², v down).
+    pub fn lightmap_uvs(&self) -> &[[[f32; 2]; 3]] {
+        &self.lightmap_uvs
+    }
+
+    /// The buffers and shadow maps for direct light with [`LIGHTS_WGSL`].
+    pub fn direct_light_bindings(&self) -> DirectLight<'_> {
+        DirectLight {
+            frame: &self.buffers.frame,
+            lights: &self.buffers.lights,
+            views: &self.buffers.views,
+            shadow_maps: &self.maps.array,
+        }
+    }
+
+    /// The scene's bounds (what [`shadow_views`] fits directional lights to).
+    pub fn bounds(&self) -> Aabb {
+        self.bounds
+    }
+
+    /// The options in use.
+    pub fn options(&self) -> &RuntimeOptions {
+        &self.options
+    }
+
+    /// Number of clusters (= panes).
+    pub fn cluster_count(&self) -> u32 {
+        self.cluster_count
+    }
+
+    /// Changes the number of clusters kept, from the next [`Runtime::update`] on.
+    pub fn set_top_k(&mut self, k: u32) {
+        self.options.top_k = k.max(1);
+    }
+
+    /// Reads the last frame's lightmap back (texel (x, y) at `y·R + x`), waiting for the device.
+    pub fn read_lightmap(&self) -> Result<Vec<[f32; 3]>, RuntimeError> {
+        let texels = readback::read_rgba32f(&self.device, &self.queue, &self.lightmap, 0)?;
+        Ok(texels.into_iter().map(|[r, g, b, _]| [r, g, b]).collect())
+    }
+
+    /// Reads the last frame's cluster weights, scores, ranks and effective weights back.
+    pub fn read_weights(&self) -> Result<Vec<ClusterWeight>, RuntimeError> {
+        let n = self.cluster_count as u64;
+        if n == 0 {
+            return Ok(Vec::new());
+        }
+        let w = readback::read_buffer(&self.device, &self.queue, &self.buffers.weights, n * 16)?;
+        let e = readback::read_buffer(&self.device, &self.queue, &self.buffers.effective, n * 16)?;
+        let w: &[GpuWeight] = bytemuck::cast_slice(&w);
+        let e: &[GpuEffective] = bytemuck::cast_slice(&e);
+        Ok(w.iter()
+            .zip(e)
+            .map(|(w, e)| ClusterWeight {
+                weight: w.weight,
+                score: w.score,
+                effective: e.weight,
+                rank: e.rank,
+            })
+            .collect())
+    }
+}

@@ -1,0 +1,168 @@
+//! The shadow pass (`shaders/runtime/shadow.wgsl`): the scene's depth from every shadow view of
+//! the frame's lights ([`shadow_views`](crate::shadow_views)), one layer of a depth array each,
+//! one render pass per view with the view's matrix at a dynamic uniform offset.
+
+use prm_gpu_kit::{pipeline, PassTimer};
+
+/// Depth format of the shadow maps (`texture_depth_2d_array` in `lights.wgsl`).
+pub const SHADOW_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
+
+/// The shadow-map array, its per-layer views and the matrices the pass reads.
+pub(crate) struct ShadowMaps {
+    pub capacity: u32,
+    pub array: wgpu::TextureView,
+    pub layers: Vec<wgpu::TextureView>,
+    pub matrices: wgpu::Buffer,
+    /// Bytes between two matrices (the device's uniform offset alignment, at least 64).
+    pub stride: u32,
+}
+
+impl ShadowMaps {
+    /// `capacity` layers of `resolution`² texels.
+    pub fn new(device: &wgpu::Device, resolution: u32, capacity: u32) -> ShadowMaps {
+        let texture = pipeline::texture(
+            device,
+            "prm shadow maps",
+            [resolution, resolution, capacity],
+            SHADOW_FORMAT,
+            wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
+        );
+        let stride = device.limits().min_uniform_buffer_offset_alignment.max(64);
+        ShadowMaps {
+            capacity,
+            array: pipeline::array_view(&texture),
+            layers: (0..capacity).map(|l| pipeline::layer_view(&texture, l)).collect(),
+            matrices: pipeline::uniform(device, "prm shadow matrices", (capacity * stride) as u64),
+            stride,
+        }
+    }
+
+    /// Uploads the views' matrices, one per stride.
+    pub fn write_matrices(&self, queue: &wgpu::Queue, views: &[crate::GpuView]) {
+        if views.is_empty() {
+            return;
+        }
+        let stride = self.stride as usize;
+        let mut bytes = vec![0u8; views.len() * stride];
+        for (i, v) in views.iter().enumerate() {
+            bytes[i * stride..i * stride + 64].copy_from_slice(bytemuck::cast_slice(&v.view_proj));
+        }
+        queue.write_buffer(&self.matrices, 0, &bytes);
+    }
+}
+
+/// Renders the shadow maps.
+pub(crate) struct ShadowPass {
+    pipeline: wgpu::RenderPipeline,
+    bind_group: wgpu::BindGroup,
+}
+
+impl ShadowPass {
+    pub fn new(device: &wgpu::Device, maps: &ShadowMaps) -> ShadowPass {
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("prm shadow"),
+            entries: &[wgpu::BindGroupLayoutEntry {
+                binding: 0,
+                visibility: wgpu::ShaderStages::VERTEX,
+                ty: wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Uniform,
+                    has_dynamic_offset: true,
+                    min_binding_size: wgpu::BufferSize::new(64),
+                },
+                count: None,
+            }],
+        });
+        let module = pipeline::shader(
+            device,
+            "prm shadow",
+            &[include_str!("../../../shaders/runtime/shadow.wgsl")],
+        );
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("prm shadow"),
+            bind_group_layouts: &[Some(&layout)],
+            immediate_size: 0,
+        });
+        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("prm shadow"),
+            layout: Some(&pipeline_layout),
+            vertex: wgpu::VertexState {
+                module: &module,
+                entry_point: Some("vs_main"),
+                compilation_options: Default::default(),
+                buffers: &[Some(wgpu::VertexBufferLayout {
+                    array_stride: 12,
+                    step_mode: wgpu::VertexStepMode::Vertex,
+                    attributes: &wgpu::vertex_attr_array![0 => Float32x3],
+                })],
+            },
+            primitive: wgpu::PrimitiveState {
+                cull_mode: None,
+                ..Default::default()
+            },
+            depth_stencil: Some(wgpu::DepthStencilState {
+                format: SHADOW_FORMAT,
+                depth_write_enabled: Some(true),
+                depth_compare: Some(wgpu::CompareFunction::Less),
+                stencil: Default::default(),
+                bias: Default::default(),
+            }),
+            multisample: Default::default(),
+            fragment: None,
+            multiview_mask: None,
+            cache: None,
+        });
+        let bind_group = Self::group(device, &pipeline, maps);
+        ShadowPass { pipeline, bind_group }
+    }
+
+    fn group(device: &wgpu::Device, pipeline: &wgpu::RenderPipeline, maps: &ShadowMaps) -> wgpu::BindGroup {
+        pipeline::bind_group(
+            device,
+            "prm shadow",
+            &pipeline.get_bind_group_layout(0),
+            &[wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                buffer: &maps.matrices,
+                offset: 0,
+                size: wgpu::BufferSize::new(64),
+            })],
+        )
+    }
+
+    /// Binds the pass to new (larger) shadow maps.
+    pub fn rebind(&mut self, device: &wgpu::Device, maps: &ShadowMaps) {
+        self.bind_group = Self::group(device, &self.pipeline, maps);
+    }
+
+    /// One depth pass per view: layers `0..views` of `maps`, drawing `vertex_count` positions.
+    pub fn encode(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        maps: &ShadowMaps,
+        views: u32,
+        positions: &wgpu::Buffer,
+        vertex_count: u32,
+        timer: Option<&PassTimer>,
+    ) {
+        for (l, layer) in maps.layers.iter().take(views as usize).enumerate() {
+            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("prm shadow"),
+                color_attachments: &[],
+                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                    view: layer,
+                    depth_ops: Some(wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(1.0),
+                        store: wgpu::StoreOp::Store,
+                    }),
+                    stencil_ops: None,
+                }),
+                timestamp_writes: timer.and_then(|t| t.render("shadow", l == 0, l + 1 == views as usize)),
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            pass.set_pipeline(&self.pipeline);
+            pass.set_bind_group(0, &self.bind_group, &[l as u32 * maps.stride]);
+            pass.set_vertex_buffer(0, positions.slice(..));
+            pass.draw(0..vertex_count, 0..1);
+        }
+    }
+}

@@ -1,0 +1,210 @@
+//! The `#[repr(C)]` structs and codes shared with the run-time shaders, defined once here and
+//! once in `shaders/runtime/shared.wgsl`, field for field; the tests below compare the two
+//! layouts through naga and the enums with the shader's constants.
+
+use bytemuck::{Pod, Zeroable};
+
+/// The shared WGSL structs and codes (`shaders/runtime/shared.wgsl`).
+pub const SHARED_WGSL: &str = include_str!("../../../shaders/runtime/shared.wgsl");
+/// The direct irradiance of a point from every light, shadow-mapped
+/// (`shaders/runtime/lights.wgsl`); needs [`SHARED_WGSL`] before it and declares nothing: the
+/// including shader binds `frame`, `lights`, `views` and `shadow_maps`
+/// (see [`Runtime::direct_light_bindings`](crate::Runtime::direct_light_bindings)).
+pub const LIGHTS_WGSL: &str = include_str!("../../../shaders/runtime/lights.wgsl");
+
+/// A light's kind, as `Light.kind` holds it.
+#[repr(u32)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LightKind {
+    /// `LIGHT_POINT`: W/sr in every direction, a cube of six shadow views.
+    Point = 0,
+    /// `LIGHT_SPOT`: W/sr inside a cone, one shadow view (a cube beyond 60°).
+    Spot = 1,
+    /// `LIGHT_DIRECTIONAL`: W/m² along one direction, one orthographic shadow view.
+    Directional = 2,
+}
+
+/// A frame's constants; `Frame` in the shaders.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct GpuFrame {
+    /// Lights this frame.
+    pub light_count: u32,
+    /// Clusters (= panes) in the archive.
+    pub cluster_count: u32,
+    /// Clusters kept.
+    pub top_k: u32,
+    /// Entry points in the archive.
+    pub entry_count: u32,
+    /// Fade band (see `select.wgsl`).
+    pub fade_band: f32,
+    /// Shadow-map side in texels.
+    pub shadow_resolution: f32,
+    /// Normal offset of shadow lookups, in shadow texels.
+    pub normal_offset: f32,
+    /// Depth bias of shadow lookups, in shadow texels.
+    pub depth_bias: f32,
+}
+
+/// A light; `Light` in the shaders.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct GpuLight {
+    /// [`LightKind`] as `u32`.
+    pub kind: u32,
+    /// First shadow view (texture layer).
+    pub first_view: u32,
+    /// Shadow views: 1, or 6 for a cube.
+    pub view_count: u32,
+    /// Cosine of a spot light's half angle (−2 for the others).
+    pub cos_cutoff: f32,
+    /// Position (point, spot).
+    pub position: [f32; 3],
+    /// Padding.
+    pub _pad0: f32,
+    /// Spot axis or directional travel direction (unit).
+    pub direction: [f32; 3],
+    /// Padding.
+    pub _pad1: f32,
+    /// Intensity (W/sr) or irradiance (W/m²), RGB.
+    pub color: [f32; 3],
+    /// Padding.
+    pub _pad2: f32,
+}
+
+/// A shadow view; `ShadowView` in the shaders.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct GpuView {
+    /// View-projection (column major), depth in [0, 1].
+    pub view_proj: [[f32; 4]; 4],
+    /// World units per texel: at unit distance (perspective) or absolute (orthographic).
+    pub texel: f32,
+    /// Near plane.
+    pub near: f32,
+    /// Far plane.
+    pub far: f32,
+    /// 1 for an orthographic view, 0 for a perspective one.
+    pub orthographic: u32,
+}
+
+/// A cluster; `Cluster` in the shaders.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct GpuCluster {
+    /// First entry.
+    pub first: u32,
+    /// Entry count.
+    pub count: u32,
+    /// Padding.
+    pub _pad0: u32,
+    /// Padding.
+    pub _pad1: u32,
+    /// Pane energy (RGB).
+    pub energy: [f32; 3],
+    /// Padding.
+    pub _pad2: f32,
+}
+
+/// An entry point; `Entry` in the shaders.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct GpuEntry {
+    /// Position.
+    pub position: [f32; 3],
+    /// r² of the disk the entry stands for: the bound of its irradiance.
+    pub disk: f32,
+    /// Unit normal.
+    pub normal: [f32; 3],
+    /// Padding.
+    pub _pad0: f32,
+    /// Pane energy the cluster weight weighs this member by (1 for archives without an entry
+    /// energy section, which makes the weight the plain mean).
+    pub energy: [f32; 3],
+    /// Padding.
+    pub _pad1: f32,
+}
+
+/// A cluster's weight and score; `Weight` in the shaders.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct GpuWeight {
+    /// The members' entry irradiance weighed by their pane energy (RGB).
+    pub weight: [f32; 3],
+    /// Σ_rgb weight × pane energy.
+    pub score: f32,
+}
+
+/// The weight a cluster is blended with and its rank; `Effective` in the shaders.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct GpuEffective {
+    /// Blend weight (0 if dropped, faded near the threshold).
+    pub weight: [f32; 3],
+    /// Rank by score (0 = largest).
+    pub rank: u32,
+}
+
+/// A kept cluster; `Selected` in the shaders.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct GpuSelected {
+    /// Effective (faded) weight.
+    pub weight: [f32; 3],
+    /// Cluster (= pane layer).
+    pub cluster: u32,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use prm_gpu_kit::layout::check_consts;
+    use prm_gpu_kit::wgsl_layout;
+
+    #[test]
+    fn rust_structs_match_the_shaders() {
+        let s = SHARED_WGSL;
+        wgsl_layout!(
+            s,
+            GpuFrame,
+            "Frame",
+            [
+                light_count,
+                cluster_count,
+                top_k,
+                entry_count,
+                fade_band,
+                shadow_resolution,
+                normal_offset,
+                depth_bias
+            ]
+        )
+        .unwrap();
+        wgsl_layout!(
+            s,
+            GpuLight,
+            "Light",
+            [kind, first_view, view_count, cos_cutoff, position, _pad0, direction, _pad1, color, _pad2]
+        )
+        .unwrap();
+        wgsl_layout!(s, GpuView, "ShadowView", [view_proj, texel, near, far, orthographic]).unwrap();
+        wgsl_layout!(s, GpuCluster, "Cluster", [first, count, _pad0, _pad1, energy, _pad2]).unwrap();
+        wgsl_layout!(s, GpuEntry, "Entry", [position, disk, normal, _pad0, energy, _pad1]).unwrap();
+        wgsl_layout!(s, GpuWeight, "Weight", [weight, score]).unwrap();
+        wgsl_layout!(s, GpuEffective, "Effective", [weight, rank]).unwrap();
+        wgsl_layout!(s, GpuSelected, "Selected", [weight, cluster]).unwrap();
+    }
+
+    #[test]
+    fn light_kinds_match_the_shader_codes() {
+        check_consts(
+            SHARED_WGSL,
+            &[
+                ("LIGHT_POINT", LightKind::Point as i64),
+                ("LIGHT_SPOT", LightKind::Spot as i64),
+                ("LIGHT_DIRECTIONAL", LightKind::Directional as i64),
+            ],
+        )
+        .unwrap();
+    }
+}

@@ -1,0 +1,91 @@
+// prm-runtime: the structs and codes every run-time pass shares, defined once here and once in
+// crates/prm-runtime/src/shared.rs (field for field; the crate's tests compare the two layouts
+// through naga, and the codes below with the Rust enums).
+
+const LIGHT_POINT: u32 = 0u;
+const LIGHT_SPOT: u32 = 1u;
+const LIGHT_DIRECTIONAL: u32 = 2u;
+
+// A frame's constants.
+struct Frame {
+    light_count: u32,
+    cluster_count: u32,
+    top_k: u32,
+    entry_count: u32,
+    // Fade band: kept clusters within band × threshold above the threshold fade (select.wgsl).
+    fade_band: f32,
+    // Shadow-map side in texels.
+    shadow_resolution: f32,
+    // Shadow lookups move the point this many shadow texels along its normal.
+    normal_offset: f32,
+    // Depth tolerance of a shadow lookup, in shadow texels.
+    depth_bias: f32,
+};
+
+struct Light {
+    // LIGHT_POINT, LIGHT_SPOT or LIGHT_DIRECTIONAL
+    kind: u32,
+    // first shadow view (texture layer) and how many (1, or 6 for a cube)
+    first_view: u32,
+    view_count: u32,
+    // cosine of a spot light's half angle
+    cos_cutoff: f32,
+    position: vec3<f32>,
+    _pad0: f32,
+    // spot axis or directional travel direction (unit)
+    direction: vec3<f32>,
+    _pad1: f32,
+    // W/sr (point, spot) or W/m² (directional)
+    color: vec3<f32>,
+    _pad2: f32,
+};
+
+struct ShadowView {
+    view_proj: mat4x4<f32>,
+    // world units per texel: at unit distance for perspective views, absolute for orthographic
+    texel: f32,
+    near: f32,
+    far: f32,
+    // 1 for an orthographic view (directional light), 0 for a perspective one
+    orthographic: u32,
+};
+
+struct Cluster {
+    first: u32,
+    count: u32,
+    _pad0: u32,
+    _pad1: u32,
+    // pane energy (RGB)
+    energy: vec3<f32>,
+    _pad2: f32,
+};
+
+struct Entry {
+    position: vec3<f32>,
+    // r² of the disk the entry stands for (area A/N over π, times ENTRY_DISK): the bound of its
+    // irradiance, see light_irradiance_disk
+    disk: f32,
+    normal: vec3<f32>,
+    _pad0: f32,
+    // pane energy e_i the cluster weight weighs this member by (1 without an entry-energy section)
+    energy: vec3<f32>,
+    _pad1: f32,
+};
+
+// A cluster's weight (RGB) and score = Σ_rgb weight × pane energy.
+struct Weight {
+    weight: vec3<f32>,
+    score: f32,
+};
+
+// The weight a cluster is blended with (0 if dropped, faded near the threshold) and its rank.
+struct Effective {
+    weight: vec3<f32>,
+    rank: u32,
+};
+
+// A kept cluster, at slot = rank.
+struct Selected {
+    weight: vec3<f32>,
+    cluster: u32,
+};
