@@ -16,12 +16,12 @@ pub mod shade;
 
 pub mod animation;
 pub mod output;
-pub mod synthetic;
+
 pub mod window;
 
 pub use error::PlayError;
 pub use gpu::{open_vulkan, open_vulkan_for, vulkan_instance};
-pub use prm_runtime::{archive_top_k, ClusterWeight};
+pub use prm_runtime::{archive_top_k, synthetic, ClusterWeight};
 pub use renderer::{FrameInput, FrameTimings, Image, Mode, PlayOptions, Renderer, MAX_LIGHTS, PASS_NAMES};
 
 use std::path::{Path, PathBuf};

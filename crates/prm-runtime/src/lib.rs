@@ -42,6 +42,7 @@ mod rank;
 mod select;
 mod shadow;
 mod shared;
+pub mod synthetic;
 mod weights;
 
 use prm_format::Archive;

@@ -1,0 +1,135 @@
+//! The run time as an engine embeds it: on a device it did not open, next to another run time,
+//! with shadow maps handed in, and refusing bad input with errors that name it.
+
+use glam::Vec3;
+use prm_gpu_kit::{Backend, GpuContext};
+use prm_runtime::synthetic::{cornell_box_path, write_archive, SyntheticParams};
+use prm_runtime::{Runtime, RuntimeError, RuntimeOptions, Shadows, MAX_LIGHTS};
+use prm_scene::{Light, Scene};
+
+type FileArchive = prm_format::Archive<std::io::BufReader<std::fs::File>>;
+
+fn gpu() -> GpuContext {
+    // Vulkan explicitly: a missing driver fails loudly instead of falling back to GL.
+    GpuContext::new(Backend::Vulkan).expect("a Vulkan adapter (apt-get install mesa-vulkan-drivers)")
+}
+
+fn archive(name: &str) -> (Scene, FileArchive) {
+    let scene_path = cornell_box_path();
+    let scene = prm_scene::load(&scene_path).unwrap();
+    let dir = std::env::temp_dir().join(format!("prm-runtime-{}-{name}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let out = dir.join("synthetic.prm");
+    write_archive(&scene, &scene_path, &out, SyntheticParams::default()).unwrap();
+    let a = prm_format::Archive::open(&out).unwrap();
+    (scene, a)
+}
+
+fn point(x: f32, y: f32, z: f32) -> Light {
+    Light::Point {
+        position: Vec3::new(x, y, z),
+        intensity: Vec3::splat(0.3),
+    }
+}
+
+fn frame(ctx: &GpuContext, rt: &mut Runtime, lights: &[Light], shadows: Shadows) -> Vec<[f32; 3]> {
+    rt.update(lights).unwrap();
+    let mut enc = ctx.device.create_command_encoder(&Default::default());
+    rt.encode(&mut enc, shadows, None);
+    ctx.queue.submit([enc.finish()]);
+    ctx.wait().unwrap();
+    rt.read_lightmap().unwrap()
+}
+
+#[test]
+fn two_runtimes_share_a_device_and_shadow_maps_can_be_handed_in() {
+    let ctx = gpu();
+    let (scene, mut a) = archive("share");
+    let opts = RuntimeOptions::for_archive(&a);
+    let mut own = Runtime::new(&ctx.device, &ctx.queue, &mut a, &scene, opts.clone()).unwrap();
+    let mut other = Runtime::new(&ctx.device, &ctx.queue, &mut a, &scene, opts).unwrap();
+    let lights = [point(0.28, 0.45, 0.28), point(0.1, 0.3, 0.4)];
+
+    let alone = frame(&ctx, &mut own, &lights, Shadows::Own);
+    let total: f64 = alone.iter().flatten().map(|v| *v as f64).sum();
+    assert!(total.is_finite() && total > 0.0, "the lightmap is empty: {total}");
+
+    // Another light in the second run time leaves the first one's lightmap alone.
+    let moved = frame(&ctx, &mut other, &[point(0.4, 0.2, 0.1)], Shadows::Own);
+    assert_ne!(moved, alone);
+    assert_eq!(own.read_lightmap().unwrap(), alone);
+
+    // The second run time reading the first one's shadow maps (rendered for the same lights)
+    // gives the same lightmap bit for bit.
+    other.update(&lights).unwrap();
+    let mut enc = ctx.device.create_command_encoder(&Default::default());
+    own.encode_shadow_maps(&mut enc, None);
+    other.encode(
+        &mut enc,
+        Shadows::External(own.direct_light_bindings().shadow_maps),
+        None,
+    );
+    ctx.queue.submit([enc.finish()]);
+    ctx.wait().unwrap();
+    assert_eq!(other.read_lightmap().unwrap(), alone);
+    let w = other.read_weights().unwrap();
+    assert_eq!(w.len() as u32, other.cluster_count());
+    assert!(w.iter().all(|c| c.score.is_finite()));
+}
+
+#[test]
+fn bad_input_is_refused_naming_it() {
+    let ctx = gpu();
+    let (scene, mut a) = archive("refuse");
+    let bad = RuntimeOptions {
+        shadow_resolution: 4,
+        ..RuntimeOptions::default()
+    };
+    let e = Runtime::new(&ctx.device, &ctx.queue, &mut a, &scene, bad)
+        .err()
+        .unwrap();
+    assert!(
+        matches!(
+            e,
+            RuntimeError::Option {
+                option: "shadow_resolution",
+                ..
+            }
+        ),
+        "{e}"
+    );
+    let nan = RuntimeOptions {
+        fade_band: f32::NAN,
+        ..RuntimeOptions::default()
+    };
+    let e = Runtime::new(&ctx.device, &ctx.queue, &mut a, &scene, nan)
+        .err()
+        .unwrap();
+    assert!(
+        matches!(
+            e,
+            RuntimeError::Option {
+                option: "fade_band",
+                ..
+            }
+        ),
+        "{e}"
+    );
+
+    // Another scene's geometry.
+    let mut other = scene.clone();
+    other.triangles.pop();
+    let e = Runtime::new(&ctx.device, &ctx.queue, &mut a, &other, RuntimeOptions::default())
+        .err()
+        .unwrap();
+    assert!(matches!(e, RuntimeError::Mismatch(_)), "{e}");
+
+    let mut rt = Runtime::new(&ctx.device, &ctx.queue, &mut a, &scene, RuntimeOptions::default()).unwrap();
+    let many = vec![point(0.2, 0.2, 0.2); MAX_LIGHTS + 1];
+    let e = rt.update(&many).unwrap_err();
+    assert!(e.to_string().contains(&format!("{} lights", MAX_LIGHTS + 1)), "{e}");
+    // The shadow array grows for more lights, and says so once.
+    assert!(rt.update(&[point(0.2, 0.2, 0.2); 3]).unwrap());
+    assert!(!rt.update(&[point(0.2, 0.2, 0.2); 2]).unwrap());
+    ctx.wait().unwrap();
+}
