@@ -1,5 +1,6 @@
 //! The shared wgpu kit of PRM: opening a device ([`GpuContext`]), catching every GPU error
-//! ([`ErrorScopes`]), building pipelines, bind groups and buffers ([`pipeline`]), reading
+//! ([`ErrorScopes`]), building pipelines, bind groups and buffers ([`pipeline`]) and compute passes
+//! ([`ComputePass`]), reading
 //! buffers and textures back ([`readback`]), timing passes ([`PassTimer`]) and checking that
 //! `#[repr(C)]` structs match their WGSL twins ([`layout`]).
 //!
@@ -9,11 +10,13 @@
 
 #![warn(missing_docs)]
 
+mod compute;
 mod context;
 pub mod layout;
 pub mod pipeline;
 pub mod readback;
 mod timer;
 
+pub use compute::ComputePass;
 pub use context::{instance, silence_wayland_probe, Backend, ContextOptions, ErrorScopes, GpuContext, GpuError};
 pub use timer::PassTimer;

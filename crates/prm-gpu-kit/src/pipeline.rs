@@ -155,3 +155,44 @@ pub fn write_layer(queue: &wgpu::Queue, texture: &wgpu::Texture, layer: u32, dat
         },
     );
 }
+
+/// A colour attachment of `view`, cleared to black and stored.
+pub fn color_attachment(view: &wgpu::TextureView) -> Option<wgpu::RenderPassColorAttachment<'_>> {
+    Some(wgpu::RenderPassColorAttachment {
+        view,
+        depth_slice: None,
+        resolve_target: None,
+        ops: wgpu::Operations {
+            load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
+            store: wgpu::StoreOp::Store,
+        },
+    })
+}
+
+/// A depth attachment of `view`, cleared to 1 (far) and kept only if `store` (shadow maps are
+/// read later; a camera's depth is not).
+pub fn depth_attachment(view: &wgpu::TextureView, store: bool) -> Option<wgpu::RenderPassDepthStencilAttachment<'_>> {
+    Some(wgpu::RenderPassDepthStencilAttachment {
+        view,
+        depth_ops: Some(wgpu::Operations {
+            load: wgpu::LoadOp::Clear(1.0),
+            store: if store {
+                wgpu::StoreOp::Store
+            } else {
+                wgpu::StoreOp::Discard
+            },
+        }),
+        stencil_ops: None,
+    })
+}
+
+/// Depth state of an opaque pass: `format`, write, nearer wins.
+pub fn depth_state(format: wgpu::TextureFormat) -> Option<wgpu::DepthStencilState> {
+    Some(wgpu::DepthStencilState {
+        format,
+        depth_write_enabled: Some(true),
+        depth_compare: Some(wgpu::CompareFunction::Less),
+        stencil: Default::default(),
+        bias: Default::default(),
+    })
+}

@@ -50,17 +50,18 @@ pub fn read_buffer(
     map_read(device, &buffer)
 }
 
-/// Layer `layer` of a texture of 16-byte texels (`rgba32float`, which needs `COPY_SRC`), row by
-/// row from the top, as RGBA.
-pub fn read_rgba32f(
+/// Layer `layer` of `texture` (which needs `COPY_SRC`; an uncompressed colour format), its rows
+/// from the top without padding.
+pub fn read_texture(
     device: &wgpu::Device,
     queue: &wgpu::Queue,
     texture: &wgpu::Texture,
     layer: u32,
-) -> Result<Vec<[f32; 4]>, GpuError> {
+) -> Result<Vec<u8>, GpuError> {
+    let texel = texture.format().block_copy_size(None).unwrap_or(4);
     let (w, h) = (texture.width(), texture.height());
-    let (row, padded) = (w as usize * 16, padded_row(w, 16));
-    let buffer = staging(device, padded_size(w, h, 16));
+    let (row, padded) = (w as usize * texel as usize, padded_row(w, texel));
+    let buffer = staging(device, padded_size(w, h, texel));
     let mut enc = device.create_command_encoder(&Default::default());
     enc.copy_texture_to_buffer(
         wgpu::TexelCopyTextureInfo {
@@ -85,10 +86,19 @@ pub fn read_rgba32f(
     );
     queue.submit([enc.finish()]);
     let bytes = map_read(device, &buffer)?;
-    let mut out = Vec::with_capacity(w as usize * h as usize);
-    for y in 0..h as usize {
-        let start = y * padded as usize;
-        out.extend(bytemuck::cast_slice::<u8, [f32; 4]>(&bytes[start..start + row]));
-    }
-    Ok(out)
+    Ok((0..h as usize)
+        .flat_map(|y| &bytes[y * padded as usize..y * padded as usize + row])
+        .copied()
+        .collect())
+}
+
+/// Layer `layer` of an `rgba32float` texture as RGBA texels (see [`read_texture`]).
+pub fn read_rgba32f(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    texture: &wgpu::Texture,
+    layer: u32,
+) -> Result<Vec<[f32; 4]>, GpuError> {
+    let bytes = read_texture(device, queue, texture, layer)?;
+    Ok(bytemuck::pod_collect_to_vec(&bytes))
 }

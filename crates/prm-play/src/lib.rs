@@ -16,6 +16,7 @@ pub mod shade;
 
 pub mod animation;
 pub mod output;
+pub mod present;
 
 pub mod window;
 

@@ -93,15 +93,6 @@ impl ShadePass {
             ),
         };
         let module = pipeline::shader(device, "play shade", &source());
-        let depth = |format| {
-            Some(wgpu::DepthStencilState {
-                format,
-                depth_write_enabled: Some(true),
-                depth_compare: Some(wgpu::CompareFunction::Less),
-                stencil: Default::default(),
-                bias: Default::default(),
-            })
-        };
         let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
             label: Some("play shade"),
             layout: None,
@@ -121,7 +112,7 @@ impl ShadePass {
                 cull_mode: None,
                 ..Default::default()
             },
-            depth_stencil: depth(DEPTH_FORMAT),
+            depth_stencil: pipeline::depth_state(DEPTH_FORMAT),
             multisample: Default::default(),
             fragment: Some(wgpu::FragmentState {
                 module: &module,
@@ -191,23 +182,8 @@ impl ShadePass {
     ) {
         let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
             label: Some("play shade"),
-            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                view: color,
-                depth_slice: None,
-                resolve_target: None,
-                ops: wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
-                    store: wgpu::StoreOp::Store,
-                },
-            })],
-            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                view: depth,
-                depth_ops: Some(wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(1.0),
-                    store: wgpu::StoreOp::Discard,
-                }),
-                stencil_ops: None,
-            }),
+            color_attachments: &[pipeline::color_attachment(color)],
+            depth_stencil_attachment: pipeline::depth_attachment(depth, false),
             timestamp_writes: timer.and_then(|t| t.render("shade", true, true)),
             occlusion_query_set: None,
             multiview_mask: None,

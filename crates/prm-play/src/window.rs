@@ -18,6 +18,7 @@ use winit::keyboard::{Key, NamedKey};
 use winit::window::{Window, WindowId};
 
 use crate::animation::Animation;
+use crate::present::Presenter;
 use crate::{FileArchive, FrameInput, Mode, PlayError, PlayOptions, Renderer};
 
 /// The window's mouse and key bindings (also printed by `prm-play --help`).
@@ -105,102 +106,6 @@ fn light_label(light: &Light) -> String {
     }
 }
 
-/// The present pass (`play/present.wgsl`): the renderer's linear frame, × exposure, clamped and
-/// sRGB-encoded (by the shader unless the target format is sRGB), onto a target of `format`.
-pub struct Presenter {
-    pipeline: wgpu::RenderPipeline,
-    uniform: wgpu::Buffer,
-    group: Option<wgpu::BindGroup>,
-}
-
-impl Presenter {
-    /// Builds the pass for targets of `format`.
-    pub fn new(ctx: &prm_gpu_kit::GpuContext, format: wgpu::TextureFormat, exposure: f32) -> Presenter {
-        let module = ctx.device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("play_present"),
-            source: wgpu::ShaderSource::Wgsl(include_str!("../../../shaders/play/present.wgsl").into()),
-        });
-        let pipeline = ctx.device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("play_present"),
-            layout: None,
-            vertex: wgpu::VertexState {
-                module: &module,
-                entry_point: Some("vs_main"),
-                compilation_options: Default::default(),
-                buffers: &[],
-            },
-            primitive: Default::default(),
-            depth_stencil: None,
-            multisample: Default::default(),
-            fragment: Some(wgpu::FragmentState {
-                module: &module,
-                entry_point: Some("fs_main"),
-                compilation_options: Default::default(),
-                targets: &[Some(format.into())],
-            }),
-            multiview_mask: None,
-            cache: None,
-        });
-        let uniform = ctx.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("play_present"),
-            size: 16,
-            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-        let encode = u32::from(!format.is_srgb());
-        ctx.queue
-            .write_buffer(&uniform, 0, bytemuck::cast_slice(&[exposure.to_bits(), encode, 0, 0]));
-        Presenter {
-            pipeline,
-            uniform,
-            group: None,
-        }
-    }
-
-    /// Binds the renderer's colour target (again after [`Renderer::resize`]).
-    pub fn bind(&mut self, renderer: &Renderer) {
-        self.group = Some(renderer.context().device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("play_present"),
-            layout: &self.pipeline.get_bind_group_layout(0),
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: wgpu::BindingResource::TextureView(renderer.color_view()),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: self.uniform.as_entire_binding(),
-                },
-            ],
-        }));
-    }
-
-    /// Records the pass drawing onto `target` (same size as the renderer's image).
-    pub fn draw(&self, encoder: &mut wgpu::CommandEncoder, target: &wgpu::TextureView) {
-        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-            label: Some("play_present"),
-            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                view: target,
-                depth_slice: None,
-                resolve_target: None,
-                ops: wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
-                    store: wgpu::StoreOp::Store,
-                },
-            })],
-            depth_stencil_attachment: None,
-            timestamp_writes: None,
-            occlusion_query_set: None,
-            multiview_mask: None,
-        });
-        if let Some(group) = &self.group {
-            pass.set_pipeline(&self.pipeline);
-            pass.set_bind_group(0, group, &[]);
-            pass.draw(0..3, 0..1);
-        }
-    }
-}
-
 /// Where the last presented frame is kept for `--screenshot`.
 enum Capture {
     /// A copy of the swapchain image (same format), made just before presenting.
@@ -249,20 +154,13 @@ fn new_capture(
 ) -> Capture {
     let ctx = renderer.context();
     let format = swapchain_format.unwrap_or(wgpu::TextureFormat::Rgba8Unorm);
-    let texture = ctx.device.create_texture(&wgpu::TextureDescriptor {
-        label: Some("prm-play screenshot"),
-        size: wgpu::Extent3d {
-            width,
-            height,
-            depth_or_array_layers: 1,
-        },
-        mip_level_count: 1,
-        sample_count: 1,
-        dimension: wgpu::TextureDimension::D2,
+    let texture = prm_gpu_kit::pipeline::texture(
+        &ctx.device,
+        "prm-play screenshot",
+        [width, height, 1],
         format,
-        usage: wgpu::TextureUsages::COPY_DST | wgpu::TextureUsages::COPY_SRC | wgpu::TextureUsages::RENDER_ATTACHMENT,
-        view_formats: &[],
-    });
+        wgpu::TextureUsages::COPY_DST | wgpu::TextureUsages::COPY_SRC | wgpu::TextureUsages::RENDER_ATTACHMENT,
+    );
     match swapchain_format {
         Some(_) => Capture::Swapchain(texture),
         None => {
@@ -301,41 +199,18 @@ impl Gpu {
         let texture = capture.texture();
         let ctx = self.renderer.context();
         let (w, h) = (texture.width(), texture.height());
-        let padded = (w * 4).div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
-        let buffer = ctx.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("prm-play screenshot"),
-            size: u64::from(padded) * u64::from(h),
-            usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
-            mapped_at_creation: false,
-        });
-        let mut enc = ctx.device.create_command_encoder(&Default::default());
-        enc.copy_texture_to_buffer(
-            texture.as_image_copy(),
-            wgpu::TexelCopyBufferInfo {
-                buffer: &buffer,
-                layout: wgpu::TexelCopyBufferLayout {
-                    offset: 0,
-                    bytes_per_row: Some(padded),
-                    rows_per_image: Some(h),
-                },
-            },
-            texture.size(),
-        );
-        ctx.queue.submit([enc.finish()]);
-        let bytes = ctx.read_buffer(&buffer)?;
+        let bytes = prm_gpu_kit::readback::read_texture(&ctx.device, &ctx.queue, texture, 0)?;
+        ctx.take_uncaptured()?;
         let bgra = matches!(
             texture.format(),
             wgpu::TextureFormat::Bgra8Unorm | wgpu::TextureFormat::Bgra8UnormSrgb
         );
         let mut rgb = Vec::with_capacity((w * h * 3) as usize);
-        for y in 0..h as usize {
-            let row = &bytes[y * padded as usize..y * padded as usize + w as usize * 4];
-            for p in row.chunks_exact(4) {
-                if bgra {
-                    rgb.extend([p[2], p[1], p[0]]);
-                } else {
-                    rgb.extend([p[0], p[1], p[2]]);
-                }
+        for p in bytes.chunks_exact(4) {
+            if bgra {
+                rgb.extend([p[2], p[1], p[0]]);
+            } else {
+                rgb.extend([p[0], p[1], p[2]]);
             }
         }
         if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {

@@ -541,47 +541,22 @@ fn present_pass_matches_png_tone_mapping() {
     let image = r.read_image().unwrap();
     let exposure = 2.0;
     let format = wgpu::TextureFormat::Rgba8Unorm;
-    let mut presenter = prm_play::window::Presenter::new(r.context(), format, exposure);
+    let mut presenter = prm_play::present::Presenter::new(r.context(), format, exposure);
     presenter.bind(&r);
     let ctx = r.context();
     let (w, h) = (image.width, image.height);
-    let target = ctx.device.create_texture(&wgpu::TextureDescriptor {
-        label: Some("present test"),
-        size: wgpu::Extent3d {
-            width: w,
-            height: h,
-            depth_or_array_layers: 1,
-        },
-        mip_level_count: 1,
-        sample_count: 1,
-        dimension: wgpu::TextureDimension::D2,
+    let target = prm_gpu_kit::pipeline::texture(
+        &ctx.device,
+        "present test",
+        [w, h, 1],
         format,
-        usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
-        view_formats: &[],
-    });
-    let padded = (w * 4).div_ceil(256) * 256;
-    let buffer = ctx.device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("present test"),
-        size: (padded * h) as u64,
-        usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
-        mapped_at_creation: false,
-    });
+        wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
+    );
     let mut enc = ctx.device.create_command_encoder(&Default::default());
     presenter.draw(&mut enc, &target.create_view(&Default::default()));
-    enc.copy_texture_to_buffer(
-        target.as_image_copy(),
-        wgpu::TexelCopyBufferInfo {
-            buffer: &buffer,
-            layout: wgpu::TexelCopyBufferLayout {
-                offset: 0,
-                bytes_per_row: Some(padded),
-                rows_per_image: Some(h),
-            },
-        },
-        target.size(),
-    );
     ctx.queue.submit([enc.finish()]);
-    let bytes = ctx.read_buffer(&buffer).unwrap();
+    let bytes = prm_gpu_kit::readback::read_texture(&ctx.device, &ctx.queue, &target, 0).unwrap();
+    let padded = w * 4;
     for y in 0..h as usize {
         for x in 0..w as usize {
             let p = image.rgb[y * w as usize + x];

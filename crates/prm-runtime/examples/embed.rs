@@ -1,5 +1,5 @@
-//! Embedding prm-runtime in a wgpu program of one's own: open a device, load an archive and its
-//! scene, run one frame of the run time headless, shade it with a few lines of WGSL (albedo/π ×
+//! Embedding prm-runtime in a wgpu program of one's own (with a few helpers of prm-gpu-kit for
+//! wgpu's longer descriptors): open a device, load an archive and its scene, run one frame of the run time headless, shade it with a few lines of WGSL (albedo/π ×
 //! (direct + indirect irradiance)) and write a PNG.
 //!
 //! `cargo run -p prm-runtime --example embed -- ARCHIVE.prm [OUT.png]`
@@ -13,6 +13,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use glam::{Mat4, Vec3};
+use prm_gpu_kit::pipeline as kit;
 use prm_runtime::{look_to, perspective, Runtime, RuntimeOptions, Shadows, LIGHTS_WGSL, SHARED_WGSL};
 use wgpu::util::DeviceExt;
 
@@ -154,13 +155,7 @@ fn run(archive_path: &Path, out: &Path) -> Result<()> {
             })],
         },
         primitive: Default::default(),
-        depth_stencil: Some(wgpu::DepthStencilState {
-            format: wgpu::TextureFormat::Depth32Float,
-            depth_write_enabled: Some(true),
-            depth_compare: Some(wgpu::CompareFunction::Less),
-            stencil: Default::default(),
-            bias: Default::default(),
-        }),
+        depth_stencil: kit::depth_state(wgpu::TextureFormat::Depth32Float),
         multisample: Default::default(),
         fragment: Some(wgpu::FragmentState {
             module: &module,
@@ -180,35 +175,8 @@ fn run(archive_path: &Path, out: &Path) -> Result<()> {
         wgpu::BindingResource::TextureView(runtime.lightmap()),
         camera_buffer.as_entire_binding(),
     ];
-    let entries: Vec<wgpu::BindGroupEntry> = resources
-        .into_iter()
-        .enumerate()
-        .map(|(i, resource)| wgpu::BindGroupEntry {
-            binding: i as u32,
-            resource,
-        })
-        .collect();
-    let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-        label: None,
-        layout: &pipeline.get_bind_group_layout(0),
-        entries: &entries,
-    });
-    let target = |format, usage| {
-        device.create_texture(&wgpu::TextureDescriptor {
-            label: None,
-            size: wgpu::Extent3d {
-                width: SIZE,
-                height: SIZE,
-                depth_or_array_layers: 1,
-            },
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format,
-            usage,
-            view_formats: &[],
-        })
-    };
+    let bind_group = kit::bind_group(&device, "embed", &pipeline.get_bind_group_layout(0), &resources);
+    let target = |format, usage| kit::texture(&device, "embed", [SIZE, SIZE, 1], format, usage);
     let color = target(
         format,
         wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
@@ -222,23 +190,8 @@ fn run(archive_path: &Path, out: &Path) -> Result<()> {
         let depth_view = depth.create_view(&Default::default());
         let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
             label: None,
-            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                view: &color_view,
-                depth_slice: None,
-                resolve_target: None,
-                ops: wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
-                    store: wgpu::StoreOp::Store,
-                },
-            })],
-            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                view: &depth_view,
-                depth_ops: Some(wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(1.0),
-                    store: wgpu::StoreOp::Discard,
-                }),
-                stencil_ops: None,
-            }),
+            color_attachments: &[kit::color_attachment(&color_view)],
+            depth_stencil_attachment: kit::depth_attachment(&depth_view, false),
             timestamp_writes: None,
             occlusion_query_set: None,
             multiview_mask: None,
@@ -248,29 +201,8 @@ fn run(archive_path: &Path, out: &Path) -> Result<()> {
         pass.set_vertex_buffer(0, vertex_buffer.slice(..));
         pass.draw(0..vertices.len() as u32, 0..1);
     }
-    // Read the image back: SIZE × 4 bytes a row is a multiple of wgpu's 256-byte alignment.
-    let readback = device.create_buffer(&wgpu::BufferDescriptor {
-        label: None,
-        size: (SIZE * SIZE * 4) as u64,
-        usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
-        mapped_at_creation: false,
-    });
-    encoder.copy_texture_to_buffer(
-        color.as_image_copy(),
-        wgpu::TexelCopyBufferInfo {
-            buffer: &readback,
-            layout: wgpu::TexelCopyBufferLayout {
-                offset: 0,
-                bytes_per_row: Some(SIZE * 4),
-                rows_per_image: None,
-            },
-        },
-        color.size(),
-    );
     queue.submit([encoder.finish()]);
-    readback.map_async(wgpu::MapMode::Read, .., |r| r.expect("map the image"));
-    device.poll(wgpu::PollType::wait_indefinitely())?;
-    let pixels = readback.get_mapped_range(..).context("map the image")?.to_vec();
+    let pixels = prm_gpu_kit::readback::read_texture(&device, &queue, &color, 0)?;
     image::save_buffer(out, &pixels, SIZE, SIZE, image::ExtendedColorType::Rgba8)
         .with_context(|| format!("write {}", out.display()))?;
 

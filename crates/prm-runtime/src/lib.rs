@@ -494,18 +494,19 @@ impl Runtime {
                 self.encode_shadow_maps(encoder, timer);
                 None
             }
-            Shadows::External(view) => Some(WeightsPass::group(
-                &self.device,
-                self.weights.pipeline(),
-                &self.buffers,
-                view,
-            )),
+            Shadows::External(view) => Some(view),
         };
         if self.cluster_count == 0 {
             return;
         }
-        self.weights
-            .encode(encoder, self.cluster_count, external.as_ref(), timer);
+        self.weights.encode(
+            &self.device,
+            encoder,
+            &self.buffers,
+            self.cluster_count,
+            external,
+            timer,
+        );
         self.rank.encode(encoder, self.cluster_count, timer);
         self.select.encode(encoder, self.cluster_count, timer);
         self.blend.encode(encoder, self.resolution, timer);

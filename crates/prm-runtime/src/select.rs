@@ -1,28 +1,20 @@
 //! The select pass (`shaders/runtime/select.wgsl`): the top K clusters with their weights faded
 //! near the threshold and scaled to keep the dropped clusters' energy, written by rank for the
-//! blend pass.
+//! blend pass; one invocation per cluster.
 
-use prm_gpu_kit::{pipeline, PassTimer};
+use prm_gpu_kit::{ComputePass, PassTimer};
 
 use crate::Buffers;
 
 /// Keeps the top K.
-pub(crate) struct SelectPass {
-    pipeline: wgpu::ComputePipeline,
-    bind_group: wgpu::BindGroup,
-}
+pub(crate) struct SelectPass(ComputePass);
 
 impl SelectPass {
     pub fn new(device: &wgpu::Device, b: &Buffers) -> SelectPass {
-        let pipeline = pipeline::compute(
+        SelectPass(ComputePass::new(
             device,
-            "prm select",
+            "select",
             &[crate::SHARED_WGSL, include_str!("../../../shaders/runtime/select.wgsl")],
-        );
-        let bind_group = pipeline::compute_group(
-            device,
-            "prm select",
-            &pipeline,
             &[
                 b.frame.as_entire_binding(),
                 b.weights.as_entire_binding(),
@@ -31,17 +23,10 @@ impl SelectPass {
                 b.selected.as_entire_binding(),
                 b.effective.as_entire_binding(),
             ],
-        );
-        SelectPass { pipeline, bind_group }
+        ))
     }
 
     pub fn encode(&self, encoder: &mut wgpu::CommandEncoder, clusters: u32, timer: Option<&PassTimer>) {
-        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-            label: Some("prm select"),
-            timestamp_writes: timer.and_then(|t| t.compute("select")),
-        });
-        pass.set_pipeline(&self.pipeline);
-        pass.set_bind_group(0, &self.bind_group, &[]);
-        pass.dispatch_workgroups(clusters.div_ceil(64), 1, 1);
+        self.0.encode(encoder, [clusters.div_ceil(64), 1, 1], timer);
     }
 }

@@ -99,13 +99,7 @@ impl ShadowPass {
                 cull_mode: None,
                 ..Default::default()
             },
-            depth_stencil: Some(wgpu::DepthStencilState {
-                format: SHADOW_FORMAT,
-                depth_write_enabled: Some(true),
-                depth_compare: Some(wgpu::CompareFunction::Less),
-                stencil: Default::default(),
-                bias: Default::default(),
-            }),
+            depth_stencil: pipeline::depth_state(SHADOW_FORMAT),
             multisample: Default::default(),
             fragment: None,
             multiview_mask: None,
@@ -147,14 +141,7 @@ impl ShadowPass {
             let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
                 label: Some("prm shadow"),
                 color_attachments: &[],
-                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                    view: layer,
-                    depth_ops: Some(wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(1.0),
-                        store: wgpu::StoreOp::Store,
-                    }),
-                    stencil_ops: None,
-                }),
+                depth_stencil_attachment: pipeline::depth_attachment(layer, true),
                 timestamp_writes: timer.and_then(|t| t.render("shadow", l == 0, l + 1 == views as usize)),
                 occlusion_query_set: None,
                 multiview_mask: None,

@@ -2,80 +2,63 @@
 //! point and each cluster's weight, its members' irradiance weighed by their pane energy, and
 //! its score; one workgroup per cluster.
 
-use prm_gpu_kit::{pipeline, PassTimer};
+use prm_gpu_kit::{ComputePass, PassTimer};
 
 use crate::Buffers;
 
 /// Computes the cluster weights.
-pub(crate) struct WeightsPass {
-    pipeline: wgpu::ComputePipeline,
-    bind_group: wgpu::BindGroup,
+pub(crate) struct WeightsPass(ComputePass);
+
+fn resources<'a>(b: &'a Buffers, shadow_maps: &'a wgpu::TextureView) -> [wgpu::BindingResource<'a>; 7] {
+    [
+        b.frame.as_entire_binding(),
+        b.lights.as_entire_binding(),
+        b.views.as_entire_binding(),
+        wgpu::BindingResource::TextureView(shadow_maps),
+        b.clusters.as_entire_binding(),
+        b.entries.as_entire_binding(),
+        b.weights.as_entire_binding(),
+    ]
 }
 
 impl WeightsPass {
     /// The pass, reading the shadow maps `shadow_maps` (a depth 2D array).
-    pub fn new(device: &wgpu::Device, buffers: &Buffers, shadow_maps: &wgpu::TextureView) -> WeightsPass {
-        let pipeline = pipeline::compute(
+    pub fn new(device: &wgpu::Device, b: &Buffers, shadow_maps: &wgpu::TextureView) -> WeightsPass {
+        WeightsPass(ComputePass::new(
             device,
-            "prm weights",
+            "weights",
             &[
                 crate::SHARED_WGSL,
                 crate::LIGHTS_WGSL,
                 include_str!("../../../shaders/runtime/weights.wgsl"),
             ],
-        );
-        let bind_group = Self::group(device, &pipeline, buffers, shadow_maps);
-        WeightsPass { pipeline, bind_group }
+            &resources(b, shadow_maps),
+        ))
     }
 
-    /// The bind group of this pass's pipeline on `buffers` and `shadow_maps`.
-    pub fn group(
-        device: &wgpu::Device,
-        pipeline: &wgpu::ComputePipeline,
-        b: &Buffers,
-        shadow_maps: &wgpu::TextureView,
-    ) -> wgpu::BindGroup {
-        pipeline::compute_group(
-            device,
-            "prm weights",
-            pipeline,
-            &[
-                b.frame.as_entire_binding(),
-                b.lights.as_entire_binding(),
-                b.views.as_entire_binding(),
-                wgpu::BindingResource::TextureView(shadow_maps),
-                b.clusters.as_entire_binding(),
-                b.entries.as_entire_binding(),
-                b.weights.as_entire_binding(),
-            ],
-        )
+    /// Binds the pass to other (larger) shadow maps.
+    pub fn rebind(&mut self, device: &wgpu::Device, b: &Buffers, shadow_maps: &wgpu::TextureView) {
+        self.0.rebind(device, &resources(b, shadow_maps));
     }
 
-    /// Binds the pass to other shadow maps.
-    pub fn rebind(&mut self, device: &wgpu::Device, buffers: &Buffers, shadow_maps: &wgpu::TextureView) {
-        self.bind_group = Self::group(device, &self.pipeline, buffers, shadow_maps);
-    }
-
-    /// The pipeline (for a bind group on shadow maps handed in for one frame).
-    pub fn pipeline(&self) -> &wgpu::ComputePipeline {
-        &self.pipeline
-    }
-
-    /// Dispatches one workgroup per cluster (rows of 65535), with `group` if given (other shadow
-    /// maps) else the pass's own.
+    /// One workgroup per cluster (rows of 65535), reading `external` shadow maps for this frame
+    /// if given, else the pass's own.
     pub fn encode(
         &self,
+        device: &wgpu::Device,
         encoder: &mut wgpu::CommandEncoder,
+        b: &Buffers,
         clusters: u32,
-        group: Option<&wgpu::BindGroup>,
+        external: Option<&wgpu::TextureView>,
         timer: Option<&PassTimer>,
     ) {
-        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-            label: Some("prm weights"),
-            timestamp_writes: timer.and_then(|t| t.compute("weights")),
-        });
-        pass.set_pipeline(&self.pipeline);
-        pass.set_bind_group(0, group.unwrap_or(&self.bind_group), &[]);
-        pass.dispatch_workgroups(clusters.min(65535), clusters.div_ceil(65535), 1);
+        let groups = [clusters.min(65535), clusters.div_ceil(65535), 1];
+        match external {
+            Some(maps) => {
+                let group = self.0.group(device, &resources(b, maps));
+                self.0.encode_with(encoder, &group, groups, timer);
+            }
+            None => self.0.encode(encoder, groups, timer),
+        }
     }
 }
