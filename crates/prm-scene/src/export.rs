@@ -29,6 +29,10 @@
 //! are embedded as PNG (8-bit sRGB RGB, the texels as they are) in the binary buffer. Lights and
 //! cameras are not written: an engine playing baked lightmaps must not light the scene again.
 //!
+//! [`write_exr_rgb`] writes a lightmap (linear RGB, 32-bit float) as OpenEXR, row 0 on top, so
+//! that texel `(x, y)` of the atlas (`uv = (x + ½, y + ½) / resolution`) is pixel `(x, y)` and
+//! glTF's top-left UV origin samples it as the baker laid it out.
+//!
 //! Files are written atomically (a temporary file in the same directory, then a rename); an
 //! existing target that is not a regular file (a directory, a symlink, a device) is refused.
 
@@ -103,6 +107,22 @@ pub enum ExportError {
         /// What is wrong.
         message: String,
     },
+    /// An image's size and pixel count disagree, or it is empty.
+    #[error("{path}: {message}")]
+    BadImage {
+        /// The file being written.
+        path: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
+    /// The EXR encoder failed.
+    #[error("{path}: EXR encoding failed: {message}")]
+    Exr {
+        /// The file being written.
+        path: PathBuf,
+        /// The encoder's message.
+        message: String,
+    },
     /// The binary data exceeds what the format can address (4 GiB for `.glb`).
     #[error("{path}: {bytes} bytes exceed the format's limit of {limit}")]
     TooLarge {
@@ -163,6 +183,47 @@ pub fn write_gltf(scene: &Scene, lightmap_uvs: &[[Vec2; 3]], path: &Path) -> Res
         bin_tmp.commit(&bin_path)?;
         json_tmp.commit(path)
     }
+}
+
+/// Writes a linear RGB image as a 32-bit float OpenEXR file at `path` (atomically).
+///
+/// `rgb` is row-major, row 0 on top (pixel `(x, y)` is `rgb[y * width + x]`), as the atlas
+/// numbers its texels. An empty image or one whose pixel count is not `width × height` is
+/// refused; an existing target that is not a regular file is left alone. Values are stored
+/// as they are (NaN included).
+pub fn write_exr_rgb(path: &Path, width: usize, height: usize, rgb: &[[f32; 3]]) -> Result<(), ExportError> {
+    let bad = |message: String| ExportError::BadImage {
+        path: path.to_path_buf(),
+        message,
+    };
+    if width == 0 || height == 0 {
+        return Err(bad(format!("empty image ({width}×{height})")));
+    }
+    match width.checked_mul(height) {
+        Some(n) if n == rgb.len() => {}
+        _ => return Err(bad(format!("{} pixels given for a {width}×{height} image", rgb.len()))),
+    }
+    if path.file_name().is_none() {
+        return Err(bad("not a file name".into()));
+    }
+    check_target(path)?;
+    let channels = exr::prelude::SpecificChannels::rgb(|p: exr::prelude::Vec2<usize>| {
+        let [r, g, b] = rgb[p.y() * width + p.x()];
+        (r, g, b)
+    });
+    let mut bytes = std::io::Cursor::new(Vec::new());
+    {
+        use exr::prelude::WritableImage;
+        exr::prelude::Image::from_channels((width, height), channels)
+            .write()
+            .to_buffered(&mut bytes)
+            .map_err(|e| ExportError::Exr {
+                path: path.to_path_buf(),
+                message: e.to_string(),
+            })?;
+    }
+    let bytes = bytes.into_inner();
+    write_atomic(path, |f| f.write_all(&bytes))
 }
 
 /// Refuses an existing target that is not a regular file (a symlink counts as not regular).

@@ -21,7 +21,7 @@ mod texture;
 
 pub use atlas::{Atlas, AtlasParams, AtlasStats, ExitPoint, Sizing, EMPTY_TEXEL};
 pub use error::SceneError;
-pub use export::{write_gltf, ExportError};
+pub use export::{write_exr_rgb, write_gltf, ExportError};
 pub use scene::{Aabb, Camera, Light, LoadReport, Material, Scene, Triangle};
 pub use texture::Texture;
 
