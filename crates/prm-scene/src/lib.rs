@@ -1,6 +1,7 @@
 //! Scene input for PRM: OBJ and glTF loaded into one flat triangle scene, plus its lightmap atlas.
 //!
-//! The flow is [`load`] (by file extension) → [`Scene`] → [`Atlas::build`]. A scene is a flat
+//! The flow is [`load`] (by file extension) → [`Scene`] → [`Atlas::build`]; [`write_gltf`] writes
+//! a scene back as glTF with its lightmap UVs, for engines that play static lightmaps. A scene is a flat
 //! list of triangles with per-corner attributes (no index buffer), a material table, textures,
 //! lights and cameras, all in world space (right-handed, +Y up, metres by convention).
 //!
@@ -12,6 +13,7 @@
 pub mod analytic;
 mod atlas;
 mod error;
+pub mod export;
 mod gltf_load;
 mod obj;
 mod scene;
@@ -20,6 +22,7 @@ mod texture;
 
 pub use atlas::{Atlas, AtlasParams, AtlasStats, ExitPoint, Sizing, EMPTY_TEXEL};
 pub use error::SceneError;
+pub use export::{write_exr_rgb, write_gltf, ExportError};
 pub use scene::{Aabb, Camera, Light, LoadReport, Material, Scene, Triangle};
 pub use spec::{parse_camera, parse_light, parse_size, SpecError};
 pub use texture::Texture;

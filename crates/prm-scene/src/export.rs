@@ -1,0 +1,679 @@
+//! Static lightmap export, scene side: the flat scene written as glTF 2.0 with lightmap UVs as `TEXCOORD_1`.
+//!
+//! [`write_gltf`] writes a [`Scene`] for engines that take only baked lightmaps (Bevy's
+//! `Lightmap`, Godot, three.js): one node, one mesh, non-indexed triangles with `POSITION`,
+//! `NORMAL`, `TEXCOORD_0` (material UVs) and `TEXCOORD_1` (the lightmap UVs given). The format
+//! follows the extension: `.glb` is one binary file; `.gltf` is JSON plus a `<stem>.bin` beside it.
+//!
+//! **Reloading gives the same scene.** Triangles keep their order: the mesh has one primitive
+//! per run of consecutive triangles with the same material (so one per material when the scene
+//! is grouped by material), and [`crate::load`] reads primitives in order. Positions, lightmap
+//! UVs and albedos are written bit-exactly (floats as the exact decimal of their `f32` value),
+//! so [`Scene::fingerprint`] and [`Scene::materials_fingerprint`] of the reloaded scene equal
+//! the original's and its [`Scene::lightmap_uvs`] equal the UVs written, with three exceptions
+//! that come from the format or the loader, not from this writer:
+//!
+//! * a `-0.0` position coordinate comes back as `+0.0` (the loader applies the node transform);
+//! * `TEXCOORD_0` is stored with `v` flipped (`1 − v`, glTF's convention, undone by the loader):
+//!   the stored value is chosen so that the loader's `1 − v'` gives back `v` exactly where one
+//!   exists, which is so for every `v` in `[0.5, 2]` and for multiples of `2⁻²⁴` (0, 0.25, …), but
+//!   not for every `v` below 0.5 (`1 − v'` is then a multiple of `2⁻²⁴`), so a textured material's
+//!   UVs (the only ones the materials fingerprint reads) may come back one ulp off;
+//! * albedos outside `[0, 1]` are clamped (glTF's `baseColorFactor` range).
+//!
+//! A triangle the loader would drop as degenerate (a hand-built scene's, never a loaded one's)
+//! is written too, and is then missing on reload.
+//!
+//! Materials are `pbrMetallicRoughness` with `baseColorFactor` = albedo (linear), metallic 0,
+//! roughness 1. A [`Texture`](crate::Texture) keeps no file path, so textures used by a material
+//! are embedded as PNG (8-bit sRGB RGB, the texels as they are) in the binary buffer. Lights and
+//! cameras are not written: an engine playing baked lightmaps must not light the scene again.
+//!
+//! [`write_exr_rgb`] writes a lightmap (linear RGB, 32-bit float) as OpenEXR, row 0 on top, so
+//! that texel `(x, y)` of the atlas (`uv = (x + ½, y + ½) / resolution`) is pixel `(x, y)` and
+//! glTF's top-left UV origin samples it as the baker laid it out.
+//!
+//! Files are written atomically (a temporary file in the same directory, then a rename); an
+//! existing target that is not a regular file (a directory, a symlink, a device) is refused.
+
+use glam::{Vec2, Vec3};
+use serde_json::{json, Map, Value};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use crate::Scene;
+
+/// Why a scene could not be exported.
+#[derive(Debug, thiserror::Error)]
+pub enum ExportError {
+    /// Creating, writing or renaming a file failed.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file being written.
+        path: PathBuf,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// The target exists and is not a regular file; it is left alone.
+    #[error("{0}: exists and is not a regular file; refusing to overwrite it")]
+    NotRegularFile(PathBuf),
+    /// The extension is neither `.glb` nor `.gltf`.
+    #[error("{0}: unsupported export format (expected .glb or .gltf)")]
+    UnsupportedFormat(PathBuf),
+    /// The scene has no triangles (a glTF mesh needs at least one primitive).
+    #[error("{0}: the scene has no triangles to export")]
+    NoTriangles(PathBuf),
+    /// The lightmap UVs are not one per triangle.
+    #[error("{path}: {uvs} lightmap UV triples given for {triangles} triangles")]
+    UvCount {
+        /// The file being written.
+        path: PathBuf,
+        /// Triangles in the scene.
+        triangles: usize,
+        /// Lightmap UV triples given.
+        uvs: usize,
+    },
+    /// A triangle holds a NaN or infinite value.
+    #[error("{path}: triangle {triangle} has a non-finite {what}")]
+    NonFinite {
+        /// The file being written.
+        path: PathBuf,
+        /// Index of the triangle.
+        triangle: usize,
+        /// Which attribute (position, normal, material UV, lightmap UV).
+        what: &'static str,
+    },
+    /// A triangle's material index is out of range.
+    #[error("{path}: triangle {triangle} uses material {material}, but the scene has {materials}")]
+    Material {
+        /// The file being written.
+        path: PathBuf,
+        /// Index of the triangle.
+        triangle: usize,
+        /// Its material index.
+        material: u32,
+        /// Materials in the scene.
+        materials: usize,
+    },
+    /// A material's albedo is not finite, or its texture cannot be written.
+    #[error("{path}: material {material} ('{name}'): {message}")]
+    BadMaterial {
+        /// The file being written.
+        path: PathBuf,
+        /// Index of the material.
+        material: usize,
+        /// Its name.
+        name: String,
+        /// What is wrong.
+        message: String,
+    },
+    /// An image's size and pixel count disagree, or it is empty.
+    #[error("{path}: {message}")]
+    BadImage {
+        /// The file being written.
+        path: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
+    /// The EXR encoder failed.
+    #[error("{path}: EXR encoding failed: {message}")]
+    Exr {
+        /// The file being written.
+        path: PathBuf,
+        /// The encoder's message.
+        message: String,
+    },
+    /// The binary data exceeds what the format can address (4 GiB for `.glb`).
+    #[error("{path}: {bytes} bytes exceed the format's limit of {limit}")]
+    TooLarge {
+        /// The file being written.
+        path: PathBuf,
+        /// Bytes needed.
+        bytes: u64,
+        /// The limit.
+        limit: u64,
+    },
+}
+
+/// glTF `bufferView.target` of vertex attributes.
+const ARRAY_BUFFER: u32 = 34962;
+/// glTF `componentType` of 32-bit floats.
+const FLOAT: u32 = 5126;
+
+/// Writes `scene` as glTF 2.0 at `path` with `lightmap_uvs` (one triple per triangle, in the
+/// scene's order, e.g. [`Atlas::uvs`](crate::Atlas::uvs)) as `TEXCOORD_1`.
+///
+/// `.glb` writes one binary glTF; `.gltf` writes JSON and a `<stem>.bin` buffer beside it
+/// (both replaced atomically, the `.bin` first). Nothing is written when the scene is invalid
+/// (no triangles, non-finite values, a material index out of range, a wrong UV count).
+pub fn write_gltf(scene: &Scene, lightmap_uvs: &[[Vec2; 3]], path: &Path) -> Result<(), ExportError> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase)
+        .unwrap_or_default();
+    let binary = match ext.as_str() {
+        "glb" => true,
+        "gltf" => false,
+        _ => return Err(ExportError::UnsupportedFormat(path.to_path_buf())),
+    };
+    if path.file_name().is_none() {
+        return Err(ExportError::UnsupportedFormat(path.to_path_buf()));
+    }
+    check_target(path)?;
+    if binary {
+        let (json, bin) = build(scene, lightmap_uvs, path, None)?;
+        let glb = glb_bytes(path, &json, &bin)?;
+        write_atomic(path, |f| f.write_all(&glb))
+    } else {
+        let bin_path = path.with_extension("bin");
+        check_target(&bin_path)?;
+        let bin_name = bin_path
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let (json, bin) = build(scene, lightmap_uvs, path, Some(&percent_encode(&bin_name)))?;
+        let text = serde_json::to_vec_pretty(&json).map_err(|e| ExportError::Io {
+            path: path.to_path_buf(),
+            source: e.into(),
+        })?;
+        // Both files are complete on disk before either replaces its target.
+        let bin_tmp = TempFile::write(&bin_path, |f| f.write_all(&bin))?;
+        let json_tmp = TempFile::write(path, |f| f.write_all(&text))?;
+        bin_tmp.commit(&bin_path)?;
+        json_tmp.commit(path)
+    }
+}
+
+/// Writes a linear RGB image as a 32-bit float OpenEXR file at `path` (atomically).
+///
+/// `rgb` is row-major, row 0 on top (pixel `(x, y)` is `rgb[y * width + x]`), as the atlas
+/// numbers its texels. An empty image or one whose pixel count is not `width × height` is
+/// refused; an existing target that is not a regular file is left alone. Values are stored
+/// as they are (NaN included).
+pub fn write_exr_rgb(path: &Path, width: usize, height: usize, rgb: &[[f32; 3]]) -> Result<(), ExportError> {
+    let bad = |message: String| ExportError::BadImage {
+        path: path.to_path_buf(),
+        message,
+    };
+    if width == 0 || height == 0 {
+        return Err(bad(format!("empty image ({width}×{height})")));
+    }
+    match width.checked_mul(height) {
+        Some(n) if n == rgb.len() => {}
+        _ => return Err(bad(format!("{} pixels given for a {width}×{height} image", rgb.len()))),
+    }
+    if path.file_name().is_none() {
+        return Err(bad("not a file name".into()));
+    }
+    check_target(path)?;
+    let channels = exr::prelude::SpecificChannels::rgb(|p: exr::prelude::Vec2<usize>| {
+        let [r, g, b] = rgb[p.y() * width + p.x()];
+        (r, g, b)
+    });
+    let mut bytes = std::io::Cursor::new(Vec::new());
+    {
+        use exr::prelude::WritableImage;
+        exr::prelude::Image::from_channels((width, height), channels)
+            .write()
+            .to_buffered(&mut bytes)
+            .map_err(|e| ExportError::Exr {
+                path: path.to_path_buf(),
+                message: e.to_string(),
+            })?;
+    }
+    let bytes = bytes.into_inner();
+    write_atomic(path, |f| f.write_all(&bytes))
+}
+
+/// Refuses an existing target that is not a regular file (a symlink counts as not regular).
+fn check_target(path: &Path) -> Result<(), ExportError> {
+    match std::fs::symlink_metadata(path) {
+        Ok(m) if m.file_type().is_file() => Ok(()),
+        Ok(_) => Err(ExportError::NotRegularFile(path.to_path_buf())),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
+        Err(source) => Err(ExportError::Io {
+            path: path.to_path_buf(),
+            source,
+        }),
+    }
+}
+
+/// A temporary file beside its target, removed when dropped unless committed.
+struct TempFile {
+    path: Option<PathBuf>,
+}
+
+impl TempFile {
+    /// Creates a fresh temporary file in `target`'s directory, fills it with `fill` and syncs it.
+    fn write(
+        target: &Path,
+        fill: impl FnOnce(&mut std::fs::File) -> std::io::Result<()>,
+    ) -> Result<TempFile, ExportError> {
+        use std::sync::atomic::{AtomicU32, Ordering};
+        static COUNTER: AtomicU32 = AtomicU32::new(0);
+        let dir = target
+            .parent()
+            .filter(|p| !p.as_os_str().is_empty())
+            .unwrap_or(Path::new("."));
+        let name = target.file_name().map(|n| n.to_string_lossy()).unwrap_or_default();
+        let io = |source| ExportError::Io {
+            path: target.to_path_buf(),
+            source,
+        };
+        loop {
+            let n = COUNTER.fetch_add(1, Ordering::Relaxed);
+            let tmp = dir.join(format!(".{name}.{}.{n}.tmp", std::process::id()));
+            let mut file = match std::fs::OpenOptions::new().write(true).create_new(true).open(&tmp) {
+                Ok(f) => f,
+                Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => continue,
+                Err(e) => return Err(io(e)),
+            };
+            // From here on the guard removes the file on every failure.
+            let guard = TempFile { path: Some(tmp) };
+            fill(&mut file).and_then(|()| file.sync_all()).map_err(io)?;
+            return Ok(guard);
+        }
+    }
+
+    /// Renames the temporary file onto `target`.
+    fn commit(mut self, target: &Path) -> Result<(), ExportError> {
+        let Some(tmp) = self.path.take() else {
+            return Ok(());
+        };
+        std::fs::rename(&tmp, target).map_err(|source| {
+            let _ = std::fs::remove_file(&tmp);
+            ExportError::Io {
+                path: target.to_path_buf(),
+                source,
+            }
+        })
+    }
+}
+
+impl Drop for TempFile {
+    fn drop(&mut self) {
+        if let Some(tmp) = self.path.take() {
+            let _ = std::fs::remove_file(tmp);
+        }
+    }
+}
+
+/// Writes `path` atomically: a temporary file filled by `fill`, then a rename.
+fn write_atomic(path: &Path, fill: impl FnOnce(&mut std::fs::File) -> std::io::Result<()>) -> Result<(), ExportError> {
+    TempFile::write(path, fill)?.commit(path)
+}
+
+/// A float as JSON: the exact decimal of its `f32` value (so it reads back bit-exactly both as
+/// `f32` and as `f64`, as validators compare `min`/`max`).
+fn num(x: f32) -> Value {
+    json!(x as f64)
+}
+
+/// The stored `TEXCOORD_0` `v'` for a material `v`: one whose loader flip `1 − v'` (in `f32`)
+/// gives back `v` bit-exactly when such a value lies within a few ulps of `1 − v`.
+fn flip_v(v: f32) -> f32 {
+    let w = 1.0 - v;
+    let back = |c: f32| (1.0 - c).to_bits() == v.to_bits();
+    if back(w) {
+        return w;
+    }
+    let (mut up, mut down) = (w, w);
+    for _ in 0..4 {
+        up = up.next_up();
+        down = down.next_down();
+        for c in [up, down] {
+            if back(c) {
+                return c;
+            }
+        }
+    }
+    w
+}
+
+/// Percent-encodes a file name for a relative glTF URI.
+fn percent_encode(name: &str) -> String {
+    let mut out = String::with_capacity(name.len());
+    for b in name.bytes() {
+        if b.is_ascii_alphanumeric() || matches!(b, b'-' | b'_' | b'.' | b'~') {
+            out.push(b as char);
+        } else {
+            out.push_str(&format!("%{b:02X}"));
+        }
+    }
+    out
+}
+
+/// The glTF JSON and the binary buffer of `scene`; `uri` names the external buffer (`.gltf`),
+/// `None` for the GLB binary chunk.
+fn build(
+    scene: &Scene,
+    lightmap_uvs: &[[Vec2; 3]],
+    path: &Path,
+    uri: Option<&str>,
+) -> Result<(Value, Vec<u8>), ExportError> {
+    let tris = &scene.triangles;
+    let n = tris.len();
+    if n == 0 {
+        return Err(ExportError::NoTriangles(path.to_path_buf()));
+    }
+    if lightmap_uvs.len() != n {
+        return Err(ExportError::UvCount {
+            path: path.to_path_buf(),
+            triangles: n,
+            uvs: lightmap_uvs.len(),
+        });
+    }
+    let non_finite = |triangle, what| ExportError::NonFinite {
+        path: path.to_path_buf(),
+        triangle,
+        what,
+    };
+    for (i, (t, luv)) in tris.iter().zip(lightmap_uvs).enumerate() {
+        if !t.positions.iter().all(|p| p.is_finite()) {
+            return Err(non_finite(i, "position"));
+        }
+        if !t.normals.iter().all(|p| p.is_finite()) {
+            return Err(non_finite(i, "normal"));
+        }
+        if !t.uvs.iter().all(|p| p.is_finite()) {
+            return Err(non_finite(i, "material UV"));
+        }
+        if !luv.iter().all(|p| p.is_finite()) {
+            return Err(non_finite(i, "lightmap UV"));
+        }
+        if t.material as usize >= scene.materials.len() {
+            return Err(ExportError::Material {
+                path: path.to_path_buf(),
+                triangle: i,
+                material: t.material,
+                materials: scene.materials.len(),
+            });
+        }
+    }
+
+    // The vertex data: four tightly packed sections (one bufferView each), three vertices per
+    // triangle in the scene's order. Every element is a multiple of 4 bytes, so every section
+    // and every accessor offset is 4-aligned.
+    let verts = 3 * n;
+    let mut bin: Vec<u8> = Vec::with_capacity(verts * (12 + 12 + 8 + 8));
+    let put = |bin: &mut Vec<u8>, xs: &[f32]| xs.iter().for_each(|x| bin.extend_from_slice(&x.to_le_bytes()));
+    for t in tris {
+        for p in t.positions {
+            put(&mut bin, &p.to_array());
+        }
+    }
+    for t in tris {
+        for nrm in t.normals {
+            put(&mut bin, &unit_normal(nrm, t.normal()).to_array());
+        }
+    }
+    for t in tris {
+        for uv in t.uvs {
+            put(&mut bin, &[uv.x, flip_v(uv.y)]);
+        }
+    }
+    for luv in lightmap_uvs {
+        for uv in luv {
+            put(&mut bin, &uv.to_array());
+        }
+    }
+    let sections = [
+        (12usize, "positions"),
+        (12, "normals"),
+        (8, "TEXCOORD_0"),
+        (8, "TEXCOORD_1"),
+    ];
+    let mut buffer_views = Vec::new();
+    let mut offset = 0usize;
+    for (size, name) in sections {
+        buffer_views.push(json!({
+            "buffer": 0, "byteOffset": offset, "byteLength": size * verts,
+            "target": ARRAY_BUFFER, "name": name,
+        }));
+        offset += size * verts;
+    }
+
+    // Textures used by a material, embedded as PNG after the vertex data.
+    let mut images = Vec::new();
+    let mut image_of_texture: Vec<Option<usize>> = vec![None; scene.textures.len()];
+    let mut materials = Vec::with_capacity(scene.materials.len());
+    for (mi, m) in scene.materials.iter().enumerate() {
+        let bad = |message: String| ExportError::BadMaterial {
+            path: path.to_path_buf(),
+            material: mi,
+            name: m.name.clone(),
+            message,
+        };
+        if !m.albedo.is_finite() {
+            return Err(bad(format!("non-finite albedo {}", m.albedo)));
+        }
+        let a = m.albedo.clamp(Vec3::ZERO, Vec3::ONE);
+        let mut pbr = Map::new();
+        pbr.insert("baseColorFactor".into(), json!([num(a.x), num(a.y), num(a.z), 1.0]));
+        pbr.insert("metallicFactor".into(), json!(0.0));
+        pbr.insert("roughnessFactor".into(), json!(1.0));
+        if let Some(ti) = m.texture {
+            let slot = image_of_texture.get_mut(ti as usize).ok_or_else(|| {
+                bad(format!(
+                    "texture {ti} out of range (the scene has {})",
+                    scene.textures.len()
+                ))
+            })?;
+            let image = match *slot {
+                Some(i) => i,
+                None => {
+                    let png = png_bytes(&scene.textures[ti as usize]).map_err(|e| bad(format!("texture {ti}: {e}")))?;
+                    while !bin.len().is_multiple_of(4) {
+                        bin.push(0);
+                    }
+                    buffer_views.push(json!({ "buffer": 0, "byteOffset": bin.len(), "byteLength": png.len() }));
+                    bin.extend_from_slice(&png);
+                    images.push(json!({ "bufferView": buffer_views.len() - 1, "mimeType": "image/png" }));
+                    *slot = Some(images.len() - 1);
+                    images.len() - 1
+                }
+            };
+            pbr.insert("baseColorTexture".into(), json!({ "index": image, "texCoord": 0 }));
+        }
+        materials.push(json!({ "name": m.name, "pbrMetallicRoughness": pbr }));
+    }
+    while !bin.len().is_multiple_of(4) {
+        bin.push(0);
+    }
+
+    // One primitive per run of consecutive triangles with the same material.
+    let mut accessors = Vec::new();
+    let mut primitives = Vec::new();
+    let mut start = 0;
+    while start < n {
+        let material = tris[start].material;
+        let end = start + tris[start..].iter().take_while(|t| t.material == material).count();
+        let (first, count) = (3 * start, 3 * (end - start));
+        let (mut lo, mut hi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
+        for t in &tris[start..end] {
+            for p in t.positions {
+                lo = lo.min(p);
+                hi = hi.max(p);
+            }
+        }
+        let mut attributes = Map::new();
+        for (view, (size, semantic)) in [(12, "POSITION"), (12, "NORMAL"), (8, "TEXCOORD_0"), (8, "TEXCOORD_1")]
+            .into_iter()
+            .enumerate()
+        {
+            let mut acc = json!({
+                "bufferView": view, "byteOffset": first * size, "componentType": FLOAT,
+                "count": count, "type": if size == 12 { "VEC3" } else { "VEC2" },
+            });
+            if semantic == "POSITION" {
+                acc["min"] = json!([num(lo.x), num(lo.y), num(lo.z)]);
+                acc["max"] = json!([num(hi.x), num(hi.y), num(hi.z)]);
+            }
+            accessors.push(acc);
+            attributes.insert(semantic.into(), json!(accessors.len() - 1));
+        }
+        primitives.push(json!({ "attributes": attributes, "material": material, "mode": 4 }));
+        start = end;
+    }
+
+    let name = path
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "scene".into());
+    let mut buffer = json!({ "byteLength": bin.len() });
+    if let Some(uri) = uri {
+        buffer["uri"] = json!(uri);
+    }
+    let mut root = json!({
+        "asset": { "version": "2.0", "generator": concat!("prm-scene ", env!("CARGO_PKG_VERSION")) },
+        "scene": 0,
+        "scenes": [{ "nodes": [0] }],
+        "nodes": [{ "mesh": 0, "name": name }],
+        "meshes": [{ "name": name, "primitives": primitives }],
+        "materials": materials,
+        "accessors": accessors,
+        "bufferViews": buffer_views,
+        "buffers": [buffer],
+    });
+    if !images.is_empty() {
+        let textures: Vec<Value> = (0..images.len())
+            .map(|i| json!({ "sampler": 0, "source": i }))
+            .collect();
+        root["images"] = json!(images);
+        root["textures"] = json!(textures);
+        // Repeat wrapping and bilinear filtering, as the baker samples.
+        root["samplers"] = json!([{ "magFilter": 9729, "minFilter": 9987, "wrapS": 10497, "wrapT": 10497 }]);
+    }
+    Ok((root, bin))
+}
+
+/// A unit shading normal: `n` when already unit length (kept bit-exact), else normalised, else
+/// the face normal `face`, else +Y (a degenerate face).
+fn unit_normal(n: Vec3, face: Vec3) -> Vec3 {
+    if (n.length_squared() - 1.0).abs() <= 1e-4 {
+        return n;
+    }
+    let u = n.normalize_or_zero();
+    if u != Vec3::ZERO {
+        u
+    } else if face != Vec3::ZERO {
+        face
+    } else {
+        Vec3::Y
+    }
+}
+
+/// A texture encoded as an 8-bit RGB PNG.
+fn png_bytes(t: &crate::Texture) -> Result<Vec<u8>, String> {
+    if t.width == 0 || t.height == 0 {
+        return Err(format!("empty ({}×{})", t.width, t.height));
+    }
+    let expected = t.width as u64 * t.height as u64;
+    if t.texels.len() as u64 != expected {
+        return Err(format!(
+            "{} texels for {}×{} = {expected}",
+            t.texels.len(),
+            t.width,
+            t.height
+        ));
+    }
+    let flat: Vec<u8> = t.texels.iter().flatten().copied().collect();
+    let img = image::RgbImage::from_raw(t.width, t.height, flat).ok_or("texel buffer of the wrong size")?;
+    let mut out = std::io::Cursor::new(Vec::new());
+    img.write_to(&mut out, image::ImageFormat::Png)
+        .map_err(|e| e.to_string())?;
+    Ok(out.into_inner())
+}
+
+/// A GLB container: 12-byte header, the JSON chunk padded with spaces, the BIN chunk.
+fn glb_bytes(path: &Path, json: &Value, bin: &[u8]) -> Result<Vec<u8>, ExportError> {
+    let mut text = serde_json::to_vec(json).map_err(|e| ExportError::Io {
+        path: path.to_path_buf(),
+        source: e.into(),
+    })?;
+    while !text.len().is_multiple_of(4) {
+        text.push(b' ');
+    }
+    let total = 12 + 8 + text.len() as u64 + 8 + bin.len() as u64;
+    if total > u32::MAX as u64 {
+        return Err(ExportError::TooLarge {
+            path: path.to_path_buf(),
+            bytes: total,
+            limit: u32::MAX as u64,
+        });
+    }
+    let mut out = Vec::with_capacity(total as usize);
+    out.extend_from_slice(b"glTF");
+    out.extend_from_slice(&2u32.to_le_bytes());
+    out.extend_from_slice(&(total as u32).to_le_bytes());
+    out.extend_from_slice(&(text.len() as u32).to_le_bytes());
+    out.extend_from_slice(b"JSON");
+    out.extend_from_slice(&text);
+    out.extend_from_slice(&(bin.len() as u32).to_le_bytes());
+    out.extend_from_slice(b"BIN\0");
+    out.extend_from_slice(bin);
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn flip_v_round_trips_through_the_loaders_flip() {
+        let exact = [0.0f32, 0.25, 0.5, 0.75, 1.0, 0.9, 1.7, 2.0, 3.25, 0.625, 3.0 / 1024.0];
+        let grid = (0..1000).map(|i| (i as f32 * 12_345.0).rem_euclid(16_777_216.0) / 16_777_216.0);
+        let upper = (0..1000).map(|i| 0.5 + i as f32 * 1.5 / 1000.0);
+        for v in exact.into_iter().chain(grid).chain(upper) {
+            let w = flip_v(v);
+            assert_eq!((1.0 - w).to_bits(), v.to_bits(), "v = {v}");
+        }
+        // Below 2⁻²⁴ no f32 near 1 flips back to v; the plain flip is kept.
+        assert_eq!(flip_v(1e-10), 1.0);
+        // Elsewhere the stored value is always within an ulp of the true flip.
+        for v in [0.1f32, 0.333, -0.3, 1e6, -7.5e-3] {
+            assert!(
+                (1.0 - flip_v(v) - v).abs() <= v.abs().max(1.0) * f32::EPSILON,
+                "v = {v}"
+            );
+        }
+    }
+
+    #[test]
+    fn a_failing_write_leaves_no_file() {
+        let dir = std::env::temp_dir().join(format!("prm-scene-export-atomic-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let target = dir.join("scene.glb");
+        let err = write_atomic(&target, |f| {
+            f.write_all(b"half a file")?;
+            Err(std::io::Error::other("disk full"))
+        })
+        .unwrap_err();
+        assert!(
+            err.to_string().contains("scene.glb") && err.to_string().contains("disk full"),
+            "{err}"
+        );
+        assert_eq!(
+            std::fs::read_dir(&dir).unwrap().count(),
+            0,
+            "no target and no temporary file"
+        );
+        // An existing target survives a failed replacement untouched.
+        std::fs::write(&target, b"old").unwrap();
+        write_atomic(&target, |_| Err(std::io::Error::other("boom"))).unwrap_err();
+        assert_eq!(std::fs::read(&target).unwrap(), b"old");
+        assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 1);
+        write_atomic(&target, |f| f.write_all(b"new")).unwrap();
+        assert_eq!(std::fs::read(&target).unwrap(), b"new");
+        assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 1);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn percent_encoding_of_buffer_names() {
+        assert_eq!(percent_encode("a b%.bin"), "a%20b%25.bin");
+        assert_eq!(percent_encode("é.bin"), "%C3%A9.bin");
+    }
+}
