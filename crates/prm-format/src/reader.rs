@@ -1,4 +1,8 @@
 //! Validating archive reader: `Archive` over a file, a byte slice or any `Read + Seek`.
+//!
+//! Over 600 lines on purpose: every section's bounds and size checks sit next to the read they
+//! guard (hostile sizes are refused before any allocation), so splitting by section would
+//! separate checks from reads.
 
 use std::fs::File;
 use std::io::{BufReader, Read, Seek, SeekFrom};

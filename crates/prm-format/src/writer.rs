@@ -1,5 +1,9 @@
 //! Streaming, atomic archive writer: panes are encoded and compressed tile by tile.
 //!
+//! Over 600 lines on purpose: the destination checks, the temporary-file discipline and the
+//! section writers share one invariant (nothing but a complete archive ever appears at the
+//! destination, formats/prm.md §9), which is easiest to audit in one file.
+//!
 //! Decisions about the destination and the temporary file:
 //!
 //! * **Symlinks are written through.** A destination that is a symbolic link

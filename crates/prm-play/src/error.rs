@@ -64,6 +64,9 @@ pub enum PlayError {
         /// What is wrong.
         message: String,
     },
+    /// Writing the exported lightmaps or scene failed.
+    #[error(transparent)]
+    Export(prm_scene::ExportError),
     /// Writing an image failed.
     #[error("cannot write {path}: {message}")]
     Output {

@@ -5,6 +5,7 @@
 //! the kept panes), and [`shade`] shades every pixel as albedo/π × (direct + indirect)
 //! irradiance, in linear HDR. See [`Renderer`].
 //!
+//! [`export`] writes static lightmaps and the scene for engines that take only those.
 //! [`open`] loads an archive and its scene (refusing an archive baked for other geometry),
 //! [`window`] presents frames in a window (winit, orbit camera),
 //! [`animation`] reads keyframed light and camera paths, [`output`] writes EXR and PNG images.
@@ -15,6 +16,7 @@ mod renderer;
 pub mod shade;
 
 pub mod animation;
+pub mod export;
 pub mod output;
 pub mod present;
 

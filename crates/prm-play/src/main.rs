@@ -60,6 +60,12 @@ struct Args {
     /// faded by a smoothstep (0: hard cut).
     #[arg(long, default_value_t = 0.25, value_parser = non_negative, allow_negative_numbers = true)]
     fade_band: f32,
+    /// Write static lightmaps for the first frame's lights into this directory and exit (no
+    /// window): indirect.exr and irradiance.exr (direct + indirect, W/m² per lightmap texel) and
+    /// scene.gltf + scene.bin with the lightmap UVs as TEXCOORD_1, for engines that take only
+    /// baked lightmaps.
+    #[arg(long, value_name = "DIR")]
+    export: Option<PathBuf>,
     /// Exposure of the tone-mapped PNG (multiplies radiance before clamping and sRGB).
     #[arg(long, default_value_t = 1.0, value_parser = non_negative, allow_negative_numbers = true)]
     exposure: f32,
@@ -87,7 +93,8 @@ fn main() -> std::process::ExitCode {
 }
 
 fn run() -> Result<()> {
-    let args = Args::parse();
+    let mut args = Args::parse();
+    args.headless |= args.export.is_some();
     if args.headless {
         prm_gpu_kit::silence_wayland_probe();
     }
@@ -160,6 +167,18 @@ fn run() -> Result<()> {
         .with_context(|| format!("playing {}", args.archive.display()))?;
     if args.timings.is_some() && !renderer.has_timestamps() {
         eprintln!("note: this device has no timestamp queries; --timings records CPU frame times only");
+    }
+    if let Some(dir) = &args.export {
+        let lights = match &animation {
+            Some(a) if !a.lights.is_empty() => a.lights_at(a.time(0)),
+            _ => base_lights.clone(),
+        };
+        let e = prm_play::export::export(&mut renderer, &scene, &lights, dir)
+            .with_context(|| format!("exporting lightmaps to {}", dir.display()))?;
+        for p in [&e.indirect, &e.irradiance, &e.gltf] {
+            eprintln!("wrote {}", p.display());
+        }
+        return Ok(());
     }
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
     let mut frames = Vec::new();

@@ -1,4 +1,6 @@
 //! Integration tests of the player on Vulkan (lavapipe): GPU blend vs CPU, mode consistency,
+//!
+//! Long on purpose: one test per behaviour of the player, each with its own setup spelled out.
 //! golden Cornell box frame, top-K selection, fingerprint check, multi-light animation, CLI,
 //! window mode under Xvfb.
 

@@ -37,7 +37,9 @@
 #![warn(missing_docs)]
 
 mod blend;
+mod irradiance;
 mod lights;
+mod options;
 mod rank;
 mod select;
 mod shadow;
@@ -46,10 +48,12 @@ pub mod synthetic;
 mod weights;
 
 use prm_format::Archive;
-use prm_gpu_kit::{pipeline, readback, ErrorScopes, GpuError, PassTimer};
+use prm_gpu_kit::{pipeline, readback, ErrorScopes, PassTimer};
 use prm_scene::{Aabb, Light, Scene};
 
+pub use irradiance::DILATE_STEPS;
 pub use lights::{look_to, orthographic, perspective, shadow_views, SPOT_SINGLE_VIEW_MAX_DEG};
+pub use options::{archive_top_k, RuntimeError, RuntimeOptions, MAX_SHADOW_RESOLUTION};
 pub use shadow::SHADOW_FORMAT;
 pub use shared::{
     GpuCluster, GpuEffective, GpuEntry, GpuFrame, GpuLight, GpuSelected, GpuView, GpuWeight, LightKind, LIGHTS_WGSL,
@@ -64,140 +68,11 @@ use weights::WeightsPass;
 
 /// Most lights a frame may have.
 pub const MAX_LIGHTS: usize = 256;
-/// Largest shadow-map side [`RuntimeOptions::validate`] accepts: a point light's six faces take
-/// 6 × 8192² × 4 bytes = 1.5 GiB of depth at this size; beyond it lavapipe runs out of memory
-/// with a single light.
-pub const MAX_SHADOW_RESOLUTION: u32 = 8192;
 /// Names of the timed passes in frame order, for a [`PassTimer`] handed to [`Runtime::encode`].
 pub const PASS_NAMES: [&str; 5] = ["shadow", "weights", "rank", "select", "blend"];
 /// Format of the lightmap [`Runtime::lightmap`] (not filterable everywhere: sample it with
 /// `textureLoad` and filter by hand, as `prm-play`'s shading does).
 pub const LIGHTMAP_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
-
-/// Why the run time could not load an archive or run a frame.
-#[derive(Debug, thiserror::Error)]
-#[non_exhaustive]
-pub enum RuntimeError {
-    /// A GPU error (validation, out of memory, device lost).
-    #[error(transparent)]
-    Gpu(#[from] GpuError),
-    /// A pane of the archive could not be read.
-    #[error("cannot read pane {pane} of the archive")]
-    Pane {
-        /// The pane (cluster) index.
-        pane: usize,
-        /// The reader's reason.
-        source: prm_format::Error,
-    },
-    /// The archive and the scene disagree.
-    #[error("archive does not fit the scene: {0}")]
-    Mismatch(String),
-    /// More panes than the device holds in one texture array.
-    #[error("the archive has {panes} panes but this GPU holds at most {max} texture layers")]
-    TooManyPanes {
-        /// Panes in the archive.
-        panes: usize,
-        /// The device's `max_texture_array_layers`.
-        max: u32,
-    },
-    /// More lights than [`MAX_LIGHTS`].
-    #[error("{count} lights, at most {MAX_LIGHTS} are supported")]
-    TooManyLights {
-        /// Lights given.
-        count: usize,
-    },
-    /// An option is out of range for the run time or this device.
-    #[error("{option}: {message}")]
-    Option {
-        /// The [`RuntimeOptions`] field.
-        option: &'static str,
-        /// What is wrong and which limit it breaks.
-        message: String,
-    },
-}
-
-/// Run-time settings.
-#[derive(Clone, Debug, PartialEq)]
-pub struct RuntimeOptions {
-    /// Clusters kept per frame.
-    pub top_k: u32,
-    /// Shadow-map side in texels (every view).
-    pub shadow_resolution: u32,
-    /// Fade band: kept clusters whose score is within `band × threshold` above the threshold
-    /// (the first dropped cluster's score) are faded by a smoothstep.
-    pub fade_band: f32,
-    /// Shadow lookups move the point this many shadow texels along its normal.
-    pub normal_offset: f32,
-    /// Depth tolerance of a shadow lookup, in shadow texels (world size at the point).
-    pub depth_bias: f32,
-}
-
-impl RuntimeOptions {
-    /// Top K when neither the caller nor the archive's `params.top_k` says otherwise.
-    pub const DEFAULT_TOP_K: u32 = 32;
-
-    /// The defaults with the top K the archive asks for ([`archive_top_k`]).
-    pub fn for_archive<R: std::io::Read + std::io::Seek>(archive: &Archive<R>) -> RuntimeOptions {
-        RuntimeOptions {
-            top_k: archive_top_k(archive),
-            ..RuntimeOptions::default()
-        }
-    }
-
-    /// Checks the options against `limits` before any GPU allocation, naming the field and the
-    /// limit it breaks.
-    pub fn validate(&self, limits: &wgpu::Limits) -> Result<(), RuntimeError> {
-        let bad = |option: &'static str, message: String| Err(RuntimeError::Option { option, message });
-        let max_dim = limits.max_texture_dimension_2d;
-        let max_shadow = max_dim.min(MAX_SHADOW_RESOLUTION);
-        if !(16..=max_shadow).contains(&self.shadow_resolution) {
-            return bad(
-                "shadow_resolution",
-                format!(
-                    "{} is outside 16..={max_shadow} (the least of this device's max_texture_dimension_2d \
-                     {max_dim} and {MAX_SHADOW_RESOLUTION}, where one point light's six faces take 1.5 GiB)",
-                    self.shadow_resolution
-                ),
-            );
-        }
-        if self.top_k == 0 {
-            return bad("top_k", "must be at least 1".into());
-        }
-        for (option, v) in [
-            ("fade_band", self.fade_band),
-            ("normal_offset", self.normal_offset),
-            ("depth_bias", self.depth_bias),
-        ] {
-            if !(v.is_finite() && v >= 0.0) {
-                return bad(option, format!("{v} must be a finite number >= 0"));
-            }
-        }
-        Ok(())
-    }
-}
-
-impl Default for RuntimeOptions {
-    fn default() -> Self {
-        RuntimeOptions {
-            top_k: RuntimeOptions::DEFAULT_TOP_K,
-            shadow_resolution: 512,
-            fade_band: 0.25,
-            normal_offset: 1.5,
-            depth_bias: 1.5,
-        }
-    }
-}
-
-/// The top K an archive asks for (`params.top_k`), else [`RuntimeOptions::DEFAULT_TOP_K`].
-pub fn archive_top_k<R: std::io::Read + std::io::Seek>(archive: &Archive<R>) -> u32 {
-    archive
-        .metadata()
-        .params
-        .get("top_k")
-        .and_then(|v| v.as_u64())
-        .map(|k| k.clamp(1, u32::MAX as u64) as u32)
-        .unwrap_or(RuntimeOptions::DEFAULT_TOP_K)
-}
 
 /// Which shadow maps a frame's weights read.
 #[derive(Clone, Copy, Debug)]
@@ -264,6 +139,8 @@ pub struct Runtime {
     vertex_count: u32,
     lightmap_uvs: Vec<[[f32; 2]; 3]>,
     positions: wgpu::Buffer,
+    /// Position, normal and lightmap UV of every corner, for [`Runtime::read_irradiance_lightmap`].
+    atlas_vertices: wgpu::Buffer,
     buffers: Buffers,
     lightmap: wgpu::Texture,
     lightmap_view: wgpu::TextureView,
@@ -313,6 +190,24 @@ impl Runtime {
             .flat_map(|t| t.positions.map(|p| p.to_array()))
             .collect();
         let vertex_count = positions.len() as u32;
+        let atlas_vertices: Vec<irradiance::AtlasVertex> = scene
+            .triangles
+            .iter()
+            .zip(&atlas.triangle_uvs)
+            .flat_map(|(t, uv)| {
+                (0..3).map(move |i| irradiance::AtlasVertex {
+                    position: t.positions[i].to_array(),
+                    normal: t.normals[i].to_array(),
+                    uv: uv[i],
+                })
+            })
+            .collect();
+        let atlas_vertices = pipeline::buffer_init(
+            device,
+            "prm atlas vertices",
+            bytemuck::cast_slice(&atlas_vertices),
+            wgpu::BufferUsages::VERTEX,
+        );
         let positions = pipeline::buffer_init(
             device,
             "prm positions",
@@ -419,6 +314,7 @@ impl Runtime {
             vertex_count,
             lightmap_uvs: atlas.triangle_uvs,
             positions,
+            atlas_vertices,
             buffers,
             lightmap,
             lightmap_view,
@@ -566,6 +462,31 @@ impl Runtime {
     pub fn read_lightmap(&self) -> Result<Vec<[f32; 3]>, RuntimeError> {
         let texels = readback::read_rgba32f(&self.device, &self.queue, &self.lightmap, 0)?;
         Ok(texels.into_iter().map(|[r, g, b, _]| [r, g, b]).collect())
+    }
+
+    /// The full irradiance (direct through the run time's shadow maps + indirect, W/m²) at every
+    /// lightmap texel (x, y) at `y·R + x`, for the frame last encoded with [`Shadows::Own`]:
+    /// what an engine that takes only static lightmaps bakes in. Texels outside every chart are
+    /// dilated from their neighbours [`DILATE_STEPS`] rings deep, 0 beyond. Waits for the device.
+    pub fn read_irradiance_lightmap(&self) -> Result<Vec<[f32; 3]>, RuntimeError> {
+        let d = self.direct_light_bindings();
+        let pass = irradiance::IrradiancePass::new(
+            &self.device,
+            &[
+                d.frame.as_entire_binding(),
+                d.lights.as_entire_binding(),
+                d.views.as_entire_binding(),
+                wgpu::BindingResource::TextureView(d.shadow_maps),
+                wgpu::BindingResource::TextureView(&self.lightmap_view),
+            ],
+        );
+        Ok(pass.render(
+            &self.device,
+            &self.queue,
+            &self.atlas_vertices,
+            self.vertex_count,
+            self.resolution,
+        )?)
     }
 
     /// Reads the last frame's cluster weights, scores, ranks and effective weights back.

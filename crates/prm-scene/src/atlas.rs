@@ -1,4 +1,8 @@
 //! Lightmap atlas: charts of connected, similarly oriented triangles, packed into one square
+//!
+//! Over 600 lines on purpose: charting, packing, conservative rasterisation and dilation share
+//! the texel-grid invariants listed in ARCHITECTURE.md (no texel shared by two charts, gutters,
+//! coverage of every triangle), which each step relies on the previous one to keep.
 //! texture with gutters; every covered texel centre becomes an *exit point*.
 //!
 //! Steps: (1) charts by flood fill over shared edges while a triangle's normal stays within

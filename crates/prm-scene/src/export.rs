@@ -1,5 +1,8 @@
 //! Static lightmap export, scene side: the flat scene written as glTF 2.0 with lightmap UVs as `TEXCOORD_1`.
 //!
+//! Over 600 lines on purpose: the glTF layout, its atomic write and the unit tests that check
+//! both in one place; a tenth of the file is unit tests.
+//!
 //! [`write_gltf`] writes a [`Scene`] for engines that take only baked lightmaps (Bevy's
 //! `Lightmap`, Godot, three.js): one node, one mesh, non-indexed triangles with `POSITION`,
 //! `NORMAL`, `TEXCOORD_0` (material UVs) and `TEXCOORD_1` (the lightmap UVs given). The format

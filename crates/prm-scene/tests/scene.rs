@@ -1,4 +1,6 @@
 //! Integration tests of scene loading and atlas building on our scenes, third-party scenes and bad input.
+//!
+//! Long on purpose: one test per scene and per malformed input, each spelled out.
 
 mod common;
 use common::temp_case;

@@ -1,0 +1,75 @@
+//! Static lightmap export (`prm_play::export`, `prm-play --export DIR`): the glTF reloads
+//! through our own loader as the same geometry with the same lightmap UVs, and the EXR maps are
+//! the run time's lightmaps.
+
+use std::path::Path;
+
+use glam::Vec3;
+use prm_play::synthetic::{cornell_box_path, write_archive, SyntheticParams};
+use prm_play::{PlayOptions, Renderer};
+use prm_scene::Light;
+
+fn read_exr(path: &Path) -> (usize, usize, Vec<[f32; 3]>) {
+    let image = exr::prelude::read_first_rgba_layer_from_file(
+        path,
+        |size, _| (size.0, size.1, vec![[0.0f32; 3]; size.0 * size.1]),
+        |(w, _, px), pos, (r, g, b, _a): (f32, f32, f32, f32)| px[pos.1 * *w + pos.0] = [r, g, b],
+    )
+    .unwrap();
+    image.layer_data.channel_data.pixels
+}
+
+#[test]
+fn exported_lightmaps_and_gltf_match_the_run_time_and_reload_as_the_same_scene() {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("prm-play-export");
+    std::fs::create_dir_all(&dir).unwrap();
+    let scene_path = cornell_box_path();
+    let scene = prm_scene::load(&scene_path).unwrap();
+    let archive_path = dir.join("cornell.prm");
+    write_archive(&scene, &scene_path, &archive_path, SyntheticParams::default()).unwrap();
+    let (mut archive, scene) = prm_play::open(&archive_path, None).unwrap();
+    let ctx = prm_play::open_vulkan().expect("a Vulkan device (apt-get install mesa-vulkan-drivers)");
+    let opts = PlayOptions {
+        width: 32,
+        height: 32,
+        ..Default::default()
+    };
+    let mut r = Renderer::new(ctx, &scene, &mut archive, opts).unwrap();
+    let lights = [Light::Point {
+        position: Vec3::new(0.28, 0.45, 0.28),
+        intensity: Vec3::splat(0.3),
+    }];
+    let out = prm_play::export::export(&mut r, &scene, &lights, &dir.join("out")).unwrap();
+
+    // The glTF is the same geometry with the run time's lightmap UVs, bit for bit.
+    let reloaded = prm_scene::load(&out.gltf).unwrap();
+    assert_eq!(reloaded.fingerprint(), scene.fingerprint());
+    assert_eq!(reloaded.materials_fingerprint(), scene.materials_fingerprint());
+    let uvs = reloaded.lightmap_uvs.as_ref().expect("TEXCOORD_1 read back");
+    let expected: Vec<[glam::Vec2; 3]> = r
+        .runtime()
+        .lightmap_uvs()
+        .iter()
+        .map(|t| t.map(glam::Vec2::from_array))
+        .collect();
+    assert_eq!(uvs, &expected);
+
+    // The maps: indirect is the run time's lightmap; the full map adds non-negative direct
+    // light, a lot of it (a point light inside the box lights most texels directly).
+    let res = r.runtime().lightmap_resolution() as usize;
+    let (w, h, indirect) = read_exr(&out.indirect);
+    assert_eq!((w, h), (res, res));
+    assert_eq!(indirect, r.read_lightmap().unwrap());
+    let (w, h, full) = read_exr(&out.irradiance);
+    assert_eq!((w, h), (res, res));
+    let sum = |m: &[[f32; 3]]| m.iter().flatten().map(|v| *v as f64).sum::<f64>();
+    assert!(full.iter().flatten().all(|v| v.is_finite() && *v >= 0.0));
+    assert!(
+        sum(&full) > 2.0 * sum(&indirect),
+        "direct {} vs indirect {}",
+        sum(&full),
+        sum(&indirect)
+    );
+    let lit = full.iter().zip(&indirect).filter(|(f, i)| f[0] > i[0] * 1.01).count();
+    assert!(lit > res * res / 4, "{lit} of {} texels get direct light", res * res);
+}

@@ -1,0 +1,158 @@
+//! The irradiance pass (`shaders/runtime/irradiance.wgsl`): the full irradiance, direct through
+//! the shadow maps plus indirect, at every lightmap texel, for engines that take only static
+//! lightmaps. Triangles are drawn in atlas space; texels no triangle's centre sample covers (the
+//! atlas's conservative edges and gutters) are then dilated from their covered neighbours on
+//! the CPU, [`DILATE_STEPS`] rings deep, so bilinear sampling at chart edges does not fetch black.
+
+use prm_gpu_kit::{pipeline, readback, GpuError};
+
+use crate::LIGHTMAP_FORMAT;
+
+/// Rings of texels filled around the covered ones: the atlas keeps charts at least two gutters
+/// apart, and a ring of 4 covers the default gutter's bilinear footprint on both sides.
+pub const DILATE_STEPS: usize = 4;
+
+/// A vertex of the pass: world position and normal, lightmap UV.
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+pub(crate) struct AtlasVertex {
+    pub position: [f32; 3],
+    pub normal: [f32; 3],
+    pub uv: [f32; 2],
+}
+
+/// Renders the irradiance lightmap.
+pub(crate) struct IrradiancePass {
+    pipeline: wgpu::RenderPipeline,
+    bind_group: wgpu::BindGroup,
+}
+
+impl IrradiancePass {
+    /// The pass reading `resources` (frame, lights, views, shadow maps, indirect lightmap).
+    pub fn new(device: &wgpu::Device, resources: &[wgpu::BindingResource]) -> IrradiancePass {
+        let module = pipeline::shader(
+            device,
+            "prm irradiance",
+            &[
+                crate::SHARED_WGSL,
+                crate::LIGHTS_WGSL,
+                include_str!("../../../shaders/runtime/irradiance.wgsl"),
+            ],
+        );
+        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("prm irradiance"),
+            layout: None,
+            vertex: wgpu::VertexState {
+                module: &module,
+                entry_point: Some("vs_main"),
+                compilation_options: Default::default(),
+                buffers: &[Some(wgpu::VertexBufferLayout {
+                    array_stride: std::mem::size_of::<AtlasVertex>() as u64,
+                    step_mode: wgpu::VertexStepMode::Vertex,
+                    attributes: &wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3, 2 => Float32x2],
+                })],
+            },
+            primitive: wgpu::PrimitiveState {
+                cull_mode: None,
+                ..Default::default()
+            },
+            depth_stencil: None,
+            multisample: Default::default(),
+            fragment: Some(wgpu::FragmentState {
+                module: &module,
+                entry_point: Some("fs_main"),
+                compilation_options: Default::default(),
+                targets: &[Some(LIGHTMAP_FORMAT.into())],
+            }),
+            multiview_mask: None,
+            cache: None,
+        });
+        let bind_group = pipeline::bind_group(device, "prm irradiance", &pipeline.get_bind_group_layout(0), resources);
+        IrradiancePass { pipeline, bind_group }
+    }
+
+    /// Renders `vertices` into a `resolution`² target, reads it back and dilates it.
+    pub fn render(
+        &self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        vertices: &wgpu::Buffer,
+        vertex_count: u32,
+        resolution: u32,
+    ) -> Result<Vec<[f32; 3]>, GpuError> {
+        let target = pipeline::texture(
+            device,
+            "prm irradiance",
+            [resolution, resolution, 1],
+            LIGHTMAP_FORMAT,
+            wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
+        );
+        let view = target.create_view(&Default::default());
+        let mut enc = device.create_command_encoder(&Default::default());
+        {
+            let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("prm irradiance"),
+                color_attachments: &[pipeline::color_attachment(&view)],
+                depth_stencil_attachment: None,
+                timestamp_writes: None,
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            pass.set_pipeline(&self.pipeline);
+            pass.set_bind_group(0, &self.bind_group, &[]);
+            pass.set_vertex_buffer(0, vertices.slice(..));
+            pass.draw(0..vertex_count, 0..1);
+        }
+        queue.submit([enc.finish()]);
+        let texels = readback::read_rgba32f(device, queue, &target, 0)?;
+        Ok(dilate(&texels, resolution as usize, DILATE_STEPS))
+    }
+}
+
+/// Fills uncovered texels (alpha 0) with the mean of their covered 8-neighbours, `steps` rings
+/// deep; texels still uncovered stay 0.
+pub(crate) fn dilate(texels: &[[f32; 4]], res: usize, steps: usize) -> Vec<[f32; 3]> {
+    let mut cur: Vec<[f32; 4]> = texels.to_vec();
+    for _ in 0..steps {
+        let prev = cur.clone();
+        for y in 0..res {
+            for x in 0..res {
+                if prev[y * res + x][3] > 0.0 {
+                    continue;
+                }
+                let (mut sum, mut n) = ([0.0f32; 3], 0);
+                for (dx, dy) in (-1i32..=1).flat_map(|dy| (-1i32..=1).map(move |dx| (dx, dy))) {
+                    let (nx, ny) = (x as i32 + dx, y as i32 + dy);
+                    if nx < 0 || ny < 0 || nx >= res as i32 || ny >= res as i32 {
+                        continue;
+                    }
+                    let t = prev[ny as usize * res + nx as usize];
+                    if t[3] > 0.0 {
+                        (0..3).for_each(|k| sum[k] += t[k]);
+                        n += 1;
+                    }
+                }
+                if n > 0 {
+                    let s = 1.0 / n as f32;
+                    cur[y * res + x] = [sum[0] * s, sum[1] * s, sum[2] * s, 1.0];
+                }
+            }
+        }
+    }
+    cur.into_iter().map(|[r, g, b, _]| [r, g, b]).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn dilation_fills_rings_around_covered_texels_only() {
+        let res = 7;
+        let mut t = vec![[0.0f32; 4]; res * res];
+        t[3 * res + 3] = [2.0, 4.0, 6.0, 1.0];
+        let d = super::dilate(&t, res, 2);
+        assert_eq!(d[3 * res + 3], [2.0, 4.0, 6.0]);
+        assert_eq!(d[2 * res + 2], [2.0, 4.0, 6.0], "first ring");
+        assert_eq!(d[res + 1], [2.0, 4.0, 6.0], "second ring");
+        assert_eq!(d[0], [0.0; 3], "beyond two rings");
+    }
+}

@@ -1,0 +1,136 @@
+//! The run time's options, with the checks that name a field and the device limit it breaks,
+//! and its error type.
+
+use prm_format::Archive;
+use prm_gpu_kit::GpuError;
+
+use crate::MAX_LIGHTS;
+
+/// Largest shadow-map side [`RuntimeOptions::validate`] accepts: a point light's six faces take
+/// 6 × 8192² × 4 bytes = 1.5 GiB of depth at this size; beyond it lavapipe runs out of memory
+/// with a single light.
+pub const MAX_SHADOW_RESOLUTION: u32 = 8192;
+/// Why the run time could not load an archive or run a frame.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum RuntimeError {
+    /// A GPU error (validation, out of memory, device lost).
+    #[error(transparent)]
+    Gpu(#[from] GpuError),
+    /// A pane of the archive could not be read.
+    #[error("cannot read pane {pane} of the archive")]
+    Pane {
+        /// The pane (cluster) index.
+        pane: usize,
+        /// The reader's reason.
+        source: prm_format::Error,
+    },
+    /// The archive and the scene disagree.
+    #[error("archive does not fit the scene: {0}")]
+    Mismatch(String),
+    /// More panes than the device holds in one texture array.
+    #[error("the archive has {panes} panes but this GPU holds at most {max} texture layers")]
+    TooManyPanes {
+        /// Panes in the archive.
+        panes: usize,
+        /// The device's `max_texture_array_layers`.
+        max: u32,
+    },
+    /// More lights than [`MAX_LIGHTS`].
+    #[error("{count} lights, at most {MAX_LIGHTS} are supported")]
+    TooManyLights {
+        /// Lights given.
+        count: usize,
+    },
+    /// An option is out of range for the run time or this device.
+    #[error("{option}: {message}")]
+    Option {
+        /// The [`RuntimeOptions`] field.
+        option: &'static str,
+        /// What is wrong and which limit it breaks.
+        message: String,
+    },
+}
+
+/// Run-time settings.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RuntimeOptions {
+    /// Clusters kept per frame.
+    pub top_k: u32,
+    /// Shadow-map side in texels (every view).
+    pub shadow_resolution: u32,
+    /// Fade band: kept clusters whose score is within `band × threshold` above the threshold
+    /// (the first dropped cluster's score) are faded by a smoothstep.
+    pub fade_band: f32,
+    /// Shadow lookups move the point this many shadow texels along its normal.
+    pub normal_offset: f32,
+    /// Depth tolerance of a shadow lookup, in shadow texels (world size at the point).
+    pub depth_bias: f32,
+}
+
+impl RuntimeOptions {
+    /// Top K when neither the caller nor the archive's `params.top_k` says otherwise.
+    pub const DEFAULT_TOP_K: u32 = 32;
+
+    /// The defaults with the top K the archive asks for ([`archive_top_k`]).
+    pub fn for_archive<R: std::io::Read + std::io::Seek>(archive: &Archive<R>) -> RuntimeOptions {
+        RuntimeOptions {
+            top_k: archive_top_k(archive),
+            ..RuntimeOptions::default()
+        }
+    }
+
+    /// Checks the options against `limits` before any GPU allocation, naming the field and the
+    /// limit it breaks.
+    pub fn validate(&self, limits: &wgpu::Limits) -> Result<(), RuntimeError> {
+        let bad = |option: &'static str, message: String| Err(RuntimeError::Option { option, message });
+        let max_dim = limits.max_texture_dimension_2d;
+        let max_shadow = max_dim.min(MAX_SHADOW_RESOLUTION);
+        if !(16..=max_shadow).contains(&self.shadow_resolution) {
+            return bad(
+                "shadow_resolution",
+                format!(
+                    "{} is outside 16..={max_shadow} (the least of this device's max_texture_dimension_2d \
+                     {max_dim} and {MAX_SHADOW_RESOLUTION}, where one point light's six faces take 1.5 GiB)",
+                    self.shadow_resolution
+                ),
+            );
+        }
+        if self.top_k == 0 {
+            return bad("top_k", "must be at least 1".into());
+        }
+        for (option, v) in [
+            ("fade_band", self.fade_band),
+            ("normal_offset", self.normal_offset),
+            ("depth_bias", self.depth_bias),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return bad(option, format!("{v} must be a finite number >= 0"));
+            }
+        }
+        Ok(())
+    }
+}
+
+impl Default for RuntimeOptions {
+    fn default() -> Self {
+        RuntimeOptions {
+            top_k: RuntimeOptions::DEFAULT_TOP_K,
+            shadow_resolution: 512,
+            fade_band: 0.25,
+            normal_offset: 1.5,
+            depth_bias: 1.5,
+        }
+    }
+}
+
+/// The top K an archive asks for (`params.top_k`), else [`RuntimeOptions::DEFAULT_TOP_K`].
+pub fn archive_top_k<R: std::io::Read + std::io::Seek>(archive: &Archive<R>) -> u32 {
+    archive
+        .metadata()
+        .params
+        .get("top_k")
+        .and_then(|v| v.as_u64())
+        .map(|k| k.clamp(1, u32::MAX as u64) as u32)
+        .unwrap_or(RuntimeOptions::DEFAULT_TOP_K)
+}
