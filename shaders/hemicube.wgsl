@@ -4,6 +4,10 @@
 // only their upper half (local z >= 0), stretched over the whole face. Clip w is the distance
 // along the face axis, so perspective division gives the face coordinates and depth.
 
+// Faces per VPL (prm-gpu's FACES): depth layer tile i holds face i % 5 of VPL i / 5.
+const HEMICUBE_FACES: u32 = 5u;
+
+// A VPL with its hemicube frame; prm-gpu's GpuVpl (crates/prm-gpu/src/vpl_depth.rs).
 struct Vpl {
     position: vec3<f32>,
     area: f32,

@@ -1,6 +1,11 @@
 // pane_gather: adds every VPL of a batch to its cluster's pane at every exit point, with hemicube
 // depth-map visibility. One thread per exit point; VPLs arrive sorted by cluster. Prepended with
-// hemicube.wgsl.
+// hemicube.wgsl and vpl.wgsl (the estimator and its bound). The structs are twins of
+// crates/prm-gpu/src/pane_gather.rs (GpuExit, GatherParams), checked there through naga.
+
+// How a depth map is read (prm-gpu's DepthFilter).
+const DEPTH_NEAREST: u32 = 0u;
+const DEPTH_PCF2X2: u32 = 1u;
 
 struct Exit {
     position: vec3<f32>,
@@ -13,7 +18,7 @@ struct Gather {
     exit_count: u32,
     vpl_count: u32,
     first_cluster: u32,
-    // 0: plain 1/r², 1: 1/max(r², value), 2: 1/(r² + value · area)
+    // VPL_BOUND_NONE, VPL_BOUND_CLAMP (value = d_min²) or VPL_BOUND_DISK (value = scale²/π)
     bound_kind: u32,
     bound_value: f32,
     near: f32,
@@ -24,7 +29,8 @@ struct Gather {
     bias_constant: f32,
     bias_slope: f32,
     texel_angle: f32,
-    // 0: nearest depth texel; 1: 2×2 percentage-closer filtering
+    // DEPTH_NEAREST: the depth texel under the receiver; DEPTH_PCF2X2: 2×2 percentage-closer
+    // filtering
     depth_filter: u32,
     // Face tiling of the depth layers (see vpl_depth.rs).
     face_resolution: u32,
@@ -38,22 +44,6 @@ struct Gather {
 @group(0) @binding(3) var<uniform> g: Gather;
 @group(0) @binding(4) var depth: texture_depth_2d_array;
 @group(0) @binding(5) var shadow: sampler_comparison;
-
-const INV_PI: f32 = 0.31830988618379067;
-
-fn inverse_square(r2: f32, area: f32) -> f32 {
-    switch g.bound_kind {
-        case 1u: {
-            return 1.0 / max(r2, g.bound_value);
-        }
-        case 2u: {
-            return 1.0 / (r2 + g.bound_value * area);
-        }
-        default: {
-            return 1.0 / r2;
-        }
-    }
-}
 
 fn visibility(j: u32, v: Vpl, x: Exit, cos_x: f32) -> f32 {
     let origin = v.position + v.normal * g.lift;
@@ -76,14 +66,14 @@ fn visibility(j: u32, v: Vpl, x: Exit, cos_x: f32) -> f32 {
     }
     // Stored depth is (w - near)·far / ((far - near)·w); compare in that space.
     let reference = (w - g.near) * g.far / ((g.far - g.near) * w);
-    // Face i = 5j + f sits in layer i / per_layer, tile i % per_layer (row-major).
-    let i = j * 5u + f;
+    // Face i = 5j + f (HEMICUBE_FACES = 5) sits in layer i / per_layer, tile i % per_layer (row-major).
+    let i = j * HEMICUBE_FACES + f;
     let per_layer = g.faces_per_row * g.faces_per_row;
     let slot = i % per_layer;
     let tile = vec2<f32>(f32(slot % g.faces_per_row), f32(slot / g.faces_per_row));
     let layer = i32(i / per_layer);
     let res = f32(g.face_resolution);
-    if (g.depth_filter == 1u) {
+    if (g.depth_filter == DEPTH_PCF2X2) {
         // Keep the 2×2 footprint inside the face's tile.
         let inside = clamp(uv, vec2<f32>(0.5 / res), vec2<f32>(1.0 - 0.5 / res));
         let at = (tile + inside) / f32(g.faces_per_row);
@@ -128,19 +118,12 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_
                 acc = vec3<f32>(0.0);
                 current = v.cluster;
             }
-            let d = v.position - x.position;
-            let r2 = dot(d, d);
-            if (r2 <= 0.0) {
+            // rgb: the unoccluded irradiance, a: cos θ_x (0 when either side faces away).
+            let e = vpl_irradiance(v, x.position, x.normal, g.bound_kind, g.bound_value);
+            if (e.a <= 0.0) {
                 continue;
             }
-            let r = sqrt(r2);
-            let cx = dot(x.normal, d) / r;
-            let cv = -dot(v.normal, d) / r;
-            if (cx <= 0.0 || cv <= 0.0) {
-                continue;
-            }
-            let e = v.power * (INV_PI * cx * cv * inverse_square(r2, v.area));
-            acc = acc + e * visibility(base + t, v, x, cx);
+            acc = acc + e.rgb * visibility(base + t, v, x, e.a);
         }
         workgroupBarrier();
     }

@@ -3,6 +3,7 @@
 // the stored depth is the standard perspective one, which the gather pass turns back into a
 // distance along the face axis before comparing with a bias in scene units.
 
+// prm-gpu's DepthFrame and FaceSelect (crates/prm-gpu/src/vpl_depth.rs), checked there through naga.
 struct DepthFrame {
     near: f32,
     far: f32,

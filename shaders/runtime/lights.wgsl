@@ -63,7 +63,18 @@ fn light_irradiance(i: u32, p: vec3<f32>, n: vec3<f32>) -> vec3<f32> {
 
 // Irradiance from light i at p, a point that stands for a disk of radius² `disk`: the
 // inverse square of point and spot lights becomes 1 / (r² + disk) (0: the plain point value).
+// The receiving normal n is also taken for the surface's geometric normal; see
+// light_irradiance_ng where they differ.
 fn light_irradiance_disk(i: u32, p: vec3<f32>, n: vec3<f32>, disk: f32) -> vec3<f32> {
+    return light_irradiance_ng(i, p, n, n, disk);
+}
+
+// light_irradiance_disk on a surface of unit geometric normal ng shaded with unit normal n: zero
+// unless the light is above both, as prm-trace's bounded_irradiance (crates/prm-trace/src/direct.rs,
+// tested against this in tests/estimators.rs). A light below the geometric plane lies behind the
+// surface itself, which the shadow map (normal-offset along n) does not see: without the ng test
+// such a light leaks onto a smooth-shaded surface past its terminator.
+fn light_irradiance_ng(i: u32, p: vec3<f32>, ng: vec3<f32>, n: vec3<f32>, disk: f32) -> vec3<f32> {
     let l = lights[i];
     var wi: vec3<f32>;
     var scale: vec3<f32>;
@@ -81,20 +92,28 @@ fn light_irradiance_disk(i: u32, p: vec3<f32>, n: vec3<f32>, disk: f32) -> vec3<
         }
     }
     let cos_t = dot(n, wi);
-    if cos_t <= 0.0 {
+    if cos_t <= 0.0 || dot(ng, wi) <= 0.0 {
         return vec3<f32>(0.0);
     }
     return scale * cos_t * visibility(l, p, n, dist);
 }
 
+// Direct irradiance (RGB, W/m²) at `p` with unit normal `n` from every light.
 fn direct_irradiance(p: vec3<f32>, n: vec3<f32>) -> vec3<f32> {
     return direct_irradiance_disk(p, n, 0.0);
 }
 
+// direct_irradiance at a point standing for a disk of radius² `disk` (see light_irradiance_disk).
 fn direct_irradiance_disk(p: vec3<f32>, n: vec3<f32>, disk: f32) -> vec3<f32> {
+    return direct_irradiance_ng(p, n, n, disk);
+}
+
+// direct_irradiance_disk with a geometric normal ng apart from the shading normal n (see
+// light_irradiance_ng).
+fn direct_irradiance_ng(p: vec3<f32>, ng: vec3<f32>, n: vec3<f32>, disk: f32) -> vec3<f32> {
     var e = vec3<f32>(0.0);
     for (var i = 0u; i < frame.light_count; i++) {
-        e += light_irradiance_disk(i, p, n, disk);
+        e += light_irradiance_ng(i, p, ng, n, disk);
     }
     return e;
 }

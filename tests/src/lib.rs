@@ -22,3 +22,137 @@ pub fn temp_dir(name: &str) -> PathBuf {
 pub fn gpu() -> GpuContext {
     GpuContext::new(Backend::Vulkan).expect("a Vulkan adapter (apt-get install mesa-vulkan-drivers)")
 }
+
+/// Runs the compute kernel `main` of the module `parts` (joined in order, see
+/// [`prm_gpu_kit::pipeline::compute`]) once per element of `count` (workgroups of 64 along x),
+/// with group 0 bound to `resources` in binding order, and returns the bytes of `output` (a
+/// storage buffer made with `COPY_SRC`). Any validation error of the shader or the dispatch fails
+/// the test with wgpu's message.
+pub fn run_kernel(
+    ctx: &GpuContext,
+    label: &'static str,
+    parts: &[&str],
+    resources: &[wgpu::BindingResource],
+    count: u32,
+    output: &wgpu::Buffer,
+) -> Vec<u8> {
+    use prm_gpu_kit::{pipeline, readback, ErrorScopes};
+    let device = &ctx.device;
+    let scope = ErrorScopes::push(device);
+    let kernel = pipeline::compute(device, label, parts);
+    let group = pipeline::compute_group(device, label, &kernel, resources);
+    let mut encoder = device.create_command_encoder(&Default::default());
+    {
+        let mut pass = encoder.begin_compute_pass(&Default::default());
+        pass.set_pipeline(&kernel);
+        pass.set_bind_group(0, &group, &[]);
+        pass.dispatch_workgroups(count.div_ceil(64), 1, 1);
+    }
+    ctx.queue.submit([encoder.finish()]);
+    let bytes = readback::read_buffer(device, &ctx.queue, output, output.size()).unwrap_or_else(|e| panic!("{e}"));
+    scope.pop(label).unwrap_or_else(|e| panic!("{e}"));
+    ctx.take_uncaptured().unwrap_or_else(|e| panic!("{e}"));
+    bytes
+}
+
+/// A `Depth32Float` 2D array of `layers` layers of `side`² texels, every texel cleared to 1.0
+/// (the far plane: a shadow lookup finds everything lit), viewed whole.
+pub fn cleared_depth_array(ctx: &GpuContext, side: u32, layers: u32) -> wgpu::TextureView {
+    use prm_gpu_kit::pipeline;
+    let texture = pipeline::texture(
+        &ctx.device,
+        "cleared depth",
+        [side, side, layers.max(1)],
+        wgpu::TextureFormat::Depth32Float,
+        wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
+    );
+    let mut encoder = ctx.device.create_command_encoder(&Default::default());
+    for layer in 0..layers.max(1) {
+        let view = pipeline::layer_view(&texture, layer);
+        encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some("clear depth"),
+            color_attachments: &[],
+            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                view: &view,
+                depth_ops: Some(wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(1.0),
+                    store: wgpu::StoreOp::Store,
+                }),
+                stencil_ops: None,
+            }),
+            timestamp_writes: None,
+            occlusion_query_set: None,
+            multiview_mask: None,
+        });
+    }
+    ctx.queue.submit([encoder.finish()]);
+    pipeline::array_view(&texture)
+}
+
+/// Compares the values of an estimator on the CPU and on the GPU, input by input and channel by
+/// channel: they agree within `relative · max(|cpu|, |gpu|) + absolute · scale`, where `scale`
+/// is the input's own magnitude (the value before its cosines, so that a result that is zero on
+/// one side and a rounding error on the other passes). Keeps the worst case for the report.
+#[derive(Debug, Default)]
+pub struct Agreement {
+    /// Inputs compared.
+    pub inputs: usize,
+    /// Inputs where either side is above the absolute tolerance.
+    pub nonzero: usize,
+    /// Inputs that did not agree, with their description and both values.
+    pub failures: Vec<String>,
+    /// Largest `|cpu − gpu| / max(|cpu|, |gpu|)` over the channels where both are above the
+    /// absolute tolerance, and the input it was found at.
+    pub worst_relative: (f32, String),
+}
+
+impl Agreement {
+    /// Relative tolerance of every comparison.
+    pub const RELATIVE: f32 = 1e-4;
+    /// Absolute tolerance, as a fraction of the input's scale.
+    pub const ABSOLUTE: f32 = 1e-5;
+
+    /// Compares one input's values (`describe` names the input for the report).
+    pub fn check(&mut self, cpu: glam::Vec3, gpu: glam::Vec3, scale: f32, describe: impl FnOnce() -> String) {
+        self.inputs += 1;
+        let floor = Self::ABSOLUTE * scale.abs();
+        let mut ok = true;
+        let mut worst = 0.0f32;
+        if cpu.abs().max(gpu.abs()).max_element() > floor {
+            self.nonzero += 1;
+        }
+        for (a, b) in cpu.to_array().into_iter().zip(gpu.to_array()) {
+            let m = a.abs().max(b.abs());
+            let d = (a - b).abs();
+            ok &= d <= Self::RELATIVE * m + floor && a.is_finite() == b.is_finite();
+            if m > floor {
+                worst = worst.max(d / m);
+            }
+        }
+        if !ok || worst > self.worst_relative.0 {
+            let text = describe();
+            if worst > self.worst_relative.0 {
+                self.worst_relative = (worst, text.clone());
+            }
+            if !ok {
+                self.failures
+                    .push(format!("{text}: cpu {cpu} gpu {gpu} (scale {scale})"));
+            }
+        }
+    }
+
+    /// Prints the summary under `name` and fails with the first failures if there are any.
+    pub fn assert(&self, name: &str) {
+        eprintln!(
+            "{name}: {} inputs ({} not zero), largest relative difference {:.3e} at {}",
+            self.inputs, self.nonzero, self.worst_relative.0, self.worst_relative.1
+        );
+        assert!(
+            self.failures.is_empty(),
+            "{name}: {} of {} inputs differ, first ones:\n{}",
+            self.failures.len(),
+            self.inputs,
+            self.failures.iter().take(20).cloned().collect::<Vec<_>>().join("\n")
+        );
+    }
+}

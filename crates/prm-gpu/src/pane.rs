@@ -25,7 +25,7 @@ use prm_scene::{ExitPoint, Scene};
 use prm_trace::{Clustering, Panes, VplBound, VplSet};
 use wgpu::util::DeviceExt;
 
-use crate::pane_gather::{GatherParams, GpuExit, PaneGatherPass};
+use crate::pane_gather::{GatherParams, GpuExit, PaneGatherPass, VplBoundKind};
 use crate::vpl_depth::{ChunkedScene, DepthFrame, GpuVpl, VplDepthPass, FACES};
 use crate::{ErrorScopes, GpuContext, GpuError};
 
@@ -50,12 +50,15 @@ pub struct PaneRenderParams {
     pub member_energy_bytes: u64,
 }
 
-/// How the gather pass reads a VPL's depth map.
+/// How the gather pass reads a VPL's depth map, as [`GatherParams::depth_filter`] holds it (the
+/// `DEPTH_*` constants of `pane_gather.wgsl`).
+#[repr(u32)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum DepthFilter {
-    /// The depth texel under the receiver: hard shadows, fastest.
+    /// `DEPTH_NEAREST`: the depth texel under the receiver: hard shadows, fastest.
     Nearest = 0,
-    /// 2×2 percentage-closer filtering through a comparison sampler: softer shadow edges.
+    /// `DEPTH_PCF2X2`: 2×2 percentage-closer filtering through a comparison sampler: softer
+    /// shadow edges.
     Pcf2x2 = 1,
 }
 
@@ -263,11 +266,7 @@ fn render_cluster_panes<E: From<GpuError>>(
         lift: 1e-5 * diagonal,
         _pad: 0.0,
     };
-    let (bound_kind, bound_value) = match params.bound {
-        VplBound::None => (0, 0.0),
-        VplBound::Clamp { min_distance } => (1, min_distance * min_distance),
-        VplBound::Disk { scale } => (2, scale * scale * std::f32::consts::FRAC_1_PI),
-    };
+    let (bound_kind, bound_value) = VplBoundKind::of(params.bound);
 
     // VPLs sorted by cluster (members ascending, VPLs of an entry in walk order).
     let mut sorted = Vec::with_capacity(vpls.vpls.len());
@@ -379,7 +378,7 @@ fn render_cluster_panes<E: From<GpuError>>(
                 exit_count: exits.len() as u32,
                 vpl_count: batch.len() as u32,
                 first_cluster: first as u32,
-                bound_kind,
+                bound_kind: bound_kind as u32,
                 bound_value,
                 near: frame.near,
                 far: frame.far,
@@ -388,7 +387,7 @@ fn render_cluster_panes<E: From<GpuError>>(
                 bias_constant: params.bias.constant * diagonal,
                 bias_slope: params.bias.slope,
                 texel_angle: texel,
-                filter: params.filter as u32,
+                depth_filter: params.filter as u32,
                 face_resolution: face_res,
                 faces_per_row: depth.faces_per_row,
                 _pad: 0,

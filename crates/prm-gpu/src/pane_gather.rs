@@ -2,6 +2,39 @@
 //! visibility, into the panes of their clusters at every exit point.
 
 use bytemuck::{Pod, Zeroable};
+use prm_trace::VplBound;
+
+use crate::vpl_depth::HEMICUBE_WGSL;
+
+/// The VPL estimator and its bound (`shaders/vpl.wgsl`), the GPU twin of
+/// [`VplBound::irradiance`]; needs [`HEMICUBE_WGSL`] before it and declares no bindings.
+pub const VPL_WGSL: &str = include_str!("../../../shaders/vpl.wgsl");
+/// The gather pass (`shaders/pane_gather.wgsl`); needs [`HEMICUBE_WGSL`] and [`VPL_WGSL`] before it.
+pub const PANE_GATHER_WGSL: &str = include_str!("../../../shaders/pane_gather.wgsl");
+
+/// How the `1/r²` of a VPL is bounded on the GPU, as [`GatherParams::bound_kind`] holds it (the
+/// `VPL_BOUND_*` constants of `vpl.wgsl`); [`VplBoundKind::of`] gives it with its parameter.
+#[repr(u32)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum VplBoundKind {
+    /// `VPL_BOUND_NONE`: plain `1/r²`.
+    None = 0,
+    /// `VPL_BOUND_CLAMP`: `1/max(r², value)`, value `d_min²`.
+    Clamp = 1,
+    /// `VPL_BOUND_DISK`: `1/(r² + value · area)`, value `scale²/π`.
+    Disk = 2,
+}
+
+impl VplBoundKind {
+    /// The code and parameter (`bound_value`) the shader evaluates `bound` with.
+    pub fn of(bound: VplBound) -> (VplBoundKind, f32) {
+        match bound {
+            VplBound::None => (VplBoundKind::None, 0.0),
+            VplBound::Clamp { min_distance } => (VplBoundKind::Clamp, min_distance * min_distance),
+            VplBound::Disk { scale } => (VplBoundKind::Disk, scale * scale * std::f32::consts::FRAC_1_PI),
+        }
+    }
+}
 
 /// An exit point as the GPU sees it; layout shared with WGSL.
 #[repr(C)]
@@ -28,9 +61,9 @@ pub struct GatherParams {
     pub vpl_count: u32,
     /// Cluster stored at slot 0 of the pane buffer.
     pub first_cluster: u32,
-    /// 0 plain `1/r²`, 1 clamp, 2 disk.
+    /// [`VplBoundKind`] as `u32`.
     pub bound_kind: u32,
-    /// Clamp: `d_min²`; disk: `scale²/π`.
+    /// Parameter of the bound: clamp `d_min²`, disk `scale²/π` (see [`VplBoundKind::of`]).
     pub bound_value: f32,
     /// Hemicube near plane.
     pub near: f32,
@@ -46,8 +79,8 @@ pub struct GatherParams {
     pub bias_slope: f32,
     /// Angle subtended by one depth texel at the face centre, radians.
     pub texel_angle: f32,
-    /// 0: nearest depth texel; 1: 2×2 percentage-closer filtering.
-    pub filter: u32,
+    /// [`DepthFilter`](crate::DepthFilter) as `u32`.
+    pub depth_filter: u32,
     /// Texels on a side of a hemicube face.
     pub face_resolution: u32,
     /// Faces on a row of a depth layer.
@@ -73,11 +106,7 @@ impl PaneGatherPass {
         params: &wgpu::Buffer,
         depth: &wgpu::TextureView,
     ) -> PaneGatherPass {
-        let source = format!(
-            "{}\n{}",
-            include_str!("../../../shaders/hemicube.wgsl"),
-            include_str!("../../../shaders/pane_gather.wgsl")
-        );
+        let source = [HEMICUBE_WGSL, VPL_WGSL, PANE_GATHER_WGSL].join("\n");
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("pane_gather"),
             source: wgpu::ShaderSource::Wgsl(source.into()),
@@ -142,5 +171,63 @@ impl PaneGatherPass {
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, &self.group, &[]);
         pass.dispatch_workgroups(exit_count.div_ceil(64), 1, 1);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::DepthFilter;
+    use prm_gpu_kit::layout::check_consts;
+    use prm_gpu_kit::wgsl_layout;
+
+    fn source() -> String {
+        [HEMICUBE_WGSL, VPL_WGSL, PANE_GATHER_WGSL].join("\n")
+    }
+
+    #[test]
+    fn rust_structs_match_the_shader() {
+        let s = source();
+        wgsl_layout!(&s, GpuExit, "Exit", [position, _pad0, normal, _pad1]).unwrap();
+        wgsl_layout!(
+            &s,
+            GatherParams,
+            "Gather",
+            [
+                exit_count,
+                vpl_count,
+                first_cluster,
+                bound_kind,
+                bound_value,
+                near,
+                far,
+                lift,
+                receiver_offset,
+                bias_constant,
+                bias_slope,
+                texel_angle,
+                depth_filter,
+                face_resolution,
+                faces_per_row,
+                _pad
+            ]
+        )
+        .unwrap();
+    }
+
+    #[test]
+    fn codes_match_the_shader_constants() {
+        let s = source();
+        check_consts(
+            &s,
+            &[
+                ("VPL_BOUND_NONE", VplBoundKind::None as i64),
+                ("VPL_BOUND_CLAMP", VplBoundKind::Clamp as i64),
+                ("VPL_BOUND_DISK", VplBoundKind::Disk as i64),
+                ("DEPTH_NEAREST", DepthFilter::Nearest as i64),
+                ("DEPTH_PCF2X2", DepthFilter::Pcf2x2 as i64),
+            ],
+        )
+        .unwrap();
     }
 }

@@ -14,7 +14,13 @@
 
 use bytemuck::{Pod, Zeroable};
 
-/// A VPL as the GPU sees it; layout shared with `hemicube.wgsl`.
+/// The hemicube faces and the VPL struct (`shaders/hemicube.wgsl`), shared by the depth and the
+/// gather pass.
+pub const HEMICUBE_WGSL: &str = include_str!("../../../shaders/hemicube.wgsl");
+/// The depth pass (`shaders/vpl_depth.wgsl`); needs [`HEMICUBE_WGSL`] before it.
+pub const VPL_DEPTH_WGSL: &str = include_str!("../../../shaders/vpl_depth.wgsl");
+
+/// A VPL as the GPU sees it; `Vpl` in `hemicube.wgsl`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
 pub struct GpuVpl {
@@ -60,7 +66,7 @@ impl GpuVpl {
     }
 }
 
-/// Near/far planes and the lift of the VPL off its surface; layout shared with WGSL.
+/// Near/far planes and the lift of the VPL off its surface; `DepthFrame` in `vpl_depth.wgsl`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
 pub struct DepthFrame {
@@ -75,7 +81,22 @@ pub struct DepthFrame {
 }
 const _: () = assert!(std::mem::size_of::<DepthFrame>() == 16);
 
-/// Faces per VPL (hemicube).
+/// Which face of which VPL a depth layer's draws render; `FaceSelect` in `vpl_depth.wgsl`, one
+/// per uniform slot (bound with a dynamic offset).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+pub struct FaceSelect {
+    /// VPL of the batch.
+    pub vpl: u32,
+    /// Hemicube face (0: along the normal; 1–4: +t, −t, +b, −b).
+    pub face: u32,
+    /// Padding.
+    pub _pad0: u32,
+    /// Padding.
+    pub _pad1: u32,
+}
+
+/// Faces per VPL (hemicube); `HEMICUBE_FACES` in `hemicube.wgsl`.
 pub const FACES: u32 = 5;
 /// Triangles per culling chunk.
 pub const CHUNK: u32 = 32;
@@ -218,11 +239,7 @@ impl VplDepthPass {
             usage: wgpu::BufferUsages::INDIRECT | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        let source = format!(
-            "{}\n{}",
-            include_str!("../../../shaders/hemicube.wgsl"),
-            include_str!("../../../shaders/vpl_depth.wgsl")
-        );
+        let source = [HEMICUBE_WGSL, VPL_DEPTH_WGSL].join("\n");
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("vpl_depth"),
             source: wgpu::ShaderSource::Wgsl(source.into()),
@@ -260,7 +277,7 @@ impl VplDepthPass {
                 ty: wgpu::BindingType::Buffer {
                     ty: wgpu::BufferBindingType::Uniform,
                     has_dynamic_offset: true,
-                    min_binding_size: wgpu::BufferSize::new(16),
+                    min_binding_size: wgpu::BufferSize::new(std::mem::size_of::<FaceSelect>() as u64),
                 },
                 count: None,
             }],
@@ -319,9 +336,14 @@ impl VplDepthPass {
         let face_stride = device.limits().min_uniform_buffer_offset_alignment.max(16);
         let mut faces = vec![0u8; (layers * face_stride) as usize];
         for layer in 0..layers {
-            let sel = [layer / FACES, layer % FACES, 0, 0];
+            let sel = FaceSelect {
+                vpl: layer / FACES,
+                face: layer % FACES,
+                _pad0: 0,
+                _pad1: 0,
+            };
             let at = (layer * face_stride) as usize;
-            faces[at..at + 16].copy_from_slice(bytemuck::cast_slice(&sel));
+            faces[at..at + std::mem::size_of::<FaceSelect>()].copy_from_slice(bytemuck::bytes_of(&sel));
         }
         let face_buffer = wgpu::util::DeviceExt::create_buffer_init(
             device,
@@ -339,7 +361,7 @@ impl VplDepthPass {
                 resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
                     buffer: &face_buffer,
                     offset: 0,
-                    size: wgpu::BufferSize::new(16),
+                    size: wgpu::BufferSize::new(std::mem::size_of::<FaceSelect>() as u64),
                 }),
             }],
         });
@@ -485,6 +507,23 @@ impl VplDepthPass {
 mod tests {
     use super::*;
     use glam::Vec3;
+    use prm_gpu_kit::layout::check_consts;
+    use prm_gpu_kit::wgsl_layout;
+
+    #[test]
+    fn rust_structs_match_the_shaders() {
+        let s = [HEMICUBE_WGSL, VPL_DEPTH_WGSL].join("\n");
+        wgsl_layout!(
+            &s,
+            GpuVpl,
+            "Vpl",
+            [position, area, normal, cluster, power, _pad0, tangent, _pad1, bitangent, _pad2]
+        )
+        .unwrap();
+        wgsl_layout!(&s, DepthFrame, "DepthFrame", [near, far, lift, _pad]).unwrap();
+        wgsl_layout!(&s, FaceSelect, "FaceSelect", [vpl, face, _pad0, _pad1]).unwrap();
+        check_consts(&s, &[("HEMICUBE_FACES", FACES as i64)]).unwrap();
+    }
 
     /// Local coordinates of `p` in the hemicube frame of `v` and the face that sees them, as
     /// `hemicube.wgsl` decides (None below the VPL's horizon).

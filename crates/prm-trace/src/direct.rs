@@ -20,8 +20,13 @@ pub fn direct_irradiance(bvh: &Bvh, lights: &[Light], p: Vec3, ng: Vec3, n: Vec3
 }
 
 /// [`direct_irradiance`] at a point standing for a disk of radius² `disk`: the inverse square of
-/// point and spot lights becomes `1 / (d² + disk)`.
-fn bounded_irradiance(bvh: &Bvh, lights: &[Light], p: Vec3, ng: Vec3, n: Vec3, tri: u32, disk: f32) -> Vec3 {
+/// point and spot lights becomes `1 / (d² + disk)` (0: the plain point value).
+///
+/// A light counts only if it is above both the shading normal `n` and the geometric normal `ng`:
+/// below the geometric plane it lies behind the surface itself. The GPU twin is
+/// `light_irradiance_ng` in `shaders/runtime/lights.wgsl` (tested function against function
+/// in `tests/estimators.rs`, the shadows left out).
+pub fn bounded_irradiance(bvh: &Bvh, lights: &[Light], p: Vec3, ng: Vec3, n: Vec3, tri: u32, disk: f32) -> Vec3 {
     let mut e = Vec3::ZERO;
     for light in lights {
         let (to_light, dist, radiometric) = match *light {

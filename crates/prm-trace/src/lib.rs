@@ -26,7 +26,7 @@ pub mod walk;
 
 pub use bvh::{BuildQuality, Bvh, BvhKind, BvhParams, Hit};
 pub use cluster::{ClusterParams, Clustering};
-pub use direct::{direct_irradiance, entry_irradiance};
+pub use direct::{bounded_irradiance, direct_irradiance, entry_irradiance};
 pub use error::TraceError;
 pub use pane::{evaluate_panes, PaneParams, Panes};
 pub use prm_scene::{parse_camera, parse_light, parse_size, SpecError, ENTRY_DISK};
