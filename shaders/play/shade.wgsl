@@ -87,8 +87,20 @@ fn fs_main(v: VsOut) -> @location(0) vec4<f32> {
     if m.texture >= 0 {
         albedo *= textureSampleLevel(textures, texture_sampler, v.uv, m.texture, 0.0).rgb;
     }
+    // The geometric normal from screen-space derivatives (before any branch: derivatives need
+    // uniform control flow), turned to the eye; the shading normal to the same side. Direct
+    // light tests both (light_irradiance_ng), so a smooth-shaded surface gets no light from
+    // below its own plane.
+    let cross_dp = cross(dpdx(v.position), dpdy(v.position));
     var n = normalize(v.normal);
-    if dot(n, camera.eye - v.position) < 0.0 {
+    var ng = n;
+    if dot(cross_dp, cross_dp) > 1e-30 {
+        ng = normalize(cross_dp);
+    }
+    if dot(ng, camera.eye - v.position) < 0.0 {
+        ng = -ng;
+    }
+    if dot(n, ng) < 0.0 {
         n = -n;
     }
     var mode = camera.mode;
@@ -97,7 +109,7 @@ fn fs_main(v: VsOut) -> @location(0) vec4<f32> {
     }
     var e = vec3<f32>(0.0);
     if mode != MODE_INDIRECT {
-        e += direct_irradiance(v.position, n);
+        e += direct_irradiance_ng(v.position, ng, n, 0.0);
     }
     if mode != MODE_DIRECT {
         e += indirect(v.lightmap_uv);
