@@ -1,18 +1,38 @@
-//! `prm-bake bake`: scene → atlas → entry points → walks → clusters → panes → `.prm` archive.
+//! `prm-bake bake`: arguments → parameters → backend → [`prm_bake::bake`] → summary and report.
 
-use anyhow::{bail, Context, Result};
-use glam::Vec3;
-use prm_format::{ArchiveWriter, AtlasSection, Cluster, Entry, Metadata};
-use prm_gpu::{Backend, GpuContext, PaneOutput, PaneRenderParams};
-use prm_scene::{Atlas, AtlasParams, Sizing};
-use prm_trace::{Bvh, BvhParams, ClusterParams, Clustering, EntryParams, PaneParams, WalkParams};
-use std::cell::OnceCell;
+use anyhow::{Context, Result};
+use prm_bake::params::plural;
+use prm_bake::{AtlasSize, BakeConfig, BakeJob, BakeParams, Plan, Preset, Renderer};
+use prm_gpu::{Backend, GpuContext};
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Instant;
 
-use crate::params::{AtlasSize, BakeConfig, BakeParams, Preset};
 use crate::progress::Progress;
+
+/// Named parameter sets (the command line's names for [`Preset`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum PresetArg {
+    /// Small and fast: 1024 entries, 64 clusters, 128² panes.
+    Preview,
+    /// Sizes derived from the scene and the budgets.
+    Default,
+    /// The paper's marble chamber: 4096 entries, 256 clusters, 256² panes, 32 clusters at run time.
+    Paper,
+    /// 16384 entries, 1024 clusters, 512² panes.
+    High,
+}
+
+impl From<PresetArg> for Preset {
+    fn from(p: PresetArg) -> Preset {
+        match p {
+            PresetArg::Preview => Preset::Preview,
+            PresetArg::Default => Preset::Default,
+            PresetArg::Paper => Preset::Paper,
+            PresetArg::High => Preset::High,
+        }
+    }
+}
 
 /// Where panes are rendered.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -37,7 +57,7 @@ pub struct BakeArgs {
     pub output: PathBuf,
     /// Named parameter set; `default` derives sizes from the scene and the budgets.
     #[arg(long, value_enum)]
-    pub preset: Option<Preset>,
+    pub preset: Option<PresetArg>,
     /// Entry points sampled on the surfaces.
     #[arg(long)]
     pub entries: Option<usize>,
@@ -84,7 +104,7 @@ pub struct BakeArgs {
 impl BakeArgs {
     fn config(&self) -> BakeConfig {
         BakeConfig {
-            preset: self.preset,
+            preset: self.preset.map(Preset::from),
             entries: self.entries,
             clusters: self.clusters,
             resolution: self.resolution,
@@ -94,62 +114,6 @@ impl BakeArgs {
             top_k: self.top_k,
             time_budget_s: self.time_budget,
             ..Default::default()
-        }
-    }
-}
-
-/// Everything the bake measured, for the summary, the archive and `--report`.
-#[derive(serde::Serialize)]
-struct Report {
-    scene: PathBuf,
-    output: PathBuf,
-    backend: String,
-    params: BakeParams,
-    atlas: prm_scene::AtlasStats,
-    triangles: usize,
-    entries: usize,
-    clusters: usize,
-    walks: u64,
-    vpls: usize,
-    rays: u64,
-    archive_bytes: u64,
-    timings: BTreeMap<String, f64>,
-}
-
-/// Largest tile size (64 at most) that divides `resolution`.
-fn tile_size(resolution: u32) -> u32 {
-    [64, 32, 16, 8, 4, 2, 1]
-        .into_iter()
-        .find(|&t| resolution.is_multiple_of(t))
-        .unwrap_or(1)
-}
-
-/// Directories a bake created for its output; those still empty are removed again when the bake
-/// fails (the guard drops without [`MadeDirs::keep`]), so a failed bake leaves nothing behind.
-struct MadeDirs(Vec<PathBuf>);
-
-impl MadeDirs {
-    fn create(dir: &Path) -> Result<MadeDirs> {
-        let mut missing = Vec::new();
-        let mut d = Some(dir);
-        while let Some(p) = d.filter(|p| !p.as_os_str().is_empty() && !p.exists()) {
-            missing.push(p.to_path_buf());
-            d = p.parent();
-        }
-        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-        Ok(MadeDirs(missing))
-    }
-
-    fn keep(mut self) {
-        self.0.clear();
-    }
-}
-
-impl Drop for MadeDirs {
-    fn drop(&mut self) {
-        // Innermost first; remove_dir refuses non-empty directories.
-        for d in &self.0 {
-            let _ = std::fs::remove_dir(d);
         }
     }
 }
@@ -189,35 +153,35 @@ fn open_backend(arg: BackendArg, progress: &Progress) -> Result<Option<GpuContex
     })
 }
 
-/// `to` relative to directory `from`, with `/` separators (absolute when they share no root).
-fn relative_path(from: &Path, to: &Path) -> String {
-    let (Ok(from), Ok(to)) = (from.canonicalize(), to.canonicalize()) else {
-        return to.to_string_lossy().replace('\\', "/");
-    };
-    let (f, t): (Vec<_>, Vec<_>) = (from.components().collect(), to.components().collect());
-    let common = f.iter().zip(&t).take_while(|(a, b)| a == b).count();
-    if common == 0 {
-        return to.to_string_lossy().replace('\\', "/");
-    }
-    let mut parts: Vec<String> = std::iter::repeat_n("..".to_string(), f.len() - common).collect();
-    parts.extend(t[common..].iter().map(|c| c.as_os_str().to_string_lossy().into_owned()));
-    parts.join("/")
+/// Everything the bake measured, for the summary and `--report`.
+#[derive(serde::Serialize)]
+struct Report {
+    scene: PathBuf,
+    output: PathBuf,
+    backend: String,
+    params: BakeParams,
+    atlas: prm_scene::AtlasStats,
+    triangles: usize,
+    entries: usize,
+    clusters: usize,
+    walks: u64,
+    vpls: usize,
+    rays: u64,
+    archive_bytes: u64,
+    timings: BTreeMap<String, f64>,
 }
 
+/// `prm-bake bake`: plans, bakes through [`prm_bake::bake`], prints the summary and writes the
+/// report.
 pub fn run(args: &BakeArgs) -> Result<()> {
     // Before any work: refuse an unusable -o (a directory, a device, a directory where no file
     // can be created), follow a symlink to the file it names, and have SIGINT, SIGTERM and
     // SIGHUP remove the bake's temporary file.
-    let destination = if args.plan {
-        args.output.clone()
-    } else {
-        let d = prm_format::check_destination(&args.output)?;
-        crate::signals::install(d.clone());
-        d
-    };
-    let progress = Progress::new(args.quiet);
+    if !args.plan {
+        crate::signals::install(prm_format::check_destination(&args.output)?);
+    }
+    let mut progress = Progress::new(args.quiet);
     let started = Instant::now();
-    let mut timings = BTreeMap::new();
 
     let file_config = match &args.config {
         Some(p) => BakeConfig::load(p)?,
@@ -230,45 +194,16 @@ pub fn run(args: &BakeArgs) -> Result<()> {
     for w in &scene.report.warnings {
         progress.warn(w);
     }
-    timings.insert("load".to_string(), t.elapsed().as_secs_f64());
+    let load_s = t.elapsed().as_secs_f64();
 
-    // The automatic atlas is built at most once, only if the parameters need it.
-    let auto_atlas: OnceCell<Atlas> = OnceCell::new();
-    let probe = || -> Result<Atlas> {
-        if let Some(a) = auto_atlas.get() {
-            return Ok(a.clone());
-        }
-        let a = Atlas::build(&scene, &AtlasParams::DEFAULT).context("building the automatic atlas")?;
-        Ok(auto_atlas.get_or_init(|| a).clone())
-    };
-    let params = BakeParams::resolve(&config, &scene, probe)?;
-    progress.say(&format!(
-        "bake: {} entries, {} clusters, atlas {}, {} walk{} per entry, seed {}, top-k {} ({:?} preset)",
-        params.entries,
-        params.clusters,
-        match params.atlas {
-            AtlasSize::Resolution(r) => format!("{r}²"),
-            AtlasSize::TexelSize(s) => format!("texel {s}"),
-        },
-        params.paths_per_entry,
-        crate::params::plural(params.paths_per_entry as usize),
-        params.seed,
-        params.top_k,
-        params.preset
-    ));
-    for r in &params.reasons {
-        progress.say(&format!("  auto: {r}"));
-    }
-    progress.say(&format!(
-        "  expected: about {:.0} s on the reference machine (time budget {:.0} s)",
-        params.estimated_seconds, params.time_budget_s
-    ));
+    let plan = Plan::new(&config, &scene)?;
+    print_plan(&plan.params, &progress);
     if args.plan {
         if let Some(path) = &args.report {
             // The same shape as a bake's report, which nests them under "params".
             std::fs::write(
                 path,
-                serde_json::to_string_pretty(&serde_json::json!({ "params": params }))?,
+                serde_json::to_string_pretty(&serde_json::json!({ "params": plan.params }))?,
             )
             .with_context(|| format!("writing {}", path.display()))?;
         }
@@ -280,268 +215,30 @@ pub fn run(args: &BakeArgs) -> Result<()> {
     if let Some(ctx) = &gpu {
         progress.say(&format!("  device: {}", ctx.describe()));
     }
-    let backend_name = gpu.as_ref().map_or_else(|| "cpu".to_string(), |g| g.describe());
-
-    let t = Instant::now();
-    let sizing = match params.atlas {
-        AtlasSize::Resolution(r) => Sizing::Resolution(r),
-        AtlasSize::TexelSize(s) => Sizing::TexelSize(s),
+    let job = BakeJob {
+        scene: &scene,
+        scene_path: &args.scene,
+        plan: &plan,
+        output: &args.output,
     };
-    let atlas = match (auto_atlas.get(), sizing) {
-        (Some(a), Sizing::Resolution(r)) if a.resolution == r => a.clone(),
-        _ => Atlas::build(&scene, &AtlasParams::with_sizing(sizing)).context("building the lightmap atlas")?,
-    };
-    if atlas.resolution > 8192 {
-        bail!(
-            "the atlas needs {}² texels, over the archive's 8192 limit; choose a larger --texel-size",
-            atlas.resolution
-        );
-    }
-    timings.insert("atlas".to_string(), t.elapsed().as_secs_f64());
-    progress.say(&format!(
-        "{:>16}: {r}x{r}, {} charts, {} exit points ({:.2} s)",
-        "atlas",
-        atlas.stats.charts,
-        atlas.exits.len(),
-        timings["atlas"],
-        r = atlas.resolution
-    ));
+    let baked = prm_bake::bake(&job, gpu.as_ref().map_or(Renderer::Cpu, Renderer::Gpu), &mut progress)?;
 
-    let phase = progress.phase("bvh", 1);
-    let bvh = Bvh::build(&scene, &BvhParams::DEFAULT).context("building the BVH")?;
-    timings.insert(
-        "bvh".to_string(),
-        phase.finish(&format!("{} triangles", scene.triangles.len())),
-    );
-
-    let phase = progress.phase("light tracing", 1);
-    let entries = prm_trace::sample_surface(
-        &scene,
-        &EntryParams {
-            count: params.entries,
-            seed: params.seed,
-        },
-    )
-    .context("sampling entry points")?;
-    let walk_params = WalkParams {
-        walks_per_entry: params.paths_per_entry,
-        seed: params.seed,
-        ..WalkParams::PREVIEW
-    };
-    let vpls = prm_trace::trace_walks(&scene, &bvh, &entries, &walk_params).context("tracing walks")?;
-    timings.insert(
-        "light_tracing".to_string(),
-        phase.finish(&format!(
-            "{} entries, {} walks, {} VPLs, {} rays",
-            entries.len(),
-            vpls.stats.walks,
-            vpls.vpls.len(),
-            vpls.stats.rays
-        )),
-    );
-
-    let phase = progress.phase("clustering", 1);
-    let clustering = if params.clusters == entries.len() {
-        Clustering::identity(&entries)
-    } else {
-        let cp = ClusterParams {
-            seed: params.seed,
-            ..ClusterParams::with_clusters(params.clusters)
-        };
-        Clustering::kmeans(&entries, scene.bounds().diagonal(), &cp)
-            .context("clustering entry points")?
-            .separate_by_visibility(&entries, &bvh)
-    };
-    timings.insert(
-        "clustering".to_string(),
-        phase.finish(&format!("{} clusters", clustering.len())),
-    );
-
-    // Archive tables: entries in cluster order, cluster ranges over them.
-    let mut table_entries = Vec::with_capacity(entries.len());
-    let mut table_clusters = Vec::with_capacity(clustering.len());
-    for (c, members) in clustering.members.iter().enumerate() {
-        table_clusters.push(Cluster::new(
-            table_entries.len() as u32,
-            members.len() as u32,
-            clustering.centroids[c].to_array(),
-            clustering.normals[c].to_array(),
-        ));
-        for &k in members {
-            let e = &entries[k as usize];
-            table_entries.push(Entry {
-                position: e.position.to_array(),
-                normal: e.normal.to_array(),
-                cluster: c as u32,
-            });
-        }
-    }
-    let mut atlas_section = AtlasSection::new(atlas.resolution, tile_size(atlas.resolution));
-    atlas_section.triangle_uvs = atlas.uvs.iter().map(|t| t.map(|uv| uv.to_array())).collect();
-    for e in &atlas.exits {
-        atlas_section.set_covered(e.texel % atlas.resolution, e.texel / atlas.resolution, true);
-    }
-    let mut metadata = Metadata::new("prm-bake", env!("CARGO_PKG_VERSION"));
-    metadata.seed = params.seed;
-    metadata.scene_fingerprint = scene.fingerprint();
-    let out_dir = destination
-        .parent()
-        .filter(|d| !d.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
-    let made = MadeDirs::create(out_dir)?;
-    metadata.source_scene = relative_path(out_dir, &args.scene);
-    if let serde_json::Value::Object(map) = serde_json::to_value(&params)? {
-        metadata.params = map;
-    }
-    metadata
-        .params
-        .insert("atlas_stats".into(), serde_json::to_value(&atlas.stats)?);
-    metadata.params.insert("backend".into(), backend_name.clone().into());
-    // The player refuses other geometry (scene_fingerprint) but only warns about other albedos.
-    metadata.params.insert(
-        "materials_fingerprint".into(),
-        format!("{:016x}", scene.materials_fingerprint()).into(),
-    );
-    let mut writer = ArchiveWriter::create(&args.output, metadata, &atlas_section, &table_entries, &table_clusters)
-        .with_context(|| format!("starting {}", args.output.display()))?;
-
-    // Panes: render (GPU or CPU), fill the atlas image, dilate into the gutters, write.
-    let mut write_s = 0.0;
-    let mut image = vec![[0f32; 3]; (atlas.resolution * atlas.resolution) as usize];
-    let mut emit = |pane: &[Vec3], writer: &mut ArchiveWriter| -> Result<()> {
-        let t = Instant::now();
-        image.fill([0.0; 3]);
-        for (e, v) in atlas.exits.iter().zip(pane) {
-            image[e.texel as usize] = v.to_array();
-        }
-        for &(dst, src) in &atlas.dilation {
-            image[dst as usize] = image[src as usize];
-        }
-        writer.add_pane(&image).context("writing a pane")?;
-        write_s += t.elapsed().as_secs_f64();
-        Ok(())
-    };
-    let t = Instant::now();
-    // Entry indices in the archive's order (cluster by cluster), and their pane energies.
-    let order: Vec<u32> = clustering.members.iter().flatten().copied().collect();
-    let mut entry_energy = vec![[0f32; 3]; entries.len()];
-    let mut entry_energy_known = true;
-    let shadow_rays;
-    let phase = match &gpu {
-        Some(ctx) => {
-            let rp = PaneRenderParams {
-                bound: params.bound(),
-                face_resolution: params.face_resolution,
-                ..PaneRenderParams::DEFAULT
-            };
-            // Progress counts VPLs: a group of panes can take minutes on a big scene.
-            let mut phase = progress.phase("pane rendering", vpls.vpls.len() as u64);
-            let mut at = 0;
-            let mut energies_complete = true;
-            let stats = prm_gpu::render_panes_with(ctx, &scene, &atlas.exits, &vpls, &clustering, &rp, |out| {
-                match out {
-                    PaneOutput::Pane {
-                        cluster,
-                        irradiance,
-                        member_energy,
-                    } => {
-                        // Members arrive cluster by cluster: the archive's entry order.
-                        energies_complete &= member_energy.len() == clustering.members[cluster].len();
-                        for e in member_energy {
-                            entry_energy[at] = e.to_array();
-                            at += 1;
-                        }
-                        emit(irradiance, &mut writer)?
-                    }
-                    PaneOutput::Progress(s) => phase.inc(s.vpls - phase.done()),
-                }
-                Ok::<(), anyhow::Error>(())
-            })
-            .context("rendering panes on the GPU")?;
-            progress.say(&format!(
-                "  GPU: {} batches, {} depth faces ({:.0} triangles each after culling) {:.2} s, {} evaluations {:.2} s ({:.0} M/s)",
-                stats.batches,
-                stats.faces,
-                stats.triangles as f64 / stats.faces.max(1) as f64,
-                stats.depth_seconds,
-                stats.evaluations,
-                stats.gather_seconds,
-                stats.evaluations as f64 / stats.gather_seconds.max(1e-9) / 1e6
-            ));
-            if !energies_complete {
-                entry_energy_known = false;
-                progress.say(&format!(
-                    "  no entry energies: their read-back would take {:.1} GiB, over the {:.1} GiB \
-                     budget, so the panes were rendered per cluster and the player weighs \
-                     members equally (the archive stays format 1.0)",
-                    prm_gpu::pane::member_readback_bytes(entries.len(), atlas.exits.len()) as f64 / (1u64 << 30) as f64,
-                    rp.member_energy_bytes as f64 / (1u64 << 30) as f64
-                ));
-            }
-            timings.insert("pane_depth_maps".to_string(), stats.depth_seconds);
-            timings.insert("pane_gather".to_string(), stats.gather_seconds);
-            shadow_rays = 0;
-            phase
-        }
-        None => {
-            let panes = prm_trace::evaluate_panes(
-                &bvh,
-                &vpls,
-                &clustering,
-                &atlas.exits,
-                &PaneParams { bound: params.bound() },
-            )
-            .context("evaluating panes on the CPU")?;
-            shadow_rays = panes.rays;
-            for (j, &k) in order.iter().enumerate() {
-                entry_energy[j] = panes.entry_energy[k as usize].to_array();
-            }
-            let mut phase = progress.phase("pane rendering", panes.clusters as u64);
-            for c in 0..panes.clusters {
-                emit(panes.pane(c), &mut writer)?;
-                phase.inc(1);
-            }
-            phase
-        }
-    };
-    if entry_energy_known {
-        writer
-            .set_entry_energy(entry_energy)
-            .context("recording the entry energies")?;
-    }
-    let render_s = t.elapsed().as_secs_f64() - write_s;
-    phase.finish(&format!(
-        "{} panes, {} VPLs on {}",
-        clustering.len(),
-        vpls.vpls.len(),
-        backend_name
-    ));
-    timings.insert("pane_rendering".to_string(), render_s);
-
-    // Timings go to stdout and --report only: the archive's bytes depend on nothing but the
-    // scene, the parameters and the backend, so caches and content-addressed pipelines can key
-    // on them (tested by `bake_is_byte_identical_across_runs_and_threads`).
-    let t = Instant::now();
-    let bytes = writer
-        .finish()
-        .with_context(|| format!("finishing {}", args.output.display()))?;
-    made.keep();
-    timings.insert("compression_write".to_string(), write_s + t.elapsed().as_secs_f64());
+    let mut timings = baked.timings;
+    timings.insert("load".to_string(), load_s);
     timings.insert("total".to_string(), started.elapsed().as_secs_f64());
-
     let report = Report {
         scene: args.scene.clone(),
         output: args.output.clone(),
-        backend: backend_name,
-        params,
-        atlas: atlas.stats.clone(),
-        triangles: scene.triangles.len(),
-        entries: entries.len(),
-        clusters: clustering.len(),
-        walks: vpls.stats.walks,
-        vpls: vpls.vpls.len(),
-        rays: vpls.stats.rays + shadow_rays,
-        archive_bytes: bytes,
+        backend: baked.backend,
+        params: plan.params,
+        atlas: baked.atlas,
+        triangles: baked.triangles,
+        entries: baked.entries,
+        clusters: baked.clusters,
+        walks: baked.walks,
+        vpls: baked.vpls,
+        rays: baked.rays,
+        archive_bytes: baked.archive_bytes,
         timings,
     };
     if !args.quiet {
@@ -554,6 +251,32 @@ pub fn run(args: &BakeArgs) -> Result<()> {
     Ok(())
 }
 
+/// The parameters the bake will use, why, and the time it expects.
+fn print_plan(params: &BakeParams, progress: &Progress) {
+    progress.say(&format!(
+        "bake: {} entries, {} clusters, atlas {}, {} walk{} per entry, seed {}, top-k {} ({:?} preset)",
+        params.entries,
+        params.clusters,
+        match params.atlas {
+            AtlasSize::Resolution(r) => format!("{r}²"),
+            AtlasSize::TexelSize(s) => format!("texel {s}"),
+        },
+        params.paths_per_entry,
+        plural(params.paths_per_entry as usize),
+        params.seed,
+        params.top_k,
+        params.preset
+    ));
+    for r in &params.reasons {
+        progress.say(&format!("  auto: {r}"));
+    }
+    progress.say(&format!(
+        "  expected: about {:.0} s on the reference machine (time budget {:.0} s)",
+        params.estimated_seconds, params.time_budget_s
+    ));
+}
+
+/// The summary on stdout: the archive and the timing breakdown.
 fn print_summary(r: &Report) {
     println!(
         "wrote {} ({:.2} MiB)",
@@ -572,27 +295,5 @@ fn print_summary(r: &Report) {
         ("total", "total"),
     ] {
         println!("  {name:<20} {:>9.3} s", r.timings.get(key).copied().unwrap_or(0.0));
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn relative_paths() {
-        let dir = std::env::temp_dir().join("prm-relpath-test/a/b");
-        std::fs::create_dir_all(&dir).unwrap();
-        let target = std::env::temp_dir().join("prm-relpath-test/c.obj");
-        std::fs::write(&target, "").unwrap();
-        assert_eq!(relative_path(&dir, &target), "../../c.obj");
-    }
-
-    #[test]
-    fn tile_sizes_divide() {
-        assert_eq!(tile_size(256), 64);
-        assert_eq!(tile_size(96), 32);
-        assert_eq!(tile_size(200), 8);
-        assert_eq!(tile_size(7), 1);
     }
 }

@@ -1,9 +1,9 @@
-//! `prm-bake`: bakes Precomputed Radiance Maps and inspects scenes and archives.
+//! `prm-bake`: bakes Precomputed Radiance Maps (through the `prm_bake` library) and inspects
+//! scenes and archives.
 
 mod atlas;
 mod bake;
 mod dump;
-mod params;
 mod progress;
 mod reference;
 mod signals;

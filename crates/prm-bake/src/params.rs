@@ -1,13 +1,28 @@
 //! Bake parameters: presets, a TOML config file, command-line overrides, and the automatic
 //! choice of sizes from the scene and budgets ("bake no more than the scene needs").
 
-use anyhow::{bail, Context, Result};
 use prm_scene::{Atlas, Scene};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
+use crate::BakeError;
+
+/// Returns [`BakeError::InvalidParams`] with a formatted message.
+macro_rules! invalid {
+    ($($arg:tt)*) => {
+        return Err(BakeError::InvalidParams(format!($($arg)*)))
+    };
+}
+
+/// Returns [`BakeError::OverLimit`] with a formatted message.
+macro_rules! over_limit {
+    ($($arg:tt)*) => {
+        return Err(BakeError::OverLimit(format!($($arg)*)))
+    };
+}
+
 /// Named parameter sets.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Preset {
     /// Small and fast: 1024 entries, 64 clusters, 128² panes.
@@ -56,9 +71,15 @@ pub struct BakeConfig {
 
 impl BakeConfig {
     /// Reads a TOML config file.
-    pub fn load(path: &Path) -> Result<BakeConfig> {
-        let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-        toml::from_str(&text).with_context(|| format!("{}: not a valid bake config", path.display()))
+    pub fn load(path: &Path) -> Result<BakeConfig, BakeError> {
+        let text = std::fs::read_to_string(path).map_err(|source| BakeError::ConfigRead {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        toml::from_str(&text).map_err(|source| BakeError::ConfigParse {
+            path: path.to_path_buf(),
+            source: Box::new(source),
+        })
     }
 
     /// `self` with every field that `over` sets replaced.
@@ -245,13 +266,17 @@ impl BakeParams {
     /// - clusters: entries / 16, 32 to 1024, then as many as the memory budget and the archive
     ///   budget allow (archive estimate: 1.5 bytes per covered texel per pane, the measured
     ///   RGB9E5 + filter + zstd rate on smooth panes, doubled for safety).
-    pub fn resolve(config: &BakeConfig, scene: &Scene, probe: impl Fn() -> Result<Atlas>) -> Result<BakeParams> {
+    pub fn resolve(
+        config: &BakeConfig,
+        scene: &Scene,
+        probe: impl Fn() -> Result<Atlas, BakeError>,
+    ) -> Result<BakeParams, BakeError> {
         let preset = config.preset.unwrap_or(Preset::Default);
         let archive_budget_mib = config.archive_budget_mib.unwrap_or(DEFAULT_ARCHIVE_BUDGET_MIB);
         let memory_budget_mib = config.memory_budget_mib.unwrap_or(DEFAULT_MEMORY_BUDGET_MIB);
         let time_budget_s = config.time_budget_s.unwrap_or(DEFAULT_TIME_BUDGET_S);
         if !(archive_budget_mib > 0.0 && memory_budget_mib > 0.0 && time_budget_s > 0.0) {
-            bail!(
+            invalid!(
                 "budgets must be positive (archive {archive_budget_mib} MiB, memory {memory_budget_mib} MiB, \
                  time {time_budget_s} s)"
             );
@@ -411,59 +436,59 @@ impl BakeParams {
     }
 
     /// Rejects impossible combinations before any work.
-    fn validate(&self, texels_per_pane: f64) -> Result<()> {
+    fn validate(&self, texels_per_pane: f64) -> Result<(), BakeError> {
         if self.entries == 0 {
-            bail!("--entries must be at least 1");
+            invalid!("--entries must be at least 1");
         }
         if self.clusters == 0 {
-            bail!("--clusters must be at least 1");
+            invalid!("--clusters must be at least 1");
         }
         if self.entries as u64 > prm_format::limits::MAX_ENTRIES {
-            bail!(
+            over_limit!(
                 "--entries {} is over the archive format's limit of {} entry points",
                 self.entries,
                 prm_format::limits::MAX_ENTRIES
             );
         }
         if self.clusters as u64 > prm_format::limits::MAX_CLUSTERS {
-            bail!(
+            over_limit!(
                 "--clusters {} is over the archive format's limit of {} clusters",
                 self.clusters,
                 prm_format::limits::MAX_CLUSTERS
             );
         }
         if self.top_k == 0 {
-            bail!("--top-k must be at least 1 (the clusters blended per frame)");
+            invalid!("--top-k must be at least 1 (the clusters blended per frame)");
         }
         if self.clusters > self.entries {
-            bail!(
+            invalid!(
                 "{} clusters for {} entry points: there cannot be more clusters than entries",
                 self.clusters,
                 self.entries
             );
         }
         if self.paths_per_entry == 0 {
-            bail!("--paths-per-entry must be at least 1");
+            invalid!("--paths-per-entry must be at least 1");
         }
         if let AtlasSize::Resolution(r) = self.atlas {
             if !(8..=8192).contains(&r) {
-                bail!("resolution {r} is outside 8..=8192");
+                invalid!("resolution {r} is outside 8..=8192");
             }
         }
         if let AtlasSize::TexelSize(s) = self.atlas {
             if !(s.is_finite() && s > 0.0) {
-                bail!("texel size {s} must be a positive number");
+                invalid!("texel size {s} must be a positive number");
             }
         }
         if !(8..=2048).contains(&self.face_resolution) {
-            bail!("face resolution {} is outside 8..=2048", self.face_resolution);
+            invalid!("face resolution {} is outside 8..=2048", self.face_resolution);
         }
         if !(self.vpl_disk_scale >= 0.0 && self.vpl_disk_scale.is_finite()) {
-            bail!("vpl_disk_scale {} must be a non-negative number", self.vpl_disk_scale);
+            invalid!("vpl_disk_scale {} must be a non-negative number", self.vpl_disk_scale);
         }
         let memory_mib = self.clusters as f64 * texels_per_pane * 4.0 / (1024.0 * 1024.0);
         if memory_mib > self.memory_budget_mib {
-            bail!(
+            over_limit!(
                 "{} panes of {:.0} texels need {memory_mib:.0} MiB at run time, over the {:.0} MiB memory budget; \
                  use fewer --clusters, a lower --resolution, or raise memory_budget_mib",
                 self.clusters,
@@ -487,135 +512,4 @@ impl BakeParams {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn cornell() -> Scene {
-        let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/cornell-box/cornell-box.obj");
-        prm_scene::load(&p).unwrap()
-    }
-
-    fn probe(scene: &Scene) -> impl Fn() -> Result<Atlas> + '_ {
-        move || Ok(Atlas::build(scene, &prm_scene::AtlasParams::DEFAULT)?)
-    }
-
-    #[test]
-    fn paper_preset_is_the_papers_settings() {
-        let scene = cornell();
-        let cfg = BakeConfig {
-            preset: Some(Preset::Paper),
-            ..Default::default()
-        };
-        let p = BakeParams::resolve(&cfg, &scene, probe(&scene)).unwrap();
-        assert_eq!(
-            (p.entries, p.clusters, p.atlas, p.top_k),
-            (4096, 256, AtlasSize::Resolution(256), 32)
-        );
-        assert!(p.reasons.is_empty());
-    }
-
-    #[test]
-    fn command_line_overrides_config_overrides_preset() {
-        let scene = cornell();
-        let file: BakeConfig = toml::from_str("preset = \"paper\"\nentries = 2048\nclusters = 128\n").unwrap();
-        let cli = BakeConfig {
-            clusters: Some(64),
-            ..Default::default()
-        };
-        let p = BakeParams::resolve(&file.overridden_by(&cli), &scene, probe(&scene)).unwrap();
-        assert_eq!((p.entries, p.clusters), (2048, 64));
-        assert!(
-            toml::from_str::<BakeConfig>("entires = 3").is_err(),
-            "unknown keys are errors"
-        );
-    }
-
-    #[test]
-    fn automatic_sizes_follow_the_scene_and_budgets() {
-        let scene = cornell();
-        let p = BakeParams::resolve(&BakeConfig::default(), &scene, probe(&scene)).unwrap();
-        assert_eq!(p.entries, 1024, "a 16-chart box needs the minimum");
-        assert!(p.clusters >= 32 && p.clusters <= p.entries);
-        assert!(!p.reasons.is_empty());
-        // A tight memory budget shrinks the atlas or the cluster count until the panes fit it.
-        let bytes = |p: &BakeParams| match p.atlas {
-            AtlasSize::Resolution(r) => p.clusters as f64 * (r as f64).powi(2) * 4.0,
-            AtlasSize::TexelSize(_) => unreachable!(),
-        };
-        let tight = BakeConfig {
-            memory_budget_mib: Some(2.0),
-            ..Default::default()
-        };
-        let q = BakeParams::resolve(&tight, &scene, probe(&scene)).unwrap();
-        assert!(
-            bytes(&q) <= 2.0 * 1024.0 * 1024.0 && bytes(&q) < bytes(&p),
-            "{q:?} vs {p:?}"
-        );
-    }
-
-    #[test]
-    fn time_budget_shrinks_automatic_sizes_only() {
-        let scene = cornell();
-        let roomy = BakeParams::resolve(&BakeConfig::default(), &scene, probe(&scene)).unwrap();
-        let budget = roomy.estimated_seconds / 4.0;
-        let tight = BakeConfig {
-            time_budget_s: Some(budget),
-            ..Default::default()
-        };
-        let p = BakeParams::resolve(&tight, &scene, probe(&scene)).unwrap();
-        assert!(p.estimated_seconds <= budget, "{p:?}");
-        assert!(p.estimated_seconds < roomy.estimated_seconds);
-        assert!(p.reasons.iter().any(|r| r.contains("time budget")), "{:?}", p.reasons);
-        // Explicit sizes are never changed, only estimated.
-        let fixed = BakeConfig {
-            preset: Some(Preset::Paper),
-            time_budget_s: Some(1.0),
-            ..Default::default()
-        };
-        let q = BakeParams::resolve(&fixed, &scene, probe(&scene)).unwrap();
-        assert_eq!((q.entries, q.clusters, q.paths_per_entry), (4096, 256, 1));
-        assert!(q.estimated_seconds > 1.0);
-    }
-
-    #[test]
-    fn impossible_parameters_are_refused() {
-        let scene = cornell();
-        for (cfg, needle) in [
-            (
-                BakeConfig {
-                    entries: Some(0),
-                    ..Default::default()
-                },
-                "entries",
-            ),
-            (
-                BakeConfig {
-                    entries: Some(100),
-                    clusters: Some(200),
-                    ..Default::default()
-                },
-                "more clusters",
-            ),
-            (
-                BakeConfig {
-                    resolution: Some(100_000),
-                    ..Default::default()
-                },
-                "resolution",
-            ),
-            (
-                BakeConfig {
-                    preset: Some(Preset::High),
-                    memory_budget_mib: Some(16.0),
-                    ..Default::default()
-                },
-                "memory budget",
-            ),
-        ] {
-            let e = BakeParams::resolve(&cfg, &scene, probe(&scene))
-                .unwrap_err()
-                .to_string();
-            assert!(e.contains(needle), "{e}");
-        }
-    }
-}
+mod tests;

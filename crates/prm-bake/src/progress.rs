@@ -1,6 +1,8 @@
-//! Progress reporting: bars on a terminal, plain lines otherwise, nothing with `--quiet`.
+//! Progress reporting: bars on a terminal, plain lines otherwise, nothing with `--quiet`; the
+//! command line's [`ProgressSink`].
 
 use indicatif::{ProgressBar, ProgressStyle};
+use prm_bake::{Phase, ProgressSink};
 use std::io::IsTerminal;
 use std::time::{Duration, Instant};
 
@@ -12,9 +14,10 @@ enum Mode {
 }
 
 /// Where progress goes (always stderr).
-#[derive(Clone, Copy)]
 pub struct Progress {
     mode: Mode,
+    /// The phase under way.
+    current: Option<Current>,
 }
 
 impl Progress {
@@ -27,7 +30,7 @@ impl Progress {
         } else {
             Mode::Lines
         };
-        Progress { mode }
+        Progress { mode, current: None }
     }
 
     /// A line of information.
@@ -41,74 +44,74 @@ impl Progress {
     pub fn warn(&self, line: &str) {
         eprintln!("warning: {line}");
     }
+}
 
-    /// Starts a phase of `total` steps.
-    pub fn phase(&self, name: &str, total: u64) -> Phase {
-        let bar = (self.mode == Mode::Bars).then(|| {
+impl ProgressSink for Progress {
+    fn phase_start(&mut self, phase: Phase, total: u64) {
+        // The atlas has no steps to show: it only gets its summary line.
+        let bar = (self.mode == Mode::Bars && phase != Phase::Atlas).then(|| {
             let bar = ProgressBar::new(total);
             let style = ProgressStyle::with_template("{prefix:>16} [{bar:32}] {pos}/{len} {elapsed_precise} eta {eta}")
                 .unwrap_or_else(|_| ProgressStyle::default_bar())
                 .progress_chars("=> ");
             bar.set_style(style);
-            bar.set_prefix(name.to_string());
+            bar.set_prefix(phase.name());
             bar
         });
-        Phase {
-            name: name.to_string(),
-            mode: self.mode,
+        self.current = Some(Current {
+            phase,
             bar,
             total,
             done: 0,
             started: Instant::now(),
             last_line: Instant::now(),
+        });
+    }
+
+    fn phase_advance(&mut self, done: u64) {
+        let mode = self.mode;
+        let Some(c) = &mut self.current else {
+            return;
+        };
+        let n = done.saturating_sub(c.done);
+        c.done = c.done.max(done);
+        if let Some(bar) = &c.bar {
+            bar.inc(n);
+        } else if mode == Mode::Lines && c.last_line.elapsed() > Duration::from_secs(5) {
+            c.last_line = Instant::now();
+            eprintln!(
+                "{}: {}/{} ({:.0}%), {:.1} s",
+                c.phase.name(),
+                c.done,
+                c.total,
+                100.0 * c.done as f64 / c.total.max(1) as f64,
+                c.started.elapsed().as_secs_f64()
+            );
         }
+    }
+
+    fn phase_finish(&mut self, phase: Phase, summary: &str, seconds: f64) {
+        if let Some(bar) = self.current.take().and_then(|c| c.bar) {
+            bar.finish_and_clear();
+        }
+        self.say(&format!("{:>16}: {summary} ({seconds:.2} s)", phase.name()));
+    }
+
+    fn info(&mut self, line: &str) {
+        self.say(line);
+    }
+
+    fn warn(&mut self, line: &str) {
+        Progress::warn(self, line);
     }
 }
 
-/// One phase of the bake.
-pub struct Phase {
-    name: String,
-    mode: Mode,
+/// The phase under way.
+struct Current {
+    phase: Phase,
     bar: Option<ProgressBar>,
     total: u64,
     done: u64,
     started: Instant,
     last_line: Instant,
-}
-
-impl Phase {
-    /// Steps done so far.
-    pub fn done(&self) -> u64 {
-        self.done
-    }
-
-    /// Records `n` more steps done.
-    pub fn inc(&mut self, n: u64) {
-        self.done += n;
-        if let Some(bar) = &self.bar {
-            bar.inc(n);
-        } else if self.mode == Mode::Lines && self.last_line.elapsed() > Duration::from_secs(5) {
-            self.last_line = Instant::now();
-            eprintln!(
-                "{}: {}/{} ({:.0}%), {:.1} s",
-                self.name,
-                self.done,
-                self.total,
-                100.0 * self.done as f64 / self.total.max(1) as f64,
-                self.started.elapsed().as_secs_f64()
-            );
-        }
-    }
-
-    /// Ends the phase with a one-line summary; returns its duration in seconds.
-    pub fn finish(self, summary: &str) -> f64 {
-        let secs = self.started.elapsed().as_secs_f64();
-        if let Some(bar) = &self.bar {
-            bar.finish_and_clear();
-        }
-        if self.mode != Mode::Quiet {
-            eprintln!("{:>16}: {summary} ({secs:.2} s)", self.name);
-        }
-        secs
-    }
 }

@@ -1,0 +1,137 @@
+//! Tests of the parameter planning: presets, config precedence, automatic sizes and budgets.
+
+use super::*;
+
+fn cornell() -> Scene {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/cornell-box/cornell-box.obj");
+    prm_scene::load(&p).unwrap()
+}
+
+fn probe(scene: &Scene) -> impl Fn() -> Result<Atlas, BakeError> + '_ {
+    move || {
+        Atlas::build(scene, &prm_scene::AtlasParams::DEFAULT).map_err(|source| BakeError::Atlas {
+            what: "building the automatic atlas",
+            source,
+        })
+    }
+}
+
+#[test]
+fn paper_preset_is_the_papers_settings() {
+    let scene = cornell();
+    let cfg = BakeConfig {
+        preset: Some(Preset::Paper),
+        ..Default::default()
+    };
+    let p = BakeParams::resolve(&cfg, &scene, probe(&scene)).unwrap();
+    assert_eq!(
+        (p.entries, p.clusters, p.atlas, p.top_k),
+        (4096, 256, AtlasSize::Resolution(256), 32)
+    );
+    assert!(p.reasons.is_empty());
+}
+
+#[test]
+fn command_line_overrides_config_overrides_preset() {
+    let scene = cornell();
+    let file: BakeConfig = toml::from_str("preset = \"paper\"\nentries = 2048\nclusters = 128\n").unwrap();
+    let cli = BakeConfig {
+        clusters: Some(64),
+        ..Default::default()
+    };
+    let p = BakeParams::resolve(&file.overridden_by(&cli), &scene, probe(&scene)).unwrap();
+    assert_eq!((p.entries, p.clusters), (2048, 64));
+    assert!(
+        toml::from_str::<BakeConfig>("entires = 3").is_err(),
+        "unknown keys are errors"
+    );
+}
+
+#[test]
+fn automatic_sizes_follow_the_scene_and_budgets() {
+    let scene = cornell();
+    let p = BakeParams::resolve(&BakeConfig::default(), &scene, probe(&scene)).unwrap();
+    assert_eq!(p.entries, 1024, "a 16-chart box needs the minimum");
+    assert!(p.clusters >= 32 && p.clusters <= p.entries);
+    assert!(!p.reasons.is_empty());
+    // A tight memory budget shrinks the atlas or the cluster count until the panes fit it.
+    let bytes = |p: &BakeParams| match p.atlas {
+        AtlasSize::Resolution(r) => p.clusters as f64 * (r as f64).powi(2) * 4.0,
+        AtlasSize::TexelSize(_) => unreachable!(),
+    };
+    let tight = BakeConfig {
+        memory_budget_mib: Some(2.0),
+        ..Default::default()
+    };
+    let q = BakeParams::resolve(&tight, &scene, probe(&scene)).unwrap();
+    assert!(
+        bytes(&q) <= 2.0 * 1024.0 * 1024.0 && bytes(&q) < bytes(&p),
+        "{q:?} vs {p:?}"
+    );
+}
+
+#[test]
+fn time_budget_shrinks_automatic_sizes_only() {
+    let scene = cornell();
+    let roomy = BakeParams::resolve(&BakeConfig::default(), &scene, probe(&scene)).unwrap();
+    let budget = roomy.estimated_seconds / 4.0;
+    let tight = BakeConfig {
+        time_budget_s: Some(budget),
+        ..Default::default()
+    };
+    let p = BakeParams::resolve(&tight, &scene, probe(&scene)).unwrap();
+    assert!(p.estimated_seconds <= budget, "{p:?}");
+    assert!(p.estimated_seconds < roomy.estimated_seconds);
+    assert!(p.reasons.iter().any(|r| r.contains("time budget")), "{:?}", p.reasons);
+    // Explicit sizes are never changed, only estimated.
+    let fixed = BakeConfig {
+        preset: Some(Preset::Paper),
+        time_budget_s: Some(1.0),
+        ..Default::default()
+    };
+    let q = BakeParams::resolve(&fixed, &scene, probe(&scene)).unwrap();
+    assert_eq!((q.entries, q.clusters, q.paths_per_entry), (4096, 256, 1));
+    assert!(q.estimated_seconds > 1.0);
+}
+
+#[test]
+fn impossible_parameters_are_refused() {
+    let scene = cornell();
+    for (cfg, needle) in [
+        (
+            BakeConfig {
+                entries: Some(0),
+                ..Default::default()
+            },
+            "entries",
+        ),
+        (
+            BakeConfig {
+                entries: Some(100),
+                clusters: Some(200),
+                ..Default::default()
+            },
+            "more clusters",
+        ),
+        (
+            BakeConfig {
+                resolution: Some(100_000),
+                ..Default::default()
+            },
+            "resolution",
+        ),
+        (
+            BakeConfig {
+                preset: Some(Preset::High),
+                memory_budget_mib: Some(16.0),
+                ..Default::default()
+            },
+            "memory budget",
+        ),
+    ] {
+        let e = BakeParams::resolve(&cfg, &scene, probe(&scene))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains(needle), "{e}");
+    }
+}

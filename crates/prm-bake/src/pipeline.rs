@@ -1,0 +1,402 @@
+//! The bake pipeline: atlas → BVH → entry points → walks → clusters → panes → `.prm` archive.
+
+use glam::Vec3;
+use prm_format::ArchiveWriter;
+use prm_gpu::{GpuContext, PaneOutput, PaneRenderParams};
+use prm_scene::{Atlas, AtlasParams, AtlasStats, Scene, Sizing};
+use prm_trace::{Bvh, BvhParams, ClusterParams, Clustering, EntryParams, PaneParams, WalkParams};
+use std::cell::OnceCell;
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::time::Instant;
+
+use crate::archive::{archive_tables, metadata, MadeDirs};
+use crate::params::{AtlasSize, BakeConfig, BakeParams};
+use crate::sink::{Phase, ProgressSink};
+use crate::BakeError;
+
+/// Largest atlas the archive format holds, texels on a side.
+const MAX_ATLAS_RESOLUTION: u32 = 8192;
+
+/// Where the panes are rendered.
+#[derive(Clone, Copy)]
+pub enum Renderer<'a> {
+    /// The CPU pane evaluator, with exact ray-cast visibility (slow; a yardstick).
+    Cpu,
+    /// The GPU pane passes on an opened device (check it with [`prm_gpu::check_support`]).
+    Gpu(&'a GpuContext),
+}
+
+impl std::fmt::Debug for Renderer<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Renderer::Cpu => f.write_str("Cpu"),
+            Renderer::Gpu(ctx) => f.debug_tuple("Gpu").field(&ctx.describe()).finish(),
+        }
+    }
+}
+
+impl Renderer<'_> {
+    /// "cpu", or the device's description; recorded in the archive's parameters as `backend`.
+    pub fn name(&self) -> String {
+        match self {
+            Renderer::Cpu => "cpu".to_string(),
+            Renderer::Gpu(ctx) => ctx.describe(),
+        }
+    }
+}
+
+/// Resolved parameters for one scene, with the automatic atlas if planning had to build it (the
+/// bake then reuses it instead of building it again).
+#[derive(Clone, Debug)]
+pub struct Plan {
+    /// The parameters the bake will use, and why.
+    pub params: BakeParams,
+    probed_atlas: Option<Atlas>,
+}
+
+impl Plan {
+    /// Resolves `config` for `scene` ([`BakeParams::resolve`]), building the automatic atlas at
+    /// most once and only if the parameters need it.
+    pub fn new(config: &BakeConfig, scene: &Scene) -> Result<Plan, BakeError> {
+        let auto_atlas: OnceCell<Atlas> = OnceCell::new();
+        let probe = || -> Result<Atlas, BakeError> {
+            if let Some(a) = auto_atlas.get() {
+                return Ok(a.clone());
+            }
+            let a = Atlas::build(scene, &AtlasParams::DEFAULT).map_err(|source| BakeError::Atlas {
+                what: "building the automatic atlas",
+                source,
+            })?;
+            Ok(auto_atlas.get_or_init(|| a).clone())
+        };
+        let params = BakeParams::resolve(config, scene, probe)?;
+        Ok(Plan {
+            params,
+            probed_atlas: auto_atlas.into_inner(),
+        })
+    }
+}
+
+impl From<BakeParams> for Plan {
+    /// A plan of parameters resolved elsewhere (the bake builds its atlas itself).
+    fn from(params: BakeParams) -> Plan {
+        Plan {
+            params,
+            probed_atlas: None,
+        }
+    }
+}
+
+/// What to bake and where to write it.
+#[derive(Clone, Copy, Debug)]
+pub struct BakeJob<'a> {
+    /// The loaded scene.
+    pub scene: &'a Scene,
+    /// The file it was loaded from: recorded in the archive (relative to the archive's
+    /// directory) so that the player can find it.
+    pub scene_path: &'a Path,
+    /// The parameters ([`Plan::new`]).
+    pub plan: &'a Plan,
+    /// The archive to write: replaced atomically, and nothing (no temporary file, no directory
+    /// the bake created) is left behind when the bake fails.
+    pub output: &'a Path,
+}
+
+/// What a finished bake measured, for a summary or a report. The archive is at
+/// [`BakeJob::output`].
+#[derive(Clone, Debug)]
+#[non_exhaustive]
+pub struct Baked {
+    /// Where the panes were rendered ([`Renderer::name`]).
+    pub backend: String,
+    /// The atlas's statistics.
+    pub atlas: AtlasStats,
+    /// Triangles in the scene.
+    pub triangles: usize,
+    /// Entry points in the archive.
+    pub entries: usize,
+    /// Clusters (= panes) in the archive.
+    pub clusters: usize,
+    /// Random walks traced.
+    pub walks: u64,
+    /// VPLs the walks stored.
+    pub vpls: usize,
+    /// Rays cast: walk rays, plus shadow rays on the CPU renderer.
+    pub rays: u64,
+    /// Size of the archive written, bytes.
+    pub archive_bytes: u64,
+    /// Seconds per step: `atlas`, `bvh`, `light_tracing`, `clustering`, `pane_rendering`,
+    /// `compression_write`, and on the GPU `pane_depth_maps` and `pane_gather`.
+    pub timings: BTreeMap<String, f64>,
+}
+
+/// Wraps a transport error with the step that failed.
+fn trace(what: &'static str) -> impl FnOnce(prm_trace::TraceError) -> BakeError {
+    move |source| BakeError::Trace { what, source }
+}
+
+/// Bakes `job.scene` into the archive `job.output` with the panes rendered by `renderer`,
+/// reporting to `progress`.
+///
+/// The destination is checked before any work ([`prm_format::check_destination`]); missing
+/// directories are created. The archive's bytes depend only on the scene, the scene path
+/// relative to the archive, the parameters and the renderer: the same inputs give the same bytes.
+pub fn bake(job: &BakeJob<'_>, renderer: Renderer<'_>, progress: &mut dyn ProgressSink) -> Result<Baked, BakeError> {
+    let destination = prm_format::check_destination(job.output).map_err(BakeError::Destination)?;
+    let (scene, params) = (job.scene, &job.plan.params);
+    let mut timings = BTreeMap::new();
+    let backend_name = renderer.name();
+
+    let t = Instant::now();
+    progress.phase_start(Phase::Atlas, 1);
+    let sizing = match params.atlas {
+        AtlasSize::Resolution(r) => Sizing::Resolution(r),
+        AtlasSize::TexelSize(s) => Sizing::TexelSize(s),
+    };
+    let atlas = match (&job.plan.probed_atlas, sizing) {
+        (Some(a), Sizing::Resolution(r)) if a.resolution == r => a.clone(),
+        _ => Atlas::build(scene, &AtlasParams::with_sizing(sizing)).map_err(|source| BakeError::Atlas {
+            what: "building the lightmap atlas",
+            source,
+        })?,
+    };
+    if atlas.resolution > MAX_ATLAS_RESOLUTION {
+        return Err(BakeError::OverLimit(format!(
+            "the atlas needs {}² texels, over the archive's {MAX_ATLAS_RESOLUTION} limit; choose a larger --texel-size",
+            atlas.resolution
+        )));
+    }
+    let secs = t.elapsed().as_secs_f64();
+    timings.insert("atlas".to_string(), secs);
+    progress.phase_finish(
+        Phase::Atlas,
+        &format!(
+            "{r}x{r}, {} charts, {} exit points",
+            atlas.stats.charts,
+            atlas.exits.len(),
+            r = atlas.resolution
+        ),
+        secs,
+    );
+
+    let t = Instant::now();
+    progress.phase_start(Phase::Bvh, 1);
+    let bvh = Bvh::build(scene, &BvhParams::DEFAULT).map_err(trace("building the BVH"))?;
+    let secs = t.elapsed().as_secs_f64();
+    timings.insert("bvh".to_string(), secs);
+    progress.phase_finish(Phase::Bvh, &format!("{} triangles", scene.triangles.len()), secs);
+
+    let t = Instant::now();
+    progress.phase_start(Phase::LightTracing, 1);
+    let entries = prm_trace::sample_surface(
+        scene,
+        &EntryParams {
+            count: params.entries,
+            seed: params.seed,
+        },
+    )
+    .map_err(trace("sampling entry points"))?;
+    let walk_params = WalkParams {
+        walks_per_entry: params.paths_per_entry,
+        seed: params.seed,
+        ..WalkParams::PREVIEW
+    };
+    let vpls = prm_trace::trace_walks(scene, &bvh, &entries, &walk_params).map_err(trace("tracing walks"))?;
+    let secs = t.elapsed().as_secs_f64();
+    timings.insert("light_tracing".to_string(), secs);
+    progress.phase_finish(
+        Phase::LightTracing,
+        &format!(
+            "{} entries, {} walks, {} VPLs, {} rays",
+            entries.len(),
+            vpls.stats.walks,
+            vpls.vpls.len(),
+            vpls.stats.rays
+        ),
+        secs,
+    );
+
+    let t = Instant::now();
+    progress.phase_start(Phase::Clustering, 1);
+    let clustering = if params.clusters == entries.len() {
+        Clustering::identity(&entries)
+    } else {
+        let cp = ClusterParams {
+            seed: params.seed,
+            ..ClusterParams::with_clusters(params.clusters)
+        };
+        Clustering::kmeans(&entries, scene.bounds().diagonal(), &cp)
+            .map_err(trace("clustering entry points"))?
+            .separate_by_visibility(&entries, &bvh)
+    };
+    let secs = t.elapsed().as_secs_f64();
+    timings.insert("clustering".to_string(), secs);
+    progress.phase_finish(Phase::Clustering, &format!("{} clusters", clustering.len()), secs);
+
+    let (table_entries, table_clusters, atlas_section) = archive_tables(&atlas, &entries, &clustering);
+    let out_dir = destination
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    let made = MadeDirs::create(out_dir)?;
+    let metadata = metadata(scene, job.scene_path, out_dir, params, &atlas, &backend_name)?;
+    let mut writer = ArchiveWriter::create(job.output, metadata, &atlas_section, &table_entries, &table_clusters)
+        .map_err(|source| BakeError::Archive {
+            what: format!("starting {}", job.output.display()),
+            source,
+        })?;
+
+    // Panes: render (GPU or CPU), fill the atlas image, dilate into the gutters, write.
+    let mut write_s = 0.0;
+    let mut image = vec![[0f32; 3]; (atlas.resolution * atlas.resolution) as usize];
+    let mut emit = |pane: &[Vec3], writer: &mut ArchiveWriter| -> Result<(), BakeError> {
+        let t = Instant::now();
+        image.fill([0.0; 3]);
+        for (e, v) in atlas.exits.iter().zip(pane) {
+            image[e.texel as usize] = v.to_array();
+        }
+        for &(dst, src) in &atlas.dilation {
+            image[dst as usize] = image[src as usize];
+        }
+        writer.add_pane(&image).map_err(|source| BakeError::Archive {
+            what: "writing a pane".to_string(),
+            source,
+        })?;
+        write_s += t.elapsed().as_secs_f64();
+        Ok(())
+    };
+    let t = Instant::now();
+    // Entry indices in the archive's order (cluster by cluster), and their pane energies.
+    let order: Vec<u32> = clustering.members.iter().flatten().copied().collect();
+    let mut entry_energy = vec![[0f32; 3]; entries.len()];
+    let mut entry_energy_known = true;
+    let shadow_rays;
+    let phase_started;
+    match renderer {
+        Renderer::Gpu(ctx) => {
+            let rp = PaneRenderParams {
+                bound: params.bound(),
+                face_resolution: params.face_resolution,
+                ..PaneRenderParams::DEFAULT
+            };
+            // Progress counts VPLs: a group of panes can take minutes on a big scene.
+            phase_started = Instant::now();
+            progress.phase_start(Phase::PaneRendering, vpls.vpls.len() as u64);
+            let mut at = 0;
+            let mut energies_complete = true;
+            let stats = prm_gpu::render_panes_with(ctx, scene, &atlas.exits, &vpls, &clustering, &rp, |out| {
+                match out {
+                    PaneOutput::Pane {
+                        cluster,
+                        irradiance,
+                        member_energy,
+                    } => {
+                        // Members arrive cluster by cluster: the archive's entry order.
+                        energies_complete &= member_energy.len() == clustering.members[cluster].len();
+                        for (slot, e) in entry_energy[at..].iter_mut().zip(member_energy) {
+                            *slot = e.to_array();
+                        }
+                        at += member_energy.len();
+                        emit(irradiance, &mut writer)?
+                    }
+                    PaneOutput::Progress(s) => progress.phase_advance(s.vpls),
+                }
+                Ok::<(), BakeError>(())
+            })?;
+            progress.info(&format!(
+                "  GPU: {} batches, {} depth faces ({:.0} triangles each after culling) {:.2} s, {} evaluations {:.2} s ({:.0} M/s)",
+                stats.batches,
+                stats.faces,
+                stats.triangles as f64 / stats.faces.max(1) as f64,
+                stats.depth_seconds,
+                stats.evaluations,
+                stats.gather_seconds,
+                stats.evaluations as f64 / stats.gather_seconds.max(1e-9) / 1e6
+            ));
+            if !energies_complete {
+                entry_energy_known = false;
+                progress.info(&format!(
+                    "  no entry energies: their read-back would take {:.1} GiB, over the {:.1} GiB \
+                     budget, so the panes were rendered per cluster and the player weighs \
+                     members equally (the archive stays format 1.0)",
+                    prm_gpu::pane::member_readback_bytes(entries.len(), atlas.exits.len()) as f64 / (1u64 << 30) as f64,
+                    rp.member_energy_bytes as f64 / (1u64 << 30) as f64
+                ));
+            }
+            timings.insert("pane_depth_maps".to_string(), stats.depth_seconds);
+            timings.insert("pane_gather".to_string(), stats.gather_seconds);
+            shadow_rays = 0;
+        }
+        Renderer::Cpu => {
+            let panes = prm_trace::evaluate_panes(
+                &bvh,
+                &vpls,
+                &clustering,
+                &atlas.exits,
+                &PaneParams { bound: params.bound() },
+            )
+            .map_err(trace("evaluating panes on the CPU"))?;
+            shadow_rays = panes.rays;
+            for (slot, &k) in entry_energy.iter_mut().zip(&order) {
+                *slot = panes
+                    .entry_energy
+                    .get(k as usize)
+                    .copied()
+                    .unwrap_or_default()
+                    .to_array();
+            }
+            entry_energy_known = panes.entry_energy.len() == entries.len();
+            phase_started = Instant::now();
+            progress.phase_start(Phase::PaneRendering, panes.clusters as u64);
+            for c in 0..panes.clusters {
+                emit(panes.pane(c), &mut writer)?;
+                progress.phase_advance(c as u64 + 1);
+            }
+        }
+    }
+    if entry_energy_known {
+        writer
+            .set_entry_energy(entry_energy)
+            .map_err(|source| BakeError::Archive {
+                what: "recording the entry energies".to_string(),
+                source,
+            })?;
+    }
+    let render_s = t.elapsed().as_secs_f64() - write_s;
+    progress.phase_finish(
+        Phase::PaneRendering,
+        &format!(
+            "{} panes, {} VPLs on {}",
+            clustering.len(),
+            vpls.vpls.len(),
+            backend_name
+        ),
+        phase_started.elapsed().as_secs_f64(),
+    );
+    timings.insert("pane_rendering".to_string(), render_s);
+
+    // Timings go to the caller only: the archive's bytes depend on nothing but the scene, the
+    // parameters and the backend, so caches and content-addressed pipelines can key on them
+    // (tested by `bake_is_byte_identical_across_runs_and_threads`).
+    let t = Instant::now();
+    let archive_bytes = writer.finish().map_err(|source| BakeError::Archive {
+        what: format!("finishing {}", job.output.display()),
+        source,
+    })?;
+    made.keep();
+    timings.insert("compression_write".to_string(), write_s + t.elapsed().as_secs_f64());
+
+    Ok(Baked {
+        backend: backend_name,
+        atlas: atlas.stats.clone(),
+        triangles: scene.triangles.len(),
+        entries: entries.len(),
+        clusters: clustering.len(),
+        walks: vpls.stats.walks,
+        vpls: vpls.vpls.len(),
+        rays: vpls.stats.rays + shadow_rays,
+        archive_bytes,
+        timings,
+    })
+}
