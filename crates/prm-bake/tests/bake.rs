@@ -1,7 +1,7 @@
 //! Integration tests of the `prm-bake` binary: real bakes of the Cornell box at small settings
 //! (archive contents, report, determinism, CPU vs Vulkan), failures that leave nothing behind,
-//! and `prm-bake dump`; and the stability tests of `stability/`. Measured numbers are printed
-//! (run with `--nocapture` to see them).
+//! and `prm-bake dump`. Measured numbers are printed (run with `--nocapture` to see them). The
+//! stability suite, which crosses into the player, is in the top-level `tests/stability.rs`.
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -9,8 +9,6 @@ use std::sync::OnceLock;
 use std::time::Instant;
 
 use prm_format::Archive;
-
-mod stability;
 
 const BIN: &str = env!("CARGO_BIN_EXE_prm-bake");
 

@@ -1,4 +1,5 @@
-//! Stability where the method is known to fail: VPL spikes, flicker under a moving light, a light
+//! Stability where the method is known to fail (end to end: bakes through `prm_bake::bake`,
+//! playback through `prm_play::Renderer`, ground truth from `prm_trace::ReferenceTracer`): VPL spikes, flicker under a moving light, a light
 //! touching a wall, leaks through a shut door, shadow edges and corners inside clusters, and
 //! degenerate or extreme inputs. Each test prints what it measured (`--nocapture`) and asserts a
 //! threshold set from that measurement with a margin, so it fails when the method gets worse.
@@ -6,21 +7,14 @@
 use std::path::{Path, PathBuf};
 
 use glam::Vec3;
-use prm_gpu::{Backend, GpuContext, PaneRenderParams};
+use prm_gpu::{GpuContext, PaneRenderParams};
 use prm_scene::{Atlas, AtlasParams, Light, Scene, Sizing};
 use prm_trace::{
     Bvh, BvhParams, ClusterParams, Clustering, EntryParams, Lighting, Panes, ReferenceParams, ReferenceTracer,
     SurfaceSample, VplBound, WalkParams,
 };
 
-fn repo(path: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..").join(path)
-}
-
-fn gpu() -> GpuContext {
-    // Vulkan explicitly: a missing driver fails loudly instead of falling back to GL.
-    GpuContext::new(Backend::Vulkan).expect("a Vulkan adapter (apt-get install mesa-vulkan-drivers)")
-}
+use prm_tests::{gpu, repo};
 
 /// A bake done through the libraries, kept in memory: what the archive would hold, unquantised.
 struct Bake {
@@ -344,34 +338,30 @@ fn variant(dir: &Path, name: &str, scale: f32, albedo: Option<f32>) -> PathBuf {
     path
 }
 
-/// Bakes `scene` with the binary at 32² and seed 2 into `dir/NAME.prm` (NAME: the scene's stem).
+/// Bakes `scene` through the library (`prm_bake::bake`, on Vulkan) at 32² and seed 2 into
+/// `dir/NAME.prm` (NAME: the scene's stem), as `prm-bake bake --resolution 32 --seed 2` does.
 fn bake_small(dir: &Path, scene: &Path, entries: &str, clusters: &str, walks: &str) -> PathBuf {
     let out = dir.join(format!("{}.prm", scene.file_stem().unwrap().to_string_lossy()));
-    let o = super::run(&[
-        "bake",
-        scene.to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-        "--entries",
-        entries,
-        "--clusters",
-        clusters,
-        "--resolution",
-        "32",
-        "--paths-per-entry",
-        walks,
-        "--seed",
-        "2",
-        "--backend",
-        "vulkan",
-        "--quiet",
-    ]);
-    assert!(
-        o.status.success(),
-        "bake of {} failed: {}",
-        scene.display(),
-        super::describe(&o)
-    );
+    let loaded = prm_scene::load(scene).unwrap();
+    let config = prm_bake::BakeConfig {
+        entries: Some(entries.parse().unwrap()),
+        clusters: Some(clusters.parse().unwrap()),
+        resolution: Some(32),
+        paths_per_entry: Some(walks.parse().unwrap()),
+        seed: Some(2),
+        ..Default::default()
+    };
+    let plan = prm_bake::Plan::new(&config, &loaded).unwrap();
+    let job = prm_bake::BakeJob {
+        scene: &loaded,
+        scene_path: scene,
+        plan: &plan,
+        output: &out,
+    };
+    let ctx = gpu();
+    if let Err(e) = prm_bake::bake(&job, prm_bake::Renderer::Gpu(&ctx), &mut prm_bake::NoProgress) {
+        panic!("bake of {} failed: {e}", scene.display());
+    }
     out
 }
 
@@ -386,10 +376,10 @@ fn pane_sum(panes: &[Vec<[f32; 3]>]) -> f64 {
     panes.iter().flatten().map(|t| (t[0] + t[1] + t[2]) as f64).sum()
 }
 
-/// 6. Degenerate and extreme inputs, end to end through `prm-bake bake`.
+/// 6. Degenerate and extreme inputs, end to end through the bake pipeline (`prm_bake::bake`).
 #[test]
 fn degenerate_and_extreme_inputs_bake_to_finite_archives() {
-    let dir = super::temp_dir("stability-extreme");
+    let dir = prm_tests::temp_dir("stability-extreme");
     // One triangle: walks leave at once, no surface lights another; every pane is zero.
     let one = dir.join("one.obj");
     std::fs::write(&one, "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();
@@ -462,13 +452,13 @@ fn changes(frames: &[Vec<Vec3>]) -> (f64, f64) {
 }
 
 /// 2. Flicker and popping: a light moving along a path in 120 small steps, played back by the
-///    player (GPU weights, top-K with fade) from archives baked by `prm-bake`; its frame-to-frame
+///    player (GPU weights, top-K with fade) from archives baked by `prm_bake::bake`; its frame-to-frame
 ///    change against the reference's own change for the same steps, clustered and unclustered,
 ///    several K.
 #[test]
 fn moving_light_does_not_flicker_or_pop() {
     use prm_play::{FrameInput, Mode, PlayOptions, Renderer};
-    let dir = super::temp_dir("stability-flicker");
+    let dir = prm_tests::temp_dir("stability-flicker");
     let scene_path = repo("scenes/cornell-box/cornell-box.obj");
     let scene = prm_scene::load(&scene_path).unwrap();
     let b = scene.bounds();
