@@ -196,3 +196,55 @@ pub fn depth_state(format: wgpu::TextureFormat) -> Option<wgpu::DepthStencilStat
         bias: Default::default(),
     })
 }
+
+/// What [`render`] builds: entry points `vs_main` and (with a colour target) `fs_main` of
+/// `module`, no culling, one sample, depth writes with nearer-wins when `depth` is given.
+pub struct RenderSpec<'a> {
+    /// Label.
+    pub label: &'a str,
+    /// The shader.
+    pub module: &'a wgpu::ShaderModule,
+    /// An explicit layout (dynamic offsets), or `None` for the one the shader implies.
+    pub layout: Option<&'a wgpu::PipelineLayout>,
+    /// Vertex buffers.
+    pub vertex_buffers: &'a [Option<wgpu::VertexBufferLayout<'a>>],
+    /// Depth format, if the pass has a depth attachment.
+    pub depth: Option<wgpu::TextureFormat>,
+    /// Colour target format (no blending), or `None` for a depth-only pass.
+    pub color: Option<wgpu::TextureFormat>,
+}
+
+/// A render pipeline as `spec` says.
+pub fn render(device: &wgpu::Device, spec: &RenderSpec) -> wgpu::RenderPipeline {
+    let targets = [spec.color.map(wgpu::ColorTargetState::from)];
+    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+        label: Some(spec.label),
+        layout: spec.layout,
+        vertex: wgpu::VertexState {
+            module: spec.module,
+            entry_point: Some("vs_main"),
+            compilation_options: Default::default(),
+            buffers: spec.vertex_buffers,
+        },
+        primitive: Default::default(),
+        depth_stencil: spec.depth.and_then(depth_state),
+        multisample: Default::default(),
+        fragment: spec.color.map(|_| wgpu::FragmentState {
+            module: spec.module,
+            entry_point: Some("fs_main"),
+            compilation_options: Default::default(),
+            targets: &targets,
+        }),
+        multiview_mask: None,
+        cache: None,
+    })
+}
+
+/// A vertex buffer layout of `stride` bytes per vertex with `attributes`.
+pub fn vertices(stride: usize, attributes: &[wgpu::VertexAttribute]) -> Option<wgpu::VertexBufferLayout<'_>> {
+    Some(wgpu::VertexBufferLayout {
+        array_stride: stride as u64,
+        step_mode: wgpu::VertexStepMode::Vertex,
+        attributes,
+    })
+}

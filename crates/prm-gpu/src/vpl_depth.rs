@@ -287,36 +287,21 @@ impl VplDepthPass {
             bind_group_layouts: &[Some(&frame_layout), Some(&face_layout)],
             immediate_size: 0,
         });
-        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("vpl_depth"),
-            layout: Some(&layout),
-            vertex: wgpu::VertexState {
+        // No raster bias: the gather pass biases distances in scene units.
+        let pipeline = prm_gpu_kit::pipeline::render(
+            device,
+            &prm_gpu_kit::pipeline::RenderSpec {
+                label: "vpl_depth",
                 module: &module,
-                entry_point: Some("vs_main"),
-                compilation_options: Default::default(),
-                buffers: &[Some(wgpu::VertexBufferLayout {
-                    array_stride: 16,
-                    step_mode: wgpu::VertexStepMode::Vertex,
-                    attributes: &wgpu::vertex_attr_array![0 => Float32x3],
-                })],
+                layout: Some(&layout),
+                vertex_buffers: &[prm_gpu_kit::pipeline::vertices(
+                    16,
+                    &wgpu::vertex_attr_array![0 => Float32x3],
+                )],
+                depth: Some(DEPTH_FORMAT),
+                color: None,
             },
-            primitive: wgpu::PrimitiveState {
-                cull_mode: None,
-                ..Default::default()
-            },
-            depth_stencil: Some(wgpu::DepthStencilState {
-                format: DEPTH_FORMAT,
-                depth_write_enabled: Some(true),
-                depth_compare: Some(wgpu::CompareFunction::Less),
-                stencil: Default::default(),
-                // No raster bias: the gather pass biases distances in scene units.
-                bias: Default::default(),
-            }),
-            multisample: Default::default(),
-            fragment: None,
-            multiview_mask: None,
-            cache: None,
-        });
+        );
         let frame_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("vpl_depth frame"),
             layout: &frame_layout,
@@ -471,14 +456,7 @@ impl VplDepthPass {
             let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
                 label: Some("vpl_depth"),
                 color_attachments: &[],
-                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                    view,
-                    depth_ops: Some(wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(1.0),
-                        store: wgpu::StoreOp::Store,
-                    }),
-                    stencil_ops: None,
-                }),
+                depth_stencil_attachment: prm_gpu_kit::pipeline::depth_attachment(view, true),
                 timestamp_writes: None,
                 occlusion_query_set: None,
                 multiview_mask: None,

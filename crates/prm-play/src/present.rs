@@ -21,27 +21,17 @@ impl Presenter {
             "play present",
             &[include_str!("../../../shaders/play/present.wgsl")],
         );
-        let pipeline = ctx.device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("play present"),
-            layout: None,
-            vertex: wgpu::VertexState {
+        let pipeline = pipeline::render(
+            &ctx.device,
+            &pipeline::RenderSpec {
+                label: "play present",
                 module: &module,
-                entry_point: Some("vs_main"),
-                compilation_options: Default::default(),
-                buffers: &[],
+                layout: None,
+                vertex_buffers: &[],
+                depth: None,
+                color: Some(format),
             },
-            primitive: Default::default(),
-            depth_stencil: None,
-            multisample: Default::default(),
-            fragment: Some(wgpu::FragmentState {
-                module: &module,
-                entry_point: Some("fs_main"),
-                compilation_options: Default::default(),
-                targets: &[Some(format.into())],
-            }),
-            multiview_mask: None,
-            cache: None,
-        });
+        );
         let uniform = pipeline::uniform(&ctx.device, "play present", 16);
         let encode = u32::from(!format.is_srgb());
         ctx.queue

@@ -93,40 +93,22 @@ impl ShadePass {
             ),
         };
         let module = pipeline::shader(device, "play shade", &source());
-        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("play shade"),
-            layout: None,
-            vertex: wgpu::VertexState {
+        let pipeline = pipeline::render(
+            device,
+            &pipeline::RenderSpec {
+                label: "play shade",
                 module: &module,
-                entry_point: Some("vs_main"),
-                compilation_options: Default::default(),
-                buffers: &[Some(wgpu::VertexBufferLayout {
-                    array_stride: std::mem::size_of::<GpuVertex>() as u64,
-                    step_mode: wgpu::VertexStepMode::Vertex,
-                    attributes: &wgpu::vertex_attr_array![
+                layout: None,
+                vertex_buffers: &[pipeline::vertices(
+                    std::mem::size_of::<GpuVertex>(),
+                    &wgpu::vertex_attr_array![
                         0 => Float32x3, 1 => Float32x3, 2 => Float32x2, 3 => Float32x2, 4 => Uint32
                     ],
-                })],
+                )],
+                depth: Some(DEPTH_FORMAT),
+                color: Some(COLOR_FORMAT),
             },
-            primitive: wgpu::PrimitiveState {
-                cull_mode: None,
-                ..Default::default()
-            },
-            depth_stencil: pipeline::depth_state(DEPTH_FORMAT),
-            multisample: Default::default(),
-            fragment: Some(wgpu::FragmentState {
-                module: &module,
-                entry_point: Some("fs_main"),
-                compilation_options: Default::default(),
-                targets: &[Some(wgpu::ColorTargetState {
-                    format: COLOR_FORMAT,
-                    blend: None,
-                    write_mask: wgpu::ColorWrites::ALL,
-                })],
-            }),
-            multiview_mask: None,
-            cache: None,
-        });
+        );
         let bind_group = Self::group(ctx, &pipeline, &res, runtime);
         ShadePass {
             pipeline,

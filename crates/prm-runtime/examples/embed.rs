@@ -37,12 +37,12 @@ struct Out {
 };
 
 @vertex
-fn vs(@location(0) p: vec3<f32>, @location(1) n: vec3<f32>, @location(2) uv: vec2<f32>, @location(3) a: vec3<f32>) -> Out {
+fn vs_main(@location(0) p: vec3<f32>, @location(1) n: vec3<f32>, @location(2) uv: vec2<f32>, @location(3) a: vec3<f32>) -> Out {
     return Out(view_proj * vec4<f32>(p, 1.0), p, n, uv, a);
 }
 
 @fragment
-fn fs(v: Out) -> @location(0) vec4<f32> {
+fn fs_main(v: Out) -> @location(0) vec4<f32> {
     let size = vec2<f32>(textureDimensions(lightmap));
     let indirect = textureLoad(lightmap, vec2<i32>(v.lightmap_uv * size), 0).rgb;
     let direct = direct_irradiance(v.position, normalize(v.normal));
@@ -141,31 +141,20 @@ fn run(archive_path: &Path, out: &Path) -> Result<()> {
         source: wgpu::ShaderSource::Wgsl(source.into()),
     });
     let format = wgpu::TextureFormat::Rgba8Unorm;
-    let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-        label: None,
-        layout: None,
-        vertex: wgpu::VertexState {
+    let pipeline = kit::render(
+        &device,
+        &kit::RenderSpec {
+            label: "embed",
             module: &module,
-            entry_point: Some("vs"),
-            compilation_options: Default::default(),
-            buffers: &[Some(wgpu::VertexBufferLayout {
-                array_stride: std::mem::size_of::<Vertex>() as u64,
-                step_mode: wgpu::VertexStepMode::Vertex,
-                attributes: &wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3, 2 => Float32x2, 3 => Float32x3],
-            })],
+            layout: None,
+            vertex_buffers: &[kit::vertices(
+                std::mem::size_of::<Vertex>(),
+                &wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3, 2 => Float32x2, 3 => Float32x3],
+            )],
+            depth: Some(wgpu::TextureFormat::Depth32Float),
+            color: Some(format),
         },
-        primitive: Default::default(),
-        depth_stencil: kit::depth_state(wgpu::TextureFormat::Depth32Float),
-        multisample: Default::default(),
-        fragment: Some(wgpu::FragmentState {
-            module: &module,
-            entry_point: Some("fs"),
-            compilation_options: Default::default(),
-            targets: &[Some(format.into())],
-        }),
-        multiview_mask: None,
-        cache: None,
-    });
+    );
     let d = runtime.direct_light_bindings();
     let resources = [
         d.frame.as_entire_binding(),

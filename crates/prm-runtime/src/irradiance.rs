@@ -39,34 +39,20 @@ impl IrradiancePass {
                 include_str!("../../../shaders/runtime/irradiance.wgsl"),
             ],
         );
-        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("prm irradiance"),
-            layout: None,
-            vertex: wgpu::VertexState {
+        let pipeline = pipeline::render(
+            device,
+            &pipeline::RenderSpec {
+                label: "prm irradiance",
                 module: &module,
-                entry_point: Some("vs_main"),
-                compilation_options: Default::default(),
-                buffers: &[Some(wgpu::VertexBufferLayout {
-                    array_stride: std::mem::size_of::<AtlasVertex>() as u64,
-                    step_mode: wgpu::VertexStepMode::Vertex,
-                    attributes: &wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3, 2 => Float32x2],
-                })],
+                layout: None,
+                vertex_buffers: &[pipeline::vertices(
+                    std::mem::size_of::<AtlasVertex>(),
+                    &wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3, 2 => Float32x2],
+                )],
+                depth: None,
+                color: Some(LIGHTMAP_FORMAT),
             },
-            primitive: wgpu::PrimitiveState {
-                cull_mode: None,
-                ..Default::default()
-            },
-            depth_stencil: None,
-            multisample: Default::default(),
-            fragment: Some(wgpu::FragmentState {
-                module: &module,
-                entry_point: Some("fs_main"),
-                compilation_options: Default::default(),
-                targets: &[Some(LIGHTMAP_FORMAT.into())],
-            }),
-            multiview_mask: None,
-            cache: None,
-        });
+        );
         let bind_group = pipeline::bind_group(device, "prm irradiance", &pipeline.get_bind_group_layout(0), resources);
         IrradiancePass { pipeline, bind_group }
     }

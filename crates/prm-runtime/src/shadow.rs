@@ -82,29 +82,17 @@ impl ShadowPass {
             bind_group_layouts: &[Some(&layout)],
             immediate_size: 0,
         });
-        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("prm shadow"),
-            layout: Some(&pipeline_layout),
-            vertex: wgpu::VertexState {
+        let pipeline = pipeline::render(
+            device,
+            &pipeline::RenderSpec {
+                label: "prm shadow",
                 module: &module,
-                entry_point: Some("vs_main"),
-                compilation_options: Default::default(),
-                buffers: &[Some(wgpu::VertexBufferLayout {
-                    array_stride: 12,
-                    step_mode: wgpu::VertexStepMode::Vertex,
-                    attributes: &wgpu::vertex_attr_array![0 => Float32x3],
-                })],
+                layout: Some(&pipeline_layout),
+                vertex_buffers: &[pipeline::vertices(12, &wgpu::vertex_attr_array![0 => Float32x3])],
+                depth: Some(SHADOW_FORMAT),
+                color: None,
             },
-            primitive: wgpu::PrimitiveState {
-                cull_mode: None,
-                ..Default::default()
-            },
-            depth_stencil: pipeline::depth_state(SHADOW_FORMAT),
-            multisample: Default::default(),
-            fragment: None,
-            multiview_mask: None,
-            cache: None,
-        });
+        );
         let bind_group = Self::group(device, &pipeline, maps);
         ShadowPass { pipeline, bind_group }
     }
