@@ -1027,6 +1027,15 @@ fn replace_section(bytes: &[u8], kind: u32, data: &[u8], compression: u32, raw_s
 }
 
 /// A zstd stream of `n` zero bytes, compressed in 1 MiB steps.
+/// Reading `archive` fails as inconsistent, naming `what`, with under 8 MiB kept live.
+fn assert_refused_in_bounded_memory(archive: &[u8], what: &str) {
+    let (result, peak) = peak_allocation(|| Archive::from_bytes(archive).map(|_| ()));
+    let err = result.unwrap_err();
+    assert!(matches!(err, Error::Inconsistent { .. }), "{err}");
+    assert!(err.to_string().contains(what), "{err}");
+    assert!(peak < 8 << 20, "the reader kept {peak} bytes live");
+}
+
 fn zstd_zeros(n: u64) -> Vec<u8> {
     use std::io::Write;
     let mut enc = zstd::stream::write::Encoder::new(Vec::new(), 19).unwrap();
@@ -1051,11 +1060,7 @@ fn decompression_bomb_in_entries_is_refused_without_allocating() {
     let bomb = zstd_zeros(raw);
     assert!(bomb.len() < 64 << 10, "bomb is {} bytes", bomb.len());
     let m = replace_section(&bytes, kind::ENTRIES, &bomb, compression::ZSTD, raw);
-    let (result, peak) = peak_allocation(|| Archive::from_bytes(&m).map(|_| ()));
-    let err = result.unwrap_err();
-    assert!(matches!(err, Error::Inconsistent { .. }), "{err}");
-    assert!(err.to_string().contains("entries"), "{err}");
-    assert!(peak < 8 << 20, "the reader kept {peak} bytes live");
+    assert_refused_in_bounded_memory(&m, "entries");
 }
 
 /// The same rule for the clusters (56 × the panes header's pane count) and
@@ -1066,13 +1071,7 @@ fn declared_raw_sizes_must_match_the_counts() {
     // clusters: 2^20 records declared, 3 panes
     let raw = limits::MAX_CLUSTERS * 56;
     let m = replace_section(&bytes, kind::CLUSTERS, &zstd_zeros(raw), compression::ZSTD, raw);
-    let (result, peak) = peak_allocation(|| Archive::from_bytes(&m).map(|_| ()));
-    let err = result.unwrap_err();
-    assert!(
-        matches!(err, Error::Inconsistent { .. }) && err.to_string().contains("3 panes"),
-        "{err}"
-    );
-    assert!(peak < 8 << 20, "the reader kept {peak} bytes live");
+    assert_refused_in_bounded_memory(&m, "3 panes");
 
     // atlas: a valid 16×16 header followed by 400 MiB of zeros
     let mut data = Vec::new();
@@ -1091,13 +1090,7 @@ fn declared_raw_sizes_must_match_the_counts() {
         enc.finish().unwrap()
     };
     let m = replace_section(&bytes, kind::ATLAS, &stream, compression::ZSTD, raw + 16);
-    let (result, peak) = peak_allocation(|| Archive::from_bytes(&m).map(|_| ()));
-    let err = result.unwrap_err();
-    assert!(
-        matches!(err, Error::Inconsistent { .. }) && err.to_string().contains("atlas"),
-        "{err}"
-    );
-    assert!(peak < 8 << 20, "the reader kept {peak} bytes live");
+    assert_refused_in_bounded_memory(&m, "atlas");
 
     // entries: the right declared size but a stream that ends early is a
     // decompression failure, found without allocating the declared size
