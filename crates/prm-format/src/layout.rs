@@ -181,6 +181,58 @@ impl PutLe for Vec<u8> {
     }
 }
 
+/// A fixed-size little-endian field of a record.
+pub(crate) trait Field: Sized {
+    fn put(self, b: &mut Vec<u8>);
+    fn take(c: &mut Cursor<'_>) -> Result<Self>;
+}
+
+impl Field for u32 {
+    fn put(self, b: &mut Vec<u8>) {
+        b.put_u32(self);
+    }
+    fn take(c: &mut Cursor<'_>) -> Result<Self> {
+        c.u32()
+    }
+}
+
+impl Field for u64 {
+    fn put(self, b: &mut Vec<u8>) {
+        b.put_u64(self);
+    }
+    fn take(c: &mut Cursor<'_>) -> Result<Self> {
+        c.u64()
+    }
+}
+
+impl Field for [f32; 3] {
+    fn put(self, b: &mut Vec<u8>) {
+        b.put_vec3(self);
+    }
+    fn take(c: &mut Cursor<'_>) -> Result<Self> {
+        c.vec3()
+    }
+}
+
+/// Gives a record struct `encode_into` and `decode`, its fields stored in the order listed, each
+/// as its [`Field`] encoding.
+macro_rules! record_codec {
+    ($ty:ident { $($field:ident),* $(,)? }) => {
+        impl $ty {
+            pub(crate) fn encode_into(&self, b: &mut Vec<u8>) {
+                $($crate::layout::Field::put(self.$field, b);)*
+            }
+
+            pub(crate) fn decode(c: &mut $crate::layout::Cursor<'_>) -> $crate::error::Result<$ty> {
+                Ok($ty {
+                    $($field: $crate::layout::Field::take(c)?,)*
+                })
+            }
+        }
+    };
+}
+pub(crate) use record_codec;
+
 /// The fixed 64-byte file header.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub(crate) struct Header {
@@ -266,29 +318,15 @@ pub(crate) struct SectionRecord {
     pub reserved: u64,
 }
 
-impl SectionRecord {
-    pub(crate) fn encode_into(&self, b: &mut Vec<u8>) {
-        b.put_u32(self.kind);
-        b.put_u32(self.compression);
-        b.put_u64(self.offset);
-        b.put_u64(self.stored_size);
-        b.put_u64(self.raw_size);
-        b.put_u64(self.checksum);
-        b.put_u64(self.reserved);
-    }
-
-    pub(crate) fn decode(c: &mut Cursor<'_>) -> Result<SectionRecord> {
-        Ok(SectionRecord {
-            kind: c.u32()?,
-            compression: c.u32()?,
-            offset: c.u64()?,
-            stored_size: c.u64()?,
-            raw_size: c.u64()?,
-            checksum: c.u64()?,
-            reserved: c.u64()?,
-        })
-    }
-}
+record_codec!(SectionRecord {
+    kind,
+    compression,
+    offset,
+    stored_size,
+    raw_size,
+    checksum,
+    reserved
+});
 
 /// One record of the panes section's tile index.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -301,23 +339,12 @@ pub(crate) struct TileRecord {
     pub checksum: u64,
 }
 
-impl TileRecord {
-    pub(crate) fn encode_into(&self, b: &mut Vec<u8>) {
-        b.put_u64(self.offset);
-        b.put_u32(self.size);
-        b.put_u32(self.reserved);
-        b.put_u64(self.checksum);
-    }
-
-    pub(crate) fn decode(c: &mut Cursor<'_>) -> Result<TileRecord> {
-        Ok(TileRecord {
-            offset: c.u64()?,
-            size: c.u32()?,
-            reserved: c.u32()?,
-            checksum: c.u64()?,
-        })
-    }
-}
+record_codec!(TileRecord {
+    offset,
+    size,
+    reserved,
+    checksum
+});
 
 #[cfg(test)]
 mod tests {

@@ -22,6 +22,9 @@ mod metadata;
 mod reader;
 mod rgb9e5;
 mod sections;
+#[cfg(test)]
+#[path = "../tests/common/splitmix.rs"]
+mod splitmix;
 mod writer;
 
 pub use error::{Error, Result};

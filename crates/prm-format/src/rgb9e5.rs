@@ -121,16 +121,9 @@ pub fn decode_rgb9e5_slice(texels: &[u32]) -> Vec<[f32; 3]> {
 mod tests {
     use super::*;
 
-    /// SplitMix64: small deterministic PRNG for tests.
-    struct Rng(u64);
+    use crate::splitmix::Rng;
+
     impl Rng {
-        fn next(&mut self) -> u64 {
-            self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-            let mut z = self.0;
-            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-            z ^ (z >> 31)
-        }
         fn unit(&mut self) -> f64 {
             (self.next() >> 11) as f64 / (1u64 << 53) as f64
         }

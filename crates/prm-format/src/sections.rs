@@ -4,7 +4,8 @@ use std::ops::Range;
 
 use crate::error::Result;
 use crate::layout::{
-    limits, Cursor, PutLe, ATLAS_HEADER_SIZE, CLUSTER_RECORD_SIZE, ENTRY_ENERGY_RECORD_SIZE, ENTRY_RECORD_SIZE,
+    limits, record_codec, Cursor, PutLe, ATLAS_HEADER_SIZE, CLUSTER_RECORD_SIZE, ENTRY_ENERGY_RECORD_SIZE,
+    ENTRY_RECORD_SIZE,
 };
 
 /// The lightmap atlas shared by every pane.
@@ -262,106 +263,76 @@ fn finite3(v: &[f32; 3]) -> bool {
     v.iter().all(|c| c.is_finite())
 }
 
-pub(crate) fn encode_entries(entries: &[Entry]) -> Vec<u8> {
-    let mut b = Vec::with_capacity(entries.len() * ENTRY_RECORD_SIZE);
-    for e in entries {
-        b.put_vec3(e.position);
-        b.put_vec3(e.normal);
-        b.put_u32(e.cluster);
+record_codec!(Entry {
+    position,
+    normal,
+    cluster
+});
+record_codec!(Cluster {
+    first,
+    count,
+    centroid,
+    mean_normal,
+    energy,
+    peak
+});
+
+/// Records of `size` bytes each, one after the other.
+fn encode_records<T>(items: &[T], size: usize, encode_into: impl Fn(&T, &mut Vec<u8>)) -> Vec<u8> {
+    let mut b = Vec::with_capacity(items.len() * size);
+    for item in items {
+        encode_into(item, &mut b);
     }
     b
+}
+
+/// Decodes a section of whole `size`-byte records; `what` names the section in errors.
+fn decode_records<T>(
+    raw: &[u8],
+    size: usize,
+    what: &'static str,
+    decode: impl Fn(&mut Cursor<'_>) -> Result<T>,
+) -> Result<Vec<T>, String> {
+    if !raw.len().is_multiple_of(size) {
+        return Err(format!("{what} section size {} is not a multiple of {size}", raw.len()));
+    }
+    let n = raw.len() / size;
+    let mut c = Cursor::new(raw, what);
+    let mut out = Vec::with_capacity(n);
+    for _ in 0..n {
+        out.push(decode(&mut c).map_err(|e| e.to_string())?);
+    }
+    Ok(out)
+}
+
+pub(crate) fn encode_entries(entries: &[Entry]) -> Vec<u8> {
+    encode_records(entries, ENTRY_RECORD_SIZE, Entry::encode_into)
 }
 
 pub(crate) fn decode_entries(raw: &[u8]) -> Result<Vec<Entry>, String> {
-    if !raw.len().is_multiple_of(ENTRY_RECORD_SIZE) {
-        return Err(format!(
-            "entries section size {} is not a multiple of {ENTRY_RECORD_SIZE}",
-            raw.len()
-        ));
-    }
-    let n = raw.len() / ENTRY_RECORD_SIZE;
-    let mut c = Cursor::new(raw, "entries");
-    let mut out = Vec::with_capacity(n);
-    for _ in 0..n {
-        let e = (|| -> Result<Entry> {
-            Ok(Entry {
-                position: c.vec3()?,
-                normal: c.vec3()?,
-                cluster: c.u32()?,
-            })
-        })()
-        .map_err(|e| e.to_string())?;
-        out.push(e);
-    }
-    Ok(out)
+    decode_records(raw, ENTRY_RECORD_SIZE, "entries", Entry::decode)
 }
 
 pub(crate) fn encode_entry_energy(energy: &[[f32; 3]]) -> Vec<u8> {
-    let mut b = Vec::with_capacity(energy.len() * ENTRY_ENERGY_RECORD_SIZE);
-    for e in energy {
-        b.put_vec3(*e);
-    }
-    b
+    encode_records(energy, ENTRY_ENERGY_RECORD_SIZE, |e, b| b.put_vec3(*e))
 }
 
 pub(crate) fn decode_entry_energy(raw: &[u8]) -> Result<Vec<[f32; 3]>, String> {
-    if !raw.len().is_multiple_of(ENTRY_ENERGY_RECORD_SIZE) {
-        return Err(format!(
-            "entry_energy section size {} is not a multiple of {ENTRY_ENERGY_RECORD_SIZE}",
-            raw.len()
-        ));
-    }
-    let n = raw.len() / ENTRY_ENERGY_RECORD_SIZE;
-    let mut c = Cursor::new(raw, "entry_energy");
-    let mut out = Vec::with_capacity(n);
-    for i in 0..n {
-        let e = c.vec3().map_err(|e| e.to_string())?;
+    let energy = decode_records(raw, ENTRY_ENERGY_RECORD_SIZE, "entry_energy", |c| c.vec3())?;
+    for (i, e) in energy.iter().enumerate() {
         if !e.iter().all(|v| v.is_finite() && *v >= 0.0) {
             return Err(format!("entry {i}'s energy {e:?} is not finite and non-negative"));
         }
-        out.push(e);
     }
-    Ok(out)
+    Ok(energy)
 }
 
 pub(crate) fn encode_clusters(clusters: &[Cluster]) -> Vec<u8> {
-    let mut b = Vec::with_capacity(clusters.len() * CLUSTER_RECORD_SIZE);
-    for c in clusters {
-        b.put_u32(c.first);
-        b.put_u32(c.count);
-        b.put_vec3(c.centroid);
-        b.put_vec3(c.mean_normal);
-        b.put_vec3(c.energy);
-        b.put_vec3(c.peak);
-    }
-    b
+    encode_records(clusters, CLUSTER_RECORD_SIZE, Cluster::encode_into)
 }
 
 pub(crate) fn decode_clusters(raw: &[u8]) -> Result<Vec<Cluster>, String> {
-    if !raw.len().is_multiple_of(CLUSTER_RECORD_SIZE) {
-        return Err(format!(
-            "clusters section size {} is not a multiple of {CLUSTER_RECORD_SIZE}",
-            raw.len()
-        ));
-    }
-    let n = raw.len() / CLUSTER_RECORD_SIZE;
-    let mut c = Cursor::new(raw, "clusters");
-    let mut out = Vec::with_capacity(n);
-    for _ in 0..n {
-        let cl = (|| -> Result<Cluster> {
-            Ok(Cluster {
-                first: c.u32()?,
-                count: c.u32()?,
-                centroid: c.vec3()?,
-                mean_normal: c.vec3()?,
-                energy: c.vec3()?,
-                peak: c.vec3()?,
-            })
-        })()
-        .map_err(|e| e.to_string())?;
-        out.push(cl);
-    }
-    Ok(out)
+    decode_records(raw, CLUSTER_RECORD_SIZE, "clusters", Cluster::decode)
 }
 
 /// Number of entries the cluster ranges cover, checking that they tile
@@ -403,18 +374,14 @@ pub(crate) fn validate_entries_clusters(entries: &[Entry], clusters: &[Cluster])
             return Err(format!("entry {i} has a non-finite position or normal"));
         }
     }
-    let mut next = 0u64;
+    let covered = entries_covered(clusters)?;
+    if covered != entries.len() as u64 {
+        return Err(format!(
+            "clusters cover {covered} entries but there are {}",
+            entries.len()
+        ));
+    }
     for (ci, c) in clusters.iter().enumerate() {
-        if u64::from(c.first) != next {
-            return Err(format!(
-                "cluster {ci} starts at entry {}, expected {next} (ranges must tile the entries in order)",
-                c.first
-            ));
-        }
-        next += u64::from(c.count);
-        if next > entries.len() as u64 {
-            return Err(format!("cluster {ci} range ends past the {} entries", entries.len()));
-        }
         for (k, e) in entries[c.members()].iter().enumerate() {
             if e.cluster as usize != ci {
                 return Err(format!(
@@ -432,9 +399,6 @@ pub(crate) fn validate_entries_clusters(entries: &[Entry], clusters: &[Cluster])
                 return Err(format!("cluster {ci} has a negative or non-finite energy/peak"));
             }
         }
-    }
-    if next != entries.len() as u64 {
-        return Err(format!("clusters cover {next} entries but there are {}", entries.len()));
     }
     Ok(())
 }
@@ -484,22 +448,15 @@ mod tests {
 
     #[test]
     fn entries_and_clusters_round_trip_and_validate() {
+        let entry = |p: f32, normal: [f32; 3], cluster: u32| Entry {
+            position: [p; 3],
+            normal,
+            cluster,
+        };
         let entries = vec![
-            Entry {
-                position: [0.0; 3],
-                normal: [0.0, 1.0, 0.0],
-                cluster: 0,
-            },
-            Entry {
-                position: [1.0; 3],
-                normal: [0.0, 1.0, 0.0],
-                cluster: 0,
-            },
-            Entry {
-                position: [2.0; 3],
-                normal: [1.0, 0.0, 0.0],
-                cluster: 2,
-            },
+            entry(0.0, [0.0, 1.0, 0.0], 0),
+            entry(1.0, [0.0, 1.0, 0.0], 0),
+            entry(2.0, [1.0, 0.0, 0.0], 2),
         ];
         let clusters = vec![
             Cluster::new(0, 2, [0.5; 3], [0.0, 1.0, 0.0]),

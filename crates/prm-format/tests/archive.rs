@@ -58,16 +58,11 @@ fn peak_allocation<T>(f: impl FnOnce() -> T) -> (T, usize) {
 
 // ---------------------------------------------------------------- helpers
 
-/// SplitMix64: deterministic PRNG, no dependency needed.
-struct Rng(u64);
+#[path = "common/splitmix.rs"]
+mod splitmix;
+use splitmix::Rng;
+
 impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
     fn below(&mut self, n: u64) -> u64 {
         self.next() % n.max(1)
     }
@@ -75,6 +70,13 @@ impl Rng {
         (self.next() >> 40) as f32 / (1u64 << 24) as f32
     }
 }
+
+/// Nothing compressed or filtered: sections and tiles as they are.
+const UNCOMPRESSED: WriterOptions = WriterOptions {
+    zstd_level: 1,
+    compress_sections: false,
+    tile_filter: TileFilter::None,
+};
 
 /// A fresh, empty directory under cargo's per-target temp dir.
 fn test_dir(name: &str) -> PathBuf {
@@ -392,7 +394,7 @@ fn tile_callback_and_full_pane_agree() {
     let a_path = dir.join("full.prm");
     write_scene(&a_path, &s, WriterOptions::default());
     let b_path = dir.join("tiles.prm");
-    let mut w = ArchiveWriter::create(&b_path, s.metadata.clone(), &s.atlas, &s.entries, &s.clusters).unwrap();
+    let mut w = start_writer(&b_path, &s).unwrap();
     assert_eq!(w.panes_remaining(), 2);
     for pane in &s.panes {
         w.add_pane_with(|tx, ty, tile| {
@@ -417,12 +419,7 @@ fn tile_callback_and_full_pane_agree() {
 
 #[test]
 fn uncompressed_sections_round_trip() {
-    let opts = WriterOptions {
-        zstd_level: 1,
-        compress_sections: false,
-        tile_filter: TileFilter::None,
-    };
-    let (bytes, s) = small_archive("uncompressed", opts);
+    let (bytes, s) = small_archive("uncompressed", UNCOMPRESSED);
     let c = read_all(&bytes).unwrap();
     assert_eq!(c.entries, s.entries);
     let a = Archive::from_bytes(&bytes).unwrap();
@@ -480,7 +477,7 @@ fn unknown_sections_are_skipped() {
     let dir = test_dir("unknown");
     let s = scene(16, 8, 2, 11);
     let path = dir.join("custom.prm");
-    let mut w = ArchiveWriter::create(&path, s.metadata.clone(), &s.atlas, &s.entries, &s.clusters).unwrap();
+    let mut w = start_writer(&path, &s).unwrap();
     assert!(w.add_custom_section(kind::ATLAS, vec![1]).is_err());
     assert!(w.add_custom_section(0, vec![1]).is_err());
     w.add_custom_section(kind::PRIVATE_FIRST + 7, b"hello, extension".repeat(10))
@@ -576,78 +573,44 @@ fn atomic_write_leaves_old_archive_untouched() {
     write_scene(&path, &s, WriterOptions::default());
     let old = std::fs::read(&path).unwrap();
     let other = scene(16, 8, 2, 6);
+    // The old archive is still there, unchanged, and nothing else is.
+    let untouched = || {
+        assert_eq!(std::fs::read(&path).unwrap(), old);
+        assert_eq!(dir_listing(&dir), vec!["scene.prm"]);
+    };
 
     // 1. dropped without finish
     {
-        let mut w = ArchiveWriter::create(
-            &path,
-            other.metadata.clone(),
-            &other.atlas,
-            &other.entries,
-            &other.clusters,
-        )
-        .unwrap();
+        let mut w = start_writer(&path, &other).unwrap();
         w.add_pane(&other.panes[0]).unwrap();
         assert_eq!(dir_listing(&dir).len(), 2, "temp file exists while writing");
     }
-    assert_eq!(std::fs::read(&path).unwrap(), old);
-    assert_eq!(dir_listing(&dir), vec!["scene.prm"]);
+    untouched();
 
     // 2. finish with a pane missing
-    let mut w = ArchiveWriter::create(
-        &path,
-        other.metadata.clone(),
-        &other.atlas,
-        &other.entries,
-        &other.clusters,
-    )
-    .unwrap();
+    let mut w = start_writer(&path, &other).unwrap();
     w.add_pane(&other.panes[0]).unwrap();
     assert!(matches!(w.finish(), Err(Error::InvalidInput(_))));
-    assert_eq!(std::fs::read(&path).unwrap(), old);
-    assert_eq!(dir_listing(&dir), vec!["scene.prm"]);
+    untouched();
 
     // 3. wrong pane size, then finish
-    let mut w = ArchiveWriter::create(
-        &path,
-        other.metadata.clone(),
-        &other.atlas,
-        &other.entries,
-        &other.clusters,
-    )
-    .unwrap();
+    let mut w = start_writer(&path, &other).unwrap();
     assert!(matches!(w.add_pane(&[[1.0; 3]; 10]), Err(Error::InvalidInput(_))));
     assert!(w.finish().is_err());
-    assert_eq!(std::fs::read(&path).unwrap(), old);
-    assert_eq!(dir_listing(&dir), vec!["scene.prm"]);
+    untouched();
 
     // 4. the tile producer panics mid-pane
     let r = std::panic::catch_unwind(|| {
-        let mut w = ArchiveWriter::create(
-            &path,
-            other.metadata.clone(),
-            &other.atlas,
-            &other.entries,
-            &other.clusters,
-        )
-        .unwrap();
+        let mut w = start_writer(&path, &other).unwrap();
         w.add_pane_with(|tx, _, _| assert!(tx < 1, "producer failed")).unwrap();
     });
     assert!(r.is_err());
-    assert_eq!(std::fs::read(&path).unwrap(), old);
-    assert_eq!(dir_listing(&dir), vec!["scene.prm"]);
+    untouched();
 
     // 5. the destination becomes a (non-empty) directory during the write:
     // `finish` refuses it instead of renaming over it
     let blocked = dir.join("blocked.prm");
-    let mut w = ArchiveWriter::create(
-        &blocked,
-        other.metadata.clone(),
-        &other.atlas,
-        &other.entries,
-        &other.clusters,
-    )
-    .unwrap();
+    let mut w = start_writer(&blocked, &other).unwrap();
     std::fs::create_dir(&blocked).unwrap();
     std::fs::write(blocked.join("keep"), b"x").unwrap();
     for p in &other.panes {
@@ -678,17 +641,7 @@ fn atomic_write_leaves_old_archive_untouched() {
 #[test]
 fn fuzz_mutated_archives_never_panic() {
     let mut rng = Rng(0xF022);
-    for (name, opts) in [
-        ("fuzz-zstd", WriterOptions::default()),
-        (
-            "fuzz-raw",
-            WriterOptions {
-                zstd_level: 1,
-                compress_sections: false,
-                tile_filter: TileFilter::None,
-            },
-        ),
-    ] {
+    for (name, opts) in [("fuzz-zstd", WriterOptions::default()), ("fuzz-raw", UNCOMPRESSED)] {
         let (bytes, _) = small_archive(name, opts);
         let mut outcomes = std::collections::BTreeMap::<String, usize>::new();
         for iter in 0..1500 {
@@ -742,12 +695,7 @@ fn fuzz_mutated_archives_never_panic() {
 /// allocating what they declare.
 #[test]
 fn hostile_sizes_are_rejected_before_allocation() {
-    let opts = WriterOptions {
-        zstd_level: 1,
-        compress_sections: false,
-        tile_filter: TileFilter::None,
-    };
-    let (bytes, _) = small_archive("hostile", opts);
+    let (bytes, _) = small_archive("hostile", UNCOMPRESSED);
     let secs = sections(&bytes);
     let table = u64_at(&bytes, 16).unwrap() as usize;
     for (i, s) in secs.iter().enumerate() {
@@ -1079,6 +1027,15 @@ fn replace_section(bytes: &[u8], kind: u32, data: &[u8], compression: u32, raw_s
 }
 
 /// A zstd stream of `n` zero bytes, compressed in 1 MiB steps.
+/// Reading `archive` fails as inconsistent, naming `what`, with under 8 MiB kept live.
+fn assert_refused_in_bounded_memory(archive: &[u8], what: &str) {
+    let (result, peak) = peak_allocation(|| Archive::from_bytes(archive).map(|_| ()));
+    let err = result.unwrap_err();
+    assert!(matches!(err, Error::Inconsistent { .. }), "{err}");
+    assert!(err.to_string().contains(what), "{err}");
+    assert!(peak < 8 << 20, "the reader kept {peak} bytes live");
+}
+
 fn zstd_zeros(n: u64) -> Vec<u8> {
     use std::io::Write;
     let mut enc = zstd::stream::write::Encoder::new(Vec::new(), 19).unwrap();
@@ -1103,11 +1060,7 @@ fn decompression_bomb_in_entries_is_refused_without_allocating() {
     let bomb = zstd_zeros(raw);
     assert!(bomb.len() < 64 << 10, "bomb is {} bytes", bomb.len());
     let m = replace_section(&bytes, kind::ENTRIES, &bomb, compression::ZSTD, raw);
-    let (result, peak) = peak_allocation(|| Archive::from_bytes(&m).map(|_| ()));
-    let err = result.unwrap_err();
-    assert!(matches!(err, Error::Inconsistent { .. }), "{err}");
-    assert!(err.to_string().contains("entries"), "{err}");
-    assert!(peak < 8 << 20, "the reader kept {peak} bytes live");
+    assert_refused_in_bounded_memory(&m, "entries");
 }
 
 /// The same rule for the clusters (56 × the panes header's pane count) and
@@ -1118,13 +1071,7 @@ fn declared_raw_sizes_must_match_the_counts() {
     // clusters: 2^20 records declared, 3 panes
     let raw = limits::MAX_CLUSTERS * 56;
     let m = replace_section(&bytes, kind::CLUSTERS, &zstd_zeros(raw), compression::ZSTD, raw);
-    let (result, peak) = peak_allocation(|| Archive::from_bytes(&m).map(|_| ()));
-    let err = result.unwrap_err();
-    assert!(
-        matches!(err, Error::Inconsistent { .. }) && err.to_string().contains("3 panes"),
-        "{err}"
-    );
-    assert!(peak < 8 << 20, "the reader kept {peak} bytes live");
+    assert_refused_in_bounded_memory(&m, "3 panes");
 
     // atlas: a valid 16×16 header followed by 400 MiB of zeros
     let mut data = Vec::new();
@@ -1143,13 +1090,7 @@ fn declared_raw_sizes_must_match_the_counts() {
         enc.finish().unwrap()
     };
     let m = replace_section(&bytes, kind::ATLAS, &stream, compression::ZSTD, raw + 16);
-    let (result, peak) = peak_allocation(|| Archive::from_bytes(&m).map(|_| ()));
-    let err = result.unwrap_err();
-    assert!(
-        matches!(err, Error::Inconsistent { .. }) && err.to_string().contains("atlas"),
-        "{err}"
-    );
-    assert!(peak < 8 << 20, "the reader kept {peak} bytes live");
+    assert_refused_in_bounded_memory(&m, "atlas");
 
     // entries: the right declared size but a stream that ends early is a
     // decompression failure, found without allocating the declared size
@@ -1376,15 +1317,7 @@ fn bounded_fuzz_reader_and_verify_never_panic() {
     let started = std::time::Instant::now();
     let bases = [
         small_archive("bfuzz-zstd", WriterOptions::default()).0,
-        small_archive(
-            "bfuzz-raw",
-            WriterOptions {
-                zstd_level: 1,
-                compress_sections: false,
-                tile_filter: TileFilter::None,
-            },
-        )
-        .0,
+        small_archive("bfuzz-raw", UNCOMPRESSED).0,
     ];
     let fields: Vec<_> = bases.iter().map(|b| count_fields(b)).collect();
     let mut outcomes = std::collections::BTreeMap::<String, usize>::new();

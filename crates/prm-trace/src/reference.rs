@@ -220,6 +220,15 @@ impl<'a> ReferenceTracer<'a> {
         sum
     }
 
+    /// Mean of `samples_per_pass` path estimates of the indirect irradiance at `x`.
+    fn indirect_mean(&self, x: Vec3, ng: Vec3, n: Vec3, tri: u32, p: &ReferenceParams, rng: &mut Rng) -> Vec3 {
+        let mut s = Vec3::ZERO;
+        for _ in 0..p.samples_per_pass {
+            s += self.indirect_path(x, ng, n, tri, p, rng);
+        }
+        s / p.samples_per_pass as f32
+    }
+
     /// Indirect irradiance (W/m²) at every exit point, progressively.
     /// `progress(pass, passes)` is called after every pass.
     pub fn indirect_at_exits(
@@ -229,25 +238,11 @@ impl<'a> ReferenceTracer<'a> {
         progress: &mut dyn FnMut(u32, u32),
     ) -> Result<Estimate, TraceError> {
         validate(params)?;
-        let mut w = Welford::new(exits.len());
-        for pass in 0..params.passes {
-            let values: Vec<Vec3> = exits
-                .par_iter()
-                .enumerate()
-                .map(|(i, x)| {
-                    let mut rng = Rng::new(params.seed, i as u64, pass as u64);
-                    let ng = self.bvh.geometric_normal(x.triangle);
-                    let mut s = Vec3::ZERO;
-                    for _ in 0..params.samples_per_pass {
-                        s += self.indirect_path(x.position, ng, x.normal, x.triangle, params, &mut rng);
-                    }
-                    s / params.samples_per_pass as f32
-                })
-                .collect();
-            w.add(&values);
-            progress(pass + 1, params.passes);
-        }
-        Ok(w.estimate())
+        Ok(progressive(exits.len(), params, progress, |i, rng| {
+            let x = &exits[i];
+            let ng = self.bvh.geometric_normal(x.triangle);
+            self.indirect_mean(x.position, ng, x.normal, x.triangle, params, rng)
+        }))
     }
 
     /// Radiance image (W/(m²·sr)) seen by `camera`, `width × height`, row-major from the top row.
@@ -300,29 +295,34 @@ impl<'a> ReferenceTracer<'a> {
                 Some((p, hit.triangle, rho, direct))
             })
             .collect();
-        let mut w = Welford::new(primary.len());
-        for pass in 0..params.passes {
-            let values: Vec<Vec3> = primary
-                .par_iter()
-                .enumerate()
-                .map(|(i, h)| {
-                    let Some((p, tri, rho, direct)) = *h else {
-                        return Vec3::ZERO;
-                    };
-                    let mut rng = Rng::new(params.seed, i as u64, pass as u64);
-                    let ng = self.bvh.geometric_normal(tri);
-                    let mut s = Vec3::ZERO;
-                    for _ in 0..params.samples_per_pass {
-                        s += self.indirect_path(p, ng, ng, tri, params, &mut rng);
-                    }
-                    rho * std::f32::consts::FRAC_1_PI * (direct + s / params.samples_per_pass as f32)
-                })
-                .collect();
-            w.add(&values);
-            progress(pass + 1, params.passes);
-        }
-        Ok(w.estimate())
+        Ok(progressive(primary.len(), params, progress, |i, rng| {
+            let Some((p, tri, rho, direct)) = primary[i] else {
+                return Vec3::ZERO;
+            };
+            let ng = self.bvh.geometric_normal(tri);
+            rho * std::f32::consts::FRAC_1_PI * (direct + self.indirect_mean(p, ng, ng, tri, params, rng))
+        }))
     }
+}
+
+/// Runs the passes over `len` texels or pixels: `sample(i, rng)` is one pass's value at `i`,
+/// drawn from the stream `(seed, i, pass)`; `progress(pass, passes)` is called after every pass.
+fn progressive(
+    len: usize,
+    params: &ReferenceParams,
+    progress: &mut dyn FnMut(u32, u32),
+    sample: impl Fn(usize, &mut Rng) -> Vec3 + Sync,
+) -> Estimate {
+    let mut w = Welford::new(len);
+    for pass in 0..params.passes {
+        let values: Vec<Vec3> = (0..len)
+            .into_par_iter()
+            .map(|i| sample(i, &mut Rng::new(params.seed, i as u64, pass as u64)))
+            .collect();
+        w.add(&values);
+        progress(pass + 1, params.passes);
+    }
+    w.estimate()
 }
 
 fn validate(p: &ReferenceParams) -> Result<(), TraceError> {

@@ -4,10 +4,11 @@
 use std::path::PathBuf;
 
 use glam::Vec3;
-use prm_scene::{Atlas, AtlasParams, ExitPoint, Sizing};
+use prm_scene::{Atlas, AtlasParams, ExitPoint, Scene, Sizing};
 use prm_trace::{
     entry_irradiance, evaluate_panes, parse_light, sample_surface, trace_walks, Bvh, BvhParams, ClusterParams,
-    Clustering, EntryParams, Lighting, PaneParams, ReferenceParams, ReferenceTracer, VplBound, WalkParams,
+    Clustering, EntryParams, Lighting, PaneParams, ReferenceParams, ReferenceTracer, SurfaceSample, VplBound, VplSet,
+    WalkParams,
 };
 
 use prm_scene::analytic::furnace_box;
@@ -26,6 +27,30 @@ fn errors(values: &[Vec3], expected: &[Vec3]) -> (f64, f64) {
         max = max.max(r);
     }
     (sum / values.len() as f64, max)
+}
+
+/// The preview walks from `entries`, seeded with `seed`.
+fn preview_walks(scene: &Scene, bvh: &Bvh, entries: &[SurfaceSample], seed: u64) -> VplSet {
+    trace_walks(
+        scene,
+        bvh,
+        entries,
+        &WalkParams {
+            seed,
+            ..WalkParams::PREVIEW
+        },
+    )
+    .unwrap()
+}
+
+/// A reference of `passes` × `samples_per_pass` paths per exit point, seeded with `seed`.
+fn reference_params(passes: u32, samples_per_pass: u32, seed: u64) -> ReferenceParams {
+    ReferenceParams {
+        passes,
+        samples_per_pass,
+        seed,
+        ..ReferenceParams::PREVIEW
+    }
 }
 
 fn mean_ratio(values: &[Vec3], expected: &[Vec3]) -> f64 {
@@ -76,16 +101,7 @@ fn furnace_panes_and_reference() {
     let exits: &[ExitPoint] = &atlas.exits;
     let bvh = Bvh::build(&scene, &BvhParams::DEFAULT).unwrap();
     let entries = sample_surface(&scene, &EntryParams { count: 4096, seed: 1 }).unwrap();
-    let walks = trace_walks(
-        &scene,
-        &bvh,
-        &entries,
-        &WalkParams {
-            seed: 1,
-            ..WalkParams::PREVIEW
-        },
-    )
-    .unwrap();
+    let walks = preview_walks(&scene, &bvh, &entries, 1);
     eprintln!(
         "furnace: {} exits, {} entries, {} VPLs, walk stats {:?}",
         exits.len(),
@@ -116,12 +132,7 @@ fn furnace_panes_and_reference() {
     let reference = ReferenceTracer::new(&scene, &bvh, Lighting::UniformIrradiance(Vec3::ONE));
     // Per-path standard deviation here is about 0.7 (a geometric number of 0.5 terms): 2048 paths
     // give a standard error of 1.6 %.
-    let params = ReferenceParams {
-        passes: 8,
-        samples_per_pass: 256,
-        seed: 3,
-        ..ReferenceParams::PREVIEW
-    };
+    let params = reference_params(8, 256, 3);
     let est = reference.indirect_at_exits(exits, &params, &mut |_, _| {}).unwrap();
     let (mean, max) = split_report("furnace reference", exits, &est.mean);
     assert!(mean < 0.02 && max < 0.10);
@@ -155,16 +166,7 @@ fn cornell_comparison(setup: &CornellSetup) -> (f64, f64, f64) {
         },
     )
     .unwrap();
-    let walks = trace_walks(
-        &scene,
-        &bvh,
-        &entries,
-        &WalkParams {
-            seed: 7,
-            ..WalkParams::PREVIEW
-        },
-    )
-    .unwrap();
+    let walks = preview_walks(&scene, &bvh, &entries, 7);
     let irradiance = entry_irradiance(&bvh, &[light], &entries);
     let reference = ReferenceTracer::new(&scene, &bvh, Lighting::Lights(std::slice::from_ref(&light)));
     let est = reference
@@ -250,48 +252,35 @@ fn cornell_comparison(setup: &CornellSetup) -> (f64, f64, f64) {
     result
 }
 
-#[test]
-fn cornell_panes_match_reference() {
+/// Runs [`cornell_comparison`] (4096 entries, 256 clusters, a reference of `passes` ×
+/// `samples_per_pass` paths) and checks the bias against `max_bias` and that the RMSE is at most
+/// the reference's noise plus `prm_error` in quadrature (PRM's own error: VPL noise, the bound,
+/// degenerate exit points on chart borders).
+fn check_cornell(atlas_resolution: u32, passes: u32, samples_per_pass: u32, max_bias: f64, prm_error: f64) {
     let (bias, rmse, noise) = cornell_comparison(&CornellSetup {
-        atlas_resolution: 32,
+        atlas_resolution,
         entries: 4096,
         clusters: 256,
-        reference: ReferenceParams {
-            passes: 4,
-            samples_per_pass: 128,
-            seed: 11,
-            ..ReferenceParams::PREVIEW
-        },
+        reference: reference_params(passes, samples_per_pass, 11),
     });
-    assert!(bias.abs() < 0.05, "bias {bias}");
-    // The RMSE is the reference's noise plus PRM's own error (VPL noise, the bound, degenerate
-    // exit points on chart borders) in quadrature; see the heavy variant for tighter numbers.
+    assert!(bias.abs() < max_bias, "bias {bias}");
     assert!(
-        rmse * rmse < noise * noise + 0.2 * 0.2,
+        rmse * rmse < noise * noise + prm_error * prm_error,
         "relative RMSE {rmse} vs reference noise {noise}"
     );
+}
+
+#[test]
+fn cornell_panes_match_reference() {
+    // See the heavy variant for tighter numbers.
+    check_cornell(32, 4, 128, 0.05, 0.2);
 }
 
 /// The same comparison at higher sample counts (about 15 s in release).
 #[test]
 #[ignore]
 fn cornell_panes_match_reference_heavy() {
-    let (bias, rmse, noise) = cornell_comparison(&CornellSetup {
-        atlas_resolution: 48,
-        entries: 4096,
-        clusters: 256,
-        reference: ReferenceParams {
-            passes: 16,
-            samples_per_pass: 256,
-            seed: 11,
-            ..ReferenceParams::PREVIEW
-        },
-    });
-    assert!(bias.abs() < 0.03, "bias {bias}");
-    assert!(
-        rmse * rmse < noise * noise + 0.11 * 0.11,
-        "relative RMSE {rmse} vs reference noise {noise}"
-    );
+    check_cornell(48, 16, 256, 0.03, 0.11);
 }
 
 /// Same seed, same output with 1 and 2 threads: entry points, walks, clustering, panes, reference.
@@ -303,16 +292,7 @@ fn results_do_not_depend_on_thread_count() {
     let run = || {
         let bvh = Bvh::build(&scene, &BvhParams::DEFAULT).unwrap();
         let entries = sample_surface(&scene, &EntryParams { count: 256, seed: 5 }).unwrap();
-        let walks = trace_walks(
-            &scene,
-            &bvh,
-            &entries,
-            &WalkParams {
-                seed: 5,
-                ..WalkParams::PREVIEW
-            },
-        )
-        .unwrap();
+        let walks = preview_walks(&scene, &bvh, &entries, 5);
         let clustering = Clustering::kmeans(
             &entries,
             scene.bounds().diagonal(),
@@ -325,12 +305,7 @@ fn results_do_not_depend_on_thread_count() {
         .unwrap();
         let panes = evaluate_panes(&bvh, &walks, &clustering, &atlas.exits, &PaneParams::DEFAULT).unwrap();
         let reference = ReferenceTracer::new(&scene, &bvh, Lighting::Lights(std::slice::from_ref(&light)));
-        let params = ReferenceParams {
-            passes: 2,
-            samples_per_pass: 4,
-            seed: 5,
-            ..ReferenceParams::PREVIEW
-        };
+        let params = reference_params(2, 4, 5);
         let est = reference
             .indirect_at_exits(&atlas.exits, &params, &mut |_, _| {})
             .unwrap();

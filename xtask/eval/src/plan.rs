@@ -45,6 +45,25 @@ pub struct SceneSpec {
     pub image_size: (u32, u32),
 }
 
+impl SceneSpec {
+    /// A scene baked with no extra arguments, seen from its own camera (or a view of its bounds),
+    /// its references taking `spp` paths per texel and per pixel over as many texels, at 96×72.
+    fn new(name: &str, path: PathBuf, light_fractions: Vec<[f32; 3]>, sweep: Sweep, spp: u32) -> SceneSpec {
+        SceneSpec {
+            name: name.into(),
+            path,
+            base_args: vec![],
+            light_fractions,
+            camera: None,
+            sweep,
+            lightmap_spp: spp,
+            lightmap_texels: spp as usize,
+            image_spp: spp,
+            image_size: (96, 72),
+        }
+    }
+}
+
 /// Light positions for box-like rooms lit from inside, above the furniture: centre near the
 /// ceiling, left front, right back.
 const ROOM_LIGHTS: [[f32; 3]; 3] = [[0.5, 0.85, 0.5], [0.2, 0.7, 0.3], [0.8, 0.7, 0.75]];
@@ -60,50 +79,36 @@ pub fn scenes(mode: Mode, root: &Path) -> Vec<SceneSpec> {
         top_k: vec![4, 8, 16, u32::MAX],
         presets: vec!["preview", "paper"],
     };
+    // The few settings that the quick run and the largest scene afford.
+    let small_sweep = Sweep {
+        resolution: vec![0.5],
+        top_k: vec![8, u32::MAX],
+        presets: vec!["preview"],
+        ..Default::default()
+    };
+    let cornell = root.join("scenes/cornell-box/cornell-box.gltf");
     if mode == Mode::Quick {
+        let sweep = Sweep {
+            paths_per_entry: vec![0.25],
+            ..small_sweep
+        };
         return vec![SceneSpec {
-            name: "cornell-box".into(),
-            path: root.join("scenes/cornell-box/cornell-box.gltf"),
-            base_args: vec![],
-            light_fractions: ROOM_LIGHTS.to_vec(),
-            camera: None,
-            sweep: Sweep {
-                resolution: vec![0.5],
-                paths_per_entry: vec![0.25],
-                top_k: vec![8, u32::MAX],
-                presets: vec!["preview"],
-                ..Default::default()
-            },
-            lightmap_spp: 1024,
-            lightmap_texels: 1024,
-            image_spp: 1024,
             image_size: (64, 48),
+            ..SceneSpec::new("cornell-box", cornell, ROOM_LIGHTS.to_vec(), sweep, 1024)
         }];
     }
+    let budget = || vec!["--time-budget".into(), "20".into()];
     let mut out = vec![
+        SceneSpec::new("cornell-box", cornell, ROOM_LIGHTS.to_vec(), full_sweep.clone(), 2048),
         SceneSpec {
-            name: "cornell-box".into(),
-            path: root.join("scenes/cornell-box/cornell-box.gltf"),
-            base_args: vec![],
-            light_fractions: ROOM_LIGHTS.to_vec(),
-            camera: None,
-            sweep: full_sweep.clone(),
-            lightmap_spp: 2048,
-            lightmap_texels: 2048,
-            image_spp: 2048,
-            image_size: (96, 72),
-        },
-        SceneSpec {
-            name: "chairs".into(),
-            path: root.join("scenes/chairs/chairs.gltf"),
-            base_args: vec!["--time-budget".into(), "20".into()],
-            light_fractions: ROOM_LIGHTS.to_vec(),
-            camera: None,
-            sweep: full_sweep.clone(),
-            lightmap_spp: 2048,
-            lightmap_texels: 2048,
-            image_spp: 2048,
-            image_size: (96, 72),
+            base_args: budget(),
+            ..SceneSpec::new(
+                "chairs",
+                root.join("scenes/chairs/chairs.gltf"),
+                ROOM_LIGHTS.to_vec(),
+                full_sweep.clone(),
+                2048,
+            )
         },
     ];
     let shared = root.join("../shared/scenes");
@@ -114,38 +119,27 @@ pub fn scenes(mode: Mode, root: &Path) -> Vec<SceneSpec> {
         );
         return out;
     }
+    let sphere_lights = vec![[0.5, 0.8, 0.5], [0.25, 0.7, 0.3], [0.75, 0.7, 0.7]];
+    let sphere_sweep = Sweep {
+        presets: vec!["preview"],
+        ..full_sweep.clone()
+    };
+    let sphere = shared.join("cornell-box/CornellBox-Sphere.obj");
     out.push(SceneSpec {
-        name: "CornellBox-Sphere".into(),
-        path: shared.join("cornell-box/CornellBox-Sphere.obj"),
-        base_args: vec!["--time-budget".into(), "20".into()],
-        light_fractions: vec![[0.5, 0.8, 0.5], [0.25, 0.7, 0.3], [0.75, 0.7, 0.7]],
-        camera: None,
-        sweep: Sweep {
-            presets: vec!["preview"],
-            ..full_sweep.clone()
-        },
-        lightmap_spp: 2048,
-        lightmap_texels: 2048,
-        image_spp: 2048,
-        image_size: (96, 72),
+        base_args: budget(),
+        ..SceneSpec::new("CornellBox-Sphere", sphere, sphere_lights, sphere_sweep, 2048)
     });
+    let sponza_lights = vec![[0.5, 0.45, 0.5], [0.3, 0.2, 0.5], [0.7, 0.12, 0.45]];
+    let sponza_sweep = Sweep {
+        clusters: vec![0.25],
+        ..small_sweep
+    };
+    let sponza = shared.join("sponza-dabrovic/sponza.obj");
     out.push(SceneSpec {
-        name: "sponza".into(),
-        path: shared.join("sponza-dabrovic/sponza.obj"),
-        base_args: vec!["--time-budget".into(), "20".into()],
-        light_fractions: vec![[0.5, 0.45, 0.5], [0.3, 0.2, 0.5], [0.7, 0.12, 0.45]],
+        base_args: budget(),
         camera: Some("14,3,0:-10,5,0:60".into()),
-        sweep: Sweep {
-            clusters: vec![0.25],
-            resolution: vec![0.5],
-            top_k: vec![8, u32::MAX],
-            presets: vec!["preview"],
-            ..Default::default()
-        },
-        lightmap_spp: 1024,
         lightmap_texels: 2048,
-        image_spp: 1024,
-        image_size: (96, 72),
+        ..SceneSpec::new("sponza", sponza, sponza_lights, sponza_sweep, 1024)
     });
     out
 }

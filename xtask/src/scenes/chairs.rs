@@ -5,7 +5,9 @@
 
 use std::f64::consts::TAU;
 
-use super::mesh::{cuboid, cylinder, rect, CameraSpec, Faces, Material, Part, PointLight, SceneDesc, Xf, V3};
+use super::mesh::{
+    cuboid, cylinder, rect, view_args, CameraSpec, Faces, Material, Part, PointLight, SceneDesc, Xf, V3,
+};
 
 /// Room interior: x ∈ [0, W], y ∈ [0, H], z ∈ [0, D] (m).
 pub const ROOM: V3 = [6.0, 2.8, 5.0];
@@ -15,11 +17,10 @@ pub const TABLE: V3 = [3.0, 0.0, 2.5];
 pub const CHAIR_RADIUS: f64 = 0.95;
 pub const CHAIRS: usize = 6;
 
-pub const LIGHT_POS: V3 = [3.0, 2.3, 2.5];
-pub const LIGHT_W_PER_SR: f64 = 4.0;
-pub const EYE: V3 = [0.6, 1.6, 0.6];
-pub const TARGET: V3 = [3.0, 0.7, 2.5];
-pub const FOV_DEG: f64 = 60.0;
+/// Above the table, 4 W/sr.
+pub const LIGHT: PointLight = PointLight::white([3.0, 2.3, 2.5], 4.0);
+/// Eye, target, vertical field of view (°).
+pub const CAMERA: CameraSpec = CameraSpec::free_aspect([0.6, 1.6, 0.6], [3.0, 0.7, 2.5], 60.0);
 
 const NO_BOTTOM: Faces = Faces {
     bottom: false,
@@ -46,14 +47,6 @@ pub const MATERIALS: [(&str, [f64; 3], &str); 9] = [
     ("shelf_paint", [0.70, 0.68, 0.62], "bookshelf"),
     ("sideboard_green", [0.20, 0.40, 0.30], "sideboard"),
 ];
-
-fn part(name: impl Into<String>, material: &str, polys: Vec<Vec<V3>>) -> Part {
-    Part {
-        name: name.into(),
-        material: material.into(),
-        polys,
-    }
-}
 
 /// One chair in local coordinates (seat centre over the origin, the sitter facing +Z).
 fn chair(xf: Xf) -> Vec<Vec<V3>> {
@@ -95,9 +88,9 @@ fn chair(xf: Xf) -> Vec<Vec<V3>> {
 pub fn scene() -> SceneDesc {
     let [w, h, d] = ROOM;
     let mut parts = vec![
-        part("floor", "floor_blue", vec![rect(1, 0.0, [0.0, d], [0.0, w], true)]),
-        part("ceiling", "ceiling", vec![rect(1, h, [0.0, d], [0.0, w], false)]),
-        part(
+        Part::new("floor", "floor_blue", vec![rect(1, 0.0, [0.0, d], [0.0, w], true)]),
+        Part::new("ceiling", "ceiling", vec![rect(1, h, [0.0, d], [0.0, w], false)]),
+        Part::new(
             "walls",
             "wall_white",
             vec![
@@ -106,7 +99,7 @@ pub fn scene() -> SceneDesc {
                 rect(2, 0.0, [0.0, w], [0.0, h], true),
             ],
         ),
-        part(
+        Part::new(
             "wall_back",
             "wall_terracotta",
             vec![rect(2, d, [0.0, w], [0.0, h], false)],
@@ -116,21 +109,21 @@ pub fn scene() -> SceneDesc {
     // Round table: top, column, foot.
     let [tx, _, tz] = TABLE;
     let none = Xf::IDENTITY;
-    parts.push(part(
+    parts.push(Part::new(
         "table_top",
         "table_wood",
         cylinder([tx, 0.72, tz], [tx, 0.76, tz], 0.6, 48, none),
     ));
     let mut base = cylinder([tx, 0.06, tz], [tx, 0.72, tz], 0.05, 24, none);
     base.extend(cylinder([tx, 0.0, tz], [tx, 0.06, tz], 0.3, 32, none));
-    parts.push(part("table_base", "table_base", base));
+    parts.push(Part::new("table_base", "table_base", base));
 
     // Chairs on a circle, each turned to face the table centre.
     for i in 0..CHAIRS {
         let a = TAU * (i as f64 + 0.5) / CHAIRS as f64;
         let (dx, dz) = (CHAIR_RADIUS * a.cos(), CHAIR_RADIUS * a.sin());
         let yaw = (-dx).atan2(-dz);
-        parts.push(part(
+        parts.push(Part::new(
             format!("chair_{}", i + 1),
             "chair_wood",
             chair(Xf::new(yaw, [tx + dx, 0.0, tz + dz])),
@@ -156,7 +149,7 @@ pub fn scene() -> SceneDesc {
             Faces::ALL,
         ));
     }
-    parts.push(part("shelf", "shelf_paint", shelf));
+    parts.push(Part::new("shelf", "shelf_paint", shelf));
 
     // Sideboard against the back wall: body on four short legs, a slightly larger top.
     let (x0, x1, z0, z1) = (1.5, 3.3, 4.5, 4.97);
@@ -176,31 +169,13 @@ pub fn scene() -> SceneDesc {
     ] {
         sb.extend(cuboid([x, 0.0, z], [x + 0.04, 0.12, z + 0.04], none, NO_BOTTOM));
     }
-    parts.push(part("sideboard", "sideboard_green", sb));
+    parts.push(Part::new("sideboard", "sideboard_green", sb));
 
     let materials = MATERIALS
         .iter()
-        .map(|(name, albedo, _)| Material {
-            name: (*name).into(),
-            albedo: *albedo,
-            emission: None,
-        })
+        .map(|(name, albedo, _)| Material::diffuse(name, *albedo))
         .collect();
-    SceneDesc {
-        name: "chairs".into(),
-        parts,
-        materials,
-        camera: CameraSpec {
-            eye: EYE,
-            target: TARGET,
-            fov_y_deg: FOV_DEG,
-            aspect: None,
-        },
-        light: PointLight {
-            position: LIGHT_POS,
-            intensity: [LIGHT_W_PER_SR; 3],
-        },
-    }
+    SceneDesc::new("chairs", parts, materials, CAMERA, LIGHT)
 }
 
 pub fn readme(s: &super::Stats) -> String {
@@ -208,8 +183,8 @@ pub fn readme(s: &super::Stats) -> String {
         .iter()
         .map(|(n, a, what)| format!("| {n} | {:.2} | {:.2} | {:.2} | {what} |\n", a[0], a[1], a[2]))
         .collect();
-    let l = LIGHT_W_PER_SR;
-    let drop = LIGHT_POS[1] - 0.76;
+    let l = LIGHT.intensity[0];
+    let drop = LIGHT.position[1] - 0.76;
     format!(
         "# chairs
 
@@ -245,8 +220,7 @@ ends of the back slats (against the rails), are left out. Vertices are not share
 ## Camera and light
 
 ```
---camera {ex},{ey},{ez}:{gx},{gy},{gz}:{fov}
---light point:{lx},{ly},{lz}:{l},{l},{l}
+{view}
 ```
 
 The camera stands in a corner looking down at the table; the light hangs {drop:.2} m above the
@@ -263,16 +237,7 @@ table top, giving it about {e:.2} W/m² directly (the glTF holds the same light,
         tz = TABLE[2],
         nc = CHAIRS,
         cr = CHAIR_RADIUS,
-        ex = EYE[0],
-        ey = EYE[1],
-        ez = EYE[2],
-        gx = TARGET[0],
-        gy = TARGET[1],
-        gz = TARGET[2],
-        fov = FOV_DEG,
-        lx = LIGHT_POS[0],
-        ly = LIGHT_POS[1],
-        lz = LIGHT_POS[2],
+        view = view_args(&CAMERA, &LIGHT),
         e = l / (drop * drop),
     )
 }

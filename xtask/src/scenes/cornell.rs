@@ -160,32 +160,18 @@ pub const LAMP_AREA: f64 = 0.130 * 0.105;
 pub fn scene() -> SceneDesc {
     let parts = measured()
         .into_iter()
-        .map(|(name, material, quads)| Part {
-            name: name.to_string(),
-            material: material.to_string(),
-            polys: quads
-                .iter()
-                .map(|q| q.iter().map(|p| p.map(|c| c / 1000.0)).collect())
-                .collect(),
+        .map(|(name, material, quads)| {
+            let metres = |q: &Quad| q.iter().map(|p| p.map(|c| c / 1000.0)).collect();
+            Part::new(name, material, quads.iter().map(metres).collect())
         })
         .collect();
-    let materials = vec![
-        Material {
-            name: "white".into(),
-            albedo: round4(spectrum_to_rgb(sampled_4nm(&CORNELL_WHITE))),
-            emission: None,
-        },
-        Material {
-            name: "red".into(),
-            albedo: round4(spectrum_to_rgb(sampled_4nm(&CORNELL_RED))),
-            emission: None,
-        },
-        Material {
-            name: "green".into(),
-            albedo: round4(spectrum_to_rgb(sampled_4nm(&CORNELL_GREEN))),
-            emission: None,
-        },
-    ];
+    let materials = [
+        ("white", &CORNELL_WHITE),
+        ("red", &CORNELL_RED),
+        ("green", &CORNELL_GREEN),
+    ]
+    .map(|(name, spectrum)| Material::diffuse(name, round4(spectrum_to_rgb(sampled_4nm(spectrum)))))
+    .into();
     SceneDesc {
         name: "cornell-box".into(),
         parts,
@@ -214,6 +200,8 @@ pub fn readme(s: &super::Stats) -> String {
     let sc = scene();
     let m = |n: &str| sc.materials.iter().find(|m| m.name == n).map(|m| m.albedo).unwrap();
     let (w, r, g) = (m("white"), m("red"), m("green"));
+    // An albedo's cells in the README's table.
+    let row = |c: [f64; 3]| format!("{:.4} | {:.4} | {:.4}", c[0], c[1], c[2]);
     let lamp = lamp_rgb();
     let i = point_light_intensity();
     format!(
@@ -252,9 +240,9 @@ little, form a thin gap that no shadow-map method resolves. The point light belo
 
 | material | R | G | B |
 | --- | --- | --- | --- |
-| white (floor, ceiling, back, blocks) | {w0:.4} | {w1:.4} | {w2:.4} |
-| red (left wall) | {r0:.4} | {r1:.4} | {r2:.4} |
-| green (right wall) | {g0:.4} | {g1:.4} | {g2:.4} |
+| white (floor, ceiling, back, blocks) | {w_row} |
+| red (left wall) | {r_row} |
+| green (right wall) | {g_row} |
 
 Derived by our code (`xtask/src/scenes/color.rs`) from the published reflectance spectra
 (400–700 nm every 4 nm): each spectrum, linearly interpolated, is integrated against the CIE 1931
@@ -299,15 +287,11 @@ the largest channel. The glTF spec calls `intensity` candela; this project's loa
         tris = s.triangles,
         area = s.area,
         bounds = s.bounds_text(),
-        w0 = w[0],
-        w1 = w[1],
-        w2 = w[2],
+        w_row = row(w),
+        r_row = row(r),
+        g_row = row(g),
         r0 = r[0],
-        r1 = r[1],
-        r2 = r[2],
-        g0 = g[0],
         g1 = g[1],
-        g2 = g[2],
         k0 = lamp[0],
         k1 = lamp[1],
         k2 = lamp[2],

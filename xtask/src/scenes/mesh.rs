@@ -64,11 +64,32 @@ pub struct Part {
     pub polys: Vec<Vec<V3>>,
 }
 
+impl Part {
+    pub fn new(name: impl Into<String>, material: &str, polys: Vec<Vec<V3>>) -> Part {
+        Part {
+            name: name.into(),
+            material: material.into(),
+            polys,
+        }
+    }
+}
+
 /// A Lambertian material: linear-RGB albedo, optional emission (written to MTL only).
 pub struct Material {
     pub name: String,
     pub albedo: [f64; 3],
     pub emission: Option<[f64; 3]>,
+}
+
+impl Material {
+    /// A material that does not emit.
+    pub fn diffuse(name: &str, albedo: [f64; 3]) -> Material {
+        Material {
+            name: name.into(),
+            albedo,
+            emission: None,
+        }
+    }
 }
 
 /// A pinhole camera: eye, target, vertical field of view in degrees.
@@ -80,10 +101,40 @@ pub struct CameraSpec {
     pub aspect: Option<f64>,
 }
 
+impl CameraSpec {
+    /// A camera whose aspect ratio the renderer chooses.
+    pub const fn free_aspect(eye: V3, target: V3, fov_y_deg: f64) -> CameraSpec {
+        CameraSpec {
+            eye,
+            target,
+            fov_y_deg,
+            aspect: None,
+        }
+    }
+}
+
 /// An isotropic point light: radiant intensity in W/sr per linear-RGB channel.
 pub struct PointLight {
     pub position: V3,
     pub intensity: [f64; 3],
+}
+
+impl PointLight {
+    /// A white light: `w_per_sr` in every channel.
+    pub const fn white(position: V3, w_per_sr: f64) -> PointLight {
+        PointLight {
+            position,
+            intensity: [w_per_sr; 3],
+        }
+    }
+}
+
+/// The `--camera` and `--light` arguments that give a viewer this camera and light (a README's
+/// "Camera and light" block).
+pub fn view_args(camera: &CameraSpec, light: &PointLight) -> String {
+    let ([ex, ey, ez], [gx, gy, gz], fov) = (camera.eye, camera.target, camera.fov_y_deg);
+    let ([lx, ly, lz], [r, g, b]) = (light.position, light.intensity);
+    format!("--camera {ex},{ey},{ez}:{gx},{gy},{gz}:{fov}\n--light point:{lx},{ly},{lz}:{r},{g},{b}")
 }
 
 /// A whole scene as the writers need it.
@@ -97,6 +148,22 @@ pub struct SceneDesc {
 }
 
 impl SceneDesc {
+    pub fn new(
+        name: impl Into<String>,
+        parts: Vec<Part>,
+        materials: Vec<Material>,
+        camera: CameraSpec,
+        light: PointLight,
+    ) -> SceneDesc {
+        SceneDesc {
+            name: name.into(),
+            parts,
+            materials,
+            camera,
+            light,
+        }
+    }
+
     /// Triangles after fan triangulation of every polygon, in f32 as both files store them.
     pub fn triangles(&self) -> Vec<[[f32; 3]; 3]> {
         let mut out = Vec::new();

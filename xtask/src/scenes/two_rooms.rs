@@ -3,7 +3,7 @@
 //! Two rooms share one 5 cm wall with a door opening; the closed variant fills the opening with
 //! a door slab. Dimensions are ours.
 
-use super::mesh::{rect, CameraSpec, Material, Part, PointLight, SceneDesc, V3};
+use super::mesh::{rect, view_args, CameraSpec, Material, Part, PointLight, SceneDesc};
 
 /// Room A spans x ∈ [0, WALL_X0], room B x ∈ [WALL_X1, ROOM_B_X1]; both z ∈ [0, DEPTH],
 /// y ∈ [0, HEIGHT].
@@ -19,19 +19,10 @@ pub const DOOR_TOP: f64 = 2.1;
 pub const SLAB_X: [f64; 2] = [4.005, 4.045];
 
 pub const ALBEDO: f64 = 0.7;
-pub const LIGHT_POS: V3 = [1.5, 2.2, 3.5];
-pub const LIGHT_W_PER_SR: f64 = 5.0;
-pub const EYE: V3 = [7.6, 1.6, 4.6];
-pub const TARGET: V3 = [4.05, 1.0, 1.45];
-pub const FOV_DEG: f64 = 70.0;
-
-fn part(name: &str, material: &str, polys: Vec<Vec<V3>>) -> Part {
-    Part {
-        name: name.into(),
-        material: material.into(),
-        polys,
-    }
-}
+/// In room A, away from the door, 5 W/sr.
+pub const LIGHT: PointLight = PointLight::white([1.5, 2.2, 3.5], 5.0);
+/// Eye, target, vertical field of view (°).
+pub const CAMERA: CameraSpec = CameraSpec::free_aspect([7.6, 1.6, 4.6], [4.05, 1.0, 1.45], 70.0);
 
 pub fn scene(closed: bool) -> SceneDesc {
     let (a0, a1, b0, b1) = (0.0, WALL_X0, WALL_X1, ROOM_B_X1);
@@ -58,23 +49,19 @@ pub fn scene(closed: bool) -> SceneDesc {
     wall.push(rect(1, dt, [dz0, dz1], [a1, b0], false));
 
     let mut parts = vec![
-        part("floor_a", "white", vec![rect(1, 0.0, [0.0, d], [a0, a1], true)]),
-        part("floor_b", "white", vec![rect(1, 0.0, [0.0, d], [b0, b1], true)]),
-        part("threshold", "white", vec![rect(1, 0.0, [dz0, dz1], [a1, b0], true)]),
-        part("ceiling_a", "white", vec![rect(1, h, [0.0, d], [a0, a1], false)]),
-        part("ceiling_b", "white", vec![rect(1, h, [0.0, d], [b0, b1], false)]),
-        part("walls_a", "white", room(a0, a1, a0, true)),
-        part("walls_b", "white", room(b0, b1, b1, false)),
-        part("shared_wall", "white", wall),
+        Part::new("floor_a", "white", vec![rect(1, 0.0, [0.0, d], [a0, a1], true)]),
+        Part::new("floor_b", "white", vec![rect(1, 0.0, [0.0, d], [b0, b1], true)]),
+        Part::new("threshold", "white", vec![rect(1, 0.0, [dz0, dz1], [a1, b0], true)]),
+        Part::new("ceiling_a", "white", vec![rect(1, h, [0.0, d], [a0, a1], false)]),
+        Part::new("ceiling_b", "white", vec![rect(1, h, [0.0, d], [b0, b1], false)]),
+        Part::new("walls_a", "white", room(a0, a1, a0, true)),
+        Part::new("walls_b", "white", room(b0, b1, b1, false)),
+        Part::new("shared_wall", "white", wall),
     ];
-    let mut materials = vec![Material {
-        name: "white".into(),
-        albedo: [ALBEDO; 3],
-        emission: None,
-    }];
+    let mut materials = vec![Material::diffuse("white", [ALBEDO; 3])];
     if closed {
         // Only the two large faces: the slab's edges rest against the jambs and the threshold.
-        parts.push(part(
+        parts.push(Part::new(
             "door",
             "door",
             vec![
@@ -82,31 +69,14 @@ pub fn scene(closed: bool) -> SceneDesc {
                 rect(0, SLAB_X[1], [0.0, dt], [dz0, dz1], true),
             ],
         ));
-        materials.push(Material {
-            name: "door".into(),
-            albedo: [ALBEDO; 3],
-            emission: None,
-        });
+        materials.push(Material::diffuse("door", [ALBEDO; 3]));
     }
-    SceneDesc {
-        name: if closed { "two-rooms-closed" } else { "two-rooms" }.into(),
-        parts,
-        materials,
-        camera: CameraSpec {
-            eye: EYE,
-            target: TARGET,
-            fov_y_deg: FOV_DEG,
-            aspect: None,
-        },
-        light: PointLight {
-            position: LIGHT_POS,
-            intensity: [LIGHT_W_PER_SR; 3],
-        },
-    }
+    let name = if closed { "two-rooms-closed" } else { "two-rooms" };
+    SceneDesc::new(name, parts, materials, CAMERA, LIGHT)
 }
 
 pub fn readme(open: &super::Stats, closed: &super::Stats) -> String {
-    let l = LIGHT_W_PER_SR;
+    let l = LIGHT.intensity[0];
     format!(
         "# two-rooms
 
@@ -141,8 +111,7 @@ All surfaces: albedo {alb} (grey); `door` is a separate material with the same a
 ## Camera and light
 
 ```
---camera {ex},{ey},{ez}:{gx},{gy},{gz}:{fov}
---light point:{lx},{ly},{lz}:{l},{l},{l}
+{view}
 ```
 
 The light is in room A, away from the door, so that its direct light falls through the doorway
@@ -167,15 +136,6 @@ hold the same light (`intensity` {l}, read as W/sr) and camera.
         sx0 = SLAB_X[0],
         sx1 = SLAB_X[1],
         alb = ALBEDO,
-        ex = EYE[0],
-        ey = EYE[1],
-        ez = EYE[2],
-        gx = TARGET[0],
-        gy = TARGET[1],
-        gz = TARGET[2],
-        fov = FOV_DEG,
-        lx = LIGHT_POS[0],
-        ly = LIGHT_POS[1],
-        lz = LIGHT_POS[2],
+        view = view_args(&CAMERA, &LIGHT),
     )
 }
