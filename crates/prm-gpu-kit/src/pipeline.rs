@@ -248,3 +248,41 @@ pub fn vertices(stride: usize, attributes: &[wgpu::VertexAttribute]) -> Option<w
         attributes,
     })
 }
+
+/// A bind group layout of one uniform buffer of `size` bytes read by the vertex stage at a
+/// dynamic offset (one matrix per view, selected per draw).
+pub fn dynamic_uniform_layout(device: &wgpu::Device, label: &str, size: u64) -> wgpu::BindGroupLayout {
+    device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some(label),
+        entries: &[wgpu::BindGroupLayoutEntry {
+            binding: 0,
+            visibility: wgpu::ShaderStages::VERTEX,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Uniform,
+                has_dynamic_offset: true,
+                min_binding_size: wgpu::BufferSize::new(size),
+            },
+            count: None,
+        }],
+    })
+}
+
+/// Begins a render pass onto `color` (cleared to black) and/or `depth` (cleared to far, kept if
+/// its flag says so), with `timestamps` if given.
+pub fn begin_render_pass<'e>(
+    encoder: &'e mut wgpu::CommandEncoder,
+    label: &str,
+    color: Option<&wgpu::TextureView>,
+    depth: Option<(&wgpu::TextureView, bool)>,
+    timestamps: Option<wgpu::RenderPassTimestampWrites<'_>>,
+) -> wgpu::RenderPass<'e> {
+    let colors = [color.and_then(color_attachment)];
+    encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+        label: Some(label),
+        color_attachments: if color.is_some() { &colors } else { &[] },
+        depth_stencil_attachment: depth.and_then(|(view, store)| depth_attachment(view, store)),
+        timestamp_writes: timestamps,
+        occlusion_query_set: None,
+        multiview_mask: None,
+    })
+}

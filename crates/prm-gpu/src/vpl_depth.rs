@@ -269,19 +269,11 @@ impl VplDepthPass {
                 },
             ],
         });
-        let face_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("vpl_depth face"),
-            entries: &[wgpu::BindGroupLayoutEntry {
-                binding: 0,
-                visibility: wgpu::ShaderStages::VERTEX,
-                ty: wgpu::BindingType::Buffer {
-                    ty: wgpu::BufferBindingType::Uniform,
-                    has_dynamic_offset: true,
-                    min_binding_size: wgpu::BufferSize::new(std::mem::size_of::<FaceSelect>() as u64),
-                },
-                count: None,
-            }],
-        });
+        let face_layout = prm_gpu_kit::pipeline::dynamic_uniform_layout(
+            device,
+            "vpl_depth face",
+            std::mem::size_of::<FaceSelect>() as u64,
+        );
         let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("vpl_depth"),
             bind_group_layouts: &[Some(&frame_layout), Some(&face_layout)],
@@ -453,14 +445,8 @@ impl VplDepthPass {
             .enumerate()
             .take(faces.div_ceil(per_layer) as usize)
         {
-            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-                label: Some("vpl_depth"),
-                color_attachments: &[],
-                depth_stencil_attachment: prm_gpu_kit::pipeline::depth_attachment(view, true),
-                timestamp_writes: None,
-                occlusion_query_set: None,
-                multiview_mask: None,
-            });
+            let mut pass =
+                prm_gpu_kit::pipeline::begin_render_pass(encoder, "vpl_depth", None, Some((view, true)), None);
             pass.set_pipeline(&self.pipeline);
             pass.set_bind_group(0, &self.frame_group, &[]);
             pass.set_vertex_buffer(0, vertices.slice(..));

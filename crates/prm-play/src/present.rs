@@ -58,14 +58,7 @@ impl Presenter {
 
     /// Records the pass drawing onto `target` (same size as the renderer's image).
     pub fn draw(&self, encoder: &mut wgpu::CommandEncoder, target: &wgpu::TextureView) {
-        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-            label: Some("play present"),
-            color_attachments: &[pipeline::color_attachment(target)],
-            depth_stencil_attachment: None,
-            timestamp_writes: None,
-            occlusion_query_set: None,
-            multiview_mask: None,
-        });
+        let mut pass = pipeline::begin_render_pass(encoder, "play present", Some(target), None, None);
         if let Some(group) = &self.group {
             pass.set_pipeline(&self.pipeline);
             pass.set_bind_group(0, group, &[]);

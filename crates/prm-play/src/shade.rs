@@ -162,14 +162,13 @@ impl ShadePass {
         depth: &wgpu::TextureView,
         timer: Option<&PassTimer>,
     ) {
-        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-            label: Some("play shade"),
-            color_attachments: &[pipeline::color_attachment(color)],
-            depth_stencil_attachment: pipeline::depth_attachment(depth, false),
-            timestamp_writes: timer.and_then(|t| t.render("shade", true, true)),
-            occlusion_query_set: None,
-            multiview_mask: None,
-        });
+        let mut pass = pipeline::begin_render_pass(
+            encoder,
+            "play shade",
+            Some(color),
+            Some((depth, false)),
+            timer.and_then(|t| t.render("shade", true, true)),
+        );
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, &self.bind_group, &[]);
         pass.set_vertex_buffer(0, self.res.vertices.slice(..));

@@ -10,13 +10,8 @@ use prm_play::{PlayOptions, Renderer};
 use prm_scene::Light;
 
 fn read_exr(path: &Path) -> (usize, usize, Vec<[f32; 3]>) {
-    let image = exr::prelude::read_first_rgba_layer_from_file(
-        path,
-        |size, _| (size.0, size.1, vec![[0.0f32; 3]; size.0 * size.1]),
-        |(w, _, px), pos, (r, g, b, _a): (f32, f32, f32, f32)| px[pos.1 * *w + pos.0] = [r, g, b],
-    )
-    .unwrap();
-    image.layer_data.channel_data.pixels
+    let image = prm_play::output::read_exr(path).unwrap();
+    (image.width as usize, image.height as usize, image.rgb)
 }
 
 #[test]

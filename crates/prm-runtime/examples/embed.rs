@@ -177,14 +177,13 @@ fn run(archive_path: &Path, out: &Path) -> Result<()> {
     {
         let color_view = color.create_view(&Default::default());
         let depth_view = depth.create_view(&Default::default());
-        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-            label: None,
-            color_attachments: &[kit::color_attachment(&color_view)],
-            depth_stencil_attachment: kit::depth_attachment(&depth_view, false),
-            timestamp_writes: None,
-            occlusion_query_set: None,
-            multiview_mask: None,
-        });
+        let mut pass = kit::begin_render_pass(
+            &mut encoder,
+            "embed",
+            Some(&color_view),
+            Some((&depth_view, false)),
+            None,
+        );
         pass.set_pipeline(&pipeline);
         pass.set_bind_group(0, &bind_group, &[]);
         pass.set_vertex_buffer(0, vertex_buffer.slice(..));

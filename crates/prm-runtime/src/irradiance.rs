@@ -76,14 +76,7 @@ impl IrradiancePass {
         let view = target.create_view(&Default::default());
         let mut enc = device.create_command_encoder(&Default::default());
         {
-            let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
-                label: Some("prm irradiance"),
-                color_attachments: &[pipeline::color_attachment(&view)],
-                depth_stencil_attachment: None,
-                timestamp_writes: None,
-                occlusion_query_set: None,
-                multiview_mask: None,
-            });
+            let mut pass = pipeline::begin_render_pass(&mut enc, "prm irradiance", Some(&view), None, None);
             pass.set_pipeline(&self.pipeline);
             pass.set_bind_group(0, &self.bind_group, &[]);
             pass.set_vertex_buffer(0, vertices.slice(..));

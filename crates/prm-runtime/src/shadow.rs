@@ -59,19 +59,7 @@ pub(crate) struct ShadowPass {
 
 impl ShadowPass {
     pub fn new(device: &wgpu::Device, maps: &ShadowMaps) -> ShadowPass {
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("prm shadow"),
-            entries: &[wgpu::BindGroupLayoutEntry {
-                binding: 0,
-                visibility: wgpu::ShaderStages::VERTEX,
-                ty: wgpu::BindingType::Buffer {
-                    ty: wgpu::BufferBindingType::Uniform,
-                    has_dynamic_offset: true,
-                    min_binding_size: wgpu::BufferSize::new(64),
-                },
-                count: None,
-            }],
-        });
+        let layout = pipeline::dynamic_uniform_layout(device, "prm shadow", 64);
         let module = pipeline::shader(
             device,
             "prm shadow",
@@ -126,14 +114,13 @@ impl ShadowPass {
         timer: Option<&PassTimer>,
     ) {
         for (l, layer) in maps.layers.iter().take(views as usize).enumerate() {
-            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-                label: Some("prm shadow"),
-                color_attachments: &[],
-                depth_stencil_attachment: pipeline::depth_attachment(layer, true),
-                timestamp_writes: timer.and_then(|t| t.render("shadow", l == 0, l + 1 == views as usize)),
-                occlusion_query_set: None,
-                multiview_mask: None,
-            });
+            let mut pass = pipeline::begin_render_pass(
+                encoder,
+                "prm shadow",
+                None,
+                Some((layer, true)),
+                timer.and_then(|t| t.render("shadow", l == 0, l + 1 == views as usize)),
+            );
             pass.set_pipeline(&self.pipeline);
             pass.set_bind_group(0, &self.bind_group, &[l as u32 * maps.stride]);
             pass.set_vertex_buffer(0, positions.slice(..));
