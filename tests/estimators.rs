@@ -111,18 +111,57 @@ struct Query {
 @group(0) @binding(4) var<storage, read> queries: array<Query>;
 @group(0) @binding(5) var<storage, read_write> out: array<vec4<f32>>;
 
+fn answer(i: u32, q: Query) {
+    out[3u * i] = vec4<f32>(light_irradiance_ng(q.light, q.position, q.ng, q.n, q.disk), 0.0);
+    out[3u * i + 1u] = vec4<f32>(light_irradiance_disk(q.light, q.position, q.n, q.disk), 0.0);
+    out[3u * i + 2u] = vec4<f32>(direct_irradiance_disk(q.position, q.n, q.disk), 0.0);
+}
+";
+
+/// The entry point of a query kernel, after it: `answer(i, queries[i])` for every query `i`
+/// (the kernel declares `Query`, `queries` and `answer`, which writes its results to `out`).
+const QUERY_MAIN: &str = "
 @compute @workgroup_size(64)
 fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     let i = id.x;
     if i >= arrayLength(&queries) {
         return;
     }
-    let q = queries[i];
-    out[3u * i] = vec4<f32>(light_irradiance_ng(q.light, q.position, q.ng, q.n, q.disk), 0.0);
-    out[3u * i + 1u] = vec4<f32>(light_irradiance_disk(q.light, q.position, q.n, q.disk), 0.0);
-    out[3u * i + 2u] = vec4<f32>(direct_irradiance_disk(q.position, q.n, q.disk), 0.0);
+    answer(i, queries[i]);
 }
 ";
+
+/// Runs the query kernel ending `parts` (see [`QUERY_MAIN`]) once per element of `queries`,
+/// with `bindings` first in group 0, then `queries`, then `out` with room for `per_query`
+/// `vec4<f32>` results each, and returns those results.
+fn run_queries<Q: Pod>(
+    ctx: &prm_gpu_kit::GpuContext,
+    label: &'static str,
+    parts: &[&str],
+    bindings: &[wgpu::BindingResource],
+    queries: &[Q],
+    per_query: usize,
+) -> Vec<Vec3> {
+    let d = &ctx.device;
+    let query_buffer = buffer_init(d, "queries", bytemuck::cast_slice(queries), wgpu::BufferUsages::STORAGE);
+    let out = storage(
+        d,
+        "out",
+        (queries.len() * per_query * 16) as u64,
+        wgpu::BufferUsages::COPY_SRC,
+    );
+    let mut resources = bindings.to_vec();
+    resources.extend([query_buffer.as_entire_binding(), out.as_entire_binding()]);
+    let bytes = run_kernel(
+        ctx,
+        label,
+        &[parts, &[QUERY_MAIN]].concat(),
+        &resources,
+        queries.len() as u32,
+        &out,
+    );
+    vec3s(&bytes)
+}
 
 /// The lights of the grid: a point light, spot lights narrow (one view), wide and beyond 60°
 /// (a cube), directional lights from three sides.
@@ -284,19 +323,7 @@ fn direct_light_agrees_with_the_cpu_on_every_light_kind() {
     let bvh = far_bvh();
     let (queries, names) = light_grid(&lights);
     let b = light_bindings(&ctx, &lights);
-    let query_buffer = buffer_init(
-        &ctx.device,
-        "queries",
-        bytemuck::cast_slice(&queries),
-        wgpu::BufferUsages::STORAGE,
-    );
-    let out = storage(
-        &ctx.device,
-        "out",
-        (queries.len() * 3 * 16) as u64,
-        wgpu::BufferUsages::COPY_SRC,
-    );
-    let bytes = run_kernel(
+    let gpu_values = run_queries(
         &ctx,
         "direct light estimators",
         &[SHARED_WGSL, LIGHTS_WGSL, LIGHT_KERNEL],
@@ -305,13 +332,10 @@ fn direct_light_agrees_with_the_cpu_on_every_light_kind() {
             b.lights.as_entire_binding(),
             b.views.as_entire_binding(),
             wgpu::BindingResource::TextureView(&b.shadow_maps),
-            query_buffer.as_entire_binding(),
-            out.as_entire_binding(),
         ],
-        queries.len() as u32,
-        &out,
+        &queries,
+        3,
     );
-    let gpu_values = vec3s(&bytes);
     let (mut with_ng, mut shading_only, mut all_lights) =
         (Agreement::default(), Agreement::default(), Agreement::default());
     // The n-only function against the CPU's ng test, where they are allowed to differ.
@@ -377,13 +401,7 @@ struct Query {
 @group(0) @binding(1) var<storage, read> queries: array<Query>;
 @group(0) @binding(2) var<storage, read_write> out: array<vec4<f32>>;
 
-@compute @workgroup_size(64)
-fn main(@builtin(global_invocation_id) id: vec3<u32>) {
-    let i = id.x;
-    if i >= arrayLength(&queries) {
-        return;
-    }
-    let q = queries[i];
+fn answer(i: u32, q: Query) {
     out[i] = vpl_irradiance(vpls[i], q.x, q.nx, q.kind, q.value);
 }
 ";
@@ -453,26 +471,14 @@ fn vpl_irradiance_agrees_with_the_cpu_on_every_bound() {
     }
     let d = &ctx.device;
     let vpl_buffer = buffer_init(d, "vpls", bytemuck::cast_slice(&gpu_vpls), wgpu::BufferUsages::STORAGE);
-    let query_buffer = buffer_init(
-        d,
-        "queries",
-        bytemuck::cast_slice(&queries),
-        wgpu::BufferUsages::STORAGE,
-    );
-    let out = storage(d, "out", (queries.len() * 16) as u64, wgpu::BufferUsages::COPY_SRC);
-    let bytes = run_kernel(
+    let gpu_values = run_queries(
         &ctx,
         "vpl estimator",
         &[HEMICUBE_WGSL, VPL_WGSL, VPL_KERNEL],
-        &[
-            vpl_buffer.as_entire_binding(),
-            query_buffer.as_entire_binding(),
-            out.as_entire_binding(),
-        ],
-        queries.len() as u32,
-        &out,
+        &[vpl_buffer.as_entire_binding()],
+        &queries,
+        1,
     );
-    let gpu_values = vec3s(&bytes);
     let mut agreement = Agreement::default();
     for (i, (x, nx, bound, name)) in cases.iter().enumerate() {
         let v = &cpu_vpls[i];

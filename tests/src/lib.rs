@@ -72,14 +72,7 @@ pub fn cleared_depth_array(ctx: &GpuContext, side: u32, layers: u32) -> wgpu::Te
         encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
             label: Some("clear depth"),
             color_attachments: &[],
-            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                view: &view,
-                depth_ops: Some(wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(1.0),
-                    store: wgpu::StoreOp::Store,
-                }),
-                stencil_ops: None,
-            }),
+            depth_stencil_attachment: pipeline::depth_attachment(&view, true),
             timestamp_writes: None,
             occlusion_query_set: None,
             multiview_mask: None,

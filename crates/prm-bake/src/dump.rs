@@ -424,6 +424,15 @@ mod tests {
         bad.to_path_buf()
     }
 
+    /// A fresh scratch directory `name` holding the archive of [`write_archive`] as `a.prm`:
+    /// (directory, archive).
+    fn scratch_archive(name: &str) -> (PathBuf, PathBuf) {
+        let dir = temp_dir(name);
+        let path = dir.join("a.prm");
+        write_archive(&path);
+        (dir, path)
+    }
+
     fn write_archive(path: &Path) {
         let mut meta = Metadata::new("dump-test", "1.0");
         meta.params.insert("bounces".into(), 2.into());
@@ -473,9 +482,7 @@ mod tests {
 
     #[test]
     fn json_summary_has_documented_keys() {
-        let dir = temp_dir("json");
-        let path = dir.join("a.prm");
-        write_archive(&path);
+        let (dir, path) = scratch_archive("json");
         let mut a = Archive::open(&path).unwrap();
         let report = a.verify().unwrap();
         let v = summary_json(&a, &path, Some(&report));
@@ -509,9 +516,7 @@ mod tests {
 
     #[test]
     fn verify_names_the_damage() {
-        let dir = temp_dir("verify");
-        let path = dir.join("a.prm");
-        write_archive(&path);
+        let (dir, path) = scratch_archive("verify");
         let bad = damage_last_tile(&path, &dir.join("bad.prm"));
         let args = DumpArgs {
             file: bad.clone(),
@@ -534,9 +539,7 @@ mod tests {
 
     #[test]
     fn export_of_a_damaged_archive_leaves_nothing_behind() {
-        let dir = temp_dir("exr-damaged");
-        let path = dir.join("a.prm");
-        write_archive(&path);
+        let (dir, path) = scratch_archive("exr-damaged");
         // The first panes read and export before the damaged last one fails.
         let bad = damage_last_tile(&path, &dir.join("bad.prm"));
         let out = dir.join("exr");
@@ -558,9 +561,7 @@ mod tests {
 
     #[test]
     fn exports_one_exr_per_pane_and_an_overview() {
-        let dir = temp_dir("exr");
-        let path = dir.join("a.prm");
-        write_archive(&path);
+        let (dir, path) = scratch_archive("exr");
         let out = dir.join("exr");
         let mut a = Archive::open(&path).unwrap();
         assert_eq!(export_exr(&mut a, &out).unwrap(), 3);

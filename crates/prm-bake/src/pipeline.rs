@@ -136,6 +136,21 @@ fn trace(what: &'static str) -> impl FnOnce(prm_trace::TraceError) -> BakeError 
     move |source| BakeError::Trace { what, source }
 }
 
+/// Ends the step `phase` begun at `started`: its seconds go into `timings` under `key` and, with
+/// `detail`, to `progress`.
+fn finish_phase(
+    timings: &mut BTreeMap<String, f64>,
+    progress: &mut dyn ProgressSink,
+    phase: Phase,
+    key: &str,
+    started: Instant,
+    detail: &str,
+) {
+    let secs = started.elapsed().as_secs_f64();
+    timings.insert(key.to_string(), secs);
+    progress.phase_finish(phase, detail, secs);
+}
+
 /// Bakes `job.scene` into the archive `job.output` with the panes rendered by `renderer`,
 /// reporting to `progress`.
 ///
@@ -167,25 +182,19 @@ pub fn bake(job: &BakeJob<'_>, renderer: Renderer<'_>, progress: &mut dyn Progre
             atlas.resolution
         )));
     }
-    let secs = t.elapsed().as_secs_f64();
-    timings.insert("atlas".to_string(), secs);
-    progress.phase_finish(
-        Phase::Atlas,
-        &format!(
-            "{r}x{r}, {} charts, {} exit points",
-            atlas.stats.charts,
-            atlas.exits.len(),
-            r = atlas.resolution
-        ),
-        secs,
+    let detail = format!(
+        "{r}x{r}, {} charts, {} exit points",
+        atlas.stats.charts,
+        atlas.exits.len(),
+        r = atlas.resolution
     );
+    finish_phase(&mut timings, progress, Phase::Atlas, "atlas", t, &detail);
 
     let t = Instant::now();
     progress.phase_start(Phase::Bvh, 1);
     let bvh = Bvh::build(scene, &BvhParams::DEFAULT).map_err(trace("building the BVH"))?;
-    let secs = t.elapsed().as_secs_f64();
-    timings.insert("bvh".to_string(), secs);
-    progress.phase_finish(Phase::Bvh, &format!("{} triangles", scene.triangles.len()), secs);
+    let detail = format!("{} triangles", scene.triangles.len());
+    finish_phase(&mut timings, progress, Phase::Bvh, "bvh", t, &detail);
 
     let t = Instant::now();
     progress.phase_start(Phase::LightTracing, 1);
@@ -203,19 +212,14 @@ pub fn bake(job: &BakeJob<'_>, renderer: Renderer<'_>, progress: &mut dyn Progre
         ..WalkParams::PREVIEW
     };
     let vpls = prm_trace::trace_walks(scene, &bvh, &entries, &walk_params).map_err(trace("tracing walks"))?;
-    let secs = t.elapsed().as_secs_f64();
-    timings.insert("light_tracing".to_string(), secs);
-    progress.phase_finish(
-        Phase::LightTracing,
-        &format!(
-            "{} entries, {} walks, {} VPLs, {} rays",
-            entries.len(),
-            vpls.stats.walks,
-            vpls.vpls.len(),
-            vpls.stats.rays
-        ),
-        secs,
+    let detail = format!(
+        "{} entries, {} walks, {} VPLs, {} rays",
+        entries.len(),
+        vpls.stats.walks,
+        vpls.vpls.len(),
+        vpls.stats.rays
     );
+    finish_phase(&mut timings, progress, Phase::LightTracing, "light_tracing", t, &detail);
 
     let t = Instant::now();
     progress.phase_start(Phase::Clustering, 1);
@@ -230,9 +234,8 @@ pub fn bake(job: &BakeJob<'_>, renderer: Renderer<'_>, progress: &mut dyn Progre
             .map_err(trace("clustering entry points"))?
             .separate_by_visibility(&entries, &bvh)
     };
-    let secs = t.elapsed().as_secs_f64();
-    timings.insert("clustering".to_string(), secs);
-    progress.phase_finish(Phase::Clustering, &format!("{} clusters", clustering.len()), secs);
+    let detail = format!("{} clusters", clustering.len());
+    finish_phase(&mut timings, progress, Phase::Clustering, "clustering", t, &detail);
 
     let (table_entries, table_clusters, atlas_section) = archive_tables(&atlas, &entries, &clustering);
     let out_dir = destination

@@ -3,7 +3,10 @@
 
 use prm_bake::{BakeConfig, BakeError, BakeJob, Phase, Plan, ProgressSink, Renderer};
 use prm_format::Archive;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
+
+mod common;
+use common::{scene_path, STEPS};
 
 /// What a [`ProgressSink`] was told.
 #[derive(Debug, PartialEq)]
@@ -38,18 +41,9 @@ impl ProgressSink for Recorder {
     }
 }
 
-fn scene_path() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/cornell-box/cornell-box.obj")
-}
-
 /// A fresh, empty directory for one test under the cargo-provided temporary directory.
 fn temp_dir(name: &str) -> PathBuf {
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
-        .join("prm-bake-library")
-        .join(name);
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+    common::scratch_dir("prm-bake-library", name)
 }
 
 fn tiny() -> BakeConfig {
@@ -135,14 +129,7 @@ fn a_cpu_bake_reports_its_phases_and_writes_the_planned_archive() {
     assert_eq!(archive.atlas().resolution, 32);
     assert_eq!(archive.metadata().params["backend"], "cpu");
     assert_eq!(baked.archive_bytes, std::fs::metadata(&out).unwrap().len());
-    for key in [
-        "atlas",
-        "bvh",
-        "light_tracing",
-        "clustering",
-        "pane_rendering",
-        "compression_write",
-    ] {
+    for key in STEPS {
         assert!(
             baked.timings.get(key).is_some_and(|t| *t >= 0.0),
             "{key}: {:?}",

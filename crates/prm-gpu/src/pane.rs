@@ -21,9 +21,9 @@
 //! no member energies are produced.
 
 use glam::Vec3;
+use prm_gpu_kit::pipeline;
 use prm_scene::{ExitPoint, Scene};
 use prm_trace::{Clustering, Panes, VplBound, VplSet};
-use wgpu::util::DeviceExt;
 
 use crate::pane_gather::{GatherParams, GpuExit, PaneGatherPass, VplBoundKind};
 use crate::vpl_depth::{ChunkedScene, DepthFrame, GpuVpl, VplDepthPass, FACES};
@@ -294,11 +294,12 @@ fn render_cluster_panes<E: From<GpuError>>(
     let group_cap = (group_bytes / (16 * n_exit)).max(1) as usize;
     let face_res = params.face_resolution.clamp(8, limits.max_texture_dimension_2d);
 
-    let scene_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-        label: Some("pane scene"),
-        contents: bytemuck::cast_slice(&chunked.vertices),
-        usage: wgpu::BufferUsages::VERTEX,
-    });
+    let scene_buffer = pipeline::buffer_init(
+        device,
+        "pane scene",
+        bytemuck::cast_slice(&chunked.vertices),
+        wgpu::BufferUsages::VERTEX,
+    );
     let gpu_exits: Vec<GpuExit> = exits
         .iter()
         .map(|e| GpuExit {
@@ -308,39 +309,25 @@ fn render_cluster_panes<E: From<GpuError>>(
             _pad1: 0.0,
         })
         .collect();
-    let exit_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-        label: Some("pane exits"),
-        contents: if gpu_exits.is_empty() {
-            &[0u8; 32]
-        } else {
-            bytemuck::cast_slice(&gpu_exits)
-        },
-        usage: wgpu::BufferUsages::STORAGE,
-    });
-    let vpl_buffer = device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("pane vpl batch"),
-        size: batch_cap as u64 * std::mem::size_of::<GpuVpl>() as u64,
-        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    });
-    let frame_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-        label: Some("pane depth frame"),
-        contents: bytemuck::bytes_of(&frame),
-        usage: wgpu::BufferUsages::UNIFORM,
-    });
-    let params_buffer = device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("pane gather params"),
-        size: std::mem::size_of::<GatherParams>() as u64,
-        usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    });
+    let exit_contents: &[u8] = if gpu_exits.is_empty() {
+        &[0u8; 32]
+    } else {
+        bytemuck::cast_slice(&gpu_exits)
+    };
+    let exit_buffer = pipeline::buffer_init(device, "pane exits", exit_contents, wgpu::BufferUsages::STORAGE);
+    // At least one VPL of at least 16 bytes: `storage`'s 16-byte floor changes nothing here.
+    let vpl_bytes = batch_cap as u64 * std::mem::size_of::<GpuVpl>() as u64;
+    let vpl_buffer = pipeline::storage(device, "pane vpl batch", vpl_bytes, wgpu::BufferUsages::empty());
+    let frame_buffer = pipeline::buffer_init(
+        device,
+        "pane depth frame",
+        bytemuck::bytes_of(&frame),
+        wgpu::BufferUsages::UNIFORM,
+    );
+    let params_buffer = pipeline::uniform(device, "pane gather params", std::mem::size_of::<GatherParams>() as u64);
+    // At least one cluster and one exit point: at least 16 bytes.
     let pane_bytes = (group_cap.min(clusters) as u64) * 16 * n_exit;
-    let pane_buffer = device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("pane group"),
-        size: pane_bytes,
-        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    });
+    let pane_buffer = pipeline::storage(device, "pane group", pane_bytes, wgpu::BufferUsages::COPY_SRC);
     let readback = device.create_buffer(&wgpu::BufferDescriptor {
         label: Some("pane readback"),
         size: pane_bytes,
@@ -394,20 +381,13 @@ fn render_cluster_panes<E: From<GpuError>>(
             };
             ctx.queue.write_buffer(&params_buffer, 0, bytemuck::bytes_of(&gp));
             // Two submissions so each pass can be timed (the device runs them in order anyway).
-            let t = std::time::Instant::now();
-            let mut encoder = device.create_command_encoder(&Default::default());
-            let (triangles, draws) = depth.encode(&mut encoder, &ctx.queue, &chunked, &scene_buffer, frame.lift, batch);
-            stats.triangles += triangles;
-            stats.draws += draws;
-            ctx.queue.submit([encoder.finish()]);
-            ctx.wait()?;
-            stats.depth_seconds += t.elapsed().as_secs_f64();
-            let t = std::time::Instant::now();
-            let mut encoder = device.create_command_encoder(&Default::default());
-            gather.encode(&mut encoder, exits.len() as u32);
-            ctx.queue.submit([encoder.finish()]);
-            ctx.wait()?;
-            stats.gather_seconds += t.elapsed().as_secs_f64();
+            let mut counts = (0, 0);
+            stats.depth_seconds += submit_timed(ctx, |encoder| {
+                counts = depth.encode(encoder, &ctx.queue, &chunked, &scene_buffer, frame.lift, batch);
+            })?;
+            stats.triangles += counts.0;
+            stats.draws += counts.1;
+            stats.gather_seconds += submit_timed(ctx, |encoder| gather.encode(encoder, exits.len() as u32))?;
             scope.pop("pane batch")?;
             stats.vpls += batch.len() as u64;
             stats.faces += (batch.len() as u32 * FACES) as u64;
@@ -441,6 +421,17 @@ fn render_cluster_panes<E: From<GpuError>>(
     Ok(stats)
 }
 
+/// Records into a fresh encoder with `record`, submits it and waits for the device: the seconds
+/// that took.
+fn submit_timed(ctx: &GpuContext, record: impl FnOnce(&mut wgpu::CommandEncoder)) -> Result<f64, GpuError> {
+    let t = std::time::Instant::now();
+    let mut encoder = ctx.device.create_command_encoder(&Default::default());
+    record(&mut encoder);
+    ctx.queue.submit([encoder.finish()]);
+    ctx.wait()?;
+    Ok(t.elapsed().as_secs_f64())
+}
+
 /// Checks that `ctx` can run the pane passes at all, in a few milliseconds: creates both passes
 /// over a one-triangle scene. A backend whose shader translation lacks what the passes use
 /// (GLSL has no `textureLoad` of depth textures, which the gather needs) fails here with the
@@ -449,21 +440,12 @@ pub fn check_support(ctx: &GpuContext) -> Result<(), GpuError> {
     let device = &ctx.device;
     let scope = ErrorScopes::push(device);
     let chunked = ChunkedScene::new(&[[Vec3::ZERO, Vec3::X, Vec3::Y]]);
-    let buffer = |label: &str, size: u64, usage: wgpu::BufferUsages| {
-        device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some(label),
-            size,
-            usage,
-            mapped_at_creation: false,
-        })
-    };
-    let storage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST;
-    let vpls = buffer("check vpls", std::mem::size_of::<GpuVpl>() as u64, storage);
-    let exits = buffer("check exits", std::mem::size_of::<GpuExit>() as u64, storage);
-    let panes = buffer("check panes", 16, storage);
-    let uniform = wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST;
-    let frame = buffer("check frame", std::mem::size_of::<DepthFrame>() as u64, uniform);
-    let params = buffer("check params", std::mem::size_of::<GatherParams>() as u64, uniform);
+    let storage = |label: &str, size: usize| pipeline::storage(device, label, size as u64, wgpu::BufferUsages::empty());
+    let vpls = storage("check vpls", std::mem::size_of::<GpuVpl>());
+    let exits = storage("check exits", std::mem::size_of::<GpuExit>());
+    let panes = storage("check panes", 16);
+    let frame = pipeline::uniform(device, "check frame", std::mem::size_of::<DepthFrame>() as u64);
+    let params = pipeline::uniform(device, "check params", std::mem::size_of::<GatherParams>() as u64);
     let depth = VplDepthPass::new(device, 1, 8, &vpls, &frame, &chunked);
     let _gather = PaneGatherPass::new(device, &vpls, &exits, &panes, &params, &depth.array_view);
     scope.pop("pane passes")?;

@@ -2,6 +2,7 @@
 //! visibility, into the panes of their clusters at every exit point.
 
 use bytemuck::{Pod, Zeroable};
+use prm_gpu_kit::ComputePass;
 use prm_trace::VplBound;
 
 use crate::vpl_depth::HEMICUBE_WGSL;
@@ -91,10 +92,7 @@ pub struct GatherParams {
 const _: () = assert!(std::mem::size_of::<GatherParams>() == 64);
 
 /// Pipeline and bindings of the gather pass.
-pub struct PaneGatherPass {
-    pipeline: wgpu::ComputePipeline,
-    group: wgpu::BindGroup,
-}
+pub struct PaneGatherPass(ComputePass);
 
 impl PaneGatherPass {
     /// Creates the pass over the given buffers and depth array.
@@ -106,19 +104,6 @@ impl PaneGatherPass {
         params: &wgpu::Buffer,
         depth: &wgpu::TextureView,
     ) -> PaneGatherPass {
-        let source = [HEMICUBE_WGSL, VPL_WGSL, PANE_GATHER_WGSL].join("\n");
-        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("pane_gather"),
-            source: wgpu::ShaderSource::Wgsl(source.into()),
-        });
-        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some("pane_gather"),
-            layout: None,
-            module: &module,
-            entry_point: Some("main"),
-            compilation_options: Default::default(),
-            cache: None,
-        });
         // Bilinear comparison: 2×2 percentage-closer filtering softens the depth maps' texels.
         let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
             label: Some("pane_gather shadow"),
@@ -129,48 +114,24 @@ impl PaneGatherPass {
             compare: Some(wgpu::CompareFunction::LessEqual),
             ..Default::default()
         });
-        let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("pane_gather"),
-            layout: &pipeline.get_bind_group_layout(0),
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: vpls.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: exits.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: panes.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 3,
-                    resource: params.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 4,
-                    resource: wgpu::BindingResource::TextureView(depth),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 5,
-                    resource: wgpu::BindingResource::Sampler(&sampler),
-                },
+        PaneGatherPass(ComputePass::new(
+            device,
+            "pane_gather",
+            &[HEMICUBE_WGSL, VPL_WGSL, PANE_GATHER_WGSL],
+            &[
+                vpls.as_entire_binding(),
+                exits.as_entire_binding(),
+                panes.as_entire_binding(),
+                params.as_entire_binding(),
+                wgpu::BindingResource::TextureView(depth),
+                wgpu::BindingResource::Sampler(&sampler),
             ],
-        });
-        PaneGatherPass { pipeline, group }
+        ))
     }
 
     /// Records one dispatch over `exit_count` exit points.
     pub fn encode(&self, encoder: &mut wgpu::CommandEncoder, exit_count: u32) {
-        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-            label: Some("pane_gather"),
-            timestamp_writes: None,
-        });
-        pass.set_pipeline(&self.pipeline);
-        pass.set_bind_group(0, &self.group, &[]);
-        pass.dispatch_workgroups(exit_count.div_ceil(64), 1, 1);
+        self.0.encode(encoder, [exit_count.div_ceil(64), 1, 1], None);
     }
 }
 

@@ -10,6 +10,37 @@ fn vulkan() -> GpuContext {
     }
 }
 
+/// The atlas (`resolution`² texels), BVH, entry points and light walks of `scene`.
+fn trace_scene(
+    scene: &prm_scene::Scene,
+    resolution: u32,
+    entries: prm_trace::EntryParams,
+    walks: prm_trace::WalkParams,
+) -> (
+    prm_scene::Atlas,
+    prm_trace::Bvh,
+    Vec<prm_trace::SurfaceSample>,
+    prm_trace::VplSet,
+) {
+    use prm_scene::{Atlas, AtlasParams, Sizing};
+    let atlas = Atlas::build(scene, &AtlasParams::with_sizing(Sizing::Resolution(resolution))).unwrap();
+    let bvh = prm_trace::Bvh::build(scene, &prm_trace::BvhParams::DEFAULT).unwrap();
+    let entries = prm_trace::sample_surface(scene, &entries).unwrap();
+    let walks = prm_trace::trace_walks(scene, &bvh, &entries, &walks).unwrap();
+    (atlas, bvh, entries, walks)
+}
+
+/// Relative RMSE of `gpu` against `cpu` over all texels and channels, normalised by the RMS of
+/// `cpu`.
+fn relative_rmse(gpu: &[glam::Vec3], cpu: &[glam::Vec3]) -> f64 {
+    let (mut err, mut norm) = (0.0f64, 0.0f64);
+    for (g, c) in gpu.iter().zip(cpu) {
+        err += (*g - *c).length_squared() as f64;
+        norm += c.length_squared() as f64;
+    }
+    (err / norm.max(1e-30)).sqrt()
+}
+
 #[test]
 fn smoke_pass_computes_on_vulkan() {
     let ctx = vulkan();
@@ -33,41 +64,21 @@ fn missing_adapter_error_names_the_fix() {
 }
 
 mod panes {
-    use super::vulkan;
+    use super::{relative_rmse, trace_scene, vulkan};
     use prm_gpu::PaneRenderParams;
-    use prm_scene::{Atlas, AtlasParams, Sizing};
-    use prm_trace::{Bvh, BvhParams, ClusterParams, Clustering, EntryParams, PaneParams, WalkParams};
+    use prm_trace::{ClusterParams, Clustering, EntryParams, PaneParams, WalkParams};
     use std::path::Path;
-
-    /// Relative RMSE of `gpu` against `cpu` over all texels and channels, normalised by the
-    /// RMS of `cpu`.
-    fn relative_rmse(gpu: &[glam::Vec3], cpu: &[glam::Vec3]) -> f64 {
-        let (mut err, mut norm) = (0.0f64, 0.0f64);
-        for (g, c) in gpu.iter().zip(cpu) {
-            err += (*g - *c).length_squared() as f64;
-            norm += c.length_squared() as f64;
-        }
-        (err / norm.max(1e-30)).sqrt()
-    }
 
     #[test]
     fn gpu_panes_match_cpu_evaluator_on_cornell_box() {
         let ctx = vulkan();
         let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/cornell-box/cornell-box.obj");
         let scene = prm_scene::load(&path).unwrap();
-        let atlas = Atlas::build(&scene, &AtlasParams::with_sizing(Sizing::Resolution(64))).unwrap();
-        let bvh = Bvh::build(&scene, &BvhParams::DEFAULT).unwrap();
-        let entries = prm_trace::sample_surface(&scene, &EntryParams { count: 256, seed: 7 }).unwrap();
-        let vpls = prm_trace::trace_walks(
-            &scene,
-            &bvh,
-            &entries,
-            &WalkParams {
-                walks_per_entry: 2,
-                ..WalkParams::PREVIEW
-            },
-        )
-        .unwrap();
+        let walks = WalkParams {
+            walks_per_entry: 2,
+            ..WalkParams::PREVIEW
+        };
+        let (atlas, bvh, entries, vpls) = trace_scene(&scene, 64, EntryParams { count: 256, seed: 7 }, walks);
         let clustering =
             Clustering::kmeans(&entries, scene.bounds().diagonal(), &ClusterParams::with_clusters(16)).unwrap();
         let cpu = prm_trace::evaluate_panes(&bvh, &vpls, &clustering, &atlas.exits, &PaneParams::DEFAULT).unwrap();
@@ -150,11 +161,11 @@ mod panes {
 /// The white furnace through the GPU pane renderer: a closed box of albedo ρ = 0.5 with unit
 /// irradiance at every entry point has indirect irradiance ρ/(1−ρ) = 1 everywhere.
 mod furnace {
-    use super::vulkan;
+    use super::{relative_rmse, trace_scene, vulkan};
     use glam::Vec3;
     use prm_gpu::PaneRenderParams;
-    use prm_scene::{Atlas, AtlasParams, ExitPoint, Sizing};
-    use prm_trace::{Bvh, BvhParams, ClusterParams, Clustering, EntryParams, PaneParams, WalkParams};
+    use prm_scene::ExitPoint;
+    use prm_trace::{ClusterParams, Clustering, EntryParams, PaneParams, WalkParams};
 
     use prm_scene::analytic::furnace_box;
 
@@ -227,36 +238,18 @@ mod furnace {
         )
     }
 
-    /// Relative RMSE of `a` against `b`, normalised by the RMS of `b`.
-    fn relative_rmse(a: &[Vec3], b: &[Vec3]) -> f64 {
-        let (mut err, mut norm) = (0.0f64, 0.0f64);
-        for (x, y) in a.iter().zip(b) {
-            err += (*x - *y).length_squared() as f64;
-            norm += y.length_squared() as f64;
-        }
-        (err / norm.max(1e-30)).sqrt()
-    }
-
     /// About 18 s in the test profile on lavapipe: 2048 entries (512 are too few for the 2 % /
     /// 10 % bounds with the edge rule below, see [`EDGE_MARGIN`]), 4 walks each, 64² faces.
     #[test]
     fn furnace_sums_to_one_on_the_gpu() {
         let ctx = vulkan();
         let scene = furnace_box(3, 0.5);
-        let atlas = Atlas::build(&scene, &AtlasParams::with_sizing(Sizing::Resolution(32))).unwrap();
+        let walk_params = WalkParams {
+            seed: 1,
+            ..WalkParams::PREVIEW
+        };
+        let (atlas, bvh, entries, walks) = trace_scene(&scene, 32, EntryParams { count: 2048, seed: 1 }, walk_params);
         let exits: &[ExitPoint] = &atlas.exits;
-        let bvh = Bvh::build(&scene, &BvhParams::DEFAULT).unwrap();
-        let entries = prm_trace::sample_surface(&scene, &EntryParams { count: 2048, seed: 1 }).unwrap();
-        let walks = prm_trace::trace_walks(
-            &scene,
-            &bvh,
-            &entries,
-            &WalkParams {
-                seed: 1,
-                ..WalkParams::PREVIEW
-            },
-        )
-        .unwrap();
         assert_eq!(walks.stats.escaped, 0, "rays leaked out of the closed box");
         eprintln!(
             "GPU furnace: {} exits, {} entries, {} VPLs",
