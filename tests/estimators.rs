@@ -1,5 +1,8 @@
 //! Every estimator that exists in Rust and in WGSL, tested function against function on grids of inputs.
 //!
+//! Long on purpose: each estimator pair needs its WGSL harness, its input grid and its CPU twin side
+//! by side, so that a failure reads in one place.
+//!
 //! Each test builds a compute kernel from the real shader files (the prelude files, the function
 //! file, then a few lines that call the WGSL function for every element of a storage buffer),
 //! runs it on lavapipe and compares every result with the Rust function on the same input:

@@ -1,4 +1,7 @@
 //! Integration tests of the `.prm` archive: round trip, corruption, atomicity, spec conformance.
+//!
+//! Long on purpose: one test per corruption, hostile size and atomicity case of the spec, each
+//! spelled out so a failure names the case.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
