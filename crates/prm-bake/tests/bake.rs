@@ -1,9 +1,9 @@
 //! Integration tests of the `prm-bake` binary: real bakes of the Cornell box at small settings
-//!
-//! Long on purpose: each test runs the real binary end to end and spells out its case.
 //! (archive contents, report, determinism, CPU vs Vulkan), failures that leave nothing behind,
 //! and `prm-bake dump`. Measured numbers are printed (run with `--nocapture` to see them). The
 //! stability suite, which crosses into the player, is in the top-level `tests/stability.rs`.
+//!
+//! Long on purpose: each test runs the real binary end to end and spells out its case.
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
