@@ -18,11 +18,11 @@ fn cargo_run(package: &str, args: &[&str]) -> Result<()> {
 }
 
 /// `cargo xtask eval ARGS`: runs the `xtask-eval` package (dev profile for `--quick`, which CI's
-/// test build has already compiled; release for `--full`).
+/// test build has already compiled; release for `--full` and `--budget`).
 pub fn run_eval(args: &[String]) -> Result<()> {
     let mut cmd = Command::new(env!("CARGO"));
     cmd.args(["run", "--quiet", "-p", "xtask-eval"]);
-    if args.iter().any(|a| a == "--full") {
+    if args.iter().any(|a| a == "--full" || a == "--budget") {
         cmd.arg("--release");
     }
     let status = cmd

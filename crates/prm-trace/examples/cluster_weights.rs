@@ -31,6 +31,10 @@ fn rel_rmse(a: &[Vec3], r: &[Vec3]) -> (f64, f64) {
     ((e / n.max(1e-30)).sqrt(), sa / sr.max(1e-30))
 }
 
+fn env_or(name: &str, default: u32) -> u32 {
+    std::env::var(name).ok().map_or(default, |s| s.parse().unwrap())
+}
+
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let scene_path = args
@@ -52,14 +56,19 @@ fn main() {
     )
     .unwrap();
     let walks = WalkParams {
-        walks_per_entry: 8,
+        walks_per_entry: env_or("WALKS", 8),
         seed: 1,
         ..WalkParams::PREVIEW
     };
     let vpls = prm_trace::trace_walks(&scene, &bvh, &entries, &walks).unwrap();
+    let pane_params = match std::env::var("BOUND").ok().as_deref() {
+        Some("none") => PaneParams { bound: prm_trace::VplBound::None },
+        Some(s) => PaneParams { bound: prm_trace::VplBound::Disk { scale: s.parse().unwrap() } },
+        None => PaneParams::DEFAULT,
+    };
     let t = std::time::Instant::now();
     let identity = Clustering::identity(&entries);
-    let per_entry = prm_trace::evaluate_panes(&bvh, &vpls, &identity, &atlas.exits, &PaneParams::DEFAULT).unwrap();
+    let per_entry = prm_trace::evaluate_panes(&bvh, &vpls, &identity, &atlas.exits, &pane_params).unwrap();
     eprintln!(
         "{} entries, {} VPLs, {} exits: per-entry panes in {:.1} s",
         entries.len(),
@@ -103,6 +112,29 @@ fn main() {
         })
         .collect();
 
+    // Area samples for the region weights, each given to the nearest entry on its own plane.
+    let n_area: usize = std::env::var("AREA").ok().map_or(262_144, |s| s.parse().unwrap());
+    let area = prm_trace::sample_surface(&scene, &EntryParams { count: n_area, seed: 7 }).unwrap();
+    let cell: Vec<u32> = {
+        use rayon::prelude::*;
+        let eps = 1e-3 * scene.bounds().diagonal();
+        area.par_iter()
+            .map(|s| {
+                let mut best = (f32::INFINITY, 0u32);
+                let mut any = (f32::INFINITY, 0u32);
+                for (i, e) in entries.iter().enumerate() {
+                    let d = (e.position - s.position).length_squared();
+                    if d < any.0 {
+                        any = (d, i as u32);
+                    }
+                    if d < best.0 && e.normal.dot(s.normal) > 0.99 && e.normal.dot(s.position - e.position).abs() < eps {
+                        best = (d, i as u32);
+                    }
+                }
+                if best.0.is_finite() { best.1 } else { any.1 }
+            })
+            .collect()
+    };
     let b = scene.bounds();
     let at = |fx: f32, fy: f32, fz: f32| b.min + (b.max - b.min) * Vec3::new(fx, fy, fz);
     let lights = [
@@ -119,7 +151,7 @@ fn main() {
         let e = prm_trace::entry_irradiance(&bvh, &light, &entries);
         let tracer = ReferenceTracer::new(&scene, &bvh, Lighting::Lights(&light));
         let reference = tracer
-            .indirect_at_exits(&atlas.exits, &ReferenceParams::with_spp(1024), &mut |_, _| {})
+            .indirect_at_exits(&atlas.exits, &ReferenceParams::with_spp(env_or("REFSPP", 1024)), &mut |_, _| {})
             .unwrap();
         let noise = {
             let v: f64 = reference.variance.iter().map(|v| v.element_sum() as f64).sum();
@@ -155,6 +187,24 @@ fn main() {
             },
             &cluster_panes,
         );
+        // Region weights: the direct light integrated over each entry's own cell (the area
+        // samples nearest to it on its own plane), per unit of its nominal area `A/N`.
+        let e_area = prm_trace::entry_irradiance(&bvh, &light, &area);
+        let mut region = vec![Vec3::ZERO; entries.len()];
+        for ((s, &i), ea) in area.iter().zip(&cell).zip(&e_area) {
+            let en = &entries[i as usize];
+            region[i as usize] += *ea * (s.albedo / en.albedo.max(Vec3::splat(1e-6))) * (s.weight / en.weight);
+        }
+        let region_un = combine(&|i| region[i], &entry_panes);
+        let region_energy = combine(
+            &|c| {
+                let mm = &clustering.members[c];
+                let num: Vec3 = mm.iter().map(|&k| region[k as usize] * energy[k as usize]).sum();
+                let den: Vec3 = mm.iter().map(|&k| energy[k as usize]).sum();
+                num / den.max(Vec3::splat(1e-30))
+            },
+            &cluster_panes,
+        );
         let lsq = combine(
             &|c| {
                 let mm = &clustering.members[c];
@@ -165,11 +215,61 @@ fn main() {
             },
             &cluster_panes,
         );
+        // A linear filter over each exit's atlas neighbours on its own chart and plane: weights
+        // from geometry only, so filtering the result equals filtering every pane at bake time.
+        let res = atlas.resolution as i32;
+        let filter = |v: &[Vec3], k: i32| -> Vec<Vec3> {
+            let sigma2 = (k as f32 * 0.5).max(0.5).powi(2);
+            atlas
+                .exits
+                .iter()
+                .map(|x| {
+                    let (tx, ty) = ((x.texel as i32) % res, (x.texel as i32) / res);
+                    let chart = atlas.texel_chart[x.texel as usize];
+                    let (mut acc, mut wsum) = (Vec3::ZERO, 0.0f32);
+                    for dy in -k..=k {
+                        for dx in -k..=k {
+                            let (ux, uy) = (tx + dx, ty + dy);
+                            if ux < 0 || uy < 0 || ux >= res || uy >= res {
+                                continue;
+                            }
+                            let t = (uy * res + ux) as usize;
+                            let j = atlas.texel_exit[t];
+                            if j == prm_scene::EMPTY_TEXEL || atlas.texel_chart[t] != chart {
+                                continue;
+                            }
+                            let y = &atlas.exits[j as usize];
+                            if y.normal.dot(x.normal) < 0.95 {
+                                continue;
+                            }
+                            let w = (-((dx * dx + dy * dy) as f32) / (2.0 * sigma2)).exp() * y.coverage;
+                            acc += w * v[j as usize];
+                            wsum += w;
+                        }
+                    }
+                    acc / wsum.max(1e-30)
+                })
+                .collect()
+        };
+        let f1 = filter(&unclustered, 1);
+        let f2 = filter(&unclustered, 2);
+        let f3 = filter(&unclustered, 3);
+        let fe2 = filter(&energy_w, 2);
+        let fr2 = filter(&region_un, 2);
+        let fre2 = filter(&region_energy, 2);
         for (label, est) in [
+            ("unclustered, filter 1", &f1),
+            ("unclustered, filter 2", &f2),
+            ("unclustered, filter 3", &f3),
+            ("energy, filter 2", &fe2),
+            ("region unclustered, filter 2", &fr2),
+            ("region energy, filter 2", &fre2),
             ("unclustered", &unclustered),
             ("mean", &mean),
             ("energy", &energy_w),
             ("lsq", &lsq),
+            ("region, unclustered", &region_un),
+            ("region, energy", &region_energy),
         ] {
             let (err, en) = rel_rmse(est, &reference.mean);
             println!("| {name} | {label} | {:.1}% | {en:.3} |", 100.0 * err);

@@ -13,6 +13,7 @@
 //! mean LDR-FLIP (nv-flip) of the final image. Writes `eval.csv`, `summary.md` and one chart per
 //! scene (SVG and PNG) to the output directory.
 
+mod budget;
 mod charts;
 mod compare;
 mod measure;
@@ -115,7 +116,7 @@ impl Row {
 
 fn usage() -> ! {
     eprintln!(
-        "usage: cargo xtask eval [--quick|--full] [--out DIR]\n       cargo xtask eval compare TEST.exr REFERENCE.exr   (error, energy, shape and local error as ../shared/notes/metrics.md defines them)\n\n  --quick   Cornell box, a handful of settings, small references (CI; dev-profile binaries); default\n  --full    all scenes and sweeps (release binaries; the README's charts)\n  --out DIR output directory (default target/eval-quick or target/eval-full)\n\nBakes and references are cached under target/eval/ (delete it to start over)."
+        "usage: cargo xtask eval [--quick|--full|--budget] [--out DIR]\n       cargo xtask eval compare TEST.exr REFERENCE.exr   (error, energy, shape and local error as ../shared/notes/metrics.md defines them)\n\n  --quick   Cornell box, a handful of settings, small references (CI; dev-profile binaries); default\n  --full    all scenes and sweeps (release binaries; the README's charts)\n  --budget  the error budget of the default bake, one idealised stage at a time (release; the README's budget table)\n  --out DIR output directory (default target/eval-quick, eval-full or eval-budget)\n\nBakes and references are cached under target/eval/ (delete it to start over)."
     );
     std::process::exit(2);
 }
@@ -137,12 +138,17 @@ fn run(args: &[String]) -> Result<()> {
         return compare::run(&args[1..]);
     }
     let mut mode = Mode::Quick;
+    let mut budget = false;
     let mut out = None;
     let mut it = args.iter();
     while let Some(a) = it.next() {
         match a.as_str() {
             "--quick" => mode = Mode::Quick,
             "--full" => mode = Mode::Full,
+            "--budget" => {
+                budget = true;
+                mode = Mode::Full;
+            }
             "--out" => out = Some(PathBuf::from(it.next().unwrap_or_else(|| usage()))),
             _ => usage(),
         }
@@ -162,9 +168,10 @@ fn run(args: &[String]) -> Result<()> {
     });
     std::env::set_current_dir(&root)?;
     let out = out.unwrap_or_else(|| {
-        target.join(match mode {
-            Mode::Quick => "eval-quick",
-            Mode::Full => "eval-full",
+        target.join(match (budget, mode) {
+            (true, _) => "eval-budget",
+            (false, Mode::Quick) => "eval-quick",
+            (false, Mode::Full) => "eval-full",
         })
     });
     std::fs::create_dir_all(&out)?;
@@ -186,6 +193,13 @@ fn run(args: &[String]) -> Result<()> {
         .join(format!("prm-bake{}", std::env::consts::EXE_SUFFIX));
 
     let started = Instant::now();
+    if budget {
+        let table = budget::run(&bin, &cache, &root)?;
+        let path = out.join("budget.md");
+        std::fs::write(&path, &table).with_context(|| format!("writing {}", path.display()))?;
+        println!("\n{table}\nbudget: written to {} in {:.0} s", path.display(), started.elapsed().as_secs_f64());
+        return Ok(());
+    }
     let scenes = plan::scenes(mode, &root);
     let mut rows: Vec<Row> = Vec::new();
     let csv = out.join("eval.csv");

@@ -48,7 +48,7 @@ pub struct SceneSpec {
 impl SceneSpec {
     /// A scene baked with no extra arguments, seen from its own camera (or a view of its bounds),
     /// its references taking `spp` paths per texel and per pixel over as many texels, at 96×72.
-    fn new(name: &str, path: PathBuf, light_fractions: Vec<[f32; 3]>, sweep: Sweep, spp: u32) -> SceneSpec {
+    pub fn new(name: &str, path: PathBuf, light_fractions: Vec<[f32; 3]>, sweep: Sweep, spp: u32) -> SceneSpec {
         SceneSpec {
             name: name.into(),
             path,
@@ -182,7 +182,7 @@ impl Params {
         })
     }
 
-    fn args(&self) -> Vec<String> {
+    pub fn args(&self) -> Vec<String> {
         vec![
             "--entries".into(),
             self.entries.to_string(),

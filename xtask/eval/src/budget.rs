@@ -1,0 +1,301 @@
+//! `cargo xtask eval --budget`: the error budget of the default bake, one idealised stage at a time.
+//!
+//! For every case (a scene and one light) the default bake (`prm-bake bake SCENE`, release,
+//! lavapipe) is played as shipped, then each stage of the chain is replaced by its ideal while
+//! the others stay as shipped:
+//!
+//! | row | what changes | how |
+//! | --- | --- | --- |
+//! | as played | nothing | the player's lightmap (`prm_play::Renderer::read_lightmap`) |
+//! | K = all | no top-K truncation | the same archive played with K = every cluster |
+//! | ray-cast entry irradiance | exact visibility at the entry points instead of shadow maps | the archive's panes blended on the CPU, weights from `prm_trace::bounded_irradiance` (K = all) |
+//! | no entry-point bound | the entry disk bound `ENTRY_DISK` off | as above with disk 0 |
+//! | exact-visibility panes | ray-cast pane visibility instead of depth maps | `--backend cpu` |
+//! | unclustered | one pane per entry point | `--clusters = --entries`, K = all |
+//! | no VPL bound | plain `1/r²` | `vpl_disk_scale = 0` |
+//! | 4× walks | four times the walks per entry point | `--paths-per-entry ×4` |
+//! | 2× atlas | twice the atlas resolution | `--resolution ×2` (its own reference) |
+//!
+//! Every row is measured in lightmap space against `prm_trace::ReferenceTracer` at an even
+//! stride of the atlas's exit points, and split into the energy bias (Σ PRM / Σ ref − 1), the
+//! shape error (what is left after the best global scale) and the reference's own noise. The
+//! table goes to `budget.md` in the output directory; the README quotes it.
+
+use anyhow::{bail, Context, Result};
+use glam::Vec3;
+use prm_play::{FrameInput, Mode as PlayMode};
+use prm_scene::{Atlas, AtlasParams, Light, Sizing};
+use std::fmt::Write as _;
+use std::path::Path;
+use std::time::Instant;
+
+use crate::plan::{self, Params, SceneSpec};
+use crate::reference::{Reference, Tracer};
+
+/// Reference paths per exit point and exit points measured per case.
+const SPP: u32 = 4096;
+const TEXELS: usize = 2048;
+
+/// One case: a scene and the light (fractions of its bounds) that lights it.
+struct Case {
+    scene: SceneSpec,
+    light_name: &'static str,
+    light_fraction: [f32; 3],
+}
+
+/// Error of one row against its reference, over the measured exit points.
+#[derive(Clone, Copy, Debug)]
+struct Split {
+    error: f64,
+    energy: f64,
+    shape: f64,
+    noise: f64,
+}
+
+fn split(test: &[Vec3], reference: &Reference) -> Split {
+    let (mut d2, mut r2, mut t2, mut tr, mut st, mut sr, mut var) = (0.0f64, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+    for ((t, r), v) in test.iter().zip(&reference.mean).zip(&reference.variance) {
+        let (t, r) = (t.as_dvec3(), r.as_dvec3());
+        d2 += (t - r).length_squared();
+        r2 += r.length_squared();
+        t2 += t.length_squared();
+        tr += t.dot(r);
+        st += t.element_sum();
+        sr += r.element_sum();
+        var += v.element_sum() as f64;
+    }
+    // The best global scale s = t·r / t·t leaves ‖s t − r‖² = r² − (t·r)² / t².
+    let shape = ((r2 - tr * tr / t2.max(1e-300)).max(0.0) / r2).sqrt();
+    Split {
+        error: (d2 / r2).sqrt(),
+        energy: st / sr,
+        shape,
+        noise: (var / r2).sqrt(),
+    }
+}
+
+fn cases(root: &Path) -> Vec<Case> {
+    let mut out = Vec::new();
+    let cornell = || {
+        SceneSpec::new(
+            "cornell-box",
+            root.join("scenes/cornell-box/cornell-box.gltf"),
+            vec![],
+            Default::default(),
+            SPP,
+        )
+    };
+    out.push(Case {
+        scene: cornell(),
+        light_name: "under the ceiling",
+        light_fraction: [0.5, 0.85, 0.5],
+    });
+    out.push(Case {
+        scene: cornell(),
+        light_name: "low near the red wall",
+        light_fraction: [0.12, 0.35, 0.5],
+    });
+    let sphere = root.join("../shared/scenes/cornell-box/CornellBox-Sphere.obj");
+    if sphere.is_file() {
+        out.push(Case {
+            scene: SceneSpec::new("CornellBox-Sphere", sphere, vec![], Default::default(), SPP),
+            light_name: "under the ceiling",
+            light_fraction: [0.5, 0.8, 0.5],
+        });
+    } else {
+        println!("budget: {} is absent: CornellBox-Sphere skipped", sphere.display());
+    }
+    out
+}
+
+/// The light of a case, with the intensity the eval uses (scaled to the scene's size).
+fn light_of(scene: &prm_scene::Scene, f: [f32; 3]) -> Result<(String, Light)> {
+    let b = scene.bounds();
+    let p = b.min + (b.max - b.min) * Vec3::from_array(f);
+    let d = b.diagonal();
+    let i = Vec3::new(1.0, 0.9, 0.75) * 0.3 * d * d;
+    let s = format!("point:{},{},{}:{},{},{}", p.x, p.y, p.z, i.x, i.y, i.z);
+    let l = prm_trace::parse_light(&s).map_err(|e| anyhow::anyhow!("light {s}: {e}"))?;
+    Ok((s, l))
+}
+
+/// The lightmap the player computes for `light`, at `texels`.
+fn played(archive: &Path, scene_path: &Path, top_k: u32, light: Light, texels: &[u32]) -> Result<Vec<Vec3>> {
+    let (mut r, scene) = crate::measure::renderer(archive, scene_path, top_k)?;
+    r.resize(64, 48);
+    let lights = [light];
+    r.render(&FrameInput {
+        camera: prm_play::default_camera(&scene),
+        lights: &lights,
+        mode: PlayMode::Gi,
+    })?;
+    let lm = r.read_lightmap()?;
+    Ok(texels.iter().map(|&t| Vec3::from_array(lm[t as usize])).collect())
+}
+
+/// The archive's panes blended on the CPU at `texels`, every cluster weighed by its members'
+/// ray-cast direct irradiance (bounded by a disk of `entry_disk · A/(Nπ)`) and pane energy, as
+/// the run time's weights pass does with shadow maps.
+fn cpu_blend(archive: &Path, tracer: &Tracer, light: Light, texels: &[u32], entry_disk: f32) -> Result<Vec<Vec3>> {
+    let mut a = prm_format::Archive::open(archive).with_context(|| format!("opening {}", archive.display()))?;
+    let entries = a.entries().to_vec();
+    let clusters = a.clusters().to_vec();
+    let energy: Vec<Vec3> = a
+        .entry_energy()
+        .context("the archive has no entry energies (format 1.0): re-bake it")?
+        .iter()
+        .map(|e| Vec3::from_array(*e))
+        .collect();
+    let area: f32 = tracer.scene.triangles.iter().map(|t| t.area()).sum();
+    let disk = entry_disk * area / (entries.len() as f32 * std::f32::consts::PI);
+    let lights = [light];
+    let e: Vec<Vec3> = entries
+        .iter()
+        .map(|en| {
+            let (p, n) = (Vec3::from_array(en.position), Vec3::from_array(en.normal));
+            prm_trace::bounded_irradiance(&tracer.bvh, &lights, p, n, n, u32::MAX, disk)
+        })
+        .collect();
+    let mut out = vec![Vec3::ZERO; texels.len()];
+    for (c, cl) in clusters.iter().enumerate() {
+        let (mut num, mut den) = (Vec3::ZERO, Vec3::ZERO);
+        for k in cl.members() {
+            num += e[k] * energy[k];
+            den += energy[k];
+        }
+        let w = Vec3::select(den.cmpgt(Vec3::ZERO), num / den, Vec3::ZERO);
+        if w == Vec3::ZERO {
+            continue;
+        }
+        let pane = a.read_pane(c)?;
+        for (o, &t) in out.iter_mut().zip(texels) {
+            *o += w * Vec3::from_array(pane[t as usize]);
+        }
+    }
+    Ok(out)
+}
+
+/// Runs every case and returns the markdown table.
+pub fn run(bin: &Path, cache: &Path, root: &Path) -> Result<String> {
+    let mut md = String::new();
+    let _ = writeln!(
+        md,
+        "| case | stage made ideal | error | energy | shape error | ref. noise | bake s |\n| --- | --- | ---: | ---: | ---: | ---: | ---: |"
+    );
+    for case in cases(root) {
+        let spec = &case.scene;
+        let started = Instant::now();
+        let scene = prm_scene::load(&spec.path).with_context(|| format!("loading {}", spec.path.display()))?;
+        let key = format!("{}|{:016x}", spec.path.display(), scene.fingerprint());
+        let tracer = Tracer::new(&scene, key, cache.join("refs"))?;
+        let (light_spec, light) = light_of(&scene, case.light_fraction)?;
+        let auto_bake = plan::bake(bin, cache, spec, &[], None, false)?;
+        let auto = Params::from_report(&auto_bake.report)?;
+        let name = format!("{}, light {}", spec.name, case.light_name);
+        println!(
+            "budget: {name}: {} entries, {} clusters, {}², {} walks/entry, K {}",
+            auto.entries, auto.clusters, auto.resolution, auto.paths_per_entry, auto.top_k
+        );
+        // The measured exit points of one resolution, and their reference.
+        let measured = |resolution: u32| -> Result<(Vec<u32>, Reference)> {
+            let atlas = Atlas::build(&scene, &AtlasParams::with_sizing(Sizing::Resolution(resolution)))?;
+            let stride = atlas.exits.len().div_ceil(TEXELS).max(1);
+            let exits: Vec<_> = atlas.exits.iter().step_by(stride).copied().collect();
+            let r = tracer.lightmap(resolution, &exits, &light_spec, &light, SPP)?;
+            if r.seconds > 0.0 {
+                println!("budget:   reference {resolution}²: {:.1} s", r.seconds);
+            }
+            Ok((exits.iter().map(|x| x.texel).collect(), r))
+        };
+        let (texels, reference) = measured(auto.resolution)?;
+        let bake_s = |b: &plan::Baked| b.report["timings"]["total"].as_f64().unwrap_or(f64::NAN);
+        let mut row = |stage: &str, test: &[Vec3], reference: &Reference, seconds: f64| {
+            let s = split(test, reference);
+            println!(
+                "budget:   {stage:<28} error {:.1}%, energy {:.3}, shape {:.1}%, noise {:.1}%",
+                100.0 * s.error,
+                s.energy,
+                100.0 * s.shape,
+                100.0 * s.noise
+            );
+            let _ = writeln!(
+                md,
+                "| {name} | {stage} | {:.1}% | {:.3} | {:.1}% | {:.1}% | {seconds:.1} |",
+                100.0 * s.error,
+                s.energy,
+                100.0 * s.shape,
+                100.0 * s.noise
+            );
+        };
+        let t_auto = bake_s(&auto_bake);
+        let a = &auto_bake.archive;
+        row("(none: as played)", &played(a, &spec.path, auto.top_k, light, &texels)?, &reference, t_auto);
+        row("K = all", &played(a, &spec.path, auto.clusters, light, &texels)?, &reference, t_auto);
+        let exact = cpu_blend(a, &tracer, light, &texels, prm_scene::ENTRY_DISK)?;
+        row("ray-cast entry irradiance, K = all", &exact, &reference, t_auto);
+        let unbounded = cpu_blend(a, &tracer, light, &texels, 0.0)?;
+        row("  and no entry-point bound", &unbounded, &reference, t_auto);
+
+        let variant = |args: Vec<String>, config: Option<&str>| plan::bake(bin, cache, spec, &args, config, false);
+        let mut args = auto.args();
+        args.extend(["--backend".into(), "cpu".into()]);
+        let b = variant(args, None)?;
+        row(
+            "exact-visibility panes",
+            &played(&b.archive, &spec.path, auto.top_k, light, &texels)?,
+            &reference,
+            bake_s(&b),
+        );
+        let unclustered = Params {
+            clusters: auto.entries,
+            top_k: auto.entries,
+            ..auto
+        };
+        if auto.entries <= 2048 {
+            let b = variant(unclustered.args(), None)?;
+            row(
+                "unclustered, K = all",
+                &played(&b.archive, &spec.path, auto.entries, light, &texels)?,
+                &reference,
+                bake_s(&b),
+            );
+        } else {
+            println!("budget:   unclustered skipped: {} entries > 2048 texture layers", auto.entries);
+        }
+        let b = variant(auto.args(), Some("vpl_disk_scale = 0.0\n"))?;
+        row(
+            "no VPL bound",
+            &played(&b.archive, &spec.path, auto.top_k, light, &texels)?,
+            &reference,
+            bake_s(&b),
+        );
+        let walks = Params {
+            paths_per_entry: auto.paths_per_entry * 4,
+            ..auto
+        };
+        let b = variant(walks.args(), None)?;
+        row(
+            "4× walks",
+            &played(&b.archive, &spec.path, auto.top_k, light, &texels)?,
+            &reference,
+            bake_s(&b),
+        );
+        let fine = Params {
+            resolution: auto.resolution * 2,
+            ..auto
+        };
+        let b = variant(fine.args(), None)?;
+        let (fine_texels, fine_reference) = measured(fine.resolution)?;
+        row(
+            "2× atlas resolution",
+            &played(&b.archive, &spec.path, auto.top_k, light, &fine_texels)?,
+            &fine_reference,
+            bake_s(&b),
+        );
+        println!("budget: {name} done in {:.0} s", started.elapsed().as_secs_f64());
+    }
+    if md.lines().count() <= 2 {
+        bail!("the budget measured nothing");
+    }
+    Ok(md)
+}
