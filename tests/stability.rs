@@ -509,7 +509,10 @@ fn moving_light_does_not_flicker_or_pop() {
         let options = PlayOptions {
             width: 32,
             height: 32,
-            shadow_resolution: 256,
+            runtime: prm_play::RuntimeOptions {
+                shadow_resolution: 256,
+                ..Default::default()
+            },
             ..Default::default()
         };
         let mut r = Renderer::new(ctx, &scene, &mut file, options).unwrap();

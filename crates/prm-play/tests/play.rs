@@ -11,7 +11,7 @@ use glam::Vec3;
 use prm_format::Archive;
 use prm_play::animation::Animation;
 use prm_play::synthetic::{cornell_box_path, write_archive, SyntheticParams};
-use prm_play::{output, FrameInput, Image, Mode, PlayError, PlayOptions, Renderer};
+use prm_play::{output, FrameInput, Image, Mode, PlayError, PlayOptions, Renderer, RuntimeOptions};
 use prm_scene::{Light, Scene};
 
 fn out_dir(name: &str) -> PathBuf {
@@ -44,8 +44,11 @@ fn small(top_k: u32) -> PlayOptions {
     PlayOptions {
         width: 96,
         height: 96,
-        top_k,
-        shadow_resolution: 256,
+        runtime: RuntimeOptions {
+            top_k,
+            shadow_resolution: 256,
+            ..Default::default()
+        },
         ..Default::default()
     }
 }
@@ -274,8 +277,11 @@ fn cornell_box_matches_golden() {
     let (mut r, scene) = renderer(PlayOptions {
         width: 128,
         height: 128,
-        top_k: 32,
-        shadow_resolution: 512,
+        runtime: RuntimeOptions {
+            top_k: 32,
+            shadow_resolution: 512,
+            ..Default::default()
+        },
         ..Default::default()
     });
     r.render(&FrameInput {
