@@ -126,6 +126,14 @@ pub enum ExportError {
         /// The encoder's message.
         message: String,
     },
+    /// An EXR could not be read ([`read_exr_rgb`]).
+    #[error("{path}: cannot read EXR: {message}")]
+    ExrRead {
+        /// The file being read.
+        path: PathBuf,
+        /// The decoder's message.
+        message: String,
+    },
     /// The binary data exceeds what the format can address (4 GiB for `.glb`).
     #[error("{path}: {bytes} bytes exceed the format's limit of {limit}")]
     TooLarge {
@@ -227,6 +235,24 @@ pub fn write_exr_rgb(path: &Path, width: usize, height: usize, rgb: &[[f32; 3]])
     }
     let bytes = bytes.into_inner();
     write_atomic(path, |f| f.write_all(&bytes))
+}
+
+/// Reads the first RGB(A) layer of an EXR as linear RGB: width, height and the pixels row by
+/// row, top row first (alpha dropped); what [`write_exr_rgb`] wrote comes back as it was.
+pub fn read_exr_rgb(path: &Path) -> Result<(usize, usize, Vec<[f32; 3]>), ExportError> {
+    let img = exr::prelude::read_first_rgba_layer_from_file(
+        path,
+        |size, _| (size.0, size.1, vec![[0f32; 3]; size.0 * size.1]),
+        |px: &mut (usize, usize, Vec<[f32; 3]>), pos, (r, g, b, _a): (f32, f32, f32, f32)| {
+            let w = px.0;
+            px.2[pos.1 * w + pos.0] = [r, g, b];
+        },
+    )
+    .map_err(|e| ExportError::ExrRead {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    })?;
+    Ok(img.layer_data.channel_data.pixels)
 }
 
 /// Refuses an existing target that is not a regular file (a symlink counts as not regular).
