@@ -10,8 +10,8 @@ use glam::Vec3;
 use prm_gpu::{GpuContext, PaneRenderParams};
 use prm_scene::{Atlas, AtlasParams, Light, Scene, Sizing};
 use prm_trace::{
-    Bvh, BvhParams, ClusterParams, Clustering, EntryParams, Lighting, Panes, ReferenceParams, ReferenceTracer,
-    SurfaceSample, VplBound, WalkParams,
+    Bvh, BvhParams, Clustering, EntryParams, Lighting, Panes, ReferenceParams, ReferenceTracer, SurfaceSample,
+    VplBound, WalkParams,
 };
 
 use prm_tests::{gpu, repo};
@@ -68,16 +68,7 @@ impl Bake {
         .unwrap();
         let clustering = match s.clusters {
             None => Clustering::identity(&entries),
-            Some(c) => Clustering::kmeans(
-                &entries,
-                scene.bounds().diagonal(),
-                &ClusterParams {
-                    seed: 3,
-                    ..ClusterParams::with_clusters(c)
-                },
-            )
-            .unwrap()
-            .separate_by_visibility(&entries, &bvh),
+            Some(c) => Clustering::kmeans_separated(&entries, &bvh, scene.bounds().diagonal(), c, 3).unwrap(),
         };
         let params = PaneRenderParams {
             bound: s.bound,
