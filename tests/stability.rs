@@ -10,8 +10,8 @@ use glam::Vec3;
 use prm_gpu::{GpuContext, PaneRenderParams};
 use prm_scene::{Atlas, AtlasParams, Light, Scene, Sizing};
 use prm_trace::{
-    Bvh, BvhParams, ClusterParams, Clustering, EntryParams, Lighting, Panes, ReferenceParams, ReferenceTracer,
-    SurfaceSample, VplBound, WalkParams,
+    Bvh, BvhParams, Clustering, EntryParams, Lighting, Panes, ReferenceParams, ReferenceTracer, SurfaceSample,
+    VplBound, WalkParams,
 };
 
 use prm_tests::{gpu, repo};
@@ -68,16 +68,7 @@ impl Bake {
         .unwrap();
         let clustering = match s.clusters {
             None => Clustering::identity(&entries),
-            Some(c) => Clustering::kmeans(
-                &entries,
-                scene.bounds().diagonal(),
-                &ClusterParams {
-                    seed: 3,
-                    ..ClusterParams::with_clusters(c)
-                },
-            )
-            .unwrap()
-            .separate_by_visibility(&entries, &bvh),
+            Some(c) => Clustering::kmeans_separated(&entries, &bvh, scene.bounds().diagonal(), c, 3).unwrap(),
         };
         let params = PaneRenderParams {
             bound: s.bound,
@@ -509,7 +500,10 @@ fn moving_light_does_not_flicker_or_pop() {
         let options = PlayOptions {
             width: 32,
             height: 32,
-            shadow_resolution: 256,
+            runtime: prm_play::RuntimeOptions {
+                shadow_resolution: 256,
+                ..Default::default()
+            },
             ..Default::default()
         };
         let mut r = Renderer::new(ctx, &scene, &mut file, options).unwrap();

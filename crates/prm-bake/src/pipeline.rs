@@ -4,7 +4,7 @@ use glam::Vec3;
 use prm_format::ArchiveWriter;
 use prm_gpu::{GpuContext, PaneOutput, PaneRenderParams};
 use prm_scene::{Atlas, AtlasParams, AtlasStats, Scene, Sizing};
-use prm_trace::{Bvh, BvhParams, ClusterParams, Clustering, EntryParams, PaneParams, WalkParams};
+use prm_trace::{Bvh, BvhParams, Clustering, EntryParams, PaneParams, WalkParams};
 use std::cell::OnceCell;
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -226,13 +226,8 @@ pub fn bake(job: &BakeJob<'_>, renderer: Renderer<'_>, progress: &mut dyn Progre
     let clustering = if params.clusters == entries.len() {
         Clustering::identity(&entries)
     } else {
-        let cp = ClusterParams {
-            seed: params.seed,
-            ..ClusterParams::with_clusters(params.clusters)
-        };
-        Clustering::kmeans(&entries, scene.bounds().diagonal(), &cp)
+        Clustering::kmeans_separated(&entries, &bvh, scene.bounds().diagonal(), params.clusters, params.seed)
             .map_err(trace("clustering entry points"))?
-            .separate_by_visibility(&entries, &bvh)
     };
     let detail = format!("{} clusters", clustering.len());
     finish_phase(&mut timings, progress, Phase::Clustering, "clustering", t, &detail);

@@ -178,6 +178,15 @@ fn scene(resolution: u32, tile_size: u32, clusters: usize, seed: u64) -> Scene {
     }
 }
 
+/// A fresh [`test_dir`] `name` holding `file`, the archive of `s` with the default options: the
+/// directory and the archive's path.
+fn written(name: &str, file: &str, s: &Scene) -> (PathBuf, PathBuf) {
+    let dir = test_dir(name);
+    let path = dir.join(file);
+    write_scene(&path, s, WriterOptions::default());
+    (dir, path)
+}
+
 fn write_scene(path: &Path, s: &Scene, options: WriterOptions) -> u64 {
     let mut w =
         ArchiveWriter::create_with_options(path, s.metadata.clone(), &s.atlas, &s.entries, &s.clusters, options)
@@ -392,10 +401,8 @@ fn round_trip() {
 
 #[test]
 fn tile_callback_and_full_pane_agree() {
-    let dir = test_dir("tile-callback");
     let s = scene(16, 4, 2, 3);
-    let a_path = dir.join("full.prm");
-    write_scene(&a_path, &s, WriterOptions::default());
+    let (dir, a_path) = written("tile-callback", "full.prm", &s);
     let b_path = dir.join("tiles.prm");
     let mut w = start_writer(&b_path, &s).unwrap();
     assert_eq!(w.panes_remaining(), 2);
@@ -570,10 +577,8 @@ fn newer_major_is_refused_newer_minor_accepted() {
 
 #[test]
 fn atomic_write_leaves_old_archive_untouched() {
-    let dir = test_dir("atomic");
     let s = scene(16, 8, 2, 5);
-    let path = dir.join("scene.prm");
-    write_scene(&path, &s, WriterOptions::default());
+    let (dir, path) = written("atomic", "scene.prm", &s);
     let old = std::fs::read(&path).unwrap();
     let other = scene(16, 8, 2, 6);
     // The old archive is still there, unchanged, and nothing else is.

@@ -1,7 +1,7 @@
 //! The shape of a compute pass: a pipeline built from WGSL parts (entry point `main`, layout from
 //! the shader), one bind group whose bindings are numbered in order, and a dispatch that times
-//! itself under its name. Each pass of PRM is a named struct around one of these, in a file
-//! beside its WGSL file.
+//! itself under its name. Each pass of PRM is a named struct around one of these (or a few, for
+//! small passes on the same buffers), in a file beside its WGSL file.
 
 use crate::{pipeline, PassTimer};
 

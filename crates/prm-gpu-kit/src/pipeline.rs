@@ -240,6 +240,35 @@ pub fn render(device: &wgpu::Device, spec: &RenderSpec) -> wgpu::RenderPipeline 
     })
 }
 
+/// A vertex type and its attributes, locations in field order, for [`mesh`].
+pub trait Vertex: Sized {
+    /// The attributes (`wgpu::vertex_attr_array!`).
+    const ATTRIBUTES: &'static [wgpu::VertexAttribute];
+}
+
+/// The pipeline of a pass that draws one vertex buffer of `V`: shader from WGSL `parts` (see
+/// [`shader`]) with the layout it implies, built as [`render`] says for `depth` and `color`.
+pub fn mesh<V: Vertex>(
+    device: &wgpu::Device,
+    label: &str,
+    parts: &[&str],
+    depth: Option<wgpu::TextureFormat>,
+    color: Option<wgpu::TextureFormat>,
+) -> wgpu::RenderPipeline {
+    let module = shader(device, label, parts);
+    render(
+        device,
+        &RenderSpec {
+            label,
+            module: &module,
+            layout: None,
+            vertex_buffers: &[vertices(std::mem::size_of::<V>(), V::ATTRIBUTES)],
+            depth,
+            color,
+        },
+    )
+}
+
 /// A vertex buffer layout of `stride` bytes per vertex with `attributes`.
 pub fn vertices(stride: usize, attributes: &[wgpu::VertexAttribute]) -> Option<wgpu::VertexBufferLayout<'_>> {
     Some(wgpu::VertexBufferLayout {

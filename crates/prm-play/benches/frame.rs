@@ -148,9 +148,11 @@ fn bench(name: &str, scene_path: &Path, frames: usize) -> Result<(f64, f64)> {
     let opts = PlayOptions {
         width: 1024,
         height: 768,
-        top_k: prm_play::archive_top_k(&archive),
+        runtime: prm_play::RuntimeOptions {
+            top_k: prm_play::archive_top_k(&archive),
+            ..Default::default()
+        },
         timestamps: true,
-        ..Default::default()
     };
     let lights = lights(&scene);
     let res = archive.atlas().resolution;
@@ -160,8 +162,8 @@ fn bench(name: &str, scene_path: &Path, frames: usize) -> Result<(f64, f64)> {
         scene.triangles.len(),
         lights.len(),
         r.cluster_count(),
-        opts.top_k,
-        opts.shadow_resolution
+        opts.runtime.top_k,
+        opts.runtime.shadow_resolution
     );
     if !r.has_timestamps() {
         println!("  (no timestamp queries on this device: wall times only)");

@@ -74,6 +74,11 @@ pub struct GpuVertex {
 }
 const _: () = assert!(std::mem::size_of::<GpuVertex>() == 44);
 
+impl prm_gpu_kit::pipeline::Vertex for GpuVertex {
+    const ATTRIBUTES: &'static [wgpu::VertexAttribute] =
+        &wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3, 2 => Float32x2, 3 => Float32x2, 4 => Uint32];
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

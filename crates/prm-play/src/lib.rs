@@ -24,7 +24,7 @@ pub mod window;
 
 pub use error::PlayError;
 pub use gpu::{open_vulkan, open_vulkan_for, vulkan_instance};
-pub use prm_runtime::{archive_top_k, synthetic, ClusterWeight};
+pub use prm_runtime::{archive_top_k, synthetic, ClusterWeight, RuntimeOptions};
 pub use renderer::{FrameInput, FrameTimings, Image, Mode, PlayOptions, Renderer, MAX_LIGHTS, PASS_NAMES};
 
 use std::path::{Path, PathBuf};

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 use clap::Parser;
 use prm_play::animation::Animation;
-use prm_play::{output, FrameInput, Mode, PlayOptions, Renderer};
+use prm_play::{output, FrameInput, Mode, PlayOptions, Renderer, RuntimeOptions};
 
 /// Real-time global illumination from a Precomputed Radiance Map.
 #[derive(Parser, Debug)]
@@ -130,6 +130,12 @@ fn run() -> Result<()> {
     } else {
         base_lights
     };
+    let runtime = RuntimeOptions {
+        top_k,
+        shadow_resolution: args.shadow_resolution,
+        fade_band: args.fade_band,
+        ..Default::default()
+    };
     if !args.headless {
         return prm_play::window::run(prm_play::window::WindowConfig {
             scene,
@@ -137,10 +143,8 @@ fn run() -> Result<()> {
             options: PlayOptions {
                 width,
                 height,
-                top_k,
-                shadow_resolution: args.shadow_resolution,
-                fade_band: args.fade_band,
-                ..Default::default()
+                runtime,
+                timestamps: false,
             },
             camera: base_camera,
             lights: base_lights,
@@ -157,11 +161,8 @@ fn run() -> Result<()> {
     let opts = PlayOptions {
         width,
         height,
-        top_k,
-        shadow_resolution: args.shadow_resolution,
+        runtime,
         timestamps: args.timings.is_some(),
-        fade_band: args.fade_band,
-        ..Default::default()
     };
     let mut renderer = Renderer::new(ctx, &scene, &mut archive, opts)
         .with_context(|| format!("playing {}", args.archive.display()))?;

@@ -4,6 +4,8 @@
 
 use std::path::Path;
 
+use prm_scene::ExportError;
+
 use crate::{Image, PlayError};
 
 /// Linear → sRGB-encoded byte, with exposure and clamping.
@@ -64,19 +66,10 @@ pub fn write_png(path: &Path, image: &Image, exposure: f32) -> Result<(), PlayEr
 
 /// Reads an RGB(A) EXR as linear RGB (for golden-image comparisons).
 pub fn read_exr(path: &Path) -> Result<Image, PlayError> {
-    let img = exr::prelude::read_first_rgba_layer_from_file(
-        path,
-        |size, _| (size.0, size.1, vec![[0f32; 3]; size.0 * size.1]),
-        |px: &mut (usize, usize, Vec<[f32; 3]>), pos, (r, g, b, _a): (f32, f32, f32, f32)| {
-            let w = px.0;
-            px.2[pos.1 * w + pos.0] = [r, g, b];
-        },
-    )
-    .map_err(|e| PlayError::Output {
-        path: path.to_path_buf(),
-        message: e.to_string(),
+    let (w, h, rgb) = prm_scene::read_exr_rgb(path).map_err(|e| match e {
+        ExportError::ExrRead { path, message } => PlayError::Output { path, message },
+        e => PlayError::Export(e),
     })?;
-    let (w, h, rgb) = img.layer_data.channel_data.pixels;
     Ok(Image {
         width: w as u32,
         height: h as u32,

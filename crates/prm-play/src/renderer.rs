@@ -73,17 +73,8 @@ pub struct PlayOptions {
     pub width: u32,
     /// Image height in pixels.
     pub height: u32,
-    /// Clusters kept per frame.
-    pub top_k: u32,
-    /// Shadow-map side in texels (every view).
-    pub shadow_resolution: u32,
-    /// Fade band: kept clusters whose score is within `band × threshold` above the threshold
-    /// (the first dropped cluster's score) are faded by a smoothstep.
-    pub fade_band: f32,
-    /// Shadow lookups move the point this many shadow texels along its normal.
-    pub normal_offset: f32,
-    /// Depth tolerance of a shadow lookup, in shadow texels (world size at the point).
-    pub depth_bias: f32,
+    /// The run time's options (top K, shadow maps, fade band, shadow offsets).
+    pub runtime: RuntimeOptions,
     /// Time every pass with GPU timestamp queries (when the device has them).
     pub timestamps: bool,
 }
@@ -114,7 +105,7 @@ impl PlayOptions {
                 ),
             );
         }
-        self.runtime_options().validate(limits).map_err(|e| match e {
+        self.runtime.validate(limits).map_err(|e| match e {
             // The run time names its fields; the player's flags spell them with dashes.
             RuntimeError::Option { option, message } => PlayError::Option {
                 option: match option {
@@ -128,17 +119,6 @@ impl PlayOptions {
             e => e.into(),
         })
     }
-
-    /// The run time's share of the options.
-    pub fn runtime_options(&self) -> RuntimeOptions {
-        RuntimeOptions {
-            top_k: self.top_k,
-            shadow_resolution: self.shadow_resolution,
-            fade_band: self.fade_band,
-            normal_offset: self.normal_offset,
-            depth_bias: self.depth_bias,
-        }
-    }
 }
 
 /// Bytes of the buffer a `width × height` frame is read back through (rgba32float rows padded
@@ -149,15 +129,10 @@ fn readback_bytes(width: u32, height: u32) -> u64 {
 
 impl Default for PlayOptions {
     fn default() -> Self {
-        let r = RuntimeOptions::default();
         PlayOptions {
             width: 1024,
             height: 768,
-            top_k: r.top_k,
-            shadow_resolution: r.shadow_resolution,
-            fade_band: r.fade_band,
-            normal_offset: r.normal_offset,
-            depth_bias: r.depth_bias,
+            runtime: RuntimeOptions::default(),
             timestamps: false,
         }
     }
@@ -198,7 +173,11 @@ pub struct Image {
 /// The player's GPU state for one archive and scene: the run time and the shading.
 pub struct Renderer {
     ctx: GpuContext,
-    opts: PlayOptions,
+    /// Image size and whether timestamps were asked for; the run time holds its own options,
+    /// so [`Renderer::options`] is made from both.
+    width: u32,
+    height: u32,
+    timestamps: bool,
     runtime: Runtime,
     shade: ShadePass,
     color: wgpu::Texture,
@@ -246,13 +225,16 @@ impl Renderer {
     ) -> Result<Renderer, PlayError> {
         opts.validate(&ctx.device.limits())?;
         let scope = ErrorScopes::push(&ctx.device);
-        let runtime = Runtime::new(&ctx.device, &ctx.queue, archive, scene, opts.runtime_options())?;
+        let PlayOptions {
+            width,
+            height,
+            runtime,
+            timestamps,
+        } = opts;
+        let runtime = Runtime::new(&ctx.device, &ctx.queue, archive, scene, runtime)?;
         let shade = ShadePass::new(&ctx, scene, &runtime);
-        let (color, color_view, depth_view) = targets(&ctx.device, opts.width, opts.height);
-        let timer = opts
-            .timestamps
-            .then(|| PassTimer::new(&ctx.device, &PASS_NAMES))
-            .flatten();
+        let (color, color_view, depth_view) = targets(&ctx.device, width, height);
+        let timer = timestamps.then(|| PassTimer::new(&ctx.device, &PASS_NAMES)).flatten();
         check(&ctx, scope, "renderer setup")?;
         Ok(Renderer {
             runtime,
@@ -263,7 +245,9 @@ impl Renderer {
             timing: timer.is_some(),
             timer,
             ctx,
-            opts,
+            width,
+            height,
+            timestamps,
         })
     }
 
@@ -277,9 +261,15 @@ impl Renderer {
         &self.runtime
     }
 
-    /// The options in use.
-    pub fn options(&self) -> &PlayOptions {
-        &self.opts
+    /// The options in use (the size after [`Renderer::resize`], the top K after
+    /// [`Renderer::set_top_k`]).
+    pub fn options(&self) -> PlayOptions {
+        PlayOptions {
+            width: self.width,
+            height: self.height,
+            runtime: self.runtime.options().clone(),
+            timestamps: self.timestamps,
+        }
     }
 
     /// Number of clusters (= panes).
@@ -306,22 +296,21 @@ impl Renderer {
     /// Changes the image size (re-creates the render targets only).
     pub fn resize(&mut self, width: u32, height: u32) {
         let (w, h) = (width.max(1), height.max(1));
-        if (w, h) == (self.opts.width, self.opts.height) {
+        if (w, h) == (self.width, self.height) {
             return;
         }
         (self.color, self.color_view, self.depth_view) = targets(&self.ctx.device, w, h);
-        self.opts.width = w;
-        self.opts.height = h;
+        self.width = w;
+        self.height = h;
     }
 
     /// Changes the number of clusters kept per frame.
     pub fn set_top_k(&mut self, k: u32) {
-        self.opts.top_k = k.max(1);
         self.runtime.set_top_k(k);
     }
 
     fn camera_matrix(&self, camera: &Camera, bounds: &Aabb) -> Mat4 {
-        let aspect = self.opts.width as f32 / self.opts.height as f32;
+        let aspect = self.width as f32 / self.height as f32;
         let diag = bounds.diagonal().max(1e-3);
         let centre = (bounds.min + bounds.max) * 0.5;
         let far = (camera.eye.distance(centre) + diag) * 1.1;
@@ -345,7 +334,7 @@ impl Renderer {
             view_proj,
             input.camera.eye,
             input.mode.code(),
-            self.opts.width,
+            self.width,
         );
         let timer = self.timer.as_ref().filter(|_| self.timing);
         let mut enc = self.ctx.device.create_command_encoder(&Default::default());
@@ -373,8 +362,8 @@ impl Renderer {
     pub fn read_image(&self) -> Result<Image, PlayError> {
         let texels = readback::read_rgba32f(&self.ctx.device, &self.ctx.queue, &self.color, 0)?;
         Ok(Image {
-            width: self.opts.width,
-            height: self.opts.height,
+            width: self.width,
+            height: self.height,
             rgb: texels.into_iter().map(|[r, g, b, _]| [r, g, b]).collect(),
         })
     }

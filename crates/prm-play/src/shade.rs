@@ -92,23 +92,8 @@ impl ShadePass {
                 wgpu::BufferUsages::VERTEX,
             ),
         };
-        let module = pipeline::shader(device, "play shade", &source());
-        let pipeline = pipeline::render(
-            device,
-            &pipeline::RenderSpec {
-                label: "play shade",
-                module: &module,
-                layout: None,
-                vertex_buffers: &[pipeline::vertices(
-                    std::mem::size_of::<GpuVertex>(),
-                    &wgpu::vertex_attr_array![
-                        0 => Float32x3, 1 => Float32x3, 2 => Float32x2, 3 => Float32x2, 4 => Uint32
-                    ],
-                )],
-                depth: Some(DEPTH_FORMAT),
-                color: Some(COLOR_FORMAT),
-            },
-        );
+        let pipeline =
+            pipeline::mesh::<GpuVertex>(device, "play shade", &source(), Some(DEPTH_FORMAT), Some(COLOR_FORMAT));
         let bind_group = Self::group(ctx, &pipeline, &res, runtime);
         ShadePass {
             pipeline,
@@ -124,16 +109,16 @@ impl ShadePass {
             "play shade",
             &pipeline.get_bind_group_layout(0),
             &[
-                d.frame.as_entire_binding(),
-                d.lights.as_entire_binding(),
-                d.views.as_entire_binding(),
-                wgpu::BindingResource::TextureView(d.shadow_maps),
-                res.materials.as_entire_binding(),
-                wgpu::BindingResource::TextureView(runtime.lightmap()),
-                wgpu::BindingResource::TextureView(&res.textures),
-                wgpu::BindingResource::Sampler(&res.sampler),
-                res.camera.as_entire_binding(),
-            ],
+                &d.resources()[..],
+                &[
+                    res.materials.as_entire_binding(),
+                    wgpu::BindingResource::TextureView(runtime.lightmap()),
+                    wgpu::BindingResource::TextureView(&res.textures),
+                    wgpu::BindingResource::Sampler(&res.sampler),
+                    res.camera.as_entire_binding(),
+                ],
+            ]
+            .concat(),
         )
     }
 

@@ -403,7 +403,7 @@ impl App {
         gpu.window.set_title(&format!(
             "prm-play — {}, K {}/{}, {:.1} ms ({:.1} fps){}{}",
             self.mode.name(),
-            gpu.renderer.options().top_k,
+            gpu.renderer.runtime().options().top_k,
             gpu.renderer.cluster_count(),
             ms,
             1e3 / ms.max(1e-3),
@@ -449,14 +449,14 @@ impl App {
             Key::Character("4") => self.mode = Mode::Split,
             Key::Character("+") | Key::Character("=") => {
                 if let Some(g) = self.gpu.as_mut() {
-                    let k = g.renderer.options().top_k;
+                    let k = g.renderer.runtime().options().top_k;
                     g.renderer
                         .set_top_k(k.saturating_mul(2).min(g.renderer.cluster_count().max(1)));
                 }
             }
             Key::Character("-") => {
                 if let Some(g) = self.gpu.as_mut() {
-                    let k = g.renderer.options().top_k;
+                    let k = g.renderer.runtime().options().top_k;
                     g.renderer.set_top_k(k.min(g.renderer.cluster_count().max(1)) / 2);
                 }
             }

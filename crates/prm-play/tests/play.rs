@@ -11,7 +11,7 @@ use glam::Vec3;
 use prm_format::Archive;
 use prm_play::animation::Animation;
 use prm_play::synthetic::{cornell_box_path, write_archive, SyntheticParams};
-use prm_play::{output, FrameInput, Image, Mode, PlayError, PlayOptions, Renderer};
+use prm_play::{output, FrameInput, Image, Mode, PlayError, PlayOptions, Renderer, RuntimeOptions};
 use prm_scene::{Light, Scene};
 
 fn out_dir(name: &str) -> PathBuf {
@@ -40,12 +40,26 @@ fn renderer(opts: PlayOptions) -> (Renderer, Scene) {
     (r, scene)
 }
 
+/// The full image of `scene` from its default camera, under its own lights.
+fn gi_image(r: &mut Renderer, scene: &Scene) -> Image {
+    r.render(&FrameInput {
+        camera: prm_play::default_camera(scene),
+        lights: &scene.lights,
+        mode: Mode::Gi,
+    })
+    .unwrap();
+    r.read_image().unwrap()
+}
+
 fn small(top_k: u32) -> PlayOptions {
     PlayOptions {
         width: 96,
         height: 96,
-        top_k,
-        shadow_resolution: 256,
+        runtime: RuntimeOptions {
+            top_k,
+            shadow_resolution: 256,
+            ..Default::default()
+        },
         ..Default::default()
     }
 }
@@ -274,17 +288,14 @@ fn cornell_box_matches_golden() {
     let (mut r, scene) = renderer(PlayOptions {
         width: 128,
         height: 128,
-        top_k: 32,
-        shadow_resolution: 512,
+        runtime: RuntimeOptions {
+            top_k: 32,
+            shadow_resolution: 512,
+            ..Default::default()
+        },
         ..Default::default()
     });
-    r.render(&FrameInput {
-        camera: prm_play::default_camera(&scene),
-        lights: &scene.lights,
-        mode: Mode::Gi,
-    })
-    .unwrap();
-    let image = r.read_image().unwrap();
+    let image = gi_image(&mut r, &scene);
     let golden_path = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/golden/cornell-box-gi.exr");
     if std::env::var_os("PRM_UPDATE_GOLDEN").is_some() {
         output::write_exr_compact(&golden_path, &image).unwrap();
@@ -534,13 +545,7 @@ keys = [ { t = 0.5, spec = "spot:0,1,0:0,-1,0:20:1,1,1" }, { t = 1.5, spec = "sp
 #[test]
 fn present_pass_matches_png_tone_mapping() {
     let (mut r, scene) = renderer(small(16));
-    r.render(&FrameInput {
-        camera: prm_play::default_camera(&scene),
-        lights: &scene.lights,
-        mode: Mode::Gi,
-    })
-    .unwrap();
-    let image = r.read_image().unwrap();
+    let image = gi_image(&mut r, &scene);
     let exposure = 2.0;
     let format = wgpu::TextureFormat::Rgba8Unorm;
     let mut presenter = prm_play::present::Presenter::new(r.context(), format, exposure);
@@ -816,15 +821,9 @@ fn cli_warns_when_materials_changed_since_the_bake() {
     let mtl = std::fs::read_to_string(src.join("cornell-box.mtl")).unwrap();
     std::fs::write(dir.join("cornell-box.obj"), obj).unwrap();
     std::fs::write(dir.join("cornell-box.mtl"), &mtl).unwrap();
-    let same = play_cli(
-        &dir,
-        &[
-            "--scene",
-            dir.join("cornell-box.obj").to_str().unwrap(),
-            "--size",
-            "16x16",
-        ],
-    );
+    let scene = dir.join("cornell-box.obj");
+    let play = || play_cli(&dir, &["--scene", scene.to_str().unwrap(), "--size", "16x16"]);
+    let same = play();
     let stderr = String::from_utf8_lossy(&same.stderr);
     assert!(same.status.success(), "{stderr}");
     assert!(!stderr.contains("materials differ"), "same materials warned:\n{stderr}");
@@ -833,15 +832,7 @@ fn cli_warns_when_materials_changed_since_the_bake() {
         mtl.replace("Kd 0.7378 0.7361 0.7374", "Kd 0.2 0.2 0.2"),
     )
     .unwrap();
-    let changed = play_cli(
-        &dir,
-        &[
-            "--scene",
-            dir.join("cornell-box.obj").to_str().unwrap(),
-            "--size",
-            "16x16",
-        ],
-    );
+    let changed = play();
     let stderr = String::from_utf8_lossy(&changed.stderr);
     assert!(changed.status.success(), "{stderr}");
     assert!(

@@ -61,6 +61,11 @@ struct Vertex {
     albedo: [f32; 3],
 }
 
+impl kit::Vertex for Vertex {
+    const ATTRIBUTES: &'static [wgpu::VertexAttribute] =
+        &wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3, 2 => Float32x2, 3 => Float32x3];
+}
+
 fn main() -> Result<()> {
     let args: Vec<PathBuf> = std::env::args_os().skip(1).map(PathBuf::from).collect();
     let Some(archive_path) = args.first() else {
@@ -135,45 +140,23 @@ fn run(archive_path: &Path, out: &Path) -> Result<()> {
         contents: bytemuck::cast_slice(&camera.to_cols_array()),
         usage: wgpu::BufferUsages::UNIFORM,
     });
-    let source = [SHARED_WGSL, LIGHTS_WGSL, SHADE].join("\n");
-    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-        label: None,
-        source: wgpu::ShaderSource::Wgsl(source.into()),
-    });
     let format = wgpu::TextureFormat::Rgba8Unorm;
-    let pipeline = kit::render(
-        &device,
-        &kit::RenderSpec {
-            label: "embed",
-            module: &module,
-            layout: None,
-            vertex_buffers: &[kit::vertices(
-                std::mem::size_of::<Vertex>(),
-                &wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3, 2 => Float32x2, 3 => Float32x3],
-            )],
-            depth: Some(wgpu::TextureFormat::Depth32Float),
-            color: Some(format),
-        },
-    );
+    let depth_format = wgpu::TextureFormat::Depth32Float;
+    let parts = [SHARED_WGSL, LIGHTS_WGSL, SHADE];
+    let pipeline = kit::mesh::<Vertex>(&device, "embed", &parts, Some(depth_format), Some(format));
     let d = runtime.direct_light_bindings();
-    let resources = [
-        d.frame.as_entire_binding(),
-        d.lights.as_entire_binding(),
-        d.views.as_entire_binding(),
-        wgpu::BindingResource::TextureView(d.shadow_maps),
+    let own = [
         wgpu::BindingResource::TextureView(runtime.lightmap()),
         camera_buffer.as_entire_binding(),
     ];
+    let resources = [&d.resources()[..], &own].concat();
     let bind_group = kit::bind_group(&device, "embed", &pipeline.get_bind_group_layout(0), &resources);
     let target = |format, usage| kit::texture(&device, "embed", [SIZE, SIZE, 1], format, usage);
     let color = target(
         format,
         wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
     );
-    let depth = target(
-        wgpu::TextureFormat::Depth32Float,
-        wgpu::TextureUsages::RENDER_ATTACHMENT,
-    );
+    let depth = target(depth_format, wgpu::TextureUsages::RENDER_ATTACHMENT);
     {
         let color_view = color.create_view(&Default::default());
         let depth_view = depth.create_view(&Default::default());

@@ -21,47 +21,35 @@ pub(crate) struct AtlasVertex {
     pub uv: [f32; 2],
 }
 
+impl pipeline::Vertex for AtlasVertex {
+    const ATTRIBUTES: &'static [wgpu::VertexAttribute] =
+        &wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3, 2 => Float32x2];
+}
+
 /// Renders the irradiance lightmap.
 pub(crate) struct IrradiancePass {
     pipeline: wgpu::RenderPipeline,
-    bind_group: wgpu::BindGroup,
 }
 
 impl IrradiancePass {
-    /// The pass reading `resources` (frame, lights, views, shadow maps, indirect lightmap).
-    pub fn new(device: &wgpu::Device, resources: &[wgpu::BindingResource]) -> IrradiancePass {
-        let module = pipeline::shader(
-            device,
-            "prm irradiance",
-            &[
-                crate::SHARED_WGSL,
-                crate::LIGHTS_WGSL,
-                include_str!("../../../shaders/runtime/irradiance.wgsl"),
-            ],
-        );
-        let pipeline = pipeline::render(
-            device,
-            &pipeline::RenderSpec {
-                label: "prm irradiance",
-                module: &module,
-                layout: None,
-                vertex_buffers: &[pipeline::vertices(
-                    std::mem::size_of::<AtlasVertex>(),
-                    &wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3, 2 => Float32x2],
-                )],
-                depth: None,
-                color: Some(LIGHTMAP_FORMAT),
-            },
-        );
-        let bind_group = pipeline::bind_group(device, "prm irradiance", &pipeline.get_bind_group_layout(0), resources);
-        IrradiancePass { pipeline, bind_group }
+    /// The pipeline; bind groups are made per [`IrradiancePass::render`].
+    pub fn new(device: &wgpu::Device) -> IrradiancePass {
+        let parts = [
+            crate::SHARED_WGSL,
+            crate::LIGHTS_WGSL,
+            include_str!("../../../shaders/runtime/irradiance.wgsl"),
+        ];
+        let pipeline = pipeline::mesh::<AtlasVertex>(device, "prm irradiance", &parts, None, Some(LIGHTMAP_FORMAT));
+        IrradiancePass { pipeline }
     }
 
-    /// Renders `vertices` into a `resolution`² target, reads it back and dilates it.
+    /// Renders `vertices` into a `resolution`² target, reads it back and dilates it; the pass
+    /// reads `resources` (frame, lights, views, shadow maps, indirect lightmap).
     pub fn render(
         &self,
         device: &wgpu::Device,
         queue: &wgpu::Queue,
+        resources: &[wgpu::BindingResource],
         vertices: &wgpu::Buffer,
         vertex_count: u32,
         resolution: u32,
@@ -74,11 +62,17 @@ impl IrradiancePass {
             wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
         );
         let view = target.create_view(&Default::default());
+        let bind_group = pipeline::bind_group(
+            device,
+            "prm irradiance",
+            &self.pipeline.get_bind_group_layout(0),
+            resources,
+        );
         let mut enc = device.create_command_encoder(&Default::default());
         {
             let mut pass = pipeline::begin_render_pass(&mut enc, "prm irradiance", Some(&view), None, None);
             pass.set_pipeline(&self.pipeline);
-            pass.set_bind_group(0, &self.bind_group, &[]);
+            pass.set_bind_group(0, &bind_group, &[]);
             pass.set_vertex_buffer(0, vertices.slice(..));
             pass.draw(0..vertex_count, 0..1);
         }

@@ -36,15 +36,13 @@
 
 #![warn(missing_docs)]
 
-mod blend;
 mod irradiance;
 mod lights;
 mod options;
-mod rank;
-mod select;
 mod shadow;
 mod shared;
 pub mod synthetic;
+mod topk;
 mod weights;
 
 use prm_format::Archive;
@@ -60,10 +58,8 @@ pub use shared::{
     SHARED_WGSL,
 };
 
-use blend::BlendPass;
-use rank::RankPass;
-use select::SelectPass;
 use shadow::{ShadowMaps, ShadowPass};
+use topk::TopKPasses;
 use weights::WeightsPass;
 
 /// Most lights a frame may have.
@@ -113,6 +109,18 @@ pub struct DirectLight<'a> {
     pub shadow_maps: &'a wgpu::TextureView,
 }
 
+impl<'a> DirectLight<'a> {
+    /// `frame`, `lights`, `views` and `shadow_maps` as bindings 0 to 3, in that order.
+    pub fn resources(&self) -> [wgpu::BindingResource<'a>; 4] {
+        [
+            self.frame.as_entire_binding(),
+            self.lights.as_entire_binding(),
+            self.views.as_entire_binding(),
+            wgpu::BindingResource::TextureView(self.shadow_maps),
+        ]
+    }
+}
+
 /// The buffers the passes share.
 pub(crate) struct Buffers {
     frame: wgpu::Buffer,
@@ -147,11 +155,10 @@ pub struct Runtime {
     maps: ShadowMaps,
     shadow: ShadowPass,
     weights: WeightsPass,
-    rank: RankPass,
-    select: SelectPass,
-    blend: BlendPass,
-    /// This frame's lights and shadow views (set by [`Runtime::update`]).
-    light_count: u32,
+    topk: TopKPasses,
+    /// Built by the first [`Runtime::read_irradiance_lightmap`].
+    irradiance: std::sync::OnceLock<irradiance::IrradiancePass>,
+    /// This frame's shadow views (set by [`Runtime::update`]).
     view_count: u32,
 }
 
@@ -299,9 +306,7 @@ impl Runtime {
         let maps = ShadowMaps::new(device, options.shadow_resolution, 1);
         let shadow = ShadowPass::new(device, &maps);
         let weights = WeightsPass::new(device, &buffers, &maps.array);
-        let rank = RankPass::new(device, &buffers);
-        let select = SelectPass::new(device, &buffers);
-        let blend = BlendPass::new(device, &buffers, &panes, &lightmap_view);
+        let topk = TopKPasses::new(device, &buffers, &panes, &lightmap_view);
         scope.pop("runtime setup")?;
         Ok(Runtime {
             device: device.clone(),
@@ -321,10 +326,8 @@ impl Runtime {
             maps,
             shadow,
             weights,
-            rank,
-            select,
-            blend,
-            light_count: 0,
+            topk,
+            irradiance: std::sync::OnceLock::new(),
             view_count: 0,
         })
     }
@@ -344,11 +347,10 @@ impl Runtime {
             self.shadow.rebind(&self.device, &self.maps);
             self.weights.rebind(&self.device, &self.buffers, &self.maps.array);
         }
-        self.light_count = gpu_lights.len() as u32;
         self.view_count = views.len() as u32;
         let o = &self.options;
         let frame = GpuFrame {
-            light_count: self.light_count,
+            light_count: gpu_lights.len() as u32,
             cluster_count: self.cluster_count,
             top_k: o.top_k.max(1),
             entry_count: self.entry_count,
@@ -403,9 +405,7 @@ impl Runtime {
             external,
             timer,
         );
-        self.rank.encode(encoder, self.cluster_count, timer);
-        self.select.encode(encoder, self.cluster_count, timer);
-        self.blend.encode(encoder, self.resolution, timer);
+        self.topk.encode(encoder, self.cluster_count, self.resolution, timer);
     }
 
     /// The indirect-irradiance lightmap (W/m², [`LIGHTMAP_FORMAT`]) of the last encoded frame.
@@ -470,19 +470,17 @@ impl Runtime {
     /// dilated from their neighbours [`DILATE_STEPS`] rings deep, 0 beyond. Waits for the device.
     pub fn read_irradiance_lightmap(&self) -> Result<Vec<[f32; 3]>, RuntimeError> {
         let d = self.direct_light_bindings();
-        let pass = irradiance::IrradiancePass::new(
-            &self.device,
-            &[
-                d.frame.as_entire_binding(),
-                d.lights.as_entire_binding(),
-                d.views.as_entire_binding(),
-                wgpu::BindingResource::TextureView(d.shadow_maps),
-                wgpu::BindingResource::TextureView(&self.lightmap_view),
-            ],
-        );
+        let pass = self
+            .irradiance
+            .get_or_init(|| irradiance::IrradiancePass::new(&self.device));
         Ok(pass.render(
             &self.device,
             &self.queue,
+            &[
+                &d.resources()[..],
+                &[wgpu::BindingResource::TextureView(&self.lightmap_view)],
+            ]
+            .concat(),
             &self.atlas_vertices,
             self.vertex_count,
             self.resolution,

@@ -126,6 +126,14 @@ pub enum ExportError {
         /// The encoder's message.
         message: String,
     },
+    /// An EXR could not be read ([`read_exr_rgb`]).
+    #[error("{path}: cannot read EXR: {message}")]
+    ExrRead {
+        /// The file being read.
+        path: PathBuf,
+        /// The decoder's message.
+        message: String,
+    },
     /// The binary data exceeds what the format can address (4 GiB for `.glb`).
     #[error("{path}: {bytes} bytes exceed the format's limit of {limit}")]
     TooLarge {
@@ -227,6 +235,24 @@ pub fn write_exr_rgb(path: &Path, width: usize, height: usize, rgb: &[[f32; 3]])
     }
     let bytes = bytes.into_inner();
     write_atomic(path, |f| f.write_all(&bytes))
+}
+
+/// Reads the first RGB(A) layer of an EXR as linear RGB: width, height and the pixels row by
+/// row, top row first (alpha dropped); what [`write_exr_rgb`] wrote comes back as it was.
+pub fn read_exr_rgb(path: &Path) -> Result<(usize, usize, Vec<[f32; 3]>), ExportError> {
+    let img = exr::prelude::read_first_rgba_layer_from_file(
+        path,
+        |size, _| (size.0, size.1, vec![[0f32; 3]; size.0 * size.1]),
+        |px: &mut (usize, usize, Vec<[f32; 3]>), pos, (r, g, b, _a): (f32, f32, f32, f32)| {
+            let w = px.0;
+            px.2[pos.1 * w + pos.0] = [r, g, b];
+        },
+    )
+    .map_err(|e| ExportError::ExrRead {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    })?;
+    Ok(img.layer_data.channel_data.pixels)
 }
 
 /// Refuses an existing target that is not a regular file (a symlink counts as not regular).
@@ -589,33 +615,43 @@ fn png_bytes(t: &crate::Texture) -> Result<Vec<u8>, String> {
     Ok(out.into_inner())
 }
 
-/// A GLB container: 12-byte header, the JSON chunk padded with spaces, the BIN chunk.
+/// The GLB container of a glTF: serialises `json` and hands it to [`glb_container`].
 fn glb_bytes(path: &Path, json: &Value, bin: &[u8]) -> Result<Vec<u8>, ExportError> {
-    let mut text = serde_json::to_vec(json).map_err(|e| ExportError::Io {
+    let text = serde_json::to_vec(json).map_err(|e| ExportError::Io {
         path: path.to_path_buf(),
         source: e.into(),
     })?;
-    while !text.len().is_multiple_of(4) {
-        text.push(b' ');
-    }
-    let total = 12 + 8 + text.len() as u64 + 8 + bin.len() as u64;
+    glb_container(&text, bin).map_err(|bytes| ExportError::TooLarge {
+        path: path.to_path_buf(),
+        bytes,
+        limit: u32::MAX as u64,
+    })
+}
+
+/// A GLB file of a glTF's `json` text and its binary buffer `bin`: the 12-byte header, the JSON
+/// chunk padded with spaces and the BIN chunk padded with zeros to a multiple of 4 bytes; the
+/// size instead when it exceeds the format's limit of `u32::MAX` bytes.
+pub fn glb_container(json: &[u8], bin: &[u8]) -> Result<Vec<u8>, u64> {
+    let chunks = [(json, *b"JSON", b' '), (bin, *b"BIN\0", 0)];
+    let total: u64 = 12
+        + chunks
+            .iter()
+            .map(|c| 8 + c.0.len().next_multiple_of(4) as u64)
+            .sum::<u64>();
     if total > u32::MAX as u64 {
-        return Err(ExportError::TooLarge {
-            path: path.to_path_buf(),
-            bytes: total,
-            limit: u32::MAX as u64,
-        });
+        return Err(total);
     }
     let mut out = Vec::with_capacity(total as usize);
     out.extend_from_slice(b"glTF");
     out.extend_from_slice(&2u32.to_le_bytes());
     out.extend_from_slice(&(total as u32).to_le_bytes());
-    out.extend_from_slice(&(text.len() as u32).to_le_bytes());
-    out.extend_from_slice(b"JSON");
-    out.extend_from_slice(&text);
-    out.extend_from_slice(&(bin.len() as u32).to_le_bytes());
-    out.extend_from_slice(b"BIN\0");
-    out.extend_from_slice(bin);
+    for (data, kind, pad) in chunks {
+        let len = data.len().next_multiple_of(4);
+        out.extend_from_slice(&(len as u32).to_le_bytes());
+        out.extend_from_slice(&kind);
+        out.extend_from_slice(data);
+        out.resize(out.len() + len - data.len(), pad);
+    }
     Ok(out)
 }
 

@@ -224,7 +224,9 @@ pub(crate) fn load(path: &Path) -> Result<Scene, SceneError> {
             }
             positions.iter().for_each(|&p| bounds.grow(p));
             // Every other attribute has one element per position.
-            let attribute = |semantic: gltf::Semantic, what: &str| -> Result<Option<gltf::Accessor>, SceneError> {
+            let attribute = |semantic: gltf::Semantic,
+                             what: &'static str|
+             -> Result<Option<(gltf::Accessor, &'static str)>, SceneError> {
                 let Some(acc) = prim.get(&semantic) else {
                     return Ok(None);
                 };
@@ -240,35 +242,26 @@ pub(crate) fn load(path: &Path) -> Result<Scene, SceneError> {
                         ),
                     });
                 }
-                Ok(Some(acc))
+                Ok(Some((acc, what)))
             };
-            let normals: Option<Vec<Vec3>> = match attribute(gltf::Semantic::Normals, "NORMAL")? {
-                Some(acc) => Some(
-                    read_floats::<3>(path, &acc, &buffers, "NORMAL")?
-                        .into_iter()
-                        .map(|n| (normal_matrix * Vec3::from_array(n)).normalize_or_zero())
-                        .collect(),
-                ),
-                None => None,
-            };
-            let uv0: Option<Vec<Vec2>> = match attribute(gltf::Semantic::TexCoords(0), "TEXCOORD_0")? {
-                Some(acc) => Some(
-                    read_floats::<2>(path, &acc, &buffers, "TEXCOORD_0")?
-                        .into_iter()
-                        .map(|[u, v]| Vec2::new(u, 1.0 - v))
-                        .collect(),
-                ),
-                None => None,
-            };
-            let uv1: Option<Vec<Vec2>> = match attribute(gltf::Semantic::TexCoords(1), "TEXCOORD_1")? {
-                Some(acc) => Some(
-                    read_floats::<2>(path, &acc, &buffers, "TEXCOORD_1")?
-                        .into_iter()
-                        .map(Vec2::from_array)
-                        .collect(),
-                ),
-                None => None,
-            };
+            let normals: Option<Vec<Vec3>> = map_floats(
+                path,
+                &buffers,
+                attribute(gltf::Semantic::Normals, "NORMAL")?,
+                |n: [f32; 3]| (normal_matrix * Vec3::from_array(n)).normalize_or_zero(),
+            )?;
+            let uv0: Option<Vec<Vec2>> = map_floats(
+                path,
+                &buffers,
+                attribute(gltf::Semantic::TexCoords(0), "TEXCOORD_0")?,
+                |[u, v]| Vec2::new(u, 1.0 - v),
+            )?;
+            let uv1: Option<Vec<Vec2>> = map_floats(
+                path,
+                &buffers,
+                attribute(gltf::Semantic::TexCoords(1), "TEXCOORD_1")?,
+                Vec2::from_array,
+            )?;
             let indices: Vec<u32> = match prim.indices() {
                 Some(acc) => read_indices(path, &acc, &buffers)?,
                 None => (0..positions.len() as u32).collect(),
@@ -624,6 +617,23 @@ fn read_accessor<T: Copy>(
         }
     }
     Ok(out)
+}
+
+/// The floats of an optional attribute (`what` names it in errors), each mapped by `f`.
+fn map_floats<const N: usize, T>(
+    path: &Path,
+    buffers: &[gltf::buffer::Data],
+    attribute: Option<(gltf::Accessor, &str)>,
+    f: impl FnMut([f32; N]) -> T,
+) -> Result<Option<Vec<T>>, SceneError> {
+    attribute
+        .map(|(acc, what)| {
+            Ok(read_floats::<N>(path, &acc, buffers, what)?
+                .into_iter()
+                .map(f)
+                .collect())
+        })
+        .transpose()
 }
 
 /// Reads a float attribute of `N` components (`VEC2` or `VEC3`), any component type.

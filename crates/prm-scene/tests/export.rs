@@ -349,19 +349,6 @@ fn failures_name_the_path_and_leave_no_partial_file() {
     assert_eq!(entries(&dir), ["link.glb", "real.glb", "split.bin", "taken.glb"]);
 }
 
-fn read_exr(path: &Path) -> (usize, usize, Vec<[f32; 3]>) {
-    let img = exr::prelude::read_first_rgba_layer_from_file(
-        path,
-        |size, _| (size.0, size.1, vec![[0f32; 3]; size.0 * size.1]),
-        |px: &mut (usize, usize, Vec<[f32; 3]>), pos, (r, g, b, _a): (f32, f32, f32, f32)| {
-            let w = px.0;
-            px.2[pos.1 * w + pos.0] = [r, g, b];
-        },
-    )
-    .unwrap();
-    img.layer_data.channel_data.pixels
-}
-
 #[test]
 fn exr_lightmaps_round_trip_bit_exactly() {
     let dir = temp_case("export-exr");
@@ -371,14 +358,14 @@ fn exr_lightmaps_round_trip_bit_exactly() {
         .collect();
     let out = dir.join("indirect.exr");
     prm_scene::write_exr_rgb(&out, w, h, &rgb).unwrap();
-    let (rw, rh, back) = read_exr(&out);
+    let (rw, rh, back) = prm_scene::read_exr_rgb(&out).unwrap();
     assert_eq!((rw, rh), (w, h));
     let b = |v: &[[f32; 3]]| v.iter().map(|p| p.map(f32::to_bits)).collect::<Vec<_>>();
     assert_eq!(b(&back), b(&rgb), "row 0 on top, values exact");
     // Overwrite in place.
     let dark = vec![[0.0f32; 3]; w * h];
     prm_scene::write_exr_rgb(&out, w, h, &dark).unwrap();
-    assert_eq!(read_exr(&out).2, dark);
+    assert_eq!(prm_scene::read_exr_rgb(&out).unwrap().2, dark);
 
     let err = prm_scene::write_exr_rgb(&dir.join("short.exr"), w, h, &rgb[1..]).unwrap_err();
     assert!(err.to_string().contains("184 pixels given for a 37×5 image"), "{err}");

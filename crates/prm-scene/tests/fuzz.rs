@@ -261,17 +261,19 @@ fn fuzz_obj_loader() {
     std::fs::write(base.join("s.mtl"), MTL).unwrap();
     std::fs::write(base.join("s.obj"), OBJ).unwrap();
     prm_scene::load(&base.join("s.obj")).expect("the unmutated OBJ loads");
-    fuzz("obj", 400, |rng, dir| {
-        let mut obj = OBJ.as_bytes().to_vec();
-        let mut mtl = MTL.as_bytes().to_vec();
-        if rng.below(4) == 0 {
-            mutate(rng, &mut mtl);
-        } else {
-            mutate(rng, &mut obj);
-        }
-        std::fs::write(dir.join("s.mtl"), &mtl).unwrap();
-        std::fs::write(dir.join("s.obj"), &obj).unwrap();
-        dir.join("s.obj")
+    fuzz_pair("obj", ("s.obj", OBJ.as_bytes()), ("s.mtl", MTL.as_bytes()));
+}
+
+/// Fuzzes a scene of two files, `main` (the one loaded) and `side` (a file it names), each a
+/// (name, bytes) pair: one case in four mutates `side`, the others `main`.
+fn fuzz_pair(name: &str, main: (&str, &[u8]), side: (&str, &[u8])) {
+    fuzz(name, 400, |rng, dir| {
+        let mut files = [main.1.to_vec(), side.1.to_vec()];
+        let k = usize::from(rng.below(4) == 0);
+        mutate(rng, &mut files[k]);
+        std::fs::write(dir.join(side.0), &files[1]).unwrap();
+        std::fs::write(dir.join(main.0), &files[0]).unwrap();
+        dir.join(main.0)
     });
 }
 
@@ -329,26 +331,7 @@ fn gltf_json(buffer: &str) -> String {
 
 /// A GLB: header, JSON chunk, BIN chunk.
 fn glb(json: &str, bin: &[u8]) -> Vec<u8> {
-    let mut json = json.as_bytes().to_vec();
-    while !json.len().is_multiple_of(4) {
-        json.push(b' ');
-    }
-    let mut bin = bin.to_vec();
-    while !bin.len().is_multiple_of(4) {
-        bin.push(0);
-    }
-    let total = 12 + 8 + json.len() + 8 + bin.len();
-    let mut out = Vec::with_capacity(total);
-    out.extend_from_slice(b"glTF");
-    out.extend_from_slice(&2u32.to_le_bytes());
-    out.extend_from_slice(&(total as u32).to_le_bytes());
-    out.extend_from_slice(&(json.len() as u32).to_le_bytes());
-    out.extend_from_slice(b"JSON");
-    out.extend_from_slice(&json);
-    out.extend_from_slice(&(bin.len() as u32).to_le_bytes());
-    out.extend_from_slice(b"BIN\0");
-    out.extend_from_slice(&bin);
-    out
+    prm_scene::export::glb_container(json.as_bytes(), bin).unwrap()
 }
 
 #[test]
@@ -361,18 +344,7 @@ fn fuzz_gltf_loader() {
     let scene = prm_scene::load(&base.join("s.gltf")).expect("the unmutated glTF loads");
     assert_eq!(scene.triangles.len(), 2);
     assert!(scene.lightmap_uvs.is_some());
-    fuzz("gltf", 400, |rng, dir| {
-        let mut j = json.as_bytes().to_vec();
-        let mut b = bin.clone();
-        if rng.below(4) == 0 {
-            mutate(rng, &mut b);
-        } else {
-            mutate(rng, &mut j);
-        }
-        std::fs::write(dir.join("s.bin"), &b).unwrap();
-        std::fs::write(dir.join("s.gltf"), &j).unwrap();
-        dir.join("s.gltf")
-    });
+    fuzz_pair("gltf", ("s.gltf", json.as_bytes()), ("s.bin", &bin));
 }
 
 #[test]

@@ -16,8 +16,7 @@
 use glam::Vec3;
 use prm_scene::{Atlas, AtlasParams, Light, Sizing};
 use prm_trace::{
-    Bvh, BvhParams, ClusterParams, Clustering, EntryParams, Lighting, PaneParams, ReferenceParams, ReferenceTracer,
-    WalkParams,
+    Bvh, BvhParams, Clustering, EntryParams, Lighting, PaneParams, ReferenceParams, ReferenceTracer, WalkParams,
 };
 
 fn rel_rmse(a: &[Vec3], r: &[Vec3]) -> (f64, f64) {
@@ -76,16 +75,7 @@ fn main() {
         atlas.exits.len(),
         t.elapsed().as_secs_f64()
     );
-    let clustering = Clustering::kmeans(
-        &entries,
-        scene.bounds().diagonal(),
-        &ClusterParams {
-            seed: 1,
-            ..ClusterParams::with_clusters(n_clusters)
-        },
-    )
-    .unwrap()
-    .separate_by_visibility(&entries, &bvh);
+    let clustering = Clustering::kmeans_separated(&entries, &bvh, scene.bounds().diagonal(), n_clusters, 1).unwrap();
     let m = atlas.exits.len();
     let energy: Vec<Vec3> = (0..entries.len()).map(|i| per_entry.pane(i).iter().sum()).collect();
     let mut cluster_pane = vec![vec![Vec3::ZERO; m]; clustering.len()];

@@ -86,6 +86,22 @@ impl Clustering {
         }
     }
 
+    /// The clustering of a bake: [`Clustering::kmeans`] with [`ClusterParams::with_clusters`]
+    /// and `seed`, then [`Clustering::separate_by_visibility`].
+    pub fn kmeans_separated(
+        entries: &[SurfaceSample],
+        bvh: &Bvh,
+        diagonal: f32,
+        clusters: usize,
+        seed: u64,
+    ) -> Result<Clustering, TraceError> {
+        let params = ClusterParams {
+            seed,
+            ..ClusterParams::with_clusters(clusters)
+        };
+        Ok(Clustering::kmeans(entries, diagonal, &params)?.separate_by_visibility(entries, bvh))
+    }
+
     /// k-means++ clustering of `entries`; `diagonal` is the scene's bounding-box diagonal.
     pub fn kmeans(entries: &[SurfaceSample], diagonal: f32, params: &ClusterParams) -> Result<Clustering, TraceError> {
         if params.clusters == 0 {

@@ -176,7 +176,10 @@ pub fn renderer(
     let opts = PlayOptions {
         width: FRAME_SIZE.0,
         height: FRAME_SIZE.1,
-        top_k,
+        runtime: prm_play::RuntimeOptions {
+            top_k,
+            ..Default::default()
+        },
         ..PlayOptions::default()
     };
     let r = Renderer::new(ctx, &scene, &mut a, opts).context("creating the renderer")?;

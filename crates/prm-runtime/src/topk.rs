@@ -1,0 +1,74 @@
+//! The passes after the weights, each a WGSL file after [`crate::SHARED_WGSL`] on the shared
+//! buffers: rank (`shaders/runtime/rank.wgsl`), every cluster's rank by score and the score of
+//! the first cluster dropped (rank K) as the fade threshold; select
+//! (`shaders/runtime/select.wgsl`), the top K clusters with their weights faded near the
+//! threshold and scaled to keep the dropped clusters' energy, written by rank for the blend;
+//! blend (`shaders/runtime/blend.wgsl`), the indirect-irradiance lightmap, Σ over the kept
+//! clusters of effective weight × pane. Rank and select run one invocation per cluster, blend
+//! one per atlas texel.
+
+use prm_gpu_kit::{ComputePass, PassTimer};
+
+use crate::Buffers;
+
+/// Ranks the clusters, keeps the top K and blends their panes into the lightmap.
+pub(crate) struct TopKPasses {
+    rank: ComputePass,
+    select: ComputePass,
+    blend: ComputePass,
+}
+
+impl TopKPasses {
+    /// The passes on `b`, blending the pane array `panes` into `lightmap`.
+    pub fn new(
+        device: &wgpu::Device,
+        b: &Buffers,
+        panes: &wgpu::TextureView,
+        lightmap: &wgpu::TextureView,
+    ) -> TopKPasses {
+        let pass = |name, wgsl, resources: &[wgpu::BindingResource]| {
+            ComputePass::new(device, name, &[crate::SHARED_WGSL, wgsl], resources)
+        };
+        let ranked = [
+            b.frame.as_entire_binding(),
+            b.weights.as_entire_binding(),
+            b.ranks.as_entire_binding(),
+            b.threshold.as_entire_binding(),
+        ];
+        let selected = [b.selected.as_entire_binding(), b.effective.as_entire_binding()];
+        TopKPasses {
+            rank: pass("rank", include_str!("../../../shaders/runtime/rank.wgsl"), &ranked),
+            select: pass(
+                "select",
+                include_str!("../../../shaders/runtime/select.wgsl"),
+                &[ranked.as_slice(), &selected].concat(),
+            ),
+            blend: pass(
+                "blend",
+                include_str!("../../../shaders/runtime/blend.wgsl"),
+                &[
+                    b.frame.as_entire_binding(),
+                    b.selected.as_entire_binding(),
+                    wgpu::BindingResource::TextureView(panes),
+                    wgpu::BindingResource::TextureView(lightmap),
+                ],
+            ),
+        }
+    }
+
+    /// Rank and select over `clusters` (workgroups of 64), then blend a `resolution`² lightmap
+    /// (8×8 workgroups).
+    pub fn encode(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        clusters: u32,
+        resolution: u32,
+        timer: Option<&PassTimer>,
+    ) {
+        let per_cluster = [clusters.div_ceil(64), 1, 1];
+        self.rank.encode(encoder, per_cluster, timer);
+        self.select.encode(encoder, per_cluster, timer);
+        let groups = resolution.div_ceil(8);
+        self.blend.encode(encoder, [groups, groups, 1], timer);
+    }
+}
