@@ -61,8 +61,14 @@ fn main() {
     };
     let vpls = prm_trace::trace_walks(&scene, &bvh, &entries, &walks).unwrap();
     let pane_params = match std::env::var("BOUND").ok().as_deref() {
-        Some("none") => PaneParams { bound: prm_trace::VplBound::None },
-        Some(s) => PaneParams { bound: prm_trace::VplBound::Disk { scale: s.parse().unwrap() } },
+        Some("none") => PaneParams {
+            bound: prm_trace::VplBound::None,
+        },
+        Some(s) => PaneParams {
+            bound: prm_trace::VplBound::Disk {
+                scale: s.parse().unwrap(),
+            },
+        },
         None => PaneParams::DEFAULT,
     };
     let t = std::time::Instant::now();
@@ -117,11 +123,16 @@ fn main() {
                     if d < any.0 {
                         any = (d, i as u32);
                     }
-                    if d < best.0 && e.normal.dot(s.normal) > 0.99 && e.normal.dot(s.position - e.position).abs() < eps {
+                    if d < best.0 && e.normal.dot(s.normal) > 0.99 && e.normal.dot(s.position - e.position).abs() < eps
+                    {
                         best = (d, i as u32);
                     }
                 }
-                if best.0.is_finite() { best.1 } else { any.1 }
+                if best.0.is_finite() {
+                    best.1
+                } else {
+                    any.1
+                }
             })
             .collect()
     };
@@ -141,7 +152,11 @@ fn main() {
         let e = prm_trace::entry_irradiance(&bvh, &light, &entries);
         let tracer = ReferenceTracer::new(&scene, &bvh, Lighting::Lights(&light));
         let reference = tracer
-            .indirect_at_exits(&atlas.exits, &ReferenceParams::with_spp(env_or("REFSPP", 1024)), &mut |_, _| {})
+            .indirect_at_exits(
+                &atlas.exits,
+                &ReferenceParams::with_spp(env_or("REFSPP", 1024)),
+                &mut |_, _| {},
+            )
             .unwrap();
         let noise = {
             let v: f64 = reference.variance.iter().map(|v| v.element_sum() as f64).sum();

@@ -229,8 +229,18 @@ pub fn run(bin: &Path, cache: &Path, root: &Path) -> Result<String> {
         };
         let t_auto = bake_s(&auto_bake);
         let a = &auto_bake.archive;
-        row("(none: as played)", &played(a, &spec.path, auto.top_k, light, &texels)?, &reference, t_auto);
-        row("K = all", &played(a, &spec.path, auto.clusters, light, &texels)?, &reference, t_auto);
+        row(
+            "(none: as played)",
+            &played(a, &spec.path, auto.top_k, light, &texels)?,
+            &reference,
+            t_auto,
+        );
+        row(
+            "K = all",
+            &played(a, &spec.path, auto.clusters, light, &texels)?,
+            &reference,
+            t_auto,
+        );
         let exact = cpu_blend(a, &tracer, light, &texels, prm_scene::ENTRY_DISK)?;
         row("ray-cast entry irradiance, K = all", &exact, &reference, t_auto);
         let unbounded = cpu_blend(a, &tracer, light, &texels, 0.0)?;
@@ -260,7 +270,10 @@ pub fn run(bin: &Path, cache: &Path, root: &Path) -> Result<String> {
                 bake_s(&b),
             );
         } else {
-            println!("budget:   unclustered skipped: {} entries > 2048 texture layers", auto.entries);
+            println!(
+                "budget:   unclustered skipped: {} entries > 2048 texture layers",
+                auto.entries
+            );
         }
         let b = variant(auto.args(), Some("vpl_disk_scale = 0.0\n"))?;
         row(

@@ -197,7 +197,11 @@ fn run(args: &[String]) -> Result<()> {
         let table = budget::run(&bin, &cache, &root)?;
         let path = out.join("budget.md");
         std::fs::write(&path, &table).with_context(|| format!("writing {}", path.display()))?;
-        println!("\n{table}\nbudget: written to {} in {:.0} s", path.display(), started.elapsed().as_secs_f64());
+        println!(
+            "\n{table}\nbudget: written to {} in {:.0} s",
+            path.display(),
+            started.elapsed().as_secs_f64()
+        );
         return Ok(());
     }
     let scenes = plan::scenes(mode, &root);
