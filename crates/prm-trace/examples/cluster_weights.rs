@@ -183,15 +183,8 @@ fn main() {
             },
             &cluster_panes,
         );
-        let energy_w = combine(
-            &|c| {
-                let mm = &clustering.members[c];
-                let num: Vec3 = mm.iter().map(|&k| e[k as usize] * energy[k as usize]).sum();
-                let den: Vec3 = mm.iter().map(|&k| energy[k as usize]).sum();
-                num / den.max(Vec3::splat(1e-30))
-            },
-            &cluster_panes,
-        );
+        let by_energy = clustering.weights_by_energy(&e, &energy);
+        let energy_w = combine(&|c| by_energy[c], &cluster_panes);
         // Region weights: the direct light integrated over each entry's own cell (the area
         // samples nearest to it on its own plane), per unit of its nominal area `A/N`.
         let e_area = prm_trace::entry_irradiance(&bvh, &light, &area);
@@ -201,15 +194,8 @@ fn main() {
             region[i as usize] += *ea * (s.albedo / en.albedo.max(Vec3::splat(1e-6))) * (s.weight / en.weight);
         }
         let region_un = combine(&|i| region[i], &entry_panes);
-        let region_energy = combine(
-            &|c| {
-                let mm = &clustering.members[c];
-                let num: Vec3 = mm.iter().map(|&k| region[k as usize] * energy[k as usize]).sum();
-                let den: Vec3 = mm.iter().map(|&k| energy[k as usize]).sum();
-                num / den.max(Vec3::splat(1e-30))
-            },
-            &cluster_panes,
-        );
+        let region_by_energy = clustering.weights_by_energy(&region, &energy);
+        let region_energy = combine(&|c| region_by_energy[c], &cluster_panes);
         let lsq = combine(
             &|c| {
                 let mm = &clustering.members[c];

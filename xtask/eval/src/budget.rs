@@ -247,52 +247,34 @@ pub fn run(bin: &Path, cache: &Path, root: &Path) -> Result<String> {
         row("  and no entry-point bound", &unbounded, &reference, t_auto);
 
         let variant = |args: Vec<String>, config: Option<&str>| plan::bake(bin, cache, spec, &args, config, false);
-        let mut args = auto.args();
-        args.extend(["--backend".into(), "cpu".into()]);
-        let b = variant(args, None)?;
-        row(
-            "exact-visibility panes",
-            &played(&b.archive, &spec.path, auto.top_k, light, &texels)?,
-            &reference,
-            bake_s(&b),
-        );
+        let mut cpu = auto.args();
+        cpu.extend(["--backend".into(), "cpu".into()]);
         let unclustered = Params {
             clusters: auto.entries,
             top_k: auto.entries,
             ..auto
         };
+        let walks = Params {
+            paths_per_entry: auto.paths_per_entry * 4,
+            ..auto
+        };
+        // (stage, bake arguments, config, K played) at the default resolution.
+        let mut stages = vec![("exact-visibility panes", cpu, None, auto.top_k)];
         if auto.entries <= 2048 {
-            let b = variant(unclustered.args(), None)?;
-            row(
-                "unclustered, K = all",
-                &played(&b.archive, &spec.path, auto.entries, light, &texels)?,
-                &reference,
-                bake_s(&b),
-            );
+            stages.push(("unclustered, K = all", unclustered.args(), None, auto.entries));
         } else {
             println!(
                 "budget:   unclustered skipped: {} entries > 2048 texture layers",
                 auto.entries
             );
         }
-        let b = variant(auto.args(), Some("vpl_disk_scale = 0.0\n"))?;
-        row(
-            "no VPL bound",
-            &played(&b.archive, &spec.path, auto.top_k, light, &texels)?,
-            &reference,
-            bake_s(&b),
-        );
-        let walks = Params {
-            paths_per_entry: auto.paths_per_entry * 4,
-            ..auto
-        };
-        let b = variant(walks.args(), None)?;
-        row(
-            "4× walks",
-            &played(&b.archive, &spec.path, auto.top_k, light, &texels)?,
-            &reference,
-            bake_s(&b),
-        );
+        stages.push(("no VPL bound", auto.args(), Some("vpl_disk_scale = 0.0\n"), auto.top_k));
+        stages.push(("4× walks", walks.args(), None, auto.top_k));
+        for (stage, args, config, k) in stages {
+            let b = variant(args, config)?;
+            let test = played(&b.archive, &spec.path, k, light, &texels)?;
+            row(stage, &test, &reference, bake_s(&b));
+        }
         let fine = Params {
             resolution: auto.resolution * 2,
             ..auto
