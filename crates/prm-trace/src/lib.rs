@@ -32,6 +32,6 @@ pub use pane::{evaluate_panes, PaneParams, Panes};
 pub use prm_scene::{parse_camera, parse_light, parse_size, SpecError, ENTRY_DISK};
 pub use reference::{Estimate, ImageMode, Lighting, ReferenceParams, ReferenceTracer};
 pub use rng::Rng;
-pub use sampling::{sample_surface, EntryParams, SurfaceSample};
+pub use sampling::{cosine_hemisphere, sample_surface, sobol2, EntryParams, SurfaceSample};
 pub use vpl::VplBound;
 pub use walk::{trace_walks, Roulette, Vpl, VplSet, WalkParams, WalkStats};

@@ -15,11 +15,14 @@
 //! | no VPL bound | plain `1/r²` | `vpl_disk_scale = 0` |
 //! | 4× walks | four times the walks per entry point | `--paths-per-entry ×4` |
 //! | 2× atlas | twice the atlas resolution | `--resolution ×2` (its own reference) |
+//! | all but the bounds | unclustered, exact visibility and 4× walks together | `--backend cpu`, K = all |
 //!
 //! Every row is measured in lightmap space against `prm_trace::ReferenceTracer` at an even
 //! stride of the atlas's exit points, and split into the energy bias (Σ PRM / Σ ref − 1), the
-//! shape error (what is left after the best global scale) and the reference's own noise. The
-//! table goes to `budget.md` in the output directory; the README quotes it.
+//! shape error (what is left after the best global scale) and the reference's own noise, and
+//! located: the share of the squared error at exit points within 1.5 texels of an edge of the
+//! geometry (a neighbour surface facing more than 60° away), and the error farther than 4 texels
+//! from any edge. The table goes to `budget.md` in the output directory; the README quotes it.
 
 use anyhow::{bail, Context, Result};
 use glam::Vec3;
@@ -43,6 +46,20 @@ struct Case {
     light_fraction: [f32; 3],
 }
 
+/// Exit points closer than this to an edge (in texels) are "at an edge"; farther than
+/// [`INTERIOR`] they are "away from edges".
+const EDGE: f32 = 1.5;
+const INTERIOR: f32 = 4.0;
+
+/// The measured exit points of one atlas resolution and their reference.
+struct Measured {
+    texels: Vec<u32>,
+    reference: Reference,
+    /// Distance of every measured exit point to the nearest exit point on a surface facing
+    /// another way (more than 60° apart: an edge of the geometry), in texels.
+    edge: Vec<f32>,
+}
+
 /// Error of one row against its reference, over the measured exit points.
 #[derive(Clone, Copy, Debug)]
 struct Split {
@@ -50,13 +67,26 @@ struct Split {
     energy: f64,
     shape: f64,
     noise: f64,
+    /// Share of the squared error at exit points within [`EDGE`] texels of an edge.
+    edge_share: f64,
+    /// The error over the exit points farther than [`INTERIOR`] texels from an edge.
+    interior: f64,
 }
 
-fn split(test: &[Vec3], reference: &Reference) -> Split {
+fn split(test: &[Vec3], m: &Measured) -> Split {
+    let reference = &m.reference;
     let (mut d2, mut r2, mut t2, mut tr, mut st, mut sr, mut var) = (0.0f64, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
-    for ((t, r), v) in test.iter().zip(&reference.mean).zip(&reference.variance) {
+    let (mut edge_d2, mut in_d2, mut in_r2) = (0.0f64, 0.0f64, 0.0f64);
+    for (((t, r), v), e) in test.iter().zip(&reference.mean).zip(&reference.variance).zip(&m.edge) {
         let (t, r) = (t.as_dvec3(), r.as_dvec3());
-        d2 += (t - r).length_squared();
+        let d = (t - r).length_squared();
+        if *e < EDGE {
+            edge_d2 += d;
+        } else if *e >= INTERIOR {
+            in_d2 += d;
+            in_r2 += r.length_squared();
+        }
+        d2 += d;
         r2 += r.length_squared();
         t2 += t.length_squared();
         tr += t.dot(r);
@@ -71,6 +101,8 @@ fn split(test: &[Vec3], reference: &Reference) -> Split {
         energy: st / sr,
         shape,
         noise: (var / r2).sqrt(),
+        edge_share: edge_d2 / d2.max(1e-300),
+        interior: (in_d2 / in_r2.max(1e-300)).sqrt(),
     }
 }
 
@@ -180,7 +212,7 @@ pub fn run(bin: &Path, cache: &Path, root: &Path) -> Result<String> {
     let mut md = String::new();
     let _ = writeln!(
         md,
-        "| case | stage made ideal | error | energy | shape error | ref. noise | bake s |\n| --- | --- | ---: | ---: | ---: | ---: | ---: |"
+        "| case | stage made ideal | error | energy | shape error | ref. noise | error² at edges | error away from edges | bake s |\n| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"
     );
     for case in cases(root) {
         let spec = &case.scene;
@@ -197,54 +229,75 @@ pub fn run(bin: &Path, cache: &Path, root: &Path) -> Result<String> {
             auto.entries, auto.clusters, auto.resolution, auto.paths_per_entry, auto.top_k
         );
         // The measured exit points of one resolution, and their reference.
-        let measured = |resolution: u32| -> Result<(Vec<u32>, Reference)> {
+        let measured = |resolution: u32| -> Result<Measured> {
             let atlas = Atlas::build(&scene, &AtlasParams::with_sizing(Sizing::Resolution(resolution)))?;
             let stride = atlas.exits.len().div_ceil(TEXELS).max(1);
             let exits: Vec<_> = atlas.exits.iter().step_by(stride).copied().collect();
-            let r = tracer.lightmap(resolution, &exits, &light_spec, &light, SPP)?;
-            if r.seconds > 0.0 {
-                println!("budget:   reference {resolution}²: {:.1} s", r.seconds);
+            let reference = tracer.lightmap(resolution, &exits, &light_spec, &light, SPP)?;
+            if reference.seconds > 0.0 {
+                println!("budget:   reference {resolution}²: {:.1} s", reference.seconds);
             }
-            Ok((exits.iter().map(|x| x.texel).collect(), r))
+            let edge = exits
+                .iter()
+                .map(|x| {
+                    let d2 = atlas
+                        .exits
+                        .iter()
+                        .filter(|y| y.normal.dot(x.normal) < 0.5)
+                        .map(|y| (y.position - x.position).length_squared())
+                        .fold(f32::INFINITY, f32::min);
+                    d2.sqrt() / atlas.stats.texel_size
+                })
+                .collect();
+            Ok(Measured {
+                texels: exits.iter().map(|x| x.texel).collect(),
+                reference,
+                edge,
+            })
         };
-        let (texels, reference) = measured(auto.resolution)?;
+        let base = measured(auto.resolution)?;
+        let texels = &base.texels;
         let bake_s = |b: &plan::Baked| b.report["timings"]["total"].as_f64().unwrap_or(f64::NAN);
-        let mut row = |stage: &str, test: &[Vec3], reference: &Reference, seconds: f64| {
-            let s = split(test, reference);
+        let mut row = |stage: &str, test: &[Vec3], m: &Measured, seconds: f64| {
+            let s = split(test, m);
             println!(
-                "budget:   {stage:<28} error {:.1}%, energy {:.3}, shape {:.1}%, noise {:.1}%",
+                "budget:   {stage:<28} error {:.1}%, energy {:.3}, shape {:.1}%, noise {:.1}%, at edges {:.0}%, away {:.1}%",
                 100.0 * s.error,
                 s.energy,
                 100.0 * s.shape,
-                100.0 * s.noise
+                100.0 * s.noise,
+                100.0 * s.edge_share,
+                100.0 * s.interior
             );
             let _ = writeln!(
                 md,
-                "| {name} | {stage} | {:.1}% | {:.3} | {:.1}% | {:.1}% | {seconds:.1} |",
+                "| {name} | {stage} | {:.1}% | {:.3} | {:.1}% | {:.1}% | {:.0}% | {:.1}% | {seconds:.1} |",
                 100.0 * s.error,
                 s.energy,
                 100.0 * s.shape,
-                100.0 * s.noise
+                100.0 * s.noise,
+                100.0 * s.edge_share,
+                100.0 * s.interior
             );
         };
         let t_auto = bake_s(&auto_bake);
         let a = &auto_bake.archive;
         row(
             "(none: as played)",
-            &played(a, &spec.path, auto.top_k, light, &texels)?,
-            &reference,
+            &played(a, &spec.path, auto.top_k, light, texels)?,
+            &base,
             t_auto,
         );
         row(
             "K = all",
-            &played(a, &spec.path, auto.clusters, light, &texels)?,
-            &reference,
+            &played(a, &spec.path, auto.clusters, light, texels)?,
+            &base,
             t_auto,
         );
-        let exact = cpu_blend(a, &tracer, light, &texels, prm_scene::ENTRY_DISK)?;
-        row("ray-cast entry irradiance, K = all", &exact, &reference, t_auto);
-        let unbounded = cpu_blend(a, &tracer, light, &texels, 0.0)?;
-        row("  and no entry-point bound", &unbounded, &reference, t_auto);
+        let exact = cpu_blend(a, &tracer, light, texels, prm_scene::ENTRY_DISK)?;
+        row("ray-cast entry irradiance, K = all", &exact, &base, t_auto);
+        let unbounded = cpu_blend(a, &tracer, light, texels, 0.0)?;
+        row("  and no entry-point bound", &unbounded, &base, t_auto);
 
         let variant = |args: Vec<String>, config: Option<&str>| plan::bake(bin, cache, spec, &args, config, false);
         let mut cpu = auto.args();
@@ -270,21 +323,36 @@ pub fn run(bin: &Path, cache: &Path, root: &Path) -> Result<String> {
         }
         stages.push(("no VPL bound", auto.args(), Some("vpl_disk_scale = 0.0\n"), auto.top_k));
         stages.push(("4× walks", walks.args(), None, auto.top_k));
+        if auto.entries <= 2048 {
+            let mut ideal = Params {
+                clusters: auto.entries,
+                top_k: auto.entries,
+                ..walks
+            }
+            .args();
+            ideal.extend(["--backend".into(), "cpu".into()]);
+            stages.push((
+                "unclustered, exact visibility and 4× walks, K = all",
+                ideal,
+                None,
+                auto.entries,
+            ));
+        }
         for (stage, args, config, k) in stages {
             let b = variant(args, config)?;
-            let test = played(&b.archive, &spec.path, k, light, &texels)?;
-            row(stage, &test, &reference, bake_s(&b));
+            let test = played(&b.archive, &spec.path, k, light, texels)?;
+            row(stage, &test, &base, bake_s(&b));
         }
         let fine = Params {
             resolution: auto.resolution * 2,
             ..auto
         };
         let b = variant(fine.args(), None)?;
-        let (fine_texels, fine_reference) = measured(fine.resolution)?;
+        let fine_measured = measured(fine.resolution)?;
         row(
             "2× atlas resolution",
-            &played(&b.archive, &spec.path, auto.top_k, light, &fine_texels)?,
-            &fine_reference,
+            &played(&b.archive, &spec.path, auto.top_k, light, &fine_measured.texels)?,
+            &fine_measured,
             bake_s(&b),
         );
         println!("budget: {name} done in {:.0} s", started.elapsed().as_secs_f64());
