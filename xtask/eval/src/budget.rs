@@ -260,17 +260,7 @@ pub fn run(bin: &Path, cache: &Path, root: &Path) -> Result<String> {
         let bake_s = |b: &plan::Baked| b.report["timings"]["total"].as_f64().unwrap_or(f64::NAN);
         let mut row = |stage: &str, test: &[Vec3], m: &Measured, seconds: f64| {
             let s = split(test, m);
-            println!(
-                "budget:   {stage:<28} error {:.1}%, energy {:.3}, shape {:.1}%, noise {:.1}%, at edges {:.0}%, away {:.1}%",
-                100.0 * s.error,
-                s.energy,
-                100.0 * s.shape,
-                100.0 * s.noise,
-                100.0 * s.edge_share,
-                100.0 * s.interior
-            );
-            let _ = writeln!(
-                md,
+            let line = format!(
                 "| {name} | {stage} | {:.1}% | {:.3} | {:.1}% | {:.1}% | {:.0}% | {:.1}% | {seconds:.1} |",
                 100.0 * s.error,
                 s.energy,
@@ -279,6 +269,9 @@ pub fn run(bin: &Path, cache: &Path, root: &Path) -> Result<String> {
                 100.0 * s.edge_share,
                 100.0 * s.interior
             );
+            println!("budget: {line}");
+            md.push_str(&line);
+            md.push('\n');
         };
         let t_auto = bake_s(&auto_bake);
         let a = &auto_bake.archive;
