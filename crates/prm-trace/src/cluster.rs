@@ -306,16 +306,26 @@ impl Clustering {
     pub fn weights_by_energy(&self, entry_irradiance: &[Vec3], entry_energy: &[Vec3]) -> Vec<Vec3> {
         self.members
             .iter()
-            .map(|m| {
-                let (mut num, mut den) = (Vec3::ZERO, Vec3::ZERO);
-                for &k in m {
-                    num += entry_irradiance[k as usize] * entry_energy[k as usize];
-                    den += entry_energy[k as usize];
-                }
-                Vec3::select(den.cmpgt(Vec3::ZERO), num / den, Vec3::ZERO)
-            })
+            .map(|m| energy_weight(m.iter().map(|&k| k as usize), entry_irradiance, entry_energy))
             .collect()
     }
+}
+
+/// One cluster's weight as [`Clustering::weights_by_energy`] takes it, from its `members`'
+/// indices into `entry_irradiance` and `entry_energy`: `Σ E_i e_i / Σ e_i` per channel (0 where
+/// the members carry no energy). For clusters that come from elsewhere, such as an archive's
+/// cluster table.
+pub fn energy_weight(
+    members: impl IntoIterator<Item = usize>,
+    entry_irradiance: &[Vec3],
+    entry_energy: &[Vec3],
+) -> Vec3 {
+    let (mut num, mut den) = (Vec3::ZERO, Vec3::ZERO);
+    for k in members {
+        num += entry_irradiance[k] * entry_energy[k];
+        den += entry_energy[k];
+    }
+    Vec3::select(den.cmpgt(Vec3::ZERO), num / den, Vec3::ZERO)
 }
 
 #[cfg(test)]

@@ -25,7 +25,7 @@ pub mod vpl;
 pub mod walk;
 
 pub use bvh::{BuildQuality, Bvh, BvhKind, BvhParams, Hit};
-pub use cluster::{ClusterParams, Clustering};
+pub use cluster::{energy_weight, ClusterParams, Clustering};
 pub use direct::{bounded_irradiance, direct_irradiance, entry_irradiance};
 pub use error::TraceError;
 pub use pane::{evaluate_panes, PaneParams, Panes};

@@ -140,29 +140,29 @@ fn cases(root: &Path) -> Vec<Case> {
     out
 }
 
-/// The light of a case, with the intensity the eval uses (scaled to the scene's size).
-fn light_of(scene: &prm_scene::Scene, f: [f32; 3]) -> Result<(String, Light)> {
-    let b = scene.bounds();
-    let p = b.min + (b.max - b.min) * Vec3::from_array(f);
-    let d = b.diagonal();
-    let i = Vec3::new(1.0, 0.9, 0.75) * 0.3 * d * d;
-    let s = format!("point:{},{},{}:{},{},{}", p.x, p.y, p.z, i.x, i.y, i.z);
-    let l = prm_trace::parse_light(&s).map_err(|e| anyhow::anyhow!("light {s}: {e}"))?;
-    Ok((s, l))
-}
-
-/// The lightmap the player computes for `light`, at `texels`.
-fn played(archive: &Path, scene_path: &Path, top_k: u32, light: Light, texels: &[u32]) -> Result<Vec<Vec3>> {
-    let (mut r, scene) = crate::measure::renderer(archive, scene_path, top_k)?;
+/// The lightmaps the player computes for `light` at `texels`, one per run-time K in `ks`, from
+/// one renderer.
+fn played_each(archive: &Path, scene_path: &Path, ks: &[u32], light: Light, texels: &[u32]) -> Result<Vec<Vec<Vec3>>> {
+    let (mut r, scene) = crate::measure::renderer(archive, scene_path, ks[0])?;
     r.resize(64, 48);
     let lights = [light];
-    r.render(&FrameInput {
-        camera: prm_play::default_camera(&scene),
-        lights: &lights,
-        mode: PlayMode::Gi,
-    })?;
-    let lm = r.read_lightmap()?;
-    Ok(texels.iter().map(|&t| Vec3::from_array(lm[t as usize])).collect())
+    ks.iter()
+        .map(|&k| {
+            r.set_top_k(k);
+            r.render(&FrameInput {
+                camera: prm_play::default_camera(&scene),
+                lights: &lights,
+                mode: PlayMode::Gi,
+            })?;
+            let lm = r.read_lightmap()?;
+            Ok(texels.iter().map(|&t| Vec3::from_array(lm[t as usize])).collect())
+        })
+        .collect()
+}
+
+/// [`played_each`] for one K.
+fn played(archive: &Path, scene_path: &Path, top_k: u32, light: Light, texels: &[u32]) -> Result<Vec<Vec3>> {
+    Ok(played_each(archive, scene_path, &[top_k], light, texels)?.remove(0))
 }
 
 /// The archive's panes blended on the CPU at `texels`, every cluster weighed by its members'
@@ -190,12 +190,7 @@ fn cpu_blend(archive: &Path, tracer: &Tracer, light: Light, texels: &[u32], entr
         .collect();
     let mut out = vec![Vec3::ZERO; texels.len()];
     for (c, cl) in clusters.iter().enumerate() {
-        let (mut num, mut den) = (Vec3::ZERO, Vec3::ZERO);
-        for k in cl.members() {
-            num += e[k] * energy[k];
-            den += energy[k];
-        }
-        let w = Vec3::select(den.cmpgt(Vec3::ZERO), num / den, Vec3::ZERO);
+        let w = prm_trace::energy_weight(cl.members(), &e, &energy);
         if w == Vec3::ZERO {
             continue;
         }
@@ -218,9 +213,12 @@ pub fn run(bin: &Path, cache: &Path, root: &Path) -> Result<String> {
         let spec = &case.scene;
         let started = Instant::now();
         let scene = prm_scene::load(&spec.path).with_context(|| format!("loading {}", spec.path.display()))?;
-        let key = format!("{}|{:016x}", spec.path.display(), scene.fingerprint());
-        let tracer = Tracer::new(&scene, key, cache.join("refs"))?;
-        let (light_spec, light) = light_of(&scene, case.light_fraction)?;
+        let tracer = Tracer::new(
+            &scene,
+            crate::reference::scene_key(&spec.path, &scene),
+            cache.join("refs"),
+        )?;
+        let (light_spec, light) = plan::point_light(&scene, case.light_fraction)?;
         let auto_bake = plan::bake(bin, cache, spec, &[], None, false)?;
         let auto = Params::from_report(&auto_bake.report)?;
         let name = format!("{}, light {}", spec.name, case.light_name);
@@ -275,18 +273,9 @@ pub fn run(bin: &Path, cache: &Path, root: &Path) -> Result<String> {
         };
         let t_auto = bake_s(&auto_bake);
         let a = &auto_bake.archive;
-        row(
-            "(none: as played)",
-            &played(a, &spec.path, auto.top_k, light, texels)?,
-            &base,
-            t_auto,
-        );
-        row(
-            "K = all",
-            &played(a, &spec.path, auto.clusters, light, texels)?,
-            &base,
-            t_auto,
-        );
+        let auto_played = played_each(a, &spec.path, &[auto.top_k, auto.clusters], light, texels)?;
+        row("(none: as played)", &auto_played[0], &base, t_auto);
+        row("K = all", &auto_played[1], &base, t_auto);
         let exact = cpu_blend(a, &tracer, light, texels, prm_scene::ENTRY_DISK)?;
         row("ray-cast entry irradiance, K = all", &exact, &base, t_auto);
         let unbounded = cpu_blend(a, &tracer, light, texels, 0.0)?;

@@ -21,7 +21,6 @@ mod plan;
 mod reference;
 
 use anyhow::{bail, Context, Result};
-use glam::Vec3;
 use plan::{Mode, Params, SceneSpec};
 use prm_scene::{Atlas, AtlasParams, Sizing};
 use std::collections::HashMap;
@@ -286,25 +285,11 @@ fn evaluate_scene(mode: Mode, bin: &Path, cache: &Path, spec: &SceneSpec) -> Res
         auto.entries, auto.clusters, auto.resolution, auto.paths_per_entry, auto.top_k
     );
     let scene = prm_scene::load(&spec.path).with_context(|| format!("loading {}", spec.path.display()))?;
-    let scene_key = format!(
-        "{}|{:016x}|{}",
-        spec.path.display(),
-        scene.fingerprint(),
-        std::fs::metadata(&spec.path).map(|m| m.len()).unwrap_or(0)
-    );
-    let tracer = reference::Tracer::new(&scene, scene_key, cache.join("refs"))?;
-    let bounds = scene.bounds();
-    let diag = bounds.diagonal();
+    let tracer = reference::Tracer::new(&scene, reference::scene_key(&spec.path, &scene), cache.join("refs"))?;
     let lights: Vec<(String, prm_scene::Light)> = spec
         .light_fractions
         .iter()
-        .map(|f| {
-            let p = bounds.min + (bounds.max - bounds.min) * Vec3::from_array(*f);
-            let i = Vec3::new(1.0, 0.9, 0.75) * 0.3 * diag * diag;
-            let s = format!("point:{},{},{}:{},{},{}", p.x, p.y, p.z, i.x, i.y, i.z);
-            let l = prm_trace::parse_light(&s).map_err(|e| anyhow::anyhow!("light {s}: {e}"))?;
-            Ok((s, l))
-        })
+        .map(|f| plan::point_light(&scene, *f))
         .collect::<Result<_>>()?;
     let camera = match &spec.camera {
         Some(c) => prm_trace::parse_camera(c).map_err(|e| anyhow::anyhow!("camera {c}: {e}"))?,

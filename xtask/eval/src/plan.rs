@@ -145,6 +145,19 @@ pub fn scenes(mode: Mode, root: &Path) -> Vec<SceneSpec> {
 }
 
 /// The bake parameters the automatic choice made (from `prm-bake bake --plan --report`).
+/// A point light at `fraction` of `scene`'s bounds, as a light spec and parsed, with the
+/// eval's warm white intensity scaled by the bounds' diagonal squared (so that scenes of every
+/// size get comparable irradiance).
+pub fn point_light(scene: &prm_scene::Scene, fraction: [f32; 3]) -> Result<(String, prm_scene::Light)> {
+    let b = scene.bounds();
+    let p = b.min + (b.max - b.min) * glam::Vec3::from_array(fraction);
+    let d = b.diagonal();
+    let i = glam::Vec3::new(1.0, 0.9, 0.75) * 0.3 * d * d;
+    let s = format!("point:{},{},{}:{},{},{}", p.x, p.y, p.z, i.x, i.y, i.z);
+    let l = prm_trace::parse_light(&s).map_err(|e| anyhow::anyhow!("light {s}: {e}"))?;
+    Ok((s, l))
+}
+
 #[derive(Clone, Copy, Debug)]
 pub struct Params {
     pub entries: u32,

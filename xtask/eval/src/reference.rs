@@ -53,6 +53,17 @@ fn load(path: &Path) -> Result<Reference> {
     })
 }
 
+/// What identifies `scene` (loaded from `path`) in the cache keys: its path, geometry and
+/// materials fingerprint and file size.
+pub fn scene_key(path: &Path, scene: &Scene) -> String {
+    format!(
+        "{}|{:016x}|{}",
+        path.display(),
+        scene.fingerprint(),
+        std::fs::metadata(path).map(|m| m.len()).unwrap_or(0)
+    )
+}
+
 /// Reference computations for one scene, cached in `dir`.
 pub struct Tracer<'a> {
     pub scene: &'a Scene,
