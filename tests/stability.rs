@@ -348,6 +348,7 @@ fn bake_small(dir: &Path, scene: &Path, entries: &str, clusters: &str, walks: &s
         scene_path: scene,
         plan: &plan,
         output: &out,
+        shard: None,
     };
     let ctx = gpu();
     if let Err(e) = prm_bake::bake(&job, prm_bake::Renderer::Gpu(&ctx), &mut prm_bake::NoProgress) {

@@ -13,6 +13,9 @@
 //! 4. [`bake`] writes the archive atomically (nothing is left behind on failure) and returns the
 //!    counts and timings ([`Baked`]), reporting its phases to a [`ProgressSink`].
 //!
+//! A bake can be split over machines: each runs [`bake`] with [`BakeJob::shard`] set to its
+//! [`Shard`], and [`merge`] joins the partial archives into the single bake's archive.
+//!
 //! ```no_run
 //! use std::path::Path;
 //! use prm_bake::{BakeConfig, BakeJob, NoProgress, Plan, Preset, Renderer};
@@ -31,6 +34,7 @@
 //!     scene_path,
 //!     plan: &plan,
 //!     output: Path::new("out/cornell-box.prm"),
+//!     shard: None,
 //! };
 //! let baked = prm_bake::bake(&job, Renderer::Cpu, &mut NoProgress)?;
 //! println!("{} clusters, {} bytes", baked.clusters, baked.archive_bytes);
@@ -42,9 +46,11 @@ mod archive;
 mod error;
 pub mod params;
 mod pipeline;
+mod shard;
 mod sink;
 
 pub use error::BakeError;
 pub use params::{AtlasSize, BakeConfig, BakeParams, CostModel, Preset};
 pub use pipeline::{bake, BakeJob, Baked, Plan, Renderer};
+pub use shard::{merge, Merged, Shard};
 pub use sink::{NoProgress, Phase, ProgressSink};

@@ -4,6 +4,7 @@
 mod atlas;
 mod bake;
 mod dump;
+mod merge;
 mod progress;
 mod reference;
 mod signals;
@@ -30,6 +31,12 @@ enum Command {
     /// Without sizes, the bake derives them from the scene and the budgets and says why.
     /// Example: prm-bake bake scenes/cornell-box/cornell-box.gltf -o out/cornell-box.prm
     Bake(Box<bake::BakeArgs>),
+    /// Join the partial archives of a sharded bake (`bake --shard I/N`) into one archive.
+    ///
+    /// Refuses parts of different scenes, seeds, parameters or backends, and a missing or
+    /// repeated shard. CPU-baked shards merge into exactly the bytes a single bake writes.
+    /// Example: prm-bake merge part-0.prm part-1.prm -o out/scene.prm
+    Merge(merge::MergeArgs),
     /// Load a scene (OBJ or glTF), build its lightmap atlas and print statistics.
     ///
     /// Example: prm-bake atlas scenes/cornell-box/cornell-box.obj --resolution 256 --png charts.png
@@ -53,6 +60,7 @@ fn main() -> ExitCode {
         Command::Bake(args) => bake::run(args),
         Command::Atlas(args) => atlas::run(args),
         Command::Dump(args) => dump::run(args),
+        Command::Merge(args) => merge::run(args),
         Command::Reference(args) => reference::run(args),
     };
     match result {

@@ -190,11 +190,21 @@ pub const DEFAULT_MEMORY_BUDGET_MIB: f64 = 256.0;
 /// Default bake time budget: ten minutes.
 pub const DEFAULT_TIME_BUDGET_S: f64 = 600.0;
 
-/// What a GPU bake costs, from rates measured on the reference machine (2 cores, lavapipe; see
-/// ARCHITECTURE.md): the pane passes dominate, so the model counts hemicube faces, the triangles
-/// they draw after culling, and VPL × exit point evaluations.
+/// What a bake costs on the reference machine (2 cores): the pane rendering dominates, so each
+/// model counts what it spends its time on. [`Renderer::cost_model`](crate::Renderer) picks the
+/// one of the renderer the bake runs on.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
-pub struct CostModel {
+pub enum CostModel {
+    /// The GPU pane passes (measured on lavapipe).
+    Gpu(GpuCost),
+    /// The CPU pane renderers.
+    Cpu(CpuCost),
+}
+
+/// The GPU model: hemicube faces, the triangles they draw after culling, and VPL × exit point
+/// evaluations.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct GpuCost {
     /// Fixed cost of one hemicube face, seconds.
     pub face_seconds: f64,
     /// Cost of one triangle drawn into a face, seconds.
@@ -207,25 +217,71 @@ pub struct CostModel {
     pub vpls_per_second: f64,
 }
 
+/// The CPU model: every VPL × exit point pair costs `pair_seconds × triangles^triangle_exponent`
+/// (its share of the shadow rays, which grow with the BVH's depth, plus the unoccluded term).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct CpuCost {
+    /// Seconds per VPL × exit point pair in a one-triangle scene.
+    pub pair_seconds: f64,
+    /// How the cost per pair grows with the scene's triangle count.
+    pub triangle_exponent: f64,
+    /// VPLs traced per second (walks).
+    pub vpls_per_second: f64,
+}
+
 impl CostModel {
-    /// Rates measured with `cargo run --release -p prm-gpu --example bench_panes` on the
+    /// Lavapipe, measured with `cargo run --release -p prm-gpu --example bench_panes` on the
     /// reference machine while it was shared (the job got about 60% of its two cores), so on a
     /// quiet one bakes take about half the estimate: Sibenik's default bake, expected 510 s, took
     /// 246 s quiet and 606 s shared.
-    pub const REFERENCE: CostModel = CostModel {
+    pub const GPU: CostModel = CostModel::Gpu(GpuCost {
         face_seconds: 1.0e-4,
         triangle_seconds: 3.0e-7,
         drawn_fraction: 0.2,
         evaluations_per_second: 12.0e6,
         vpls_per_second: 1.0e6,
-    };
+    });
+
+    /// `--backend cpu` (shared visibility), fitted to the pane rendering time per pair of three
+    /// default-size bakes (`cargo xtask bench-bake`, quiet machine): the Cornell box (30
+    /// triangles, 11.7 ns per pair), chairs with the paper preset (2,910, 33.3 ns) and Sibenik
+    /// (75,277, 80.5 ns). The per-pair cost grows as T^0.23 between the first two and T^0.27
+    /// between the last two; T^0.25 with 4.8 ns fits all three within 6 %.
+    pub const CPU: CostModel = CostModel::Cpu(CpuCost {
+        pair_seconds: 4.8e-9,
+        triangle_exponent: 0.25,
+        vpls_per_second: 1.0e6,
+    });
+
+    /// `--backend cpu-exact`: 50.9 ns per pair on the Cornell box and 72.7 ns on chairs (paper
+    /// preset), T^0.078; not measured on larger scenes.
+    pub const CPU_EXACT: CostModel = CostModel::Cpu(CpuCost {
+        pair_seconds: 39.6e-9,
+        triangle_exponent: 0.078,
+        vpls_per_second: 1.0e6,
+    });
+
+    /// Expected seconds for `entries` entry points with `paths` walks each, `bounces_per_walk`
+    /// VPLs per walk besides each entry point's own, over `exits` exit points in a scene of
+    /// `triangles`.
+    pub fn bake_seconds(&self, entries: usize, paths: u32, bounces_per_walk: f64, exits: f64, triangles: f64) -> f64 {
+        let vpls = entries as f64 * (1.0 + paths as f64 * bounces_per_walk);
+        self.seconds(vpls, exits, triangles)
+    }
 
     /// Expected seconds for `vpls` VPLs over `exits` exit points in a scene of `triangles`.
     pub fn seconds(&self, vpls: f64, exits: f64, triangles: f64) -> f64 {
-        let faces = 5.0 * vpls;
-        faces * (self.face_seconds + self.triangle_seconds * self.drawn_fraction * triangles)
-            + vpls * exits / self.evaluations_per_second
-            + vpls / self.vpls_per_second
+        match self {
+            CostModel::Gpu(g) => {
+                let faces = 5.0 * vpls;
+                faces * (g.face_seconds + g.triangle_seconds * g.drawn_fraction * triangles)
+                    + vpls * exits / g.evaluations_per_second
+                    + vpls / g.vpls_per_second
+            }
+            CostModel::Cpu(c) => {
+                vpls * exits * c.pair_seconds * triangles.max(1.0).powf(c.triangle_exponent) + vpls / c.vpls_per_second
+            }
+        }
     }
 }
 
@@ -238,9 +294,12 @@ pub fn plural(n: usize) -> &'static str {
     }
 }
 
-/// Expected VPLs per walk: a walk stores a VPL per bounce and survives a bounce with the
-/// roulette's probability, so on average 1 / (1 − q̄) VPLs, q̄ the area-weighted survival.
-fn vpls_per_walk(scene: &Scene) -> f64 {
+/// Expected VPLs per walk beyond the entry point's own (which every entry point has once, however
+/// many walks leave it) in a closed scene: a walk stores a VPL per bounce and survives a bounce
+/// with the roulette's probability q̄ (area-weighted), so q̄ / (1 − q̄) on average. Walks that
+/// escape make fewer: [`Plan::new`](crate::Plan) measures the count instead.
+#[cfg(test)]
+pub(crate) fn bounces_per_walk(scene: &Scene) -> f64 {
     let roulette = prm_trace::Roulette::DEFAULT;
     let (mut q, mut area) = (0.0f64, 0.0f64);
     for (i, t) in scene.triangles.iter().enumerate() {
@@ -248,11 +307,14 @@ fn vpls_per_walk(scene: &Scene) -> f64 {
         q += a * roulette.survival(scene.albedo(i, 1.0 / 3.0, 1.0 / 3.0)) as f64;
         area += a;
     }
-    1.0 / (1.0 - (q / area.max(1e-30)).min(0.95))
+    let q = (q / area.max(1e-30)).min(0.95);
+    q / (1.0 - q)
 }
 
 impl BakeParams {
-    /// Resolves `config` for `scene`; `probe` builds the automatic atlas when one is needed.
+    /// Resolves `config` for `scene`; `probe` builds the automatic atlas when one is needed, and
+    /// `cost` estimates the bake's time from the VPL count: one per entry point and
+    /// `bounces_per_walk` per walk.
     ///
     /// Automatic rules (preset `default`, each overridable):
     /// - atlas: the atlas's own automatic size (about 12 texels per triangle, 256 to 4096 a side),
@@ -260,7 +322,7 @@ impl BakeParams {
     /// - entries: 4 per chart (charts are the scene's distinct flat pieces), 1024 to 16384, a
     ///   multiple of 256;
     /// - walks per entry: enough for about 8192 walks in all, 1 to 16;
-    /// - then, while [`CostModel::REFERENCE`] expects the bake to take longer than the time budget,
+    /// - then, while `cost` expects the bake to take longer than the time budget,
     ///   fewer walks, fewer entries (down to 1024) or a smaller atlas (down to 128²), whichever is
     ///   furthest above its floor;
     /// - clusters: entries / 16, 32 to 1024, then as many as the memory budget and the archive
@@ -269,6 +331,8 @@ impl BakeParams {
     pub fn resolve(
         config: &BakeConfig,
         scene: &Scene,
+        cost: &CostModel,
+        bounces_per_walk: f64,
         probe: impl Fn() -> Result<Atlas, BakeError>,
     ) -> Result<BakeParams, BakeError> {
         let preset = config.preset.unwrap_or(Preset::Default);
@@ -342,15 +406,13 @@ impl BakeParams {
             Some(_) => probe()?.stats.utilization as f64,
             None => 0.5,
         };
-        let per_walk = vpls_per_walk(scene);
         let triangles = scene.triangles.len() as f64;
         let texels = |atlas: AtlasSize| match atlas {
             AtlasSize::Resolution(r) => (r as f64).powi(2),
             AtlasSize::TexelSize(s) => scene.area() / (s as f64).powi(2) * 2.0,
         };
         let estimate = |entries: usize, paths: u32, atlas: AtlasSize| {
-            let vpls = entries as f64 * paths as f64 * per_walk;
-            CostModel::REFERENCE.seconds(vpls, utilization * texels(atlas), triangles)
+            cost.bake_seconds(entries, paths, bounces_per_walk, utilization * texels(atlas), triangles)
         };
         // Every chart needs a texel and its gutters: a 3×3 block at the least.
         let atlas_floor = match auto_resolution {

@@ -70,6 +70,7 @@ fn a_cpu_bake_reports_its_phases_and_writes_the_planned_archive() {
         scene_path: &path,
         plan: &plan,
         output: &out,
+        shard: None,
     };
     let mut recorder = Recorder::default();
     let baked = prm_bake::bake(&job, Renderer::Cpu, &mut recorder).unwrap();
@@ -110,7 +111,10 @@ fn a_cpu_bake_reports_its_phases_and_writes_the_planned_archive() {
             Event::Finish(p) => {
                 assert_eq!(current.map(|c| c.0), Some(p), "{:?}", recorder.0);
                 if p == Phase::PaneRendering {
-                    assert_eq!(done, baked.clusters as u64, "every pane was reported");
+                    // The CPU renderers count exit points.
+                    let total = current.map_or(0, |c| c.1);
+                    assert_eq!(total, baked.atlas.covered_texels as u64, "{:?}", recorder.0);
+                    assert_eq!(done, total, "every exit point was reported");
                 }
                 current = None;
             }
@@ -167,6 +171,7 @@ fn impossible_parameters_and_destinations_are_typed_errors() {
         scene_path: &path,
         plan: &plan,
         output: &dir,
+        shard: None,
     };
     let e = prm_bake::bake(&job, Renderer::Cpu, &mut prm_bake::NoProgress).unwrap_err();
     assert!(matches!(e, BakeError::Destination(_)), "{e:?}");

@@ -229,6 +229,11 @@ impl GpuContext {
         })
     }
 
+    /// Whether the adapter is a software rasterizer (lavapipe, llvmpipe, WARP).
+    pub fn is_software(&self) -> bool {
+        self.info.device_type == wgpu::DeviceType::Cpu
+    }
+
     /// One line: adapter name, backend, driver.
     pub fn describe(&self) -> String {
         format!(

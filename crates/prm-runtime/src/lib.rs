@@ -174,6 +174,14 @@ impl Runtime {
         options: RuntimeOptions,
     ) -> Result<Runtime, RuntimeError> {
         options.validate(&device.limits())?;
+        if let Some(shard) = archive.metadata().params.get("shard") {
+            let field = |k: &str| shard.get(k).map_or("?".to_string(), |v| v.to_string());
+            return Err(RuntimeError::PartialArchive(format!(
+                "{}/{}",
+                field("index"),
+                field("count")
+            )));
+        }
         let atlas = archive.atlas().clone();
         if atlas.triangle_uvs.len() != scene.triangles.len() {
             return Err(RuntimeError::Mismatch(format!(

@@ -28,6 +28,10 @@ pub enum RuntimeError {
     /// The archive and the scene disagree.
     #[error("archive does not fit the scene: {0}")]
     Mismatch(String),
+    /// The archive is one shard of a sharded bake (`params.shard`): the other shards' panes are
+    /// empty.
+    #[error("the archive is shard {0} of a sharded bake, without the other shards' panes: join the parts with `prm-bake merge`")]
+    PartialArchive(String),
     /// More panes than the device holds in one texture array.
     #[error("the archive has {panes} panes but this GPU holds at most {max} texture layers")]
     TooManyPanes {

@@ -122,3 +122,35 @@ fn bad_input_is_refused_naming_it() {
     assert!(!rt.update(&[point(0.2, 0.2, 0.2); 2]).unwrap());
     ctx.wait().unwrap();
 }
+
+/// One shard of a sharded bake (`params.shard`) holds the other shards' panes as zeros: the run
+/// time refuses it, naming the shard and the merge.
+#[test]
+fn a_shard_of_a_bake_is_refused() {
+    let ctx = gpu();
+    let (scene, mut a) = archive("shard");
+    let mut metadata = a.metadata().clone();
+    metadata
+        .params
+        .insert("shard".into(), serde_json::json!({ "index": 1, "count": 4 }));
+    let clusters: Vec<prm_format::Cluster> = a
+        .clusters()
+        .iter()
+        .map(|c| prm_format::Cluster::new(c.first, c.count, c.centroid, c.mean_normal))
+        .collect();
+    let out = std::env::temp_dir().join(format!("prm-runtime-{}-shard/part.prm", std::process::id()));
+    let mut w = prm_format::ArchiveWriter::create(&out, metadata, a.atlas(), a.entries(), &clusters).unwrap();
+    for c in 0..clusters.len() {
+        w.add_pane(&a.read_pane(c).unwrap()).unwrap();
+    }
+    w.finish().unwrap();
+    let mut part = prm_format::Archive::open(&out).unwrap();
+    let e = Runtime::new(&ctx.device, &ctx.queue, &mut part, &scene, RuntimeOptions::default())
+        .err()
+        .expect("a shard was accepted");
+    assert!(matches!(e, RuntimeError::PartialArchive(_)), "{e}");
+    assert!(
+        e.to_string().contains("shard 1/4") && e.to_string().contains("prm-bake merge"),
+        "{e}"
+    );
+}

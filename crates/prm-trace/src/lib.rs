@@ -28,7 +28,7 @@ pub use bvh::{BuildQuality, Bvh, BvhKind, BvhParams, Hit};
 pub use cluster::{energy_weight, ClusterParams, Clustering};
 pub use direct::{bounded_irradiance, direct_irradiance, entry_irradiance};
 pub use error::TraceError;
-pub use pane::{evaluate_panes, PaneParams, Panes};
+pub use pane::{evaluate_atlas_panes, evaluate_panes, Lattice, PaneParams, Panes};
 pub use prm_scene::{parse_camera, parse_light, parse_size, SpecError, ENTRY_DISK};
 pub use reference::{Estimate, ImageMode, Lighting, ReferenceParams, ReferenceTracer};
 pub use rng::Rng;

@@ -1,4 +1,4 @@
-//! CPU pane evaluator: the pane of every cluster at every exit point, by brute force.
+//! CPU pane evaluators: the pane of every cluster at every exit point, by ray casting.
 //!
 //! `pane_c(x) = Σ_{k ∈ c} Σ_{v ∈ VPLs of k} Φ_v/π · cos θ_x · cos θ_v · b(r², v) · V(x, v)` where
 //! `b` is the bounded `1/r²` ([`VplBound`]) and `V` is a shadow ray ([`Bvh::visible`]); `cos θ_x`
@@ -8,17 +8,53 @@
 //! members weighed by their pane energy ([`crate::Clustering::weights_by_energy`],
 //! [`Panes::combine`]).
 //!
-//! Work is parallel over exit points; each exit point sums its VPLs in a fixed order, so the
-//! result does not depend on the thread count. This is the exact yardstick for a GPU renderer.
+//! Two evaluators, on one kernel (the VPLs in blocks of 64, structure of arrays, so that the
+//! unoccluded term vectorises: the Cornell box's exact panes took 28.0 s with one VPL at a
+//! time, 23.3 s now):
+//! * [`evaluate_panes`]: one shadow ray per exit point and VPL, over any list of exit points. The
+//!   exact yardstick for every other renderer.
+//! * [`evaluate_atlas_panes`]: over an atlas, sharing shadow rays between neighbouring texels
+//!   ([`Lattice`]). Every ray is cast at the exit points of a coarse lattice (every `step`-th
+//!   texel in x and y); then, halving the spacing down to 1, each new point takes a VPL's
+//!   visibility from the lattice corners around it when they all agree, and casts its own ray
+//!   where they do not (shadow edges) or where a corner is missing or unlike it (chart borders,
+//!   creases). The unoccluded term is evaluated at every exit point. With `step: 1` it is the
+//!   exact evaluator, bit for bit.
+//!
+//! Measured (release, 2 cores, `prm-bake bake --backend cpu` against `--backend cpu-exact`;
+//! difference = relative L2 of all pane values against exact, over the archive's RGB9E5 panes):
+//!
+//! | scene | step | shadow rays | pane rendering | difference (worst pane) | energy |
+//! | --- | --- | ---: | ---: | ---: | ---: |
+//! | Cornell box, default (42,912 exits, 10,668 VPLs) | exact | 303 M | 23.3 s | | |
+//! | | 2 | 98 M | 9.0 s | 0.32 % (1.2 %) | 1.0000 |
+//! | | 4 | 46 M | 5.2 s | 0.57 % (2.4 %) | 1.0001 |
+//! | | 8 | 34 M | 4.1 s | 0.65 % (2.4 %) | 1.0001 |
+//! | chairs, `--preset paper` (35,717 exits, 11,547 VPLs, 913 charts) | exact | 271 M | 30.0 s | | |
+//! | | 2 | 120 M | 15.7 s | 2.1 % (7.0 %) | 1.0013 |
+//! | | 4 | 80 M | 12.9 s | 2.5 % (13 %) | 1.0021 |
+//! | | 8 | 70 M | 12.0 s | 4.1 % (28 %) | 1.0026 |
+//!
+//! For scale, lavapipe's depth-map panes (`--backend vulkan`) differ from exact by 1.8 % on the
+//! Cornell box and by 10.7 % on chairs (energy 1.046): the shared visibility is closer to exact
+//! than the GPU path. Step 4 is the default: step 8 saves 7 % of chairs' time for 1.6 points more
+//! difference, since a shadow narrower than the coarse lattice is lost. Chairs' time is 82 %
+//! shadow rays (`perf`); of its 80 M rays, 45 M are cast at points whose corners do not all fit
+//! (its charts are small), 20 M at the coarse lattice and 15 M at shadow edges. A slow (spatial
+//! split) build or a BVH2 did not trace them faster.
+//!
+//! Work is parallel over exit points (tiles of the atlas); each exit point sums its VPLs in a
+//! fixed order and the work items are fixed by the atlas alone, so the result does not depend on
+//! the thread count.
 
 use glam::Vec3;
-use prm_scene::ExitPoint;
+use prm_scene::{Atlas, ExitPoint, EMPTY_TEXEL};
 use rayon::prelude::*;
 
 use crate::bvh::Bvh;
 use crate::cluster::Clustering;
 use crate::vpl::VplBound;
-use crate::walk::VplSet;
+use crate::walk::{Vpl, VplSet};
 use crate::TraceError;
 
 /// Pane evaluation parameters.
@@ -77,6 +113,157 @@ impl Panes {
     }
 }
 
+/// VPLs per block of the per-exit loop: one word of the visibility bit sets.
+const BLOCK: usize = 64;
+
+/// The VPLs as the per-exit loop reads them: structure of arrays padded to whole blocks, so the
+/// unoccluded term of a block is one loop of fixed length that the compiler vectorises.
+struct Kernel<'a> {
+    bvh: &'a Bvh,
+    vpls: &'a [Vpl],
+    px: Vec<f32>,
+    py: Vec<f32>,
+    pz: Vec<f32>,
+    nx: Vec<f32>,
+    ny: Vec<f32>,
+    nz: Vec<f32>,
+    /// The bound as `1/max(r² + add, min)` ([`VplBound`]).
+    add: Vec<f32>,
+    min: Vec<f32>,
+    cluster: Vec<u32>,
+    clusters: usize,
+    entries: usize,
+}
+
+impl<'a> Kernel<'a> {
+    fn new(bvh: &'a Bvh, vpls: &'a VplSet, clustering: &Clustering, bound: VplBound) -> Result<Kernel<'a>, TraceError> {
+        if clustering.of_entry.len() != vpls.entries() {
+            return Err(TraceError::InvalidParameter(format!(
+                "clustering covers {} entry points, the VPL set {}",
+                clustering.of_entry.len(),
+                vpls.entries()
+            )));
+        }
+        let padded = vpls.vpls.len().div_ceil(BLOCK) * BLOCK;
+        let column = |f: &dyn Fn(&Vpl) -> f32| -> Vec<f32> {
+            let mut c: Vec<f32> = vpls.vpls.iter().map(f).collect();
+            // Padding: a zero normal makes `cos θ_v` zero, so these never count.
+            c.resize(padded, 0.0);
+            c
+        };
+        // `1/max(r² + disk · area, clamp)` is each bound of [`VplBound`].
+        let (disk, clamp) = match bound {
+            VplBound::None => (0.0, 0.0),
+            VplBound::Clamp { min_distance } => (0.0, min_distance * min_distance),
+            VplBound::Disk { scale } => (scale * scale * std::f32::consts::FRAC_1_PI, 0.0),
+        };
+        Ok(Kernel {
+            bvh,
+            vpls: &vpls.vpls,
+            px: column(&|v| v.position.x),
+            py: column(&|v| v.position.y),
+            pz: column(&|v| v.position.z),
+            nx: column(&|v| v.normal.x),
+            ny: column(&|v| v.normal.y),
+            nz: column(&|v| v.normal.z),
+            add: column(&|v| disk * v.area),
+            min: column(&|_| clamp),
+            cluster: vpls
+                .vpls
+                .iter()
+                .map(|v| clustering.of_entry[v.entry as usize])
+                .collect(),
+            clusters: clustering.len(),
+            entries: vpls.entries(),
+        })
+    }
+
+    /// Words of a per-VPL bit set (= blocks).
+    fn words(&self) -> usize {
+        self.px.len() / BLOCK
+    }
+
+    /// The unoccluded irradiance factor `cos θ_x cos θ_v b(r²)/π` of block `b`'s VPLs at `x`
+    /// (zero where either side faces away), and the mask of the non-zero ones.
+    #[inline]
+    fn block_factors(&self, b: usize, x: Vec3, n: Vec3, g: &mut [f32; BLOCK]) -> u64 {
+        fn block(c: &[f32], b: usize) -> &[f32; BLOCK] {
+            c[b * BLOCK..(b + 1) * BLOCK].try_into().expect("whole blocks")
+        }
+        let (px, py, pz) = (block(&self.px, b), block(&self.py, b), block(&self.pz, b));
+        let (nx, ny, nz) = (block(&self.nx, b), block(&self.ny, b), block(&self.nz, b));
+        let (add, min) = (block(&self.add, b), block(&self.min, b));
+        // Branch-free, so that it vectorises: `cx`, `cv` are the cosines times r.
+        for j in 0..BLOCK {
+            let (dx, dy, dz) = (px[j] - x.x, py[j] - x.y, pz[j] - x.z);
+            let r2 = dx * dx + dy * dy + dz * dz;
+            let cx = n.x * dx + n.y * dy + n.z * dz;
+            let cv = -(nx[j] * dx + ny[j] * dy + nz[j] * dz);
+            let denominator = r2 * (r2 + add[j]).max(min[j]);
+            let f = std::f32::consts::FRAC_1_PI * cx * cv / denominator;
+            let facing = (cx > 0.0) & (cv > 0.0) & (denominator > 0.0);
+            g[j] = if facing { f } else { 0.0 };
+        }
+        let mut mask = 0u64;
+        for (j, &f) in g.iter().enumerate() {
+            mask |= u64::from(f > 0.0) << j;
+        }
+        mask
+    }
+
+    /// Sums every VPL at exit `x` into `acc` (per cluster) and `entry_energy`. `corners` gives,
+    /// per word, the VPLs that the lattice corners all see and all miss; every other VPL facing
+    /// `x` costs a shadow ray, whose answer is recorded in `bits` (known, visible) when given.
+    fn sum_exit(
+        &self,
+        x: &ExitPoint,
+        corners: Option<(&[u64], &[u64])>,
+        mut bits: Option<(&mut [u64], &mut [u64])>,
+        acc: &mut [Vec3],
+        entry_energy: &mut [Vec3],
+        rays: &mut u64,
+    ) {
+        let ng = self.bvh.geometric_normal(x.triangle);
+        let mut g = [0.0f32; BLOCK];
+        for w in 0..self.words() {
+            let facing = self.block_factors(w, x.position, x.normal, &mut g);
+            if facing == 0 {
+                continue;
+            }
+            let (mut visible, mut unknown) = match corners {
+                Some((seen, missed)) => (facing & seen[w], facing & !seen[w] & !missed[w]),
+                None => (0, facing),
+            };
+            *rays += u64::from(unknown.count_ones());
+            let mut vis_w = 0u64;
+            while unknown != 0 {
+                let j = unknown.trailing_zeros() as usize;
+                unknown &= unknown - 1;
+                let v = &self.vpls[w * BLOCK + j];
+                if self
+                    .bvh
+                    .visible(x.position, ng, x.triangle, v.position, v.normal, v.triangle)
+                {
+                    vis_w |= 1 << j;
+                }
+            }
+            visible |= vis_w;
+            if let Some((known, vis)) = bits.as_mut() {
+                known[w] = facing;
+                vis[w] = visible;
+            }
+            while visible != 0 {
+                let j = visible.trailing_zeros() as usize;
+                visible &= visible - 1;
+                let k = w * BLOCK + j;
+                let e = self.vpls[k].power * g[j];
+                acc[self.cluster[k] as usize] += e;
+                entry_energy[self.vpls[k].entry as usize] += e;
+            }
+        }
+    }
+}
+
 /// Work items of [`evaluate_panes`]: the exits are cut into this many chunks (of 64 to 4096
 /// exits), each keeping one energy per entry point, so the bookkeeping stays at most 256 ×
 /// entries × 12 bytes while 2 cores still get 128 items each. Fixed by the exit count alone, so
@@ -84,7 +271,7 @@ impl Panes {
 const WORK_ITEMS: usize = 256;
 
 /// Evaluates every cluster's pane at every exit point in `exits`, and every entry point's pane
-/// energy.
+/// energy, with one shadow ray per exit point and VPL.
 pub fn evaluate_panes(
     bvh: &Bvh,
     vpls: &VplSet,
@@ -92,71 +279,284 @@ pub fn evaluate_panes(
     exits: &[ExitPoint],
     params: &PaneParams,
 ) -> Result<Panes, TraceError> {
-    if clustering.of_entry.len() != vpls.entries() {
-        return Err(TraceError::InvalidParameter(format!(
-            "clustering covers {} entry points, the VPL set {}",
-            clustering.of_entry.len(),
-            vpls.entries()
-        )));
-    }
-    let c = clustering.len();
-    let cluster_of_vpl: Vec<u32> = vpls
-        .vpls
-        .iter()
-        .map(|v| clustering.of_entry[v.entry as usize])
-        .collect();
+    let kernel = Kernel::new(bvh, vpls, clustering, params.bound)?;
+    let c = kernel.clusters;
     // Exits in fixed chunks, each summing its VPLs' energy too; the chunks' sums are added in
     // order, so the energies do not depend on the thread count either.
     let chunk_len = exits.len().div_ceil(WORK_ITEMS).clamp(64, 4096);
-    let per_chunk: Vec<(Vec<Vec<Vec3>>, Vec<Vec3>, u64)> = exits
+    let per_chunk: Vec<WorkPanes> = exits
         .par_chunks(chunk_len)
-        .map(|chunk| {
-            let mut entry_energy = vec![Vec3::ZERO; vpls.entries()];
-            let mut rays = 0u64;
-            let accs = chunk
-                .iter()
-                .map(|x| {
-                    let mut acc = vec![Vec3::ZERO; c];
-                    let ng = bvh.geometric_normal(x.triangle);
-                    for (v, &cl) in vpls.vpls.iter().zip(&cluster_of_vpl) {
-                        let e = params.bound.irradiance(v, x.position, x.normal);
-                        if e == Vec3::ZERO || v.position.distance_squared(x.position) == 0.0 {
-                            continue;
-                        }
-                        rays += 1;
-                        if bvh.visible(x.position, ng, x.triangle, v.position, v.normal, v.triangle) {
-                            acc[cl as usize] += e;
-                            entry_energy[v.entry as usize] += e;
-                        }
-                    }
-                    acc
-                })
-                .collect();
-            (accs, entry_energy, rays)
+        .enumerate()
+        .map(|(k, chunk)| {
+            let mut out = WorkPanes::new(kernel.entries);
+            out.exits = (k * chunk_len..k * chunk_len + chunk.len()).map(|i| i as u32).collect();
+            out.accs = vec![Vec3::ZERO; chunk.len() * c];
+            for (x, acc) in chunk.iter().zip(out.accs.chunks_mut(c.max(1))) {
+                kernel.sum_exit(x, None, None, acc, &mut out.entry_energy, &mut out.rays);
+            }
+            out
         })
         .collect();
-    let n = exits.len();
-    let mut data = vec![Vec3::ZERO; c * n];
-    let mut rays = 0;
-    let mut entry_energy = vec![Vec3::ZERO; vpls.entries()];
-    let mut i = 0;
-    for (accs, energy, r) in per_chunk {
-        rays += r;
-        for (total, e) in entry_energy.iter_mut().zip(energy) {
-            *total += e;
-        }
-        for acc in accs {
-            for (cl, v) in acc.into_iter().enumerate() {
-                data[cl * n + i] = v;
-            }
-            i += 1;
+    let mut panes = Panes::assembling(c, exits.len(), kernel.entries);
+    for out in per_chunk {
+        panes.add(out);
+    }
+    Ok(panes)
+}
+
+/// What one work item (a chunk or tile of exit points) produced.
+struct WorkPanes {
+    /// Exit point indices, in the order of `accs`.
+    exits: Vec<u32>,
+    /// `exits.len() × clusters` pane values, exit-major.
+    accs: Vec<Vec3>,
+    entry_energy: Vec<Vec3>,
+    rays: u64,
+}
+
+impl WorkPanes {
+    fn new(entries: usize) -> WorkPanes {
+        WorkPanes {
+            exits: Vec::new(),
+            accs: Vec::new(),
+            entry_energy: vec![Vec3::ZERO; entries],
+            rays: 0,
         }
     }
-    Ok(Panes {
-        clusters: c,
-        exits: n,
-        data,
-        rays,
-        entry_energy,
-    })
+}
+
+impl Panes {
+    /// Empty panes, to [`add`](Self::add) work items to.
+    fn assembling(clusters: usize, exits: usize, entries: usize) -> Panes {
+        Panes {
+            clusters,
+            exits,
+            data: vec![Vec3::ZERO; clusters * exits],
+            rays: 0,
+            entry_energy: vec![Vec3::ZERO; entries],
+        }
+    }
+
+    /// Adds a work item's results (items are added in a fixed order, so the sums are too).
+    fn add(&mut self, out: WorkPanes) {
+        let (c, n) = (self.clusters, self.exits);
+        self.rays += out.rays;
+        for (total, e) in self.entry_energy.iter_mut().zip(&out.entry_energy) {
+            *total += *e;
+        }
+        for (k, &i) in out.exits.iter().enumerate() {
+            for cl in 0..c {
+                self.data[cl * n + i as usize] = out.accs[k * c + cl];
+            }
+        }
+    }
+}
+
+/// Shadow-ray sharing between neighbouring texels in [`evaluate_atlas_panes`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Lattice {
+    /// Texels, in x and in y, between the exit points that cast every shadow ray: a power of
+    /// two; 1 casts every ray at every exit point (exact).
+    pub step: u32,
+}
+
+impl Lattice {
+    /// Every shadow ray at every exit point: the same panes as [`evaluate_panes`].
+    pub const EXACT: Lattice = Lattice { step: 1 };
+    /// Every fourth texel in x and y, refined through every second: 15–30 % of the exact rays,
+    /// within 0.6–2.5 % of exact (module docs).
+    pub const DEFAULT: Lattice = Lattice { step: 4 };
+}
+
+impl Default for Lattice {
+    fn default() -> Self {
+        Self::DEFAULT
+    }
+}
+
+/// A lattice corner stands for an exit point only if its normal is within about 18° of the exit
+/// point's (cos 18° ≈ 0.95): across a crease or on a tight curve the corners see a different
+/// horizon.
+const CORNER_MIN_COS: f32 = 0.95;
+
+/// … and if it lies within this many corner spacings of it, in the atlas's mean texel size (a
+/// diagonal corner is √2 spacings away; farther means the chart is stretched or folded there).
+const CORNER_MAX_SPACINGS: f32 = 2.0;
+
+/// Tiles of the atlas are this many texels on a side (or the lattice step, if larger): the
+/// coarsest lattice points on a tile's far edges are cast again by the next tile, 27 % more of
+/// them at step 4.
+const TILE_TEXELS: u32 = 32;
+
+/// Tiles evaluated in parallel before their results are added up in order: bounds the per-tile
+/// entry energies held at once to this many × entries × 12 bytes.
+const TILES_PER_BATCH: usize = 64;
+
+/// The tiles of an atlas, evaluated coarse to fine.
+struct Tiler<'a> {
+    kernel: Kernel<'a>,
+    atlas: &'a Atlas,
+    step: u32,
+    tile: u32,
+}
+
+impl Tiler<'_> {
+    /// Whether exit `c` may stand for exit `x` as a lattice corner `spacing` texels away.
+    fn corner_fits(&self, x: &ExitPoint, c: &ExitPoint, spacing: u32) -> bool {
+        let charts = &self.atlas.chart_of_triangle;
+        let max_d = CORNER_MAX_SPACINGS * spacing as f32 * self.atlas.stats.texel_size;
+        charts[x.triangle as usize] == charts[c.triangle as usize]
+            && x.normal.dot(c.normal) >= CORNER_MIN_COS
+            && x.position.distance(c.position) <= max_d
+    }
+
+    /// Evaluates the tile whose first texel is `(x0, y0)`: first the points of the coarsest
+    /// lattice (every ray), then each finer lattice's new points from the corners around them
+    /// on the coarser one. The region includes the far edges, whose lattice points belong to
+    /// the next tiles but are corners of this one's last texels; they are evaluated for their
+    /// answers only.
+    fn evaluate_tile(&self, x0: u32, y0: u32) -> WorkPanes {
+        let (res, s, t) = (self.atlas.resolution, self.step, self.tile);
+        let side = (t + 1) as usize;
+        let words = self.kernel.words();
+        let c = self.kernel.clusters;
+        let exit_at = |x: u32, y: u32| -> Option<u32> {
+            (x < res && y < res)
+                .then(|| self.atlas.texel_exit[(y * res + x) as usize])
+                .filter(|&i| i != EMPTY_TEXEL)
+        };
+        let mut out = WorkPanes::new(self.kernel.entries);
+        // Bits of every point that is a corner of a finer one: the even texels.
+        let half = side.div_ceil(2);
+        let slot = |dx: u32, dy: u32| ((dy / 2) as usize * half + (dx / 2) as usize) * words;
+        let mut known = if s > 1 {
+            vec![0u64; half * half * words]
+        } else {
+            Vec::new()
+        };
+        let mut vis = known.clone();
+        let mut seen = vec![0u64; words];
+        let mut missed = vec![0u64; words];
+        let mut scratch = vec![Vec3::ZERO; c];
+        let mut scratch_energy = vec![Vec3::ZERO; self.kernel.entries];
+        let mut h = s;
+        loop {
+            // The points new at spacing `h`: multiples of h, not of 2h (all of them at the top).
+            for dy in (0..=t).step_by(h as usize) {
+                for dx in (0..=t).step_by(h as usize) {
+                    let top = h == s;
+                    if !top && dx % (2 * h) == 0 && dy % (2 * h) == 0 {
+                        continue;
+                    }
+                    let inside = dx < t && dy < t;
+                    // Far-edge points matter only as corners of finer points.
+                    if !inside && h == 1 {
+                        continue;
+                    }
+                    let Some(e) = exit_at(x0 + dx, y0 + dy) else { continue };
+                    let exit = &self.atlas.exits[e as usize];
+                    let corners = if top {
+                        None
+                    } else {
+                        let xs: &[u32] = if dx % (2 * h) == 0 { &[dx] } else { &[dx - h, dx + h] };
+                        let ys: &[u32] = if dy % (2 * h) == 0 { &[dy] } else { &[dy - h, dy + h] };
+                        // Every corner must stand for the point; at chart borders and creases
+                        // some do not, and the point casts its own rays. (Taking the corners
+                        // that fit, if two or more do, saved 11 % of the rays on chairs and
+                        // raised its difference from exact from 2.5 % to 3.3 %.)
+                        let corners = ys.iter().flat_map(|&cy| xs.iter().map(move |&cx| (cx, cy)));
+                        let fits = corners.clone().all(|(cx, cy)| {
+                            exit_at(x0 + cx, y0 + cy)
+                                .is_some_and(|ce| self.corner_fits(exit, &self.atlas.exits[ce as usize], h))
+                        });
+                        fits.then(|| {
+                            seen.fill(!0);
+                            missed.fill(!0);
+                            for (cx, cy) in corners {
+                                let at = slot(cx, cy);
+                                let (k, v) = (&known[at..at + words], &vis[at..at + words]);
+                                for w in 0..words {
+                                    seen[w] &= k[w] & v[w];
+                                    missed[w] &= k[w] & !v[w];
+                                }
+                            }
+                            (seen.as_slice(), missed.as_slice())
+                        })
+                    };
+                    let bits = (h > 1).then(|| {
+                        let at = slot(dx, dy);
+                        (&mut known[at..at + words], &mut vis[at..at + words])
+                    });
+                    if inside {
+                        let at = out.accs.len();
+                        out.accs.resize(at + c, Vec3::ZERO);
+                        out.exits.push(e);
+                        self.kernel.sum_exit(
+                            exit,
+                            corners,
+                            bits,
+                            &mut out.accs[at..],
+                            &mut out.entry_energy,
+                            &mut out.rays,
+                        );
+                    } else {
+                        scratch.fill(Vec3::ZERO);
+                        self.kernel
+                            .sum_exit(exit, corners, bits, &mut scratch, &mut scratch_energy, &mut out.rays);
+                    }
+                }
+            }
+            if h == 1 {
+                break;
+            }
+            h /= 2;
+        }
+        out
+    }
+}
+
+/// Evaluates every cluster's pane at every exit point of `atlas`, and every entry point's pane
+/// energy, sharing shadow rays between neighbouring texels as `lattice` says (module docs).
+/// `on_progress` is called on the calling thread with the number of exit points done so far.
+pub fn evaluate_atlas_panes(
+    bvh: &Bvh,
+    vpls: &VplSet,
+    clustering: &Clustering,
+    atlas: &Atlas,
+    params: &PaneParams,
+    lattice: &Lattice,
+    on_progress: &mut dyn FnMut(u64),
+) -> Result<Panes, TraceError> {
+    if !lattice.step.is_power_of_two() {
+        return Err(TraceError::InvalidParameter(format!(
+            "the lattice step must be a power of two, not {}",
+            lattice.step
+        )));
+    }
+    let tiler = Tiler {
+        kernel: Kernel::new(bvh, vpls, clustering, params.bound)?,
+        atlas,
+        step: lattice.step,
+        tile: TILE_TEXELS.max(lattice.step),
+    };
+    let (res, t) = (atlas.resolution, tiler.tile);
+    let per_side = res.div_ceil(t);
+    let tiles: Vec<(u32, u32)> = (0..per_side * per_side)
+        .map(|k| ((k % per_side) * t, (k / per_side) * t))
+        .filter(|&(x0, y0)| {
+            (y0..(y0 + t).min(res))
+                .any(|y| (x0..(x0 + t).min(res)).any(|x| atlas.texel_exit[(y * res + x) as usize] != EMPTY_TEXEL))
+        })
+        .collect();
+    let mut panes = Panes::assembling(tiler.kernel.clusters, atlas.exits.len(), tiler.kernel.entries);
+    let mut done = 0u64;
+    for batch in tiles.chunks(TILES_PER_BATCH) {
+        let outs: Vec<WorkPanes> = batch.par_iter().map(|&(x0, y0)| tiler.evaluate_tile(x0, y0)).collect();
+        for out in outs {
+            done += out.exits.len() as u64;
+            panes.add(out);
+        }
+        on_progress(done);
+    }
+    Ok(panes)
 }

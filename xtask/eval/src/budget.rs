@@ -1,8 +1,9 @@
 //! `cargo xtask eval --budget`: the error budget of the default bake, one idealised stage at a time.
 //!
-//! For every case (a scene and one light) the default bake (`prm-bake bake SCENE`, release,
-//! lavapipe) is played as shipped, then each stage of the chain is replaced by its ideal while
-//! the others stay as shipped:
+//! For every case (a scene and one light) the default bake (`prm-bake bake SCENE`, release; on a
+//! machine without a GPU `--backend auto` renders panes with the native CPU evaluator) is played
+//! as shipped, then each stage of the chain is replaced by its ideal while the others stay as
+//! shipped:
 //!
 //! | row | what changes | how |
 //! | --- | --- | --- |
@@ -10,12 +11,13 @@
 //! | K = all | no top-K truncation | the same archive played with K = every cluster |
 //! | ray-cast entry irradiance | exact visibility at the entry points instead of shadow maps | the archive's panes blended on the CPU, weights from `prm_trace::bounded_irradiance` (K = all) |
 //! | no entry-point bound | the entry disk bound `ENTRY_DISK` off | as above with disk 0 |
-//! | exact-visibility panes | ray-cast pane visibility instead of depth maps | `--backend cpu` |
+//! | exact-visibility panes | a shadow ray per exit point and VPL instead of shared ones | `--backend cpu-exact` |
+//! | depth-map panes | not an ideal: the GPU path's hemicube depth maps (lavapipe here) | `--backend vulkan` |
 //! | unclustered | one pane per entry point | `--clusters = --entries`, K = all |
 //! | no VPL bound | plain `1/r²` | `vpl_disk_scale = 0` |
 //! | 4× walks | four times the walks per entry point | `--paths-per-entry ×4` |
 //! | 2× atlas | twice the atlas resolution | `--resolution ×2` (its own reference) |
-//! | all but the bounds | unclustered, exact visibility and 4× walks together | `--backend cpu`, K = all |
+//! | all but the bounds | unclustered, exact visibility and 4× walks together | `--backend cpu-exact`, K = all |
 //!
 //! Every row is measured in lightmap space against `prm_trace::ReferenceTracer` at an even
 //! stride of the atlas's exit points, and split into the energy bias (Σ PRM / Σ ref − 1), the
@@ -126,6 +128,17 @@ fn cases(root: &Path) -> Vec<Case> {
         scene: cornell(),
         light_name: "low near the red wall",
         light_fraction: [0.12, 0.35, 0.5],
+    });
+    out.push(Case {
+        scene: SceneSpec::new(
+            "chairs",
+            root.join("scenes/chairs/chairs.obj"),
+            vec![],
+            Default::default(),
+            SPP,
+        ),
+        light_name: "above the chairs",
+        light_fraction: [0.5, 0.75, 0.5],
     });
     let sphere = root.join("../shared/scenes/cornell-box/CornellBox-Sphere.obj");
     if sphere.is_file() {
@@ -282,8 +295,11 @@ pub fn run(bin: &Path, cache: &Path, root: &Path) -> Result<String> {
         row("  and no entry-point bound", &unbounded, &base, t_auto);
 
         let variant = |args: Vec<String>, config: Option<&str>| plan::bake(bin, cache, spec, &args, config, false);
-        let mut cpu = auto.args();
-        cpu.extend(["--backend".into(), "cpu".into()]);
+        let backend = |b: &str| {
+            let mut args = auto.args();
+            args.extend(["--backend".into(), b.into()]);
+            args
+        };
         let unclustered = Params {
             clusters: auto.entries,
             top_k: auto.entries,
@@ -294,7 +310,15 @@ pub fn run(bin: &Path, cache: &Path, root: &Path) -> Result<String> {
             ..auto
         };
         // (stage, bake arguments, config, K played) at the default resolution.
-        let mut stages = vec![("exact-visibility panes", cpu, None, auto.top_k)];
+        let mut stages = vec![
+            ("exact-visibility panes", backend("cpu-exact"), None, auto.top_k),
+            (
+                "(not ideal) depth-map panes on lavapipe",
+                backend("vulkan"),
+                None,
+                auto.top_k,
+            ),
+        ];
         if auto.entries <= 2048 {
             stages.push(("unclustered, K = all", unclustered.args(), None, auto.entries));
         } else {
@@ -312,7 +336,7 @@ pub fn run(bin: &Path, cache: &Path, root: &Path) -> Result<String> {
                 ..walks
             }
             .args();
-            ideal.extend(["--backend".into(), "cpu".into()]);
+            ideal.extend(["--backend".into(), "cpu-exact".into()]);
             stages.push((
                 "unclustered, exact visibility and 4× walks, K = all",
                 ideal,

@@ -332,8 +332,13 @@ fn file_stamp(path: &Path) -> String {
     }
 }
 
+/// Part of every cached bake's key: bumped whenever what a bake writes for the same arguments
+/// changes, so that the eval never measures a stale archive. 2: `--backend auto` renders on the
+/// native CPU evaluator when the only adapter is a software rasterizer.
+const BAKE_EPOCH: u32 = 2;
+
 /// Runs `prm-bake bake` for `spec` (extra arguments `extra`), or reuses the cached result under
-/// `cache` keyed by the scene file, the arguments and the config.
+/// `cache` keyed by [`BAKE_EPOCH`], the scene file, the arguments and the config.
 pub fn bake(
     bin: &Path,
     cache: &Path,
@@ -343,7 +348,7 @@ pub fn bake(
     plan_only: bool,
 ) -> Result<Baked> {
     let key_text = format!(
-        "{}|{}|{}|{}|{}",
+        "{BAKE_EPOCH}|{}|{}|{}|{}|{}",
         scene.path.display(),
         file_stamp(&scene.path),
         args.join(" "),

@@ -7,6 +7,15 @@ fn cornell() -> Scene {
     prm_scene::load(&p).unwrap()
 }
 
+/// [`BakeParams::resolve`] with the CPU renderer's cost model.
+fn resolve(
+    config: &BakeConfig,
+    scene: &Scene,
+    probe: impl Fn() -> Result<Atlas, BakeError>,
+) -> Result<BakeParams, BakeError> {
+    BakeParams::resolve(config, scene, &CostModel::CPU, bounces_per_walk(scene), probe)
+}
+
 fn probe(scene: &Scene) -> impl Fn() -> Result<Atlas, BakeError> + '_ {
     move || {
         Atlas::build(scene, &prm_scene::AtlasParams::DEFAULT).map_err(|source| BakeError::Atlas {
@@ -23,7 +32,7 @@ fn paper_preset_is_the_papers_settings() {
         preset: Some(Preset::Paper),
         ..Default::default()
     };
-    let p = BakeParams::resolve(&cfg, &scene, probe(&scene)).unwrap();
+    let p = resolve(&cfg, &scene, probe(&scene)).unwrap();
     assert_eq!(
         (p.entries, p.clusters, p.atlas, p.top_k),
         (4096, 256, AtlasSize::Resolution(256), 32)
@@ -39,7 +48,7 @@ fn command_line_overrides_config_overrides_preset() {
         clusters: Some(64),
         ..Default::default()
     };
-    let p = BakeParams::resolve(&file.overridden_by(&cli), &scene, probe(&scene)).unwrap();
+    let p = resolve(&file.overridden_by(&cli), &scene, probe(&scene)).unwrap();
     assert_eq!((p.entries, p.clusters), (2048, 64));
     assert!(
         toml::from_str::<BakeConfig>("entires = 3").is_err(),
@@ -50,7 +59,7 @@ fn command_line_overrides_config_overrides_preset() {
 #[test]
 fn automatic_sizes_follow_the_scene_and_budgets() {
     let scene = cornell();
-    let p = BakeParams::resolve(&BakeConfig::default(), &scene, probe(&scene)).unwrap();
+    let p = resolve(&BakeConfig::default(), &scene, probe(&scene)).unwrap();
     assert_eq!(p.entries, 1024, "a 16-chart box needs the minimum");
     assert!(p.clusters >= 32 && p.clusters <= p.entries);
     assert!(!p.reasons.is_empty());
@@ -63,7 +72,7 @@ fn automatic_sizes_follow_the_scene_and_budgets() {
         memory_budget_mib: Some(2.0),
         ..Default::default()
     };
-    let q = BakeParams::resolve(&tight, &scene, probe(&scene)).unwrap();
+    let q = resolve(&tight, &scene, probe(&scene)).unwrap();
     assert!(
         bytes(&q) <= 2.0 * 1024.0 * 1024.0 && bytes(&q) < bytes(&p),
         "{q:?} vs {p:?}"
@@ -73,13 +82,13 @@ fn automatic_sizes_follow_the_scene_and_budgets() {
 #[test]
 fn time_budget_shrinks_automatic_sizes_only() {
     let scene = cornell();
-    let roomy = BakeParams::resolve(&BakeConfig::default(), &scene, probe(&scene)).unwrap();
+    let roomy = resolve(&BakeConfig::default(), &scene, probe(&scene)).unwrap();
     let budget = roomy.estimated_seconds / 4.0;
     let tight = BakeConfig {
         time_budget_s: Some(budget),
         ..Default::default()
     };
-    let p = BakeParams::resolve(&tight, &scene, probe(&scene)).unwrap();
+    let p = resolve(&tight, &scene, probe(&scene)).unwrap();
     assert!(p.estimated_seconds <= budget, "{p:?}");
     assert!(p.estimated_seconds < roomy.estimated_seconds);
     assert!(p.reasons.iter().any(|r| r.contains("time budget")), "{:?}", p.reasons);
@@ -89,7 +98,7 @@ fn time_budget_shrinks_automatic_sizes_only() {
         time_budget_s: Some(1.0),
         ..Default::default()
     };
-    let q = BakeParams::resolve(&fixed, &scene, probe(&scene)).unwrap();
+    let q = resolve(&fixed, &scene, probe(&scene)).unwrap();
     assert_eq!((q.entries, q.clusters, q.paths_per_entry), (4096, 256, 1));
     assert!(q.estimated_seconds > 1.0);
 }
@@ -129,9 +138,7 @@ fn impossible_parameters_are_refused() {
             "memory budget",
         ),
     ] {
-        let e = BakeParams::resolve(&cfg, &scene, probe(&scene))
-            .unwrap_err()
-            .to_string();
+        let e = resolve(&cfg, &scene, probe(&scene)).unwrap_err().to_string();
         assert!(e.contains(needle), "{e}");
     }
 }
