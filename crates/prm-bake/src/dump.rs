@@ -208,6 +208,18 @@ pub fn write_summary<W: Write, R: Read + Seek>(
         hex(meta.scene_fingerprint)
     )?;
     writeln!(out, "seed         {}", meta.seed)?;
+    if let Some(b) = meta.params.get("backend").and_then(|b| b.as_str()) {
+        writeln!(out, "renderer     {b}")?;
+    }
+    if let Some(shard) = meta.params.get("shard") {
+        let field = |k: &str| shard.get(k).map_or("?".to_string(), |v| v.to_string());
+        writeln!(
+            out,
+            "shard        {}/{}: a partial archive (the other shards' panes are zero); join the parts with `prm-bake merge`",
+            field("index"),
+            field("count")
+        )?;
+    }
     writeln!(
         out,
         "units        length {}, irradiance {}",

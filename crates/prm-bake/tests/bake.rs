@@ -675,6 +675,12 @@ fn shards_merge_into_the_single_bake_byte_for_byte() {
         part1.to_str().unwrap(),
         merged.to_str().unwrap(),
     );
+    let dump = run(&["dump", p0]);
+    assert!(
+        String::from_utf8_lossy(&dump.stdout).contains("shard        0/2: a partial archive"),
+        "{}",
+        describe(&dump)
+    );
     let r = run(&["merge", p1, p0, "-o", m]);
     assert!(r.status.success(), "{}", describe(&r));
     assert!(
