@@ -22,7 +22,9 @@
 //!   exact evaluator, bit for bit.
 //!
 //! Measured (release, 2 cores, `prm-bake bake --backend cpu` against `--backend cpu-exact`;
-//! difference = relative L2 of all pane values against exact, over the archive's RGB9E5 panes):
+//! difference = relative L2 of all pane values against exact, over the archive's RGB9E5 panes;
+//! `cargo run --release -p prm-trace --example lattice -- SCENE ENTRIES CLUSTERS RES WALKS`
+//! repeats it on the floats):
 //!
 //! | scene | step | shadow rays | pane rendering | difference (worst pane) | energy |
 //! | --- | --- | ---: | ---: | ---: | ---: |
