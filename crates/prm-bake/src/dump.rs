@@ -211,14 +211,13 @@ pub fn write_summary<W: Write, R: Read + Seek>(
     if let Some(b) = meta.params.get("backend").and_then(|b| b.as_str()) {
         writeln!(out, "renderer     {b}")?;
     }
-    if let Some(shard) = meta.params.get("shard") {
-        let field = |k: &str| shard.get(k).map_or("?".to_string(), |v| v.to_string());
-        writeln!(
+    match prm_bake::Shard::of(meta) {
+        Some(Ok(shard)) => writeln!(
             out,
-            "shard        {}/{}: a partial archive (the other shards' panes are zero); join the parts with `prm-bake merge`",
-            field("index"),
-            field("count")
-        )?;
+            "shard        {shard}: a partial archive (the other shards' panes are zero); join the parts with `prm-bake merge`"
+        )?,
+        Some(Err(e)) => writeln!(out, "shard        malformed: {e}")?,
+        None => {}
     }
     writeln!(
         out,

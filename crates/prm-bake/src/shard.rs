@@ -39,8 +39,9 @@ impl Shard {
         serde_json::json!({ "index": self.index, "count": self.count })
     }
 
-    /// The shard an archive's metadata records, if it is a partial archive.
-    fn of(metadata: &Metadata) -> Option<Result<Shard, String>> {
+    /// The shard an archive's metadata records (`params.shard`), if it is a partial archive; an
+    /// error says what is wrong with a malformed record.
+    pub fn of(metadata: &Metadata) -> Option<Result<Shard, String>> {
         let v = metadata.params.get("shard")?;
         let field = |k: &str| v.get(k).and_then(|x| x.as_u64()).and_then(|x| u32::try_from(x).ok());
         Some(match (field("index"), field("count")) {
