@@ -140,8 +140,8 @@ enum Chosen {
 /// Opens the device the panes are rendered on, checked to run the pane passes
 /// ([`prm_gpu::check_support`]). `auto` takes the first hardware adapter of Vulkan, then OpenGL,
 /// and otherwise the native CPU evaluator, saying why it passed over each backend: on a software
-/// rasterizer (lavapipe, llvmpipe) the CPU evaluator bakes the bundled Cornell box about twice as
-/// fast (`cargo xtask bench-bake`). An explicit GPU backend that cannot bake is an error.
+/// rasterizer (lavapipe, llvmpipe) the CPU evaluator bakes the bundled Cornell box about ten
+/// times as fast (`cargo xtask bench-bake`). An explicit GPU backend that cannot bake is an error.
 fn open_backend(arg: BackendArg, progress: &Progress) -> Result<Chosen> {
     let open = |b: Backend| -> Result<GpuContext, prm_gpu::GpuError> {
         let ctx = GpuContext::new(b)?;
