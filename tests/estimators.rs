@@ -186,6 +186,21 @@ fn grid_lights() -> Vec<Light> {
             intensity: Vec3::new(3.0, 1.0, 7.0),
         });
     }
+    // Rectangular spots: square and narrow, and one wide and tilted.
+    for (half, axis, up) in [
+        ([30.0f32, 30.0], Vec3::NEG_Y, Vec3::Z),
+        ([50.0, 12.0], Vec3::new(1.0, -2.0, 0.5), Vec3::Y),
+        ([80.0, 60.0], Vec3::X, Vec3::new(0.0, 1.0, 1.0)),
+    ] {
+        let direction = axis.normalize();
+        lights.push(Light::Rect {
+            position: c + Vec3::new(-0.25, 0.5, 0.125),
+            direction,
+            up: (up - up.dot(direction) * direction).normalize(),
+            half_angles: half.map(f32::to_radians),
+            intensity: Vec3::new(2.0, 6.0, 1.0),
+        });
+    }
     for d in [Vec3::NEG_Y, Vec3::new(1.0, -1.0, 0.3), Vec3::new(-0.2, 0.5, -1.0)] {
         lights.push(Light::Directional {
             direction: d.normalize(),
@@ -200,6 +215,9 @@ fn light_scale(l: &Light, p: Vec3, disk: f32) -> f32 {
     match *l {
         Light::Point { position, intensity }
         | Light::Spot {
+            position, intensity, ..
+        }
+        | Light::Rect {
             position, intensity, ..
         } => intensity.max_element() / (position.distance_squared(p) + disk),
         Light::Directional { irradiance, .. } => irradiance.max_element(),
@@ -229,6 +247,31 @@ fn receivers(k: usize, light: &Light) -> Vec<(Vec3, Vec3, String)> {
                         let wi = (position - p).normalize();
                         out.push((p, wi, format!("light {k} off-axis {o}° az {az} r {r}")));
                     }
+                }
+            }
+        }
+        Light::Rect {
+            position,
+            direction,
+            up,
+            half_angles,
+            ..
+        } => {
+            // Inside, just inside and just outside each side and corner, far outside, behind.
+            let right = direction.cross(up);
+            let (tx, ty) = (half_angles[0].tan(), half_angles[1].tan());
+            let mut dirs = Vec::new();
+            for fx in [0.0f32, 0.5, 0.97, 1.03, 2.0] {
+                for fy in [0.0f32, -0.5, 0.97, -1.03, 2.0] {
+                    dirs.push((direction + right * (fx * tx) + up * (fy * ty)).normalize());
+                }
+            }
+            dirs.push(-direction);
+            for (i, dir) in dirs.iter().enumerate() {
+                for &r in &DISTANCES {
+                    let p = position + *dir * r;
+                    let wi = (position - p).normalize();
+                    out.push((p, wi, format!("light {k} frustum direction {i} r {r}")));
                 }
             }
         }

@@ -90,6 +90,15 @@ fn light_irradiance_ng(i: u32, p: vec3<f32>, ng: vec3<f32>, n: vec3<f32>, disk: 
         if l.kind == LIGHT_SPOT && dot(-wi, l.direction) < l.cos_cutoff {
             return vec3<f32>(0.0);
         }
+        if l.kind == LIGHT_RECT {
+            // Inside the frustum, boundaries included (prm_scene::Light::emits_towards).
+            let z = dot(-wi, l.direction);
+            let x = dot(-wi, cross(l.direction, l.up));
+            let y = dot(-wi, l.up);
+            if z <= 0.0 || abs(x) > z * l.tan_x || abs(y) > z * l.tan_y {
+                return vec3<f32>(0.0);
+            }
+        }
     }
     let cos_t = dot(n, wi);
     if cos_t <= 0.0 || dot(ng, wi) <= 0.0 {

@@ -5,6 +5,7 @@
 const LIGHT_POINT: u32 = 0u;
 const LIGHT_SPOT: u32 = 1u;
 const LIGHT_DIRECTIONAL: u32 = 2u;
+const LIGHT_RECT: u32 = 3u;
 
 // A frame's constants.
 struct Frame {
@@ -23,7 +24,7 @@ struct Frame {
 };
 
 struct Light {
-    // LIGHT_POINT, LIGHT_SPOT or LIGHT_DIRECTIONAL
+    // LIGHT_POINT, LIGHT_SPOT, LIGHT_DIRECTIONAL or LIGHT_RECT
     kind: u32,
     // first shadow view (texture layer) and how many (1, or 6 for a cube)
     first_view: u32,
@@ -31,13 +32,18 @@ struct Light {
     // cosine of a spot light's half angle
     cos_cutoff: f32,
     position: vec3<f32>,
-    _pad0: f32,
-    // spot axis or directional travel direction (unit)
+    // tangent of a rectangular spot's horizontal half angle (about direction × up)
+    tan_x: f32,
+    // spot or rect axis, or directional travel direction (unit)
     direction: vec3<f32>,
-    _pad1: f32,
-    // W/sr (point, spot) or W/m² (directional)
+    // tangent of a rectangular spot's vertical half angle (about up)
+    tan_y: f32,
+    // W/sr (point, spot, rect) or W/m² (directional)
     color: vec3<f32>,
-    _pad2: f32,
+    _pad0: f32,
+    // a rectangular spot's vertical (unit, perpendicular to direction)
+    up: vec3<f32>,
+    _pad1: f32,
 };
 
 struct ShadowView {

@@ -16,7 +16,9 @@ pub struct ReferenceArgs {
     /// Scene file (OBJ or glTF).
     pub scene: PathBuf,
     /// A light: `point:X,Y,Z:R,G,B` (W/sr), `spot:X,Y,Z:DX,DY,DZ:ANGLE_DEG:R,G,B` (W/sr inside
-    /// the cone of that half angle) or `dir:DX,DY,DZ:R,G,B` (W/m² on a surface facing the light).
+    /// the cone of that half angle), `rect:X,Y,Z:DX,DY,DZ:UX,UY,UZ:HALF_X_DEG,HALF_Y_DEG:R,G,B`
+    /// (W/sr inside a rectangular frustum along D with vertical U, half angles about D × U and
+    /// U) or `dir:DX,DY,DZ:R,G,B` (W/m² on a surface facing the light).
     /// Repeatable; defaults to the scene's own lights.
     #[arg(long = "light", value_name = "SPEC")]
     pub lights: Vec<String>,

@@ -17,8 +17,9 @@
 //! ]
 //! ```
 //!
-//! Between keys every parameter is interpolated linearly (positions, intensities, cone angles;
-//! directions are interpolated and renormalised); before the first key and after the last the
+//! Between keys every parameter is interpolated linearly (positions, intensities, cone and
+//! frustum angles; directions are interpolated and renormalised, a rectangular spot's vertical
+//! also made perpendicular to its axis again); before the first key and after the last the
 //! end keys hold. The keys of one light must all be of the same kind.
 
 use std::path::Path;
@@ -96,6 +97,34 @@ fn lerp_light(a: &Light, b: &Light, s: f32) -> Light {
             angle: a0 + (a1 - a0) * s,
             intensity: i0.lerp(i1, s),
         },
+        (
+            Light::Rect {
+                position: p0,
+                direction: d0,
+                up: u0,
+                half_angles: h0,
+                intensity: i0,
+            },
+            Light::Rect {
+                position: p1,
+                direction: d1,
+                up: u1,
+                half_angles: h1,
+                intensity: i1,
+            },
+        ) => {
+            let direction = dir(d0, d1);
+            // The vertical, interpolated and made perpendicular to the new axis again.
+            let u = u0.lerp(u1, s);
+            let up = (u - u.dot(direction) * direction).normalize_or(u1);
+            Light::Rect {
+                position: p0.lerp(p1, s),
+                direction,
+                up,
+                half_angles: [h0[0] + (h1[0] - h0[0]) * s, h0[1] + (h1[1] - h0[1]) * s],
+                intensity: i0.lerp(i1, s),
+            }
+        }
         (
             Light::Directional {
                 direction: d0,

@@ -130,6 +130,21 @@ pub fn light_spec(light: &Light) -> String {
             angle.to_degrees(),
             v(intensity)
         ),
+        Light::Rect {
+            position,
+            direction,
+            up,
+            half_angles,
+            intensity,
+        } => format!(
+            "rect:{}:{}:{}:{},{}:{}",
+            v(position),
+            v(direction),
+            v(up),
+            half_angles[0].to_degrees(),
+            half_angles[1].to_degrees(),
+            v(intensity)
+        ),
         Light::Directional { direction, irradiance } => format!("dir:{}:{}", v(direction), v(irradiance)),
     }
 }
@@ -143,6 +158,10 @@ pub fn describe_light(light: &Light) -> String {
         ),
         Light::Spot { position, .. } => format!(
             "a spot light at ({:.3}, {:.3}, {:.3})",
+            position.x, position.y, position.z
+        ),
+        Light::Rect { position, .. } => format!(
+            "a rectangular spot light at ({:.3}, {:.3}, {:.3})",
             position.x, position.y, position.z
         ),
         Light::Directional { direction, .. } => format!(

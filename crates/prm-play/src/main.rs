@@ -26,8 +26,10 @@ struct Args {
     /// Camera `EX,EY,EZ:TX,TY,TZ:FOV_DEG` (default: the scene's first, or a view of its bounds).
     #[arg(long)]
     camera: Option<String>,
-    /// Light spec, repeatable: `point:X,Y,Z:R,G,B` (W/sr), `spot:X,Y,Z:DX,DY,DZ:ANGLE_DEG:R,G,B`,
-    /// `dir:DX,DY,DZ:R,G,B` (W/m²). Default: the scene's lights.
+    /// Light spec, repeatable: `point:X,Y,Z:R,G,B` (W/sr), `spot:X,Y,Z:DX,DY,DZ:ANGLE_DEG:R,G,B`
+    /// (cone half angle), `rect:X,Y,Z:DX,DY,DZ:UX,UY,UZ:HALF_X_DEG,HALF_Y_DEG:R,G,B` (a
+    /// rectangular spot along D with vertical U), `dir:DX,DY,DZ:R,G,B` (W/m²). Default: the
+    /// scene's lights.
     #[arg(long = "light")]
     lights: Vec<String>,
     /// gi, direct, indirect or split (left direct, right gi).

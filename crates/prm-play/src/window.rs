@@ -77,7 +77,9 @@ pub fn nudge_light(light: &mut Light, camera: &Camera, right: f32, forward: f32,
     let side = fwd.cross(Vec3::Y);
     let offset = (side * right + fwd * forward + Vec3::Y * up) * step;
     match light {
-        Light::Point { position, .. } | Light::Spot { position, .. } => *position += offset,
+        Light::Point { position, .. } | Light::Spot { position, .. } | Light::Rect { position, .. } => {
+            *position += offset
+        }
         Light::Directional { direction, .. } => {
             let turn = LIGHT_TURN_DEG.to_radians();
             let mut d = Quat::from_rotation_y(-right * turn) * *direction;
@@ -102,6 +104,7 @@ fn light_label(light: &Light) -> String {
     match light {
         Light::Point { position, .. } => format!("point at {}", v(*position)),
         Light::Spot { position, .. } => format!("spot at {}", v(*position)),
+        Light::Rect { position, .. } => format!("rectangular spot at {}", v(*position)),
         Light::Directional { direction, .. } => format!("directional towards {}", v(*direction)),
     }
 }

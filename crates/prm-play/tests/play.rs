@@ -99,14 +99,15 @@ fn cpu_irradiance(scene: &Scene, lights: &[Light], p: Vec3, n: Vec3) -> Vec3 {
             Light::Point { position, intensity }
             | Light::Spot {
                 position, intensity, ..
+            }
+            | Light::Rect {
+                position, intensity, ..
             } => {
                 let d = position - p;
                 let dist = d.length();
                 let wi = d / dist;
-                if let Light::Spot { direction, angle, .. } = *l {
-                    if (-wi).dot(direction) < angle.cos() {
-                        return Vec3::ZERO;
-                    }
+                if !l.emits_towards(-wi) {
+                    return Vec3::ZERO;
                 }
                 let c = n.dot(wi);
                 if c <= 0.0 || occluded(scene, o, wi, dist) {
@@ -138,6 +139,14 @@ fn cornell_lights(scene: &Scene) -> Vec<Light> {
         direction: Vec3::new(-0.3, -1.0, -0.2).normalize(),
         angle: 35f32.to_radians(),
         intensity: Vec3::new(0.05, 0.1, 0.2),
+    });
+    let direction = Vec3::new(0.2, -1.0, 0.3).normalize();
+    l.push(Light::Rect {
+        position: c + Vec3::new(-0.3 * h.x, 0.4 * h.y, -0.2 * h.z),
+        direction,
+        up: direction.cross(Vec3::X).normalize(),
+        half_angles: [40f32.to_radians(), 15f32.to_radians()],
+        intensity: Vec3::new(0.15, 0.05, 0.1),
     });
     l.push(Light::Directional {
         direction: Vec3::new(0.2, -1.0, -0.4).normalize(),
@@ -500,6 +509,8 @@ t = 1.0
 spec = "2,0,1:0,0,0:60"
 [[light]]
 keys = [ { t = 0.5, spec = "spot:0,1,0:0,-1,0:20:1,1,1" }, { t = 1.5, spec = "spot:0,1,0:1,0,0:40:3,1,1" } ]
+[[light]]
+keys = [ { t = 0.0, spec = "rect:0,1,0:0,-1,0:0,0,1:20,10:1,1,1" }, { t = 2.0, spec = "rect:2,1,0:1,-1,0:0,1,0:40,30:1,1,1" } ]
 "#,
     )
     .unwrap();
@@ -521,6 +532,25 @@ keys = [ { t = 0.5, spec = "spot:0,1,0:0,-1,0:20:1,1,1" }, { t = 1.5, spec = "sp
         l => panic!("{l:?}"),
     }
     assert!(matches!(a.lights_at(9.0)[0], Light::Spot { angle, .. } if (angle.to_degrees() - 40.0).abs() < 1e-3));
+    match a.lights_at(1.0)[1] {
+        Light::Rect {
+            position,
+            direction,
+            up,
+            half_angles,
+            ..
+        } => {
+            assert!((position - Vec3::new(1.0, 1.0, 0.0)).length() < 1e-5);
+            assert!((direction.length() - 1.0).abs() < 1e-5 && (up.length() - 1.0).abs() < 1e-5);
+            assert!(
+                up.dot(direction).abs() < 1e-5,
+                "up {up} not perpendicular to {direction}"
+            );
+            assert!((half_angles[0].to_degrees() - 30.0).abs() < 1e-3);
+            assert!((half_angles[1].to_degrees() - 20.0).abs() < 1e-3);
+        }
+        l => panic!("{l:?}"),
+    }
     for (bad, says) in [
         ("fps = 0.0", "fps"),
         ("[[light]]\nkeys = []", "no keys"),

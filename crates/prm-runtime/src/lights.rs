@@ -1,7 +1,7 @@
 //! The lights of a frame as the shaders see them, and their shadow views: a cube (6 perspective
 //! views) for point lights, one perspective view for spot lights of half angle up to
 //! [`SPOT_SINGLE_VIEW_MAX_DEG`] (a cube beyond, where a single frustum would waste its texels),
-//! one orthographic view covering the scene's bounds for directional lights. Depth is [0, 1]
+//! one perspective view of its own aspect for rectangular spots, one orthographic view covering the scene's bounds for directional lights. Depth is [0, 1]
 //! (wgpu), linearised in `lights.wgsl`. An engine that renders its own shadow maps renders these
 //! views, in this order, one layer each ([`Shadows::External`](crate::Shadows)).
 
@@ -131,6 +131,40 @@ pub fn shadow_views(lights: &[Light], bounds: &Aabb, resolution: u32) -> (Vec<Gp
                     position: position.to_array(),
                     direction: direction.normalize().to_array(),
                     color: intensity.to_array(),
+                    ..Default::default()
+                }
+            }
+            Light::Rect {
+                position,
+                direction,
+                up,
+                half_angles,
+                intensity,
+            } => {
+                // One view of the frustum's own aspect, 5% and 1° wider than it like a spot's.
+                let widen = |a: f32| (a * 1.05 + 1f32.to_radians()).min(88f32.to_radians()).tan();
+                let (tx, ty) = (widen(half_angles[0]), widen(half_angles[1]));
+                let near = diag * 1e-3;
+                let far = far_from(position);
+                let proj = perspective(2.0 * ty.atan(), tx / ty, near, far);
+                views.push(GpuView {
+                    view_proj: cols(proj * look_to(position, direction, up)),
+                    texel: 2.0 * tx.max(ty) / res,
+                    near,
+                    far,
+                    orthographic: 0,
+                });
+                GpuLight {
+                    kind: LightKind::Rect as u32,
+                    first_view,
+                    view_count: 1,
+                    cos_cutoff: -2.0,
+                    position: position.to_array(),
+                    tan_x: half_angles[0].tan(),
+                    direction: direction.normalize().to_array(),
+                    tan_y: half_angles[1].tan(),
+                    color: intensity.to_array(),
+                    up: up.normalize().to_array(),
                     ..Default::default()
                 }
             }

@@ -22,6 +22,9 @@ pub enum LightKind {
     Spot = 1,
     /// `LIGHT_DIRECTIONAL`: W/m² along one direction, one orthographic shadow view.
     Directional = 2,
+    /// `LIGHT_RECT`: W/sr inside a rectangular frustum, one perspective shadow view of its
+    /// aspect.
+    Rect = 3,
 }
 
 /// A frame's constants; `Frame` in the shaders.
@@ -58,18 +61,22 @@ pub struct GpuLight {
     pub view_count: u32,
     /// Cosine of a spot light's half angle (−2 for the others).
     pub cos_cutoff: f32,
-    /// Position (point, spot).
+    /// Position (point, spot, rect).
     pub position: [f32; 3],
-    /// Padding.
-    pub _pad0: f32,
-    /// Spot axis or directional travel direction (unit).
+    /// Tangent of a rectangular spot's horizontal half angle (about `direction × up`).
+    pub tan_x: f32,
+    /// Spot or rect axis, or directional travel direction (unit).
     pub direction: [f32; 3],
-    /// Padding.
-    pub _pad1: f32,
+    /// Tangent of a rectangular spot's vertical half angle (about `up`).
+    pub tan_y: f32,
     /// Intensity (W/sr) or irradiance (W/m²), RGB.
     pub color: [f32; 3],
     /// Padding.
-    pub _pad2: f32,
+    pub _pad0: f32,
+    /// A rectangular spot's vertical (unit, perpendicular to `direction`).
+    pub up: [f32; 3],
+    /// Padding.
+    pub _pad1: f32,
 }
 
 /// A shadow view; `ShadowView` in the shaders.
@@ -184,7 +191,7 @@ mod tests {
             s,
             GpuLight,
             "Light",
-            [kind, first_view, view_count, cos_cutoff, position, _pad0, direction, _pad1, color, _pad2]
+            [kind, first_view, view_count, cos_cutoff, position, tan_x, direction, tan_y, color, _pad0, up, _pad1]
         )
         .unwrap();
         wgsl_layout!(s, GpuView, "ShadowView", [view_proj, texel, near, far, orthographic]).unwrap();
@@ -203,6 +210,7 @@ mod tests {
                 ("LIGHT_POINT", LightKind::Point as i64),
                 ("LIGHT_SPOT", LightKind::Spot as i64),
                 ("LIGHT_DIRECTIONAL", LightKind::Directional as i64),
+                ("LIGHT_RECT", LightKind::Rect as i64),
             ],
         )
         .unwrap();

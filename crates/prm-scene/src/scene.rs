@@ -90,6 +90,22 @@ pub enum Light {
         /// Radiant intensity (W/sr) per RGB channel inside the cone.
         intensity: Vec3,
     },
+    /// Rectangular spot light (the paper's projector): a point light restricted to a
+    /// rectangular frustum around `direction`, hard-edged like [`Light::Spot`].
+    Rect {
+        /// Position.
+        position: Vec3,
+        /// Unit axis of the frustum.
+        direction: Vec3,
+        /// Unit vector perpendicular to `direction`: the frustum's vertical. Its horizontal is
+        /// `direction × up`.
+        up: Vec3,
+        /// Half angles of the frustum, radians: horizontal (along `direction × up`) and
+        /// vertical (along `up`), each in (0, 85°).
+        half_angles: [f32; 2],
+        /// Radiant intensity (W/sr) per RGB channel inside the frustum.
+        intensity: Vec3,
+    },
     /// Directional light travelling along `direction`.
     Directional {
         /// Unit direction the light travels in.
@@ -97,6 +113,34 @@ pub enum Light {
         /// Irradiance (W/m²) on a surface facing the light, per channel.
         irradiance: Vec3,
     },
+}
+
+/// Largest half angle of a [`Light::Rect`], degrees: its shadow map is one perspective view,
+/// which must stay well short of 90° (at 85° a texel at the rim is 130 times one at the axis).
+pub const RECT_MAX_HALF_ANGLE_DEG: f32 = 85.0;
+
+impl Light {
+    /// Whether the light emits along the unit direction `from_light` (from the light towards
+    /// a point): always for point and directional lights, inside the cone of a spot and inside
+    /// the frustum of a rectangular spot (boundaries included). The run-time twin is the cone
+    /// and frustum test of `light_irradiance_ng` in `shaders/runtime/lights.wgsl`.
+    pub fn emits_towards(&self, from_light: Vec3) -> bool {
+        match *self {
+            Light::Point { .. } | Light::Directional { .. } => true,
+            Light::Spot { direction, angle, .. } => from_light.dot(direction) >= angle.cos(),
+            Light::Rect {
+                direction,
+                up,
+                half_angles,
+                ..
+            } => {
+                let z = from_light.dot(direction);
+                let x = from_light.dot(direction.cross(up));
+                let y = from_light.dot(up);
+                z > 0.0 && x.abs() <= z * half_angles[0].tan() && y.abs() <= z * half_angles[1].tan()
+            }
+        }
+    }
 }
 
 /// A pinhole camera.

@@ -3,6 +3,10 @@
 //! * `point:X,Y,Z:R,G,B` — point light, intensity in W/sr per channel;
 //! * `spot:X,Y,Z:DX,DY,DZ:ANGLE_DEG:R,G,B` — spot light along `D` with cone half angle in
 //!   degrees (0, 180), intensity W/sr inside the cone;
+//! * `rect:X,Y,Z:DX,DY,DZ:UX,UY,UZ:HALF_X_DEG,HALF_Y_DEG:R,G,B` — rectangular spot light (a
+//!   projector) along `D`, `U` its vertical (made perpendicular to `D`; not parallel to it),
+//!   half angles in degrees (0, 85) about `D × U` and about `U`, intensity W/sr inside the
+//!   frustum;
 //! * `dir:DX,DY,DZ:R,G,B` — directional light travelling along `D`, irradiance in W/m² on a
 //!   surface facing the light;
 //! * camera `EX,EY,EZ:TX,TY,TZ:FOV_DEG` — eye, target, vertical field of view in degrees
@@ -17,8 +21,8 @@ use thiserror::Error;
 /// A light, camera or image-size spec that could not be parsed.
 #[derive(Debug, Error, Clone, PartialEq)]
 pub enum SpecError {
-    /// The light kind before the first `:` is not `point`, `spot` or `dir`.
-    #[error("unknown light kind {kind:?} in {spec:?} (expected point, spot or dir)")]
+    /// The light kind before the first `:` is not `point`, `spot`, `rect` or `dir`.
+    #[error("unknown light kind {kind:?} in {spec:?} (expected point, spot, rect or dir)")]
     UnknownLightKind {
         /// The whole spec.
         spec: String,
@@ -55,6 +59,7 @@ pub enum SpecError {
 
 const POINT: &str = "point:X,Y,Z:R,G,B";
 const SPOT: &str = "spot:X,Y,Z:DX,DY,DZ:ANGLE_DEG:R,G,B";
+const RECT: &str = "rect:X,Y,Z:DX,DY,DZ:UX,UY,UZ:HALF_X_DEG,HALF_Y_DEG:R,G,B";
 const DIR: &str = "dir:DX,DY,DZ:R,G,B";
 const CAMERA: &str = "EX,EY,EZ:TX,TY,TZ:FOV_DEG";
 
@@ -153,6 +158,39 @@ pub fn parse_light(spec: &str) -> Result<Light, SpecError> {
                 intensity: colour(spec, "intensity", f[4])?,
             })
         }
+        "rect" => {
+            let f = fields(spec, "rectangular spot light", 6, RECT)?;
+            let d = direction(spec, "direction", f[2])?;
+            let u = vec3(spec, "up", f[3])?;
+            let up = (u - u.dot(d) * d).normalize_or_zero();
+            if u.length() == 0.0 || up.length() == 0.0 || up.cross(d).length() < 1e-3 * u.length() {
+                return Err(bad(spec, "up", f[3], "zero or parallel to the direction"));
+            }
+            let parts: Vec<&str> = f[4].split(',').collect();
+            if parts.len() != 2 {
+                return Err(bad(
+                    spec,
+                    "half angles",
+                    f[4],
+                    format!("expected 2 comma-separated angles, found {}", parts.len()),
+                ));
+            }
+            let mut half = [0.0f32; 2];
+            for (h, p) in half.iter_mut().zip(&parts) {
+                let a = number(spec, "half angle", p)?;
+                if !(a > 0.0 && a < crate::RECT_MAX_HALF_ANGLE_DEG) {
+                    return Err(bad(spec, "half angle", p, "must be in (0, 85) degrees"));
+                }
+                *h = a.to_radians();
+            }
+            Ok(Light::Rect {
+                position: vec3(spec, "position", f[1])?,
+                direction: d,
+                up,
+                half_angles: half,
+                intensity: colour(spec, "intensity", f[5])?,
+            })
+        }
         "dir" => {
             let f = fields(spec, "directional light", 3, DIR)?;
             Ok(Light::Directional {
@@ -229,6 +267,22 @@ mod tests {
             }
             other => panic!("{other:?}"),
         }
+        match parse_light("rect:0,2,0:0,-1,0:0,1,1:30,20:1,2,3").unwrap() {
+            Light::Rect {
+                direction,
+                up,
+                half_angles,
+                intensity,
+                ..
+            } => {
+                assert_eq!(direction, -Vec3::Y);
+                assert!((up - Vec3::Z).length() < 1e-6, "up made perpendicular: {up}");
+                assert!((half_angles[0] - 30f32.to_radians()).abs() < 1e-6);
+                assert!((half_angles[1] - 20f32.to_radians()).abs() < 1e-6);
+                assert_eq!(intensity, Vec3::new(1.0, 2.0, 3.0));
+            }
+            other => panic!("{other:?}"),
+        }
         assert!(matches!(
             parse_light("dir:0,-1,0:3,3,3").unwrap(),
             Light::Directional { .. }
@@ -247,6 +301,14 @@ mod tests {
         assert!(parse_light("spot:0,0,0:0,0,0:30:1,1,1").is_err());
         assert!(parse_light("spot:0,0,0:0,-1,0:0:1,1,1").is_err());
         assert!(parse_light("point:0,0,0:-1,1,1").is_err());
+        let e = parse_light("rect:0,0,0:0,-1,0:0,2,0:30,20:1,1,1").unwrap_err();
+        assert!(e.to_string().contains("parallel"), "{e}");
+        let e = parse_light("rect:0,0,0:0,-1,0:0,0,1:30:1,1,1").unwrap_err();
+        assert!(e.to_string().contains("2 comma-separated"), "{e}");
+        let e = parse_light("rect:0,0,0:0,-1,0:0,0,1:30,90:1,1,1").unwrap_err();
+        assert!(e.to_string().contains("(0, 85)"), "{e}");
+        let e = parse_light("rect:0,0,0:0,-1,0:30,20:1,1,1").unwrap_err();
+        assert!(e.to_string().contains("expected 6"), "{e}");
         assert!(parse_light("point:0,0,x:1,1,1").is_err());
         assert!(parse_camera("0,0,0:0,0,0:40").is_err());
         assert!(parse_camera("0,0,0:0,0,1:0").is_err());

@@ -2,7 +2,8 @@
 //!
 //! Point: `E = I · cos θ / d² · V` (I in W/sr). Spot: the same inside the cone
 //! (angle between the light's axis and the direction to the point ≤ half angle), zero outside: a
-//! hard-edged cone with no falloff. Directional: `E = E⊥ · cos θ · V` with `E⊥` the irradiance on a
+//! hard-edged cone with no falloff. Rectangular spot: the same inside its frustum
+//! ([`Light::emits_towards`]). Directional: `E = E⊥ · cos θ · V` with `E⊥` the irradiance on a
 //! surface facing the light, shadow ray to infinity.
 
 use glam::Vec3;
@@ -36,15 +37,15 @@ pub fn bounded_irradiance(bvh: &Bvh, lights: &[Light], p: Vec3, ng: Vec3, n: Vec
                 (d / r, r, intensity / (r * r + disk))
             }
             Light::Spot {
-                position,
-                direction,
-                angle,
-                intensity,
+                position, intensity, ..
+            }
+            | Light::Rect {
+                position, intensity, ..
             } => {
                 let d = position - p;
                 let r = d.length();
                 let l = d / r;
-                if (-l).dot(direction) < angle.cos() {
+                if !light.emits_towards(-l) {
                     continue;
                 }
                 (l, r, intensity / (r * r + disk))
@@ -90,4 +91,91 @@ pub fn entry_irradiance(bvh: &Bvh, lights: &[Light], entries: &[SurfaceSample]) 
             bounded_irradiance(bvh, lights, e.position, e.normal, e.normal, e.triangle, disk)
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::BvhParams;
+    use glam::Vec2;
+    use prm_scene::{LoadReport, Material, Scene, Triangle};
+
+    /// A floor 20 × 20 at y = 0, facing up.
+    fn floor() -> Scene {
+        let (a, b, c, d) = (
+            Vec3::new(-10.0, 0.0, -10.0),
+            Vec3::new(10.0, 0.0, -10.0),
+            Vec3::new(10.0, 0.0, 10.0),
+            Vec3::new(-10.0, 0.0, 10.0),
+        );
+        let tri = |positions: [Vec3; 3]| Triangle {
+            positions,
+            normals: [Vec3::Y; 3],
+            uvs: [Vec2::ZERO; 3],
+            material: 0,
+        };
+        Scene {
+            source: "floor".into(),
+            triangles: vec![tri([a, d, c]), tri([a, c, b])],
+            lightmap_uvs: None,
+            materials: vec![Material {
+                name: "m".into(),
+                albedo: Vec3::splat(0.5),
+                texture: None,
+            }],
+            textures: vec![],
+            lights: vec![],
+            cameras: vec![],
+            report: LoadReport::default(),
+        }
+    }
+
+    #[test]
+    fn a_rectangular_spot_lights_its_footprint_only() {
+        let scene = floor();
+        let bvh = Bvh::build(&scene, &BvhParams::DEFAULT).unwrap();
+        // A projector 2 above the floor looking down with up = −Z, so its horizontal is
+        // (−Y) × (−Z) = +X: 30° half angle along x, 10° along z.
+        let light = Light::Rect {
+            position: Vec3::new(0.0, 2.0, 0.0),
+            direction: Vec3::NEG_Y,
+            up: Vec3::NEG_Z,
+            half_angles: [30f32.to_radians(), 10f32.to_radians()],
+            intensity: Vec3::new(4.0, 2.0, 1.0),
+        };
+        let e = |x: f32, z: f32| direct_irradiance(&bvh, &[light], Vec3::new(x, 0.0, z), Vec3::Y, Vec3::Y, u32::MAX);
+        let (hx, hz) = (2.0 * 30f32.to_radians().tan(), 2.0 * 10f32.to_radians().tan());
+        // Inside: E = I cos θ / d² with cos θ = 2 / d.
+        for (x, z) in [(0.0, 0.0), (0.95 * hx, 0.0), (0.0, -0.95 * hz), (-0.95 * hx, 0.95 * hz)] {
+            let d2 = x * x + z * z + 4.0;
+            let expected = Vec3::new(4.0, 2.0, 1.0) * (2.0 / d2.sqrt()) / d2;
+            assert!(
+                (e(x, z) - expected).abs().max_element() < 1e-5,
+                "({x}, {z}): {} vs {expected}",
+                e(x, z)
+            );
+        }
+        // Outside each side, a corner, and where the swapped angles would light it.
+        for (x, z) in [
+            (1.05 * hx, 0.0),
+            (0.0, 1.05 * hz),
+            (-1.05 * hx, -1.05 * hz),
+            (0.0, 0.8 * hx),
+        ] {
+            assert_eq!(e(x, z), Vec3::ZERO, "({x}, {z})");
+        }
+        // The reference tracer's next-event estimation goes through the same function: a light
+        // facing away lights nothing.
+        let away = Light::Rect {
+            position: Vec3::new(0.0, 2.0, 0.0),
+            direction: Vec3::Y,
+            up: Vec3::Z,
+            half_angles: [30f32.to_radians(), 10f32.to_radians()],
+            intensity: Vec3::ONE,
+        };
+        assert_eq!(
+            direct_irradiance(&bvh, &[away], Vec3::ZERO, Vec3::Y, Vec3::Y, u32::MAX),
+            Vec3::ZERO
+        );
+    }
 }
