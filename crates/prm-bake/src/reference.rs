@@ -7,7 +7,8 @@ use anyhow::{bail, Context, Result};
 use glam::Vec3;
 use prm_scene::{Atlas, AtlasParams, Light, Sizing};
 use prm_trace::{
-    parse_camera, parse_light, parse_size, Bvh, BvhParams, ImageMode, Lighting, ReferenceParams, ReferenceTracer,
+    parse_camera, parse_light, parse_size, Bvh, BvhParams, Emitters, ImageMode, Lighting, ReferenceParams,
+    ReferenceTracer,
 };
 
 /// Arguments of `prm-bake reference`.
@@ -22,6 +23,12 @@ pub struct ReferenceArgs {
     /// Repeatable; defaults to the scene's own lights.
     #[arg(long = "light", value_name = "SPEC")]
     pub lights: Vec<String>,
+    /// Light the scene with its emissive surfaces too (OBJ `Ke`, glTF `emissiveFactor` ×
+    /// `KHR_materials_emissive_strength`): area lights at their own radiance, one group per
+    /// emissive material; the full image shows the emitters themselves. With it, the scene's
+    /// punctual lights are used only if it has some or `--light` gives them.
+    #[arg(long)]
+    pub emitters: bool,
     /// Camera `EX,EY,EZ:TX,TY,TZ:FOV_DEG` (eye, target, vertical FOV; +Y up). Defaults to the
     /// scene's first camera.
     #[arg(long, value_name = "SPEC", conflicts_with = "lightmap")]
@@ -69,10 +76,34 @@ pub fn run(args: &ReferenceArgs) -> Result<()> {
             .map(|s| parse_light(s).with_context(|| format!("bad --light {s:?}")))
             .collect::<Result<_>>()?
     };
-    if lights.is_empty() {
+    let emitters = if args.emitters {
+        let e = Emitters::from_scene(&scene);
+        if e.is_empty() {
+            bail!(
+                "--emitters: {} has no emissive material (OBJ Ke, glTF emissiveFactor)",
+                args.scene.display()
+            );
+        }
+        for g in &e.groups {
+            eprintln!(
+                "emitter group {:?}: {} triangles, {:.4} m², radiance {:.3} {:.3} {:.3}",
+                g.name, g.triangles, g.area, g.radiance.x, g.radiance.y, g.radiance.z
+            );
+        }
+        e
+    } else {
+        Emitters::default()
+    };
+    if lights.is_empty() && emitters.is_empty() {
+        let emissive = Emitters::from_scene(&scene).groups.len();
         bail!(
-            "{} has no lights of its own; give at least one --light SPEC",
-            args.scene.display()
+            "{} has no lights of its own; give at least one --light SPEC{}",
+            args.scene.display(),
+            if emissive > 0 {
+                format!(", or --emitters for its {emissive} emissive material(s)")
+            } else {
+                String::new()
+            }
         );
     }
     let bvh = Bvh::build(&scene, &BvhParams::DEFAULT).context("cannot build the BVH")?;
@@ -83,7 +114,7 @@ pub fn run(args: &ReferenceArgs) -> Result<()> {
         lights.len(),
         bvh.build_time()
     );
-    let tracer = ReferenceTracer::new(&scene, &bvh, Lighting::Lights(&lights));
+    let tracer = ReferenceTracer::new(&scene, &bvh, Lighting::Lights(&lights)).with_emitters(&emitters);
     let params = ReferenceParams {
         seed: args.seed,
         ..ReferenceParams::with_spp(args.spp)

@@ -47,6 +47,7 @@ pub fn furnace_box(subdivisions: u32, albedo: f32) -> Scene {
             name: "grey".into(),
             albedo: Vec3::splat(albedo),
             texture: None,
+            emission: Vec3::ZERO,
         }],
         textures: vec![],
         lights: vec![],

@@ -95,12 +95,27 @@ pub(crate) fn load(path: &Path) -> Result<Scene, SceneError> {
                 }
             });
         }
+        if m.emissive_texture().is_some() && m.emissive_factor() != [0.0; 3] {
+            report.warnings.push(format!(
+                "{}: material {} has an emissive texture; its emission is the factor alone",
+                path.display(),
+                m.name().unwrap_or("(unnamed)")
+            ));
+        }
         materials.push(Material {
             name: m
                 .name()
                 .map_or_else(|| format!("material-{}", materials.len()), str::to_string),
             albedo: Vec3::new(f[0], f[1], f[2]),
             texture,
+            emission: {
+                let e = Vec3::from_array(m.emissive_factor()) * m.emissive_strength().unwrap_or(1.0);
+                if e.is_finite() && e.min_element() >= 0.0 {
+                    e
+                } else {
+                    Vec3::ZERO
+                }
+            },
         });
     }
     let default_material = materials.len() as u32;
@@ -108,6 +123,7 @@ pub(crate) fn load(path: &Path) -> Result<Scene, SceneError> {
         name: "default".into(),
         albedo: Vec3::ONE,
         texture: None,
+        emission: Vec3::ZERO,
     });
 
     // Flatten the node hierarchy of the default scene (or of every scene when none is marked).

@@ -111,10 +111,23 @@ pub(crate) fn load(path: &Path) -> Result<Scene, SceneError> {
             (None, Some(kd)) => kd,
             (None, None) => DEFAULT_GREY,
         };
+        let emission = match m.emissive.map(Vec3::from_array) {
+            Some(ke) if ke.is_finite() && ke.min_element() >= 0.0 => ke,
+            Some(ke) => {
+                report.warnings.push(format!(
+                    "{}: material '{}' has Ke {ke} (negative or not finite); it does not emit",
+                    path.display(),
+                    m.name
+                ));
+                Vec3::ZERO
+            }
+            None => Vec3::ZERO,
+        };
         scene_materials.push(Material {
             name: m.name.clone(),
             albedo,
             texture,
+            emission,
         });
     }
     let default_material = scene_materials.len() as u32;
@@ -122,6 +135,7 @@ pub(crate) fn load(path: &Path) -> Result<Scene, SceneError> {
         name: "default-grey".into(),
         albedo: DEFAULT_GREY,
         texture: None,
+        emission: Vec3::ZERO,
     });
 
     let mut bounds = Aabb::EMPTY;

@@ -67,6 +67,10 @@ pub struct Material {
     pub albedo: Vec3,
     /// Index into [`Scene::textures`] of the base colour texture (sRGB-encoded).
     pub texture: Option<u32>,
+    /// Emitted radiance, W/(m²·sr) per linear RGB channel, uniform over the surface and the
+    /// hemisphere (Lambertian emission); zero for a surface that only reflects. From OBJ `Ke`,
+    /// and glTF `emissiveFactor` × `KHR_materials_emissive_strength`.
+    pub emission: Vec3,
 }
 
 /// A punctual light. Units follow `prm-bake reference --light`.

@@ -104,6 +104,7 @@ fn textured_furnace() -> Scene {
         name: "textured \"one\"".into(),
         albedo: Vec3::new(0.9, 0.7, 0.333),
         texture: Some(0),
+        emission: Vec3::ZERO,
     });
     for (i, t) in scene.triangles.iter_mut().enumerate() {
         t.material = (i % 3 == 0) as u32;

@@ -747,3 +747,52 @@ fn gltf_node_cycle_is_an_error() {
     let e = prm_scene::load(&p).expect_err("a cycle");
     assert!(e.to_string().contains("appears twice"), "{e}");
 }
+
+#[test]
+fn emission_loads_from_obj_ke_and_gltf_emissive_factor_and_strength() {
+    let dir = temp_case("emission");
+    let obj =
+        "mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl lamp\nf 1 2 3\nusemtl wall\nf 1 3 2\nusemtl bad\nf 2 3 1\n";
+    write(
+        &dir,
+        "m.mtl",
+        "newmtl lamp\nKd 0.7 0.7 0.7\nKe 17 12 4\nnewmtl wall\nKd 0.5 0.5 0.5\nKe 0 0 0\nnewmtl bad\nKe -1 2 3\n",
+    );
+    let s = prm_scene::load(&write(&dir, "s.obj", obj)).unwrap();
+    let by_name = |n: &str| s.materials.iter().find(|m| m.name == n).unwrap().emission;
+    assert_eq!(by_name("lamp"), Vec3::new(17.0, 12.0, 4.0));
+    assert_eq!(by_name("wall"), Vec3::ZERO);
+    assert_eq!(by_name("bad"), Vec3::ZERO);
+    assert!(
+        s.report
+            .warnings
+            .iter()
+            .any(|w| w.contains("'bad'") && w.contains("does not emit")),
+        "{:?}",
+        s.report.warnings
+    );
+
+    let bin: Vec<u8> = [0.0f32, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0]
+        .iter()
+        .flat_map(|v| v.to_le_bytes())
+        .collect();
+    std::fs::write(dir.join("e.bin"), &bin).unwrap();
+    let json = r#"{
+      "asset": {"version": "2.0"},
+      "extensionsUsed": ["KHR_materials_emissive_strength"],
+      "buffers": [{"uri": "e.bin", "byteLength": 36}],
+      "bufferViews": [{"buffer": 0, "byteOffset": 0, "byteLength": 36}],
+      "accessors": [{"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3", "min": [0,0,0], "max": [1,1,0]}],
+      "materials": [
+        {"name": "strong", "emissiveFactor": [1, 0.5, 0.25], "extensions": {"KHR_materials_emissive_strength": {"emissiveStrength": 8}}},
+        {"name": "plain", "emissiveFactor": [0.5, 0.5, 0.5]}],
+      "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "material": 0}, {"attributes": {"POSITION": 0}, "material": 1}]}],
+      "nodes": [{"mesh": 0}],
+      "scenes": [{"nodes": [0]}],
+      "scene": 0
+    }"#;
+    let g = prm_scene::load(&write(&dir, "e.gltf", json)).unwrap();
+    let by_name = |n: &str| g.materials.iter().find(|m| m.name == n).unwrap().emission;
+    assert_eq!(by_name("strong"), Vec3::new(8.0, 4.0, 2.0));
+    assert_eq!(by_name("plain"), Vec3::splat(0.5));
+}

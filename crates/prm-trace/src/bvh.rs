@@ -246,13 +246,30 @@ impl Bvh {
 
     /// Whether anything blocks `origin + t·dir` for `tmin ≤ t < tmax`, ignoring `ignore`.
     pub fn occluded_between(&self, origin: Vec3, dir: Vec3, tmin: f32, tmax: f32, ignore: [u32; 2]) -> bool {
+        self.occluded_cached(origin, dir, tmin, tmax, ignore, &mut { NO_OCCLUDER })
+    }
+
+    /// [`Bvh::occluded_between`] that first tests the occluder in `cache` (from an earlier ray,
+    /// or [`NO_OCCLUDER`]) and leaves the occluder it finds there: neighbouring shadow rays
+    /// towards one light are mostly blocked by the same triangle, which is then one triangle
+    /// test instead of a traversal. The answer is the traversal's either way (the cached
+    /// triangle counts under the same test, `t < tmax`).
+    pub fn occluded_cached(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        tmin: f32,
+        tmax: f32,
+        ignore: [u32; 2],
+        cache: &mut u32,
+    ) -> bool {
         let ray = Ray::new(
             (origin * self.scale).into(),
             dir.into(),
             tmin * self.scale,
             tmax * self.scale,
         );
-        let f = |r: &Ray, i: usize| {
+        let blocks = |r: &Ray, i: usize| {
             let id = self.ids[i];
             if id == ignore[0] || id == ignore[1] {
                 f32::INFINITY
@@ -260,10 +277,25 @@ impl Bvh {
                 intersect(&self.tris[i], r)
             }
         };
-        !match &self.accel {
+        if *cache != NO_OCCLUDER && blocks(&ray, *cache as usize) < ray.tmax {
+            return true;
+        }
+        let mut found = NO_OCCLUDER;
+        let f = |r: &Ray, i: usize| {
+            let t = blocks(r, i);
+            if t < r.tmax {
+                found = i as u32;
+            }
+            t
+        };
+        let miss = match &self.accel {
             Accel::Cw(b) => b.ray_traverse_miss(ray, f),
             Accel::Two(b) => b.ray_traverse_miss(ray, f),
+        };
+        if !miss {
+            *cache = found;
         }
+        !miss
     }
 
     /// Mutual visibility of two surface points `a` (on triangle `ta`, geometric normal `na`) and
@@ -271,6 +303,12 @@ impl Bvh {
     /// with both triangles ignored, skipping the first [`Bvh::epsilon`] of it (so that a receiver
     /// lying exactly on a concave edge is not shadowed by the neighbouring face it touches).
     pub fn visible(&self, a: Vec3, na: Vec3, ta: u32, b: Vec3, nb: Vec3, tb: u32) -> bool {
+        self.visible_cached(a, na, ta, b, nb, tb, &mut { NO_OCCLUDER })
+    }
+
+    /// [`Bvh::visible`] with an occluder cache ([`Bvh::occluded_cached`]).
+    #[allow(clippy::too_many_arguments)]
+    pub fn visible_cached(&self, a: Vec3, na: Vec3, ta: u32, b: Vec3, nb: Vec3, tb: u32, cache: &mut u32) -> bool {
         let d = b - a;
         let o = self.spawn(a, na, d);
         let target = self.spawn(b, nb, -d);
@@ -279,9 +317,12 @@ impl Bvh {
         if len.is_nan() || len <= 0.0 {
             return true;
         }
-        !self.occluded_between(o, v / len, self.epsilon.min(0.5 * len), len, [ta, tb])
+        !self.occluded_cached(o, v / len, self.epsilon.min(0.5 * len), len, [ta, tb], cache)
     }
 }
+
+/// An empty occluder cache ([`Bvh::occluded_cached`]).
+pub const NO_OCCLUDER: u32 = u32::MAX;
 
 /// Relative tolerance on the barycentric edge tests: rays through a shared edge or vertex hit
 /// both neighbours instead of slipping between them (obvhs's own test rejects `-0.0`).
@@ -371,6 +412,7 @@ mod tests {
                 name: "m".into(),
                 albedo: Vec3::splat(0.5),
                 texture: None,
+                emission: Vec3::ZERO,
             }],
             textures: vec![],
             lights: vec![],

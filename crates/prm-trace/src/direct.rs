@@ -122,6 +122,7 @@ mod tests {
                 name: "m".into(),
                 albedo: Vec3::splat(0.5),
                 texture: None,
+                emission: Vec3::ZERO,
             }],
             textures: vec![],
             lights: vec![],

@@ -16,6 +16,7 @@
 pub mod bvh;
 pub mod cluster;
 pub mod direct;
+pub mod emitters;
 mod error;
 pub mod pane;
 pub mod reference;
@@ -24,9 +25,10 @@ pub mod sampling;
 pub mod vpl;
 pub mod walk;
 
-pub use bvh::{BuildQuality, Bvh, BvhKind, BvhParams, Hit};
+pub use bvh::{BuildQuality, Bvh, BvhKind, BvhParams, Hit, NO_OCCLUDER};
 pub use cluster::{energy_weight, ClusterParams, Clustering};
 pub use direct::{bounded_irradiance, direct_irradiance, entry_irradiance};
+pub use emitters::{EmitterGroup, Emitters};
 pub use error::TraceError;
 pub use pane::{evaluate_atlas_panes, evaluate_panes, Lattice, PaneParams, Panes};
 pub use prm_scene::{parse_camera, parse_light, parse_size, SpecError, ENTRY_DISK};

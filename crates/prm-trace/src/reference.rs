@@ -27,6 +27,14 @@
 //!
 //! [`Lighting::UniformIrradiance`] is a pseudo-light for the furnace test: every front-facing
 //! surface point receives that direct irradiance, with no visibility.
+//!
+//! **Emissive surfaces** ([`ReferenceTracer::with_emitters`]) are area lights besides the
+//! lighting: `E_dir(y_j)` gains one next-event sample of them at every path vertex
+//! ([`Emitters::sample_irradiance`], unbiased), and emission met along a path is not added
+//! (the samples count it), so the estimator above stays the indirect irradiance. The direct
+//! irradiance at exit points takes [`EMITTER_DIRECT_SAMPLES`] samples each (stream
+//! `(seed, exit, u64::MAX)`), and an image's full radiance adds the emission `L_e` of the
+//! surface seen and a fresh sample of its direct light every pass.
 
 use glam::{Vec2, Vec3};
 use prm_scene::{Camera, ExitPoint, Light, Scene};
@@ -34,6 +42,7 @@ use rayon::prelude::*;
 
 use crate::bvh::Bvh;
 use crate::direct::direct_irradiance;
+use crate::emitters::Emitters;
 use crate::rng::Rng;
 use crate::sampling::cosine_hemisphere;
 use crate::walk::Roulette;
@@ -155,19 +164,38 @@ impl Welford {
     }
 }
 
+/// Emitter samples per exit point in [`ReferenceTracer::direct_at_exits`]: about 6% noise
+/// per texel where an emitter is seen at a grazing angle, far less once averaged over an image.
+pub const EMITTER_DIRECT_SAMPLES: u32 = 256;
+
 /// The reference path tracer over one scene and lighting.
 pub struct ReferenceTracer<'a> {
     scene: &'a Scene,
     bvh: &'a Bvh,
     lighting: Lighting<'a>,
+    emitters: Option<&'a Emitters>,
 }
 
 impl<'a> ReferenceTracer<'a> {
     /// A tracer for `scene` (with its `bvh`) under `lighting`.
     pub fn new(scene: &'a Scene, bvh: &'a Bvh, lighting: Lighting<'a>) -> Self {
-        ReferenceTracer { scene, bvh, lighting }
+        ReferenceTracer {
+            scene,
+            bvh,
+            lighting,
+            emitters: None,
+        }
     }
 
+    /// The same tracer with `emitters` as area lights besides the lighting (module docs).
+    pub fn with_emitters(self, emitters: &'a Emitters) -> Self {
+        ReferenceTracer {
+            emitters: (!emitters.is_empty()).then_some(emitters),
+            ..self
+        }
+    }
+
+    /// The lighting's direct irradiance (deterministic).
     fn direct(&self, p: Vec3, ng: Vec3, n: Vec3, tri: u32) -> Vec3 {
         match self.lighting {
             Lighting::Lights(l) => direct_irradiance(self.bvh, l, p, ng, n, tri),
@@ -175,13 +203,25 @@ impl<'a> ReferenceTracer<'a> {
         }
     }
 
-    /// Direct irradiance at every exit point (receiving with the exit point's normal).
+    /// The emitters' direct irradiance, `samples` next-event samples (zero without emitters).
+    #[allow(clippy::too_many_arguments)]
+    fn emitted(&self, p: Vec3, ng: Vec3, n: Vec3, tri: u32, samples: u32, rng: &mut Rng) -> Vec3 {
+        self.emitters.map_or(Vec3::ZERO, |e| {
+            e.irradiance(self.scene, self.bvh, p, ng, n, tri, samples, rng)
+        })
+    }
+
+    /// Direct irradiance at every exit point (receiving with the exit point's normal): the
+    /// lighting's, plus [`EMITTER_DIRECT_SAMPLES`] emitter samples with emitters.
     pub fn direct_at_exits(&self, exits: &[ExitPoint]) -> Vec<Vec3> {
         exits
             .par_iter()
-            .map(|x| {
+            .enumerate()
+            .map(|(i, x)| {
                 let ng = self.bvh.geometric_normal(x.triangle);
+                let mut rng = Rng::new(0, i as u64, u64::MAX);
                 self.direct(x.position, ng, x.normal, x.triangle)
+                    + self.emitted(x.position, ng, x.normal, x.triangle, EMITTER_DIRECT_SAMPLES, &mut rng)
             })
             .collect()
     }
@@ -191,7 +231,7 @@ impl<'a> ReferenceTracer<'a> {
         let (mut pos, mut ng, mut n, mut tri) = (x, ng, n, tri);
         let mut throughput = Vec3::ONE;
         let mut sum = Vec3::ZERO;
-        for _ in 0..p.max_bounces {
+        for bounce in 0..p.max_bounces {
             let dir = cosine_hemisphere(rng.next_vec2(), n);
             if dir.dot(ng) <= 0.0 {
                 break;
@@ -205,12 +245,26 @@ impl<'a> ReferenceTracer<'a> {
             if !hit.front {
                 break;
             }
+            // The segment from a vertex (not from x: light straight from an emitter to x is
+            // direct light there) is also the cosine half of that vertex's emitter estimate; it
+            // was traced with probability q, which `throughput` already divides by.
+            if let (Some(e), true) = (self.emitters, bounce > 0) {
+                let le = e.emission(hit.triangle);
+                if le.max_element() > 0.0 {
+                    let ce = -self.bvh.geometric_normal(hit.triangle).dot(dir);
+                    let w = e.cosine_weight(self.scene, hit.triangle, n.dot(dir), hit.t * hit.t, ce);
+                    sum += throughput * le * (std::f32::consts::PI * w);
+                }
+            }
             tri = hit.triangle;
             pos = self.scene.triangles[tri as usize].point(hit.b1, hit.b2);
             ng = self.bvh.geometric_normal(tri);
             n = ng;
             let rho = self.scene.albedo(tri as usize, hit.b1, hit.b2);
-            sum += throughput * rho * self.direct(pos, ng, n, tri);
+            let emitted = self.emitters.map_or(Vec3::ZERO, |e| {
+                e.sample_weighted(self.scene, self.bvh, pos, ng, n, tri, rng)
+            });
+            sum += throughput * rho * (self.direct(pos, ng, n, tri) + emitted);
             let q = p.roulette.survival(rho);
             if rng.next_f32() >= q {
                 break;
@@ -271,8 +325,9 @@ impl<'a> ReferenceTracer<'a> {
         let up = right.cross(forward);
         let tan = (camera.fov_y_deg.to_radians() * 0.5).tan();
         let aspect = width as f32 / height as f32;
-        // First hits are the same every pass: find them once.
-        let primary: Vec<Option<(Vec3, u32, Vec3, Vec3)>> = (0..width * height)
+        // First hits are the same every pass: find them once (with the lighting's direct light
+        // and the emission seen; the emitters' direct light is sampled every pass).
+        let primary: Vec<Option<Primary>> = (0..width * height)
             .into_par_iter()
             .map(|i| {
                 let (px, py) = (i % width, i / width);
@@ -288,21 +343,56 @@ impl<'a> ReferenceTracer<'a> {
                 let p = self.scene.triangles[hit.triangle as usize].point(hit.b1, hit.b2);
                 let ng = self.bvh.geometric_normal(hit.triangle);
                 let rho = self.scene.albedo(hit.triangle as usize, hit.b1, hit.b2);
-                let direct = match mode {
-                    ImageMode::Full => self.direct(p, ng, ng, hit.triangle),
-                    ImageMode::IndirectOnly => Vec3::ZERO,
+                let (direct, emission) = match mode {
+                    ImageMode::Full => (
+                        self.direct(p, ng, ng, hit.triangle),
+                        self.emitters
+                            .map_or(Vec3::ZERO, |e| e.radiance_of(self.scene, hit.triangle)),
+                    ),
+                    ImageMode::IndirectOnly => (Vec3::ZERO, Vec3::ZERO),
                 };
-                Some((p, hit.triangle, rho, direct))
+                Some(Primary {
+                    p,
+                    tri: hit.triangle,
+                    rho,
+                    direct,
+                    emission,
+                })
             })
             .collect();
         Ok(progressive(primary.len(), params, progress, |i, rng| {
-            let Some((p, tri, rho, direct)) = primary[i] else {
+            let Some(Primary {
+                p,
+                tri,
+                rho,
+                direct,
+                emission,
+            }) = primary[i]
+            else {
                 return Vec3::ZERO;
             };
             let ng = self.bvh.geometric_normal(tri);
-            rho * std::f32::consts::FRAC_1_PI * (direct + self.indirect_mean(p, ng, ng, tri, params, rng))
+            let emitted = match mode {
+                ImageMode::Full => self.emitted(p, ng, ng, tri, params.samples_per_pass, rng),
+                ImageMode::IndirectOnly => Vec3::ZERO,
+            };
+            emission
+                + rho
+                    * std::f32::consts::FRAC_1_PI
+                    * (direct + emitted + self.indirect_mean(p, ng, ng, tri, params, rng))
         }))
     }
+}
+
+/// A pixel's first visible point: position, triangle, albedo, the lighting's direct irradiance
+/// and the radiance it emits (both zero for indirect-only images).
+#[derive(Clone, Copy)]
+struct Primary {
+    p: Vec3,
+    tri: u32,
+    rho: Vec3,
+    direct: Vec3,
+    emission: Vec3,
 }
 
 /// Runs the passes over `len` texels or pixels: `sample(i, rng)` is one pass's value at `i`,

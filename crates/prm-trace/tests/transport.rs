@@ -7,8 +7,8 @@ use glam::Vec3;
 use prm_scene::{Atlas, AtlasParams, ExitPoint, Scene, Sizing};
 use prm_trace::{
     entry_irradiance, evaluate_atlas_panes, evaluate_panes, parse_light, sample_surface, trace_walks, Bvh, BvhParams,
-    ClusterParams, Clustering, EntryParams, Lattice, Lighting, PaneParams, ReferenceParams, ReferenceTracer,
-    SurfaceSample, VplBound, VplSet, WalkParams,
+    ClusterParams, Clustering, Emitters, EntryParams, ImageMode, Lattice, Lighting, PaneParams, ReferenceParams,
+    ReferenceTracer, SurfaceSample, VplBound, VplSet, WalkParams,
 };
 
 use prm_scene::analytic::furnace_box;
@@ -460,4 +460,60 @@ fn shared_visibility_stays_close_to_exact() {
         matches!(e, Err(prm_trace::TraceError::InvalidParameter(_))),
         "step 3 accepted"
     );
+}
+
+/// The emissive furnace: a closed box whose every surface emits `L_e` and reflects `ρ`. Radiance
+/// is `L = L_e / (1 − ρ)` everywhere, so at every point the emitters' direct irradiance is
+/// `π L_e`, the indirect irradiance `π (L − L_e) = π L_e ρ / (1 − ρ)`, and an image shows `L`.
+#[test]
+fn emissive_furnace_matches_the_closed_form() {
+    let rho = 0.6f32;
+    let mut scene = furnace_box(2, rho);
+    let le = Vec3::new(1.0, 0.5, 0.25);
+    scene.materials[0].emission = le;
+    let atlas = Atlas::build(&scene, &AtlasParams::with_sizing(Sizing::Resolution(16))).unwrap();
+    let bvh = Bvh::build(&scene, &BvhParams::DEFAULT).unwrap();
+    let emitters = Emitters::from_scene(&scene);
+    assert_eq!(emitters.groups.len(), 1);
+    assert_eq!(emitters.groups[0].triangles as usize, scene.triangles.len());
+    let tracer = ReferenceTracer::new(&scene, &bvh, Lighting::Lights(&[])).with_emitters(&emitters);
+    let pi = std::f32::consts::PI;
+
+    let direct = tracer.direct_at_exits(&atlas.exits);
+    let expected_direct = vec![le * pi; direct.len()];
+    let ratio = mean_ratio(&direct, &expected_direct);
+    let (mean, max) = errors(&direct, &expected_direct);
+    eprintln!("emissive furnace: direct energy {ratio:.4}, mean error {mean:.4}, max {max:.4}");
+    assert!((ratio - 1.0).abs() < 0.01, "direct energy {ratio}");
+    assert!(mean < 0.05, "direct mean error {mean}");
+
+    let est = tracer
+        .indirect_at_exits(&atlas.exits, &reference_params(16, 64, 3), &mut |_, _| {})
+        .unwrap();
+    let expected = vec![le * pi * rho / (1.0 - rho); est.mean.len()];
+    let ratio = mean_ratio(&est.mean, &expected);
+    let (mean, max) = errors(&est.mean, &expected);
+    eprintln!("emissive furnace: indirect energy {ratio:.4}, mean error {mean:.4}, max {max:.4}");
+    assert!((ratio - 1.0).abs() < 0.01, "indirect energy {ratio}");
+    assert!(mean < 0.05, "indirect mean error {mean}");
+
+    let camera = prm_scene::Camera {
+        eye: scene.bounds().min + scene.bounds().extent() * Vec3::new(0.5, 0.5, 0.9),
+        target: scene.bounds().min + scene.bounds().extent() * Vec3::new(0.5, 0.5, 0.0),
+        fov_y_deg: 60.0,
+    };
+    let img = tracer
+        .render(
+            &camera,
+            16,
+            16,
+            ImageMode::Full,
+            &reference_params(4, 32, 5),
+            &mut |_, _| {},
+        )
+        .unwrap();
+    let expected = vec![le / (1.0 - rho); img.mean.len()];
+    let ratio = mean_ratio(&img.mean, &expected);
+    eprintln!("emissive furnace: image energy {ratio:.4}");
+    assert!((ratio - 1.0).abs() < 0.01, "image energy {ratio}");
 }
