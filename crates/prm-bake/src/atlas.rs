@@ -61,6 +61,7 @@ pub fn run(args: &AtlasArgs) -> Result<()> {
         "spot": count(|l| matches!(l, Light::Spot { .. })),
         "directional": count(|l| matches!(l, Light::Directional { .. })),
     });
+    let emissive = scene.emissive_materials();
     let s = &atlas.stats;
     if args.json {
         let out = serde_json::json!({
@@ -72,6 +73,7 @@ pub fn run(args: &AtlasArgs) -> Result<()> {
             "area": scene.area(),
             "bounds": { "min": bounds.min.to_array(), "max": bounds.max.to_array() },
             "lights": lights,
+            "emissive_materials": emissive,
             "cameras": scene.cameras.len(),
             "fingerprint": format!("{:016x}", scene.fingerprint()),
             "lightmap_uvs_from_file": scene.lightmap_uvs.is_some(),
@@ -116,6 +118,9 @@ pub fn run(args: &AtlasArgs) -> Result<()> {
         lights["directional"],
         scene.cameras.len()
     );
+    if !emissive.is_empty() {
+        println!("emitters     {} (emissive materials)", emissive.join(", "));
+    }
     println!("fingerprint  {:016x}", scene.fingerprint());
     println!(
         "atlas        {r}x{r}, texel size {:.4}, {} charts{}",

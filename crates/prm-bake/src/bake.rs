@@ -232,6 +232,13 @@ pub fn run(args: &BakeArgs) -> Result<()> {
     for w in &scene.report.warnings {
         progress.warn(w);
     }
+    let emissive = scene.emissive_materials();
+    if !emissive.is_empty() {
+        progress.warn(&format!(
+            "emissive material(s) {}: the bake does not light the scene with them yet (they are              diffuse surfaces here); `prm-bake reference --emitters` renders their light",
+            emissive.join(", ")
+        ));
+    }
     let load_s = t.elapsed().as_secs_f64();
 
     // Open the device first: the plan's time budget is the renderer's, and a missing driver

@@ -243,13 +243,14 @@ impl CostModel {
     });
 
     /// `--backend cpu` (shared visibility), fitted to the pane rendering time per pair of three
-    /// default-size bakes (`cargo xtask bench-bake`, quiet machine): the Cornell box (30
-    /// triangles, 11.7 ns per pair), chairs with the paper preset (2,910, 33.3 ns) and Sibenik
-    /// (75,277, 80.5 ns). The per-pair cost grows as T^0.23 between the first two and T^0.27
-    /// between the last two; T^0.25 with 4.8 ns fits all three within 6 %.
+    /// bakes (`cargo xtask bench-bake`, quiet machine): the Cornell box's default (30 triangles,
+    /// 8.3 ns per pair), chairs with the paper preset (2,910, 26.4 ns) and Sibenik at 5120
+    /// entries (75,277, 53.5 ns). The per-pair cost grows as T^0.25 between the first two and
+    /// T^0.22 between the last two; T^0.24 with 3.7 ns fits all three within 6 %. (Before the
+    /// lattice was anchored per chart: 11.7, 33.3 and 80.5 ns, 4.8 ns × T^0.25.)
     pub const CPU: CostModel = CostModel::Cpu(CpuCost {
-        pair_seconds: 4.8e-9,
-        triangle_exponent: 0.25,
+        pair_seconds: 3.7e-9,
+        triangle_exponent: 0.24,
         vpls_per_second: 1.0e6,
     });
 

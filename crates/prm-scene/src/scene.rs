@@ -233,6 +233,15 @@ impl Scene {
         b
     }
 
+    /// Names of the materials that emit ([`Material::emission`] not zero), in order.
+    pub fn emissive_materials(&self) -> Vec<&str> {
+        self.materials
+            .iter()
+            .filter(|m| m.emission.max_element() > 0.0)
+            .map(|m| m.name.as_str())
+            .collect()
+    }
+
     /// Total surface area.
     pub fn area(&self) -> f64 {
         self.triangles.iter().map(|t| t.area() as f64).sum()

@@ -14,39 +14,44 @@
 //! * [`evaluate_panes`]: one shadow ray per exit point and VPL, over any list of exit points. The
 //!   exact yardstick for every other renderer.
 //! * [`evaluate_atlas_panes`]: over an atlas, sharing shadow rays between neighbouring texels
-//!   ([`Lattice`]). Every ray is cast at the exit points of a coarse lattice (every `step`-th
-//!   texel in x and y); then, halving the spacing down to 1, each new point takes a VPL's
-//!   visibility from the lattice corners around it when they all agree, and casts its own ray
-//!   where they do not (shadow edges) or where a corner is missing or unlike it (chart borders,
-//!   creases). The unoccluded term is evaluated at every exit point. With `step: 1` it is the
-//!   exact evaluator, bit for bit.
+//!   ([`Lattice`]). Each chart is cut into tiles of its own bounding box, and every ray is cast
+//!   at the exit points of a coarse lattice anchored at the box's corner: every `step`-th texel
+//!   in x and y, and the box's far edges (halved for a chart narrower than the step). Then,
+//!   halving the spacing down to 1, each new point takes a VPL's visibility from the lattice
+//!   corners around it when they all agree, and casts its own ray where they do not (shadow
+//!   edges) or where a corner is missing or unlike it (chart borders, creases). The unoccluded
+//!   term is evaluated at every exit point. With `step: 1` it is the exact evaluator, bit for
+//!   bit.
 //!
-//! Measured (release, 2 cores, `prm-bake bake --backend cpu` against `--backend cpu-exact`;
-//! difference = relative L2 of all pane values against exact, over the archive's RGB9E5 panes;
-//! `cargo run --release -p prm-trace --example lattice -- SCENE ENTRIES CLUSTERS RES WALKS`
-//! repeats it on the floats):
+//! Measured (release, 2 cores, `cargo run --release -p prm-trace --example lattice -- SCENE
+//! ENTRIES CLUSTERS RES WALKS` with the bake's sizes; difference = relative L2 of all pane values
+//! against exact, worst pane in brackets):
 //!
 //! | scene | step | shadow rays | pane rendering | difference (worst pane) | energy |
 //! | --- | --- | ---: | ---: | ---: | ---: |
-//! | Cornell box, default (42,912 exits, 10,668 VPLs) | exact | 303 M | 23.3 s | | |
-//! | | 2 | 98 M | 9.0 s | 0.32 % (1.2 %) | 1.0000 |
-//! | | 4 | 46 M | 5.2 s | 0.57 % (2.4 %) | 1.0001 |
-//! | | 8 | 34 M | 4.1 s | 0.65 % (2.4 %) | 1.0001 |
-//! | chairs, `--preset paper` (35,717 exits, 11,547 VPLs, 913 charts) | exact | 271 M | 30.0 s | | |
-//! | | 2 | 120 M | 15.7 s | 2.1 % (7.0 %) | 1.0013 |
-//! | | 4 | 80 M | 12.9 s | 2.5 % (13 %) | 1.0021 |
-//! | | 8 | 70 M | 12.0 s | 4.1 % (28 %) | 1.0026 |
+//! | Cornell box, default (42,912 exits, 10,668 VPLs, 15 charts) | exact | 303 M | 20.2 s | | |
+//! | | 2 | 90 M | 7.4 s | 0.04 % (0.2 %) | 1.0000 |
+//! | | **4** | **32 M** | **3.7 s** | **0.12 % (0.8 %)** | 1.0000 |
+//! | | 8 | 16 M | 2.6 s | 0.15 % (0.9 %) | 1.0000 |
+//! | chairs, `--preset paper` (35,717 exits, 11,547 VPLs, 913 charts) | exact | 271 M | 26.7 s | | |
+//! | | 2 | 112 M | 15.4 s | 1.7 % (11.7 %) | 1.0011 |
+//! | | **4** | **59 M** | **10.2 s** | **2.7 % (13.0 %)** | 1.0025 |
+//! | | 8 | 42 M | 8.3 s | 5.4 % (36.6 %) | 1.0036 |
 //!
-//! For scale, lavapipe's depth-map panes (`--backend vulkan`) differ from exact by 1.8 % on the
-//! Cornell box and by 10.7 % on chairs (energy 1.046): the shared visibility is closer to exact
-//! than the GPU path. Step 4 is the default: step 8 saves 7 % of chairs' time for 1.6 points more
-//! difference, since a shadow narrower than the coarse lattice is lost. Chairs' time is 82 %
-//! shadow rays (`perf`); of its 80 M rays, 45 M are cast at points whose corners do not all fit
-//! (its charts are small), 20 M at the coarse lattice and 15 M at shadow edges. A slow (spatial
-//! split) build or a BVH2 did not trace them faster. An occluder cache per VPL (each ray first
-//! tries the triangle that blocked that VPL's last ray, [`Bvh::occluded_cached`]; same answers)
-//! took chairs' exact panes from 32.1 s to 28.7 s and step 4 from 13.8 s to 13.3 s (`lattice`
-//! example, one run each): the lattice already shares most of the rays a cache would save.
+//! Before the lattice was anchored per chart (one lattice over the whole atlas; a small chart
+//! then had most of its texels without a corner on their own chart, and they cast all their
+//! rays), step 4 took 46 M rays and 5.2 s at 0.59 % on the Cornell box, 80 M rays and 13.3 s at
+//! 2.4 % on chairs: anchoring saves 26–30 % of the rays, and on chairs costs 0.3 points of
+//! difference (without the halved step for narrow charts: 55 M rays, 3.3 %). For scale,
+//! lavapipe's depth-map panes (`--backend vulkan`) differ from exact by 1.8 % on the Cornell box
+//! and by 10.7 % on chairs (energy 1.046): the shared visibility is closer to exact than the GPU
+//! path. Step 4 is the default: step 8 saves 19 % of chairs' time for 2.7 points more
+//! difference, since a shadow narrower than the coarse lattice is lost. Chairs' time is mostly
+//! shadow rays (82 % before anchoring, `perf`). A slow (spatial split) build or a BVH2 did not
+//! trace them faster. An occluder cache per VPL (each ray first tries the triangle that blocked
+//! that VPL's last ray, [`Bvh::occluded_cached`]; same answers) took chairs' exact panes from
+//! 32.1 s to 28.7 s and step 4 from 13.8 s to 13.3 s (one run each, before anchoring): the
+//! lattice already shares most of the rays a cache would save.
 //!
 //! Work is parallel over exit points (tiles of the atlas); each exit point sums its VPLs in a
 //! fixed order and the work items are fixed by the atlas alone, so the result does not depend on
@@ -384,8 +389,8 @@ pub struct Lattice {
 impl Lattice {
     /// Every shadow ray at every exit point: the same panes as [`evaluate_panes`].
     pub const EXACT: Lattice = Lattice { step: 1 };
-    /// Every fourth texel in x and y, refined through every second: 15–30 % of the exact rays,
-    /// within 0.6–2.5 % of exact (module docs).
+    /// Every fourth texel in x and y, refined through every second: 11–22 % of the exact rays,
+    /// within 0.1–2.7 % of exact (module docs).
     pub const DEFAULT: Lattice = Lattice { step: 4 };
 }
 
@@ -404,21 +409,97 @@ const CORNER_MIN_COS: f32 = 0.95;
 /// diagonal corner is √2 spacings away; farther means the chart is stretched or folded there).
 const CORNER_MAX_SPACINGS: f32 = 2.0;
 
-/// Tiles of the atlas are this many texels on a side (or the lattice step, if larger): the
-/// coarsest lattice points on a tile's far edges are cast again by the next tile, 27 % more of
-/// them at step 4.
+/// Tiles of a chart's box are at most this many texels on a side (or the lattice step, if
+/// larger): the coarsest lattice points on a tile's far edges inside the chart are cast again by
+/// the next tile.
 const TILE_TEXELS: u32 = 32;
 
-/// Tiles evaluated in parallel before their results are added up in order: bounds the per-tile
+/// Items evaluated in parallel before their results are added up in order: bounds the per-item
 /// entry energies held at once to this many × entries × 12 bytes.
-const TILES_PER_BATCH: usize = 64;
+const ITEMS_PER_BATCH: usize = 64;
 
-/// The tiles of an atlas, evaluated coarse to fine.
+/// A work item of [`evaluate_atlas_panes`]: the texels of one chart inside one tile of the
+/// chart's own bounding box. The lattice is anchored at the box's corner and includes the box's
+/// far edges, so that every chart, however small, has lattice points at its own corners: with a
+/// lattice over the whole atlas, a chart a few texels wide had most of its texels without a
+/// corner on their chart, and they cast all their rays.
+#[derive(Clone, Copy, Debug)]
+struct Item {
+    chart: u32,
+    /// First texel.
+    x0: u32,
+    y0: u32,
+    /// Last local coordinate in x and in y: the item's far edges.
+    tx: u32,
+    ty: u32,
+    /// Whether the far edge is the chart's own last column (row), evaluated here, or the next
+    /// item's first, evaluated here only for its answers as a corner.
+    end_x: bool,
+    end_y: bool,
+    /// Lattice step of this item.
+    step: u32,
+}
+
+/// The items of every chart of `atlas`, tiles of `tile` texels anchored at each chart's
+/// bounding box, charts in order; lattice `step`, halved for a chart narrower than it (on
+/// chairs, 913 charts: 55 M rays and 3.3 % from exact with `step` everywhere, 59 M and 2.7 %
+/// halved below the step, 61 M and 2.5 % halved below twice the step).
+fn items(atlas: &Atlas, tile: u32, step: u32) -> Vec<Item> {
+    let res = atlas.resolution;
+    let mut boxes: Vec<Option<[u32; 4]>> = Vec::new();
+    for x in &atlas.exits {
+        let c = atlas.chart_of_triangle[x.triangle as usize] as usize;
+        if boxes.len() <= c {
+            boxes.resize(c + 1, None);
+        }
+        let (tx, ty) = (x.texel % res, x.texel / res);
+        let b = boxes[c].get_or_insert([tx, ty, tx, ty]);
+        *b = [b[0].min(tx), b[1].min(ty), b[2].max(tx), b[3].max(ty)];
+    }
+    // Tiles of `[first, last]`: (start, far edge, far edge is `last`).
+    let cut = |first: u32, last: u32| {
+        let mut out = Vec::new();
+        let mut o = first;
+        loop {
+            if last - o <= tile {
+                out.push((o, last - o, true));
+                return out;
+            }
+            out.push((o, tile, false));
+            o += tile;
+        }
+    };
+    let mut out = Vec::new();
+    for (chart, b) in boxes.iter().enumerate() {
+        let Some([bx0, by0, bx1, by1]) = *b else { continue };
+        // A chart narrower than the step would have its coarse points at its two edges only.
+        let item_step = if (bx1 - bx0).min(by1 - by0) < step {
+            (step / 2).max(1)
+        } else {
+            step
+        };
+        for (y0, ty, end_y) in cut(by0, by1) {
+            for &(x0, tx, end_x) in &cut(bx0, bx1) {
+                out.push(Item {
+                    chart: chart as u32,
+                    x0,
+                    y0,
+                    tx,
+                    ty,
+                    end_x,
+                    end_y,
+                    step: item_step,
+                });
+            }
+        }
+    }
+    out
+}
+
+/// The chart items of an atlas, evaluated coarse to fine.
 struct Tiler<'a> {
     kernel: Kernel<'a>,
     atlas: &'a Atlas,
-    step: u32,
-    tile: u32,
 }
 
 impl Tiler<'_> {
@@ -431,27 +512,29 @@ impl Tiler<'_> {
             && x.position.distance(c.position) <= max_d
     }
 
-    /// Evaluates the tile whose first texel is `(x0, y0)`: first the points of the coarsest
-    /// lattice (every ray), then each finer lattice's new points from the corners around them
-    /// on the coarser one. The region includes the far edges, whose lattice points belong to
-    /// the next tiles but are corners of this one's last texels; they are evaluated for their
-    /// answers only.
-    fn evaluate_tile(&self, x0: u32, y0: u32) -> WorkPanes {
-        let (res, s, t) = (self.atlas.resolution, self.step, self.tile);
-        let side = (t + 1) as usize;
+    /// Evaluates `item`: first the points of the coarsest lattice (every ray), then each finer
+    /// lattice's new points from the corners around them on the coarser one. A lattice of
+    /// spacing `h` is the multiples of `h` below the far edge, and the far edge itself; so a new
+    /// point `d` (an odd multiple of `h`) has its corners at `d − h` and `min(d + h, far edge)`.
+    fn evaluate_item(&self, item: &Item) -> WorkPanes {
+        let (res, s) = (self.atlas.resolution, item.step);
         let words = self.kernel.words();
         let c = self.kernel.clusters;
         let exit_at = |x: u32, y: u32| -> Option<u32> {
-            (x < res && y < res)
-                .then(|| self.atlas.texel_exit[(y * res + x) as usize])
-                .filter(|&i| i != EMPTY_TEXEL)
+            let (gx, gy) = (item.x0 + x, item.y0 + y);
+            (gx < res && gy < res)
+                .then(|| self.atlas.texel_exit[(gy * res + gx) as usize])
+                .filter(|&i| {
+                    i != EMPTY_TEXEL
+                        && self.atlas.chart_of_triangle[self.atlas.exits[i as usize].triangle as usize] == item.chart
+                })
         };
         let mut out = WorkPanes::new(self.kernel.entries);
-        // Bits of every point that is a corner of a finer one: the even texels.
-        let half = side.div_ceil(2);
-        let slot = |dx: u32, dy: u32| ((dy / 2) as usize * half + (dx / 2) as usize) * words;
+        // Visibility bits of every point that is a corner of a finer one.
+        let width = (item.tx + 1) as usize;
+        let slot = |x: u32, y: u32| (y as usize * width + x as usize) * words;
         let mut known = if s > 1 {
-            vec![0u64; half * half * words]
+            vec![0u64; width * (item.ty + 1) as usize * words]
         } else {
             Vec::new()
         };
@@ -461,36 +544,47 @@ impl Tiler<'_> {
         let mut scratch = vec![Vec3::ZERO; c];
         let mut scratch_energy = vec![Vec3::ZERO; self.kernel.entries];
         let mut cache = self.kernel.occluder_cache();
+        // The coordinates of the lattice of spacing `h` along an edge of length `far`.
+        let lattice = |h: u32, far: u32| -> Vec<u32> { (0..far).step_by(h as usize).chain([far]).collect() };
+        let on = |d: u32, h: u32, far: u32| d == far || d.is_multiple_of(h);
         let mut h = s;
         loop {
-            // The points new at spacing `h`: multiples of h, not of 2h (all of them at the top).
-            for dy in (0..=t).step_by(h as usize) {
-                for dx in (0..=t).step_by(h as usize) {
-                    let top = h == s;
-                    if !top && dx % (2 * h) == 0 && dy % (2 * h) == 0 {
+            let top = h == s;
+            let (xs_h, ys_h) = (lattice(h, item.tx), lattice(h, item.ty));
+            for &dy in &ys_h {
+                for &dx in &xs_h {
+                    let (coarse_x, coarse_y) = (on(dx, 2 * h, item.tx), on(dy, 2 * h, item.ty));
+                    if !top && coarse_x && coarse_y {
                         continue;
                     }
-                    let inside = dx < t && dy < t;
+                    let inside = (dx < item.tx || item.end_x) && (dy < item.ty || item.end_y);
                     // Far-edge points matter only as corners of finer points.
                     if !inside && h == 1 {
                         continue;
                     }
-                    let Some(e) = exit_at(x0 + dx, y0 + dy) else { continue };
+                    let Some(e) = exit_at(dx, dy) else { continue };
                     let exit = &self.atlas.exits[e as usize];
                     let corners = if top {
                         None
                     } else {
-                        let xs: &[u32] = if dx % (2 * h) == 0 { &[dx] } else { &[dx - h, dx + h] };
-                        let ys: &[u32] = if dy % (2 * h) == 0 { &[dy] } else { &[dy - h, dy + h] };
+                        let xs = if coarse_x {
+                            [dx, dx]
+                        } else {
+                            [dx - h, (dx + h).min(item.tx)]
+                        };
+                        let ys = if coarse_y {
+                            [dy, dy]
+                        } else {
+                            [dy - h, (dy + h).min(item.ty)]
+                        };
                         // Every corner must stand for the point; at chart borders and creases
                         // some do not, and the point casts its own rays. (Taking the corners
                         // that fit, if two or more do, saved 11 % of the rays on chairs and
                         // raised its difference from exact from 2.5 % to 3.3 %; at the finest
                         // spacing only, 8 % and 3.0 %, for no faster bake.)
-                        let corners = ys.iter().flat_map(|&cy| xs.iter().map(move |&cx| (cx, cy)));
+                        let corners = ys.into_iter().flat_map(|cy| xs.into_iter().map(move |cx| (cx, cy)));
                         let fits = corners.clone().all(|(cx, cy)| {
-                            exit_at(x0 + cx, y0 + cy)
-                                .is_some_and(|ce| self.corner_fits(exit, &self.atlas.exits[ce as usize], h))
+                            exit_at(cx, cy).is_some_and(|ce| self.corner_fits(exit, &self.atlas.exits[ce as usize], h))
                         });
                         fits.then(|| {
                             seen.fill(!0);
@@ -567,22 +661,12 @@ pub fn evaluate_atlas_panes(
     let tiler = Tiler {
         kernel: Kernel::new(bvh, vpls, clustering, params.bound)?,
         atlas,
-        step: lattice.step,
-        tile: TILE_TEXELS.max(lattice.step),
     };
-    let (res, t) = (atlas.resolution, tiler.tile);
-    let per_side = res.div_ceil(t);
-    let tiles: Vec<(u32, u32)> = (0..per_side * per_side)
-        .map(|k| ((k % per_side) * t, (k / per_side) * t))
-        .filter(|&(x0, y0)| {
-            (y0..(y0 + t).min(res))
-                .any(|y| (x0..(x0 + t).min(res)).any(|x| atlas.texel_exit[(y * res + x) as usize] != EMPTY_TEXEL))
-        })
-        .collect();
+    let work = items(atlas, TILE_TEXELS.max(lattice.step), lattice.step);
     let mut panes = Panes::assembling(tiler.kernel.clusters, atlas.exits.len(), tiler.kernel.entries);
     let mut done = 0u64;
-    for batch in tiles.chunks(TILES_PER_BATCH) {
-        let outs: Vec<WorkPanes> = batch.par_iter().map(|&(x0, y0)| tiler.evaluate_tile(x0, y0)).collect();
+    for batch in work.chunks(ITEMS_PER_BATCH) {
+        let outs: Vec<WorkPanes> = batch.par_iter().map(|item| tiler.evaluate_item(item)).collect();
         for out in outs {
             done += out.exits.len() as u64;
             panes.add(out);

@@ -33,7 +33,7 @@
 //! ([`Emitters::sample_irradiance`], unbiased), and emission met along a path is not added
 //! (the samples count it), so the estimator above stays the indirect irradiance. The direct
 //! irradiance at exit points takes [`EMITTER_DIRECT_SAMPLES`] samples each (stream
-//! `(seed, exit, u64::MAX)`), and an image's full radiance adds the emission `L_e` of the
+//! `(0, exit, u64::MAX)`, fixed), and an image's full radiance adds the emission `L_e` of the
 //! surface seen and a fresh sample of its direct light every pass.
 
 use glam::{Vec2, Vec3};

@@ -1,5 +1,8 @@
 //! `cargo xtask eval --budget`: the error budget of the default bake, one idealised stage at a time.
 //!
+//! The cases: the Cornell box with the light under the ceiling and low near a wall, chairs,
+//! McGuire's CornellBox-Sphere and, as the large shared scene, the Dabrovic Sponza (its bakes
+//! plan under `--time-budget` [`LARGE_TIME_BUDGET`]: the whole budget takes about 35 minutes).
 //! For every case (a scene and one light) the default bake (`prm-bake bake SCENE`, release; on a
 //! machine without a GPU `--backend auto` renders panes with the native CPU evaluator) is played
 //! as shipped, then each stage of the chain is replaced by its ideal while the others stay as
@@ -12,7 +15,7 @@
 //! | ray-cast entry irradiance | exact visibility at the entry points instead of shadow maps | the archive's panes blended on the CPU, weights from `prm_trace::bounded_irradiance` (K = all) |
 //! | no entry-point bound | the entry disk bound `ENTRY_DISK` off | as above with disk 0 |
 //! | exact-visibility panes | a shadow ray per exit point and VPL instead of shared ones | `--backend cpu-exact` |
-//! | depth-map panes | not an ideal: the GPU path's hemicube depth maps (lavapipe here) | `--backend vulkan` |
+//! | depth-map panes | not an ideal: the GPU path's hemicube depth maps (lavapipe here; not on the large scene) | `--backend vulkan` |
 //! | unclustered | one pane per entry point | `--clusters = --entries`, K = all |
 //! | no VPL bound | plain `1/r²` | `vpl_disk_scale = 0` |
 //! | 4× walks | four times the walks per entry point | `--paths-per-entry ×4` |
@@ -46,7 +49,14 @@ struct Case {
     scene: SceneSpec,
     light_name: &'static str,
     light_fraction: [f32; 3],
+    /// The large scene: no lavapipe row (hours on 2 cores), and its 2× atlas bake given the
+    /// memory and archive budgets it needs.
+    large: bool,
 }
+
+/// The large shared scene's bakes plan under this time budget (`--time-budget`, seconds)
+/// instead of the default 600 s, so that its ten bakes take about 10 minutes.
+const LARGE_TIME_BUDGET: &str = "60";
 
 /// Exit points closer than this to an edge (in texels) are "at an edge"; farther than
 /// [`INTERIOR`] they are "away from edges".
@@ -71,7 +81,8 @@ struct Split {
     noise: f64,
     /// Share of the squared error at exit points within [`EDGE`] texels of an edge.
     edge_share: f64,
-    /// The error over the exit points farther than [`INTERIOR`] texels from an edge.
+    /// The error over the exit points farther than [`INTERIOR`] texels from an edge (NaN if
+    /// there are none: every texel of a coarse atlas of a detailed scene is near an edge).
     interior: f64,
 }
 
@@ -104,7 +115,7 @@ fn split(test: &[Vec3], m: &Measured) -> Split {
         shape,
         noise: (var / r2).sqrt(),
         edge_share: edge_d2 / d2.max(1e-300),
-        interior: (in_d2 / in_r2.max(1e-300)).sqrt(),
+        interior: if in_r2 > 0.0 { (in_d2 / in_r2).sqrt() } else { f64::NAN },
     }
 }
 
@@ -123,11 +134,13 @@ fn cases(root: &Path) -> Vec<Case> {
         scene: cornell(),
         light_name: "under the ceiling",
         light_fraction: [0.5, 0.85, 0.5],
+        large: false,
     });
     out.push(Case {
         scene: cornell(),
         light_name: "low near the red wall",
         light_fraction: [0.12, 0.35, 0.5],
+        large: false,
     });
     out.push(Case {
         scene: SceneSpec::new(
@@ -139,6 +152,7 @@ fn cases(root: &Path) -> Vec<Case> {
         ),
         light_name: "above the chairs",
         light_fraction: [0.5, 0.75, 0.5],
+        large: false,
     });
     let sphere = root.join("../shared/scenes/cornell-box/CornellBox-Sphere.obj");
     if sphere.is_file() {
@@ -146,9 +160,24 @@ fn cases(root: &Path) -> Vec<Case> {
             scene: SceneSpec::new("CornellBox-Sphere", sphere, vec![], Default::default(), SPP),
             light_name: "under the ceiling",
             light_fraction: [0.5, 0.8, 0.5],
+            large: false,
         });
     } else {
         println!("budget: {} is absent: CornellBox-Sphere skipped", sphere.display());
+    }
+    let sponza = root.join("../shared/scenes/sponza-dabrovic/sponza.obj");
+    if sponza.is_file() {
+        out.push(Case {
+            scene: SceneSpec {
+                base_args: vec!["--time-budget".into(), LARGE_TIME_BUDGET.into()],
+                ..SceneSpec::new("sponza", sponza, vec![], Default::default(), SPP)
+            },
+            light_name: "in the atrium, time budget 60 s",
+            light_fraction: [0.5, 0.45, 0.5],
+            large: true,
+        });
+    } else {
+        println!("budget: {} is absent: sponza skipped", sponza.display());
     }
     out
 }
@@ -232,7 +261,7 @@ pub fn run(bin: &Path, cache: &Path, root: &Path) -> Result<String> {
             cache.join("refs"),
         )?;
         let (light_spec, light) = plan::point_light(&scene, case.light_fraction)?;
-        let auto_bake = plan::bake(bin, cache, spec, &[], None, false)?;
+        let auto_bake = plan::bake(bin, cache, spec, &spec.base_args, None, false)?;
         let auto = Params::from_report(&auto_bake.report)?;
         let name = format!("{}, light {}", spec.name, case.light_name);
         println!(
@@ -271,14 +300,18 @@ pub fn run(bin: &Path, cache: &Path, root: &Path) -> Result<String> {
         let bake_s = |b: &plan::Baked| b.report["timings"]["total"].as_f64().unwrap_or(f64::NAN);
         let mut row = |stage: &str, test: &[Vec3], m: &Measured, seconds: f64| {
             let s = split(test, m);
+            let interior = if s.interior.is_nan() {
+                "none".to_string()
+            } else {
+                format!("{:.1}%", 100.0 * s.interior)
+            };
             let line = format!(
-                "| {name} | {stage} | {:.1}% | {:.3} | {:.1}% | {:.1}% | {:.0}% | {:.1}% | {seconds:.1} |",
+                "| {name} | {stage} | {:.1}% | {:.3} | {:.1}% | {:.1}% | {:.0}% | {interior} | {seconds:.1} |",
                 100.0 * s.error,
                 s.energy,
                 100.0 * s.shape,
                 100.0 * s.noise,
                 100.0 * s.edge_share,
-                100.0 * s.interior
             );
             println!("budget: {line}");
             md.push_str(&line);
@@ -310,15 +343,15 @@ pub fn run(bin: &Path, cache: &Path, root: &Path) -> Result<String> {
             ..auto
         };
         // (stage, bake arguments, config, K played) at the default resolution.
-        let mut stages = vec![
-            ("exact-visibility panes", backend("cpu-exact"), None, auto.top_k),
-            (
+        let mut stages = vec![("exact-visibility panes", backend("cpu-exact"), None, auto.top_k)];
+        if !case.large {
+            stages.push((
                 "(not ideal) depth-map panes on lavapipe",
                 backend("vulkan"),
                 None,
                 auto.top_k,
-            ),
-        ];
+            ));
+        }
         if auto.entries <= 2048 {
             stages.push(("unclustered, K = all", unclustered.args(), None, auto.entries));
         } else {
@@ -353,7 +386,11 @@ pub fn run(bin: &Path, cache: &Path, root: &Path) -> Result<String> {
             resolution: auto.resolution * 2,
             ..auto
         };
-        let b = variant(fine.args(), None)?;
+        // 240 panes of 1024² need 960 MiB resident and in the archive.
+        let budgets = case
+            .large
+            .then_some("memory_budget_mib = 4096\narchive_budget_mib = 4096\n");
+        let b = variant(fine.args(), budgets)?;
         let fine_measured = measured(fine.resolution)?;
         row(
             "2× atlas resolution",
