@@ -76,25 +76,22 @@ pub fn nudge_light(light: &mut Light, camera: &Camera, right: f32, forward: f32,
     };
     let side = fwd.cross(Vec3::Y);
     let offset = (side * right + fwd * forward + Vec3::Y * up) * step;
-    match light {
-        Light::Point { position, .. } | Light::Spot { position, .. } | Light::Rect { position, .. } => {
-            *position += offset
+    if let Some(position) = light.position_mut() {
+        *position += offset;
+    } else if let Light::Directional { direction, .. } = light {
+        let turn = LIGHT_TURN_DEG.to_radians();
+        let mut d = Quat::from_rotation_y(-right * turn) * *direction;
+        // Tilt about the horizontal axis across the light (the view's side for a vertical one).
+        let (axis, vertical) = match d.cross(Vec3::Y).try_normalize() {
+            Some(a) => (a, false),
+            None => (side, true),
+        };
+        let tilted = Quat::from_axis_angle(axis, forward * turn) * d;
+        // Never tip over the vertical (the turn about +Y would flip).
+        if vertical || tilted.cross(Vec3::Y).dot(axis) > 0.0 {
+            d = tilted;
         }
-        Light::Directional { direction, .. } => {
-            let turn = LIGHT_TURN_DEG.to_radians();
-            let mut d = Quat::from_rotation_y(-right * turn) * *direction;
-            // Tilt about the horizontal axis across the light (the view's side for a vertical one).
-            let (axis, vertical) = match d.cross(Vec3::Y).try_normalize() {
-                Some(a) => (a, false),
-                None => (side, true),
-            };
-            let tilted = Quat::from_axis_angle(axis, forward * turn) * d;
-            // Never tip over the vertical (the turn about +Y would flip).
-            if vertical || tilted.cross(Vec3::Y).dot(axis) > 0.0 {
-                d = tilted;
-            }
-            *direction = d.normalize_or(*direction);
-        }
+        *direction = d.normalize_or(*direction);
     }
 }
 

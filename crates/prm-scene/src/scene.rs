@@ -124,6 +124,16 @@ pub enum Light {
 pub const RECT_MAX_HALF_ANGLE_DEG: f32 = 85.0;
 
 impl Light {
+    /// The position of a point, spot or rectangular spot light (None for a directional one).
+    pub fn position_mut(&mut self) -> Option<&mut Vec3> {
+        match self {
+            Light::Point { position, .. } | Light::Spot { position, .. } | Light::Rect { position, .. } => {
+                Some(position)
+            }
+            Light::Directional { .. } => None,
+        }
+    }
+
     /// Whether the light emits along the unit direction `from_light` (from the light towards
     /// a point): always for point and directional lights, inside the cone of a spot and inside
     /// the frustum of a rectangular spot (boundaries included). The run-time twin is the cone

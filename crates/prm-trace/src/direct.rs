@@ -31,12 +31,8 @@ pub fn bounded_irradiance(bvh: &Bvh, lights: &[Light], p: Vec3, ng: Vec3, n: Vec
     let mut e = Vec3::ZERO;
     for light in lights {
         let (to_light, dist, radiometric) = match *light {
-            Light::Point { position, intensity } => {
-                let d = position - p;
-                let r = d.length();
-                (d / r, r, intensity / (r * r + disk))
-            }
-            Light::Spot {
+            Light::Point { position, intensity }
+            | Light::Spot {
                 position, intensity, ..
             }
             | Light::Rect {

@@ -24,7 +24,7 @@
 use glam::{Vec2, Vec3};
 use prm_scene::Scene;
 
-use crate::bvh::Bvh;
+use crate::bvh::{Bvh, Hit};
 use crate::rng::Rng;
 use crate::TraceError;
 
@@ -58,6 +58,16 @@ pub struct Emitters {
     pick: Vec<f32>,
     /// Emitter index of every scene triangle ([`NOT_EMITTER`] for the others).
     of_triangle: Vec<u32>,
+}
+
+/// How an emitter sample is weighed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Strategy {
+    /// Against cosine sampling (multiple importance sampling).
+    Weighted,
+    /// Alone: the whole estimate (the tests hold the weighted pair to it).
+    #[cfg_attr(not(test), allow(dead_code))]
+    Alone,
 }
 
 /// [`Emitters`]' index of a triangle that does not emit.
@@ -180,8 +190,7 @@ impl Emitters {
 
     /// The emitter-sampling half of the estimate at `p` on triangle `tri` (geometric normal
     /// `ng`, receiving normal `n`), with a shadow ray, weighed against cosine sampling: the
-    /// caller adds the other half ([`Emitters::cosine_weight`] of `π L_e` where its cosine
-    /// sample meets an emitter).
+    /// caller adds the other half ([`Emitters::cosine_hit`] of its cosine sample).
     #[allow(clippy::too_many_arguments)]
     pub fn sample_weighted(
         &self,
@@ -193,20 +202,28 @@ impl Emitters {
         tri: u32,
         rng: &mut Rng,
     ) -> Vec3 {
-        self.sample(scene, bvh, p, ng, n, tri, rng, true)
+        self.sample(scene, bvh, p, ng, n, tri, rng, Strategy::Weighted)
     }
 
-    /// MIS weight of a cosine sample (receiving cosine `cos_x`) that met emitter triangle `e`
-    /// `r²` away at cosine `cos_e` there.
-    pub fn cosine_weight(&self, scene: &Scene, e: u32, cos_x: f32, r2: f32, cos_e: f32) -> f32 {
-        balance(cos_x * std::f32::consts::FRAC_1_PI, self.pdf(scene, e, r2, cos_e))
+    /// The cosine half of the estimate: what the cosine-sampled direction `dir` (receiving
+    /// cosine `cos_x`) that met `hit` adds, `π L_e` weighed against emitter sampling, zero
+    /// unless it met an emitter's front.
+    pub fn cosine_hit(&self, scene: &Scene, bvh: &Bvh, hit: &Hit, dir: Vec3, cos_x: f32) -> Vec3 {
+        let le = self.emission(hit.triangle);
+        if !hit.front || le.max_element() <= 0.0 {
+            return Vec3::ZERO;
+        }
+        let ce = -bvh.geometric_normal(hit.triangle).dot(dir);
+        let w = balance(
+            cos_x * std::f32::consts::FRAC_1_PI,
+            self.pdf(scene, hit.triangle, hit.t * hit.t, ce),
+        );
+        le * (std::f32::consts::PI * w)
     }
 
-    /// One-sample estimate of the direct irradiance (W/m²) at `p` on triangle `tri` (geometric
-    /// normal `ng`, receiving normal `n`) from every emitter, by emitter sampling alone, with a
-    /// shadow ray.
+    /// One emitter sample at `p`, weighed by `strategy`.
     #[allow(clippy::too_many_arguments)]
-    pub fn sample_irradiance(
+    fn sample(
         &self,
         scene: &Scene,
         bvh: &Bvh,
@@ -215,12 +232,8 @@ impl Emitters {
         n: Vec3,
         tri: u32,
         rng: &mut Rng,
+        strategy: Strategy,
     ) -> Vec3 {
-        self.sample(scene, bvh, p, ng, n, tri, rng, false)
-    }
-
-    #[allow(clippy::too_many_arguments)]
-    fn sample(&self, scene: &Scene, bvh: &Bvh, p: Vec3, ng: Vec3, n: Vec3, tri: u32, rng: &mut Rng, mis: bool) -> Vec3 {
         if self.is_empty() {
             return Vec3::ZERO;
         }
@@ -247,10 +260,9 @@ impl Emitters {
         if !bvh.visible(p, ng, tri, y, ne, e) {
             return Vec3::ZERO;
         }
-        let weight = if mis {
-            balance(self.pick[k] * r2 / (t.area() * ce), cx * std::f32::consts::FRAC_1_PI)
-        } else {
-            1.0
+        let weight = match strategy {
+            Strategy::Weighted => balance(self.pick[k] * r2 / (t.area() * ce), cx * std::f32::consts::FRAC_1_PI),
+            Strategy::Alone => 1.0,
         };
         self.radiance[k] * (weight * cx * ce * t.area() / (r2 * self.pick[k]))
     }
@@ -266,12 +278,7 @@ impl Emitters {
         let dir = crate::sampling::cosine_hemisphere(rng.next_vec2(), n);
         if dir.dot(ng) > 0.0 {
             if let Some(hit) = bvh.closest_hit(bvh.spawn(p, ng, dir), dir, f32::INFINITY, tri) {
-                let le = self.emission(hit.triangle);
-                if hit.front && le.max_element() > 0.0 {
-                    let ce = -bvh.geometric_normal(hit.triangle).dot(dir);
-                    let w = self.cosine_weight(scene, hit.triangle, n.dot(dir), hit.t * hit.t, ce);
-                    e += le * (std::f32::consts::PI * w);
-                }
+                e += self.cosine_hit(scene, bvh, &hit, dir, n.dot(dir));
             }
         }
         e
@@ -297,16 +304,6 @@ impl Emitters {
             .map(|_| self.sample_both(scene, bvh, p, ng, n, tri, rng))
             .sum();
         s / samples as f32
-    }
-
-    /// Radiance leaving the front of scene triangle `tri` by emission (zero for the back and
-    /// for non-emitters).
-    pub fn radiance_of(&self, scene: &Scene, tri: u32) -> Vec3 {
-        let m = scene.triangles[tri as usize].material;
-        self.groups
-            .iter()
-            .find(|g| g.material == m)
-            .map_or(Vec3::ZERO, |g| g.radiance)
     }
 }
 
@@ -396,7 +393,7 @@ mod tests {
             let exact = le * std::f32::consts::PI * exact;
             let both = e.irradiance(&scene, &bvh, p, Vec3::Y, Vec3::Y, 0, 1 << 16, &mut rng);
             let alone: Vec3 = (0..1 << 16)
-                .map(|_| e.sample_irradiance(&scene, &bvh, p, Vec3::Y, Vec3::Y, 0, &mut rng))
+                .map(|_| e.sample(&scene, &bvh, p, Vec3::Y, Vec3::Y, 0, &mut rng, Strategy::Alone))
                 .sum::<Vec3>()
                 / (1 << 16) as f32;
             for (name, v) in [("both strategies", both), ("emitter sampling", alone)] {

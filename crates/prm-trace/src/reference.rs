@@ -30,7 +30,7 @@
 //!
 //! **Emissive surfaces** ([`ReferenceTracer::with_emitters`]) are area lights besides the
 //! lighting: `E_dir(y_j)` gains one next-event sample of them at every path vertex
-//! ([`Emitters::sample_irradiance`], unbiased), and emission met along a path is not added
+//! ([`Emitters::sample_weighted`] and [`Emitters::cosine_hit`], unbiased), and emission met along a path is not added
 //! (the samples count it), so the estimator above stays the indirect irradiance. The direct
 //! irradiance at exit points takes [`EMITTER_DIRECT_SAMPLES`] samples each (stream
 //! `(0, exit, u64::MAX)`, fixed), and an image's full radiance adds the emission `L_e` of the
@@ -249,12 +249,7 @@ impl<'a> ReferenceTracer<'a> {
             // direct light there) is also the cosine half of that vertex's emitter estimate; it
             // was traced with probability q, which `throughput` already divides by.
             if let (Some(e), true) = (self.emitters, bounce > 0) {
-                let le = e.emission(hit.triangle);
-                if le.max_element() > 0.0 {
-                    let ce = -self.bvh.geometric_normal(hit.triangle).dot(dir);
-                    let w = e.cosine_weight(self.scene, hit.triangle, n.dot(dir), hit.t * hit.t, ce);
-                    sum += throughput * le * (std::f32::consts::PI * w);
-                }
+                sum += throughput * e.cosine_hit(self.scene, self.bvh, &hit, dir, n.dot(dir));
             }
             tri = hit.triangle;
             pos = self.scene.triangles[tri as usize].point(hit.b1, hit.b2);
@@ -346,8 +341,7 @@ impl<'a> ReferenceTracer<'a> {
                 let (direct, emission) = match mode {
                     ImageMode::Full => (
                         self.direct(p, ng, ng, hit.triangle),
-                        self.emitters
-                            .map_or(Vec3::ZERO, |e| e.radiance_of(self.scene, hit.triangle)),
+                        self.emitters.map_or(Vec3::ZERO, |e| e.emission(hit.triangle)),
                     ),
                     ImageMode::IndirectOnly => (Vec3::ZERO, Vec3::ZERO),
                 };
