@@ -23,9 +23,11 @@ import sys
 
 MAGIC = b"\x89PRM\r\n\x1a\n"
 SUPPORTED_MAJOR = 1
-SUPPORTED_MINOR = 1
-KINDS = {1: "metadata", 2: "atlas", 3: "entries", 4: "clusters", 5: "panes", 6: "entry_energy"}
-OPTIONAL = {6}
+SUPPORTED_MINOR = 2
+KINDS = {1: "metadata", 2: "atlas", 3: "entries", 4: "clusters", 5: "panes", 6: "entry_energy",
+         7: "emitters"}
+OPTIONAL = {6, 7}
+MAX_EMITTER_GROUPS = 256
 MAX_RESOLUTION = 8192
 MAX_TILE_SIZE = 1024
 MAX_TRIANGLES = 1 << 24
@@ -292,8 +294,10 @@ class Reader:
             if a[1] > b[0]:
                 raise InvalidArchive("overlapping sections")
         by_kind = {}
+        # Kind 7 is the emitters section from 1.2 on; before, it was unassigned.
+        known = {k: v for k, v in KINDS.items() if k != 7 or minor >= 2}
         for s in sections:
-            if s["kind"] in KINDS:
+            if s["kind"] in known:
                 if s["kind"] in by_kind:
                     raise InvalidArchive(f"duplicate {s['name']} section")
                 by_kind[s["kind"]] = s
@@ -335,7 +339,51 @@ class Reader:
             if any(v != v or v < 0 or v == float("inf") for r in vals for v in r):
                 raise InvalidArchive("entry_energy: values must be finite and non-negative")
             self.entry_energy = vals
+        self.emitters = None
+        if 7 in by_kind:
+            self.parse_emitters(by_kind[7])
         self.parse_panes(by_kind[5])
+
+    def parse_emitters(self, s):
+        # 1.2: header (groups, entries, resolution, reserved), 80-byte group records, then per
+        # group an RGB f32 triple per entry and an RGB9E5 word per atlas texel.
+        n_entries, texels = len(self.entries), self.resolution * self.resolution
+        limit = 16 + MAX_EMITTER_GROUPS * (80 + 12 * n_entries + 4 * texels)
+        raw = self.load(s, limit)
+        if len(raw) < 16:
+            raise InvalidArchive("emitters: shorter than its header")
+        groups, entries, res, reserved = struct.unpack_from("<IIII", raw, 0)
+        if self.strict and reserved:
+            raise InvalidArchive("emitters reserved field not zero")
+        if not 1 <= groups <= MAX_EMITTER_GROUPS:
+            raise InvalidArchive("emitters: group count outside 1..=256")
+        if entries != n_entries or res != self.resolution:
+            raise InvalidArchive("emitters: entry count or resolution differs from the archive's")
+        size = 16 + groups * (80 + 12 * n_entries + 4 * texels)
+        if len(raw) != size:
+            raise InvalidArchive("emitters: raw size does not match its counts")
+        out, at = [], 16 + 80 * groups
+        for g in range(groups):
+            rec = raw[16 + 80 * g:16 + 80 * (g + 1)]
+            name = rec[:64]
+            end = name.find(b"\0") if b"\0" in name else 64
+            if any(name[end:]):
+                raise InvalidArchive("emitters: bytes after a name's NUL padding")
+            try:
+                name = name[:end].decode("utf-8")
+            except UnicodeDecodeError:
+                raise InvalidArchive("emitters: a name is not UTF-8")
+            material = struct.unpack_from("<I", rec, 64)[0]
+            radiance = list(struct.unpack_from("<3f", rec, 68))
+            irr = [list(struct.unpack_from("<3f", raw, at + 12 * i)) for i in range(n_entries)]
+            at += 12 * n_entries
+            direct = [decode_rgb9e5(struct.unpack_from("<I", raw, at + 4 * i)[0]) for i in range(texels)]
+            at += 4 * texels
+            if any(v != v or v < 0 or v == float("inf") for r in [radiance] + irr for v in r):
+                raise InvalidArchive("emitters: values must be finite and non-negative")
+            out.append(dict(name=name, material=material, radiance=radiance,
+                            entry_irradiance=irr, direct=direct))
+        self.emitters = out
 
     def load(self, s, max_raw):
         if s["raw_size"] > max_raw:
@@ -473,6 +521,7 @@ class Reader:
             covered_texels=self.covered,
             entries=self.entries,
             entry_energy=self.entry_energy,
+            emitters=self.emitters,
             clusters=self.clusters,
             tile_filter=self.tile_filter,
             stored_tiles=sum(1 for t in self.tiles if t[1]),

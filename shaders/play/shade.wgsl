@@ -1,5 +1,6 @@
 // prm-play shade pass: radiance of every pixel, albedo/π × (direct irradiance with shadows +
-// indirect irradiance bilinearly sampled from the lightmap), linear HDR. Comes after the run
+// the emitters' direct irradiance and the indirect irradiance, bilinearly sampled from their
+// lightmaps) + the surface's own emission, linear HDR. Comes after the run
 // time's shared.wgsl and lights.wgsl (which use `frame`, `lights`, `views`, `shadow_maps`).
 
 // What a frame shows (prm_play::Mode).
@@ -24,6 +25,9 @@ struct Material {
     albedo: vec3<f32>,
     // texture layer, or -1
     texture: i32,
+    // emitted radiance (the emitter group's baked radiance × its scale), 0 if not emissive
+    emission: vec3<f32>,
+    _pad0: f32,
 };
 
 @group(0) @binding(0) var<uniform> frame: Frame;
@@ -35,6 +39,8 @@ struct Material {
 @group(0) @binding(6) var textures: texture_2d_array<f32>;
 @group(0) @binding(7) var texture_sampler: sampler;
 @group(0) @binding(8) var<uniform> camera: Camera;
+// The emitters' direct irradiance (prm_runtime::Runtime::emitter_lightmap), any size.
+@group(0) @binding(9) var emitter_lightmap: texture_2d<f32>;
 
 struct VsIn {
     @location(0) position: vec3<f32>,
@@ -66,17 +72,17 @@ fn vs_main(v: VsIn) -> VsOut {
 }
 
 // Bilinear lightmap lookup (rgba32float is not filterable everywhere: filtered by hand).
-fn indirect(uv: vec2<f32>) -> vec3<f32> {
-    let size = vec2<i32>(textureDimensions(lightmap));
+fn bilinear(map: texture_2d<f32>, uv: vec2<f32>) -> vec3<f32> {
+    let size = vec2<i32>(textureDimensions(map));
     let t = uv * vec2<f32>(size) - 0.5;
     let base = floor(t);
     let f = t - base;
     let b = vec2<i32>(base);
     let hi = size - 1;
-    let a00 = textureLoad(lightmap, clamp(b, vec2<i32>(0), hi), 0).rgb;
-    let a10 = textureLoad(lightmap, clamp(b + vec2<i32>(1, 0), vec2<i32>(0), hi), 0).rgb;
-    let a01 = textureLoad(lightmap, clamp(b + vec2<i32>(0, 1), vec2<i32>(0), hi), 0).rgb;
-    let a11 = textureLoad(lightmap, clamp(b + vec2<i32>(1, 1), vec2<i32>(0), hi), 0).rgb;
+    let a00 = textureLoad(map, clamp(b, vec2<i32>(0), hi), 0).rgb;
+    let a10 = textureLoad(map, clamp(b + vec2<i32>(1, 0), vec2<i32>(0), hi), 0).rgb;
+    let a01 = textureLoad(map, clamp(b + vec2<i32>(0, 1), vec2<i32>(0), hi), 0).rgb;
+    let a11 = textureLoad(map, clamp(b + vec2<i32>(1, 1), vec2<i32>(0), hi), 0).rgb;
     return mix(mix(a00, a10, f.x), mix(a01, a11, f.x), f.y);
 }
 
@@ -108,11 +114,15 @@ fn fs_main(v: VsOut) -> @location(0) vec4<f32> {
         mode = select(MODE_GI, MODE_DIRECT, v.clip.x < camera.width * 0.5);
     }
     var e = vec3<f32>(0.0);
+    var emitted = vec3<f32>(0.0);
     if mode != MODE_INDIRECT {
-        e += direct_irradiance_ng(v.position, ng, n, 0.0);
+        e += direct_irradiance_ng(v.position, ng, n, 0.0) + bilinear(emitter_lightmap, v.lightmap_uv);
+        // Emitters are one-sided: they show their radiance from the side their normals face.
+        let front = dot(v.normal, camera.eye - v.position) > 0.0;
+        emitted = select(vec3<f32>(0.0), m.emission, front);
     }
     if mode != MODE_DIRECT {
-        e += indirect(v.lightmap_uv);
+        e += bilinear(lightmap, v.lightmap_uv);
     }
-    return vec4<f32>(albedo / 3.14159265358979 * e, 1.0);
+    return vec4<f32>(albedo / 3.14159265358979 * e + emitted, 1.0);
 }

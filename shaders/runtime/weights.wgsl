@@ -1,4 +1,5 @@
-// prm-runtime weights pass: irradiance of every entry point from the lights (shadow-mapped), and
+// prm-runtime weights pass: irradiance of every entry point from the lights (shadow-mapped) and
+// the emitters (precomputed), and
 // each cluster's weight = its members' irradiance weighed by their pane energy,
 // Σ E_i e_i / Σ e_i per channel (the mean when every e_i is 1, archives before 1.1), so the
 // cluster gives the indirect energy its members would give unclustered; score = Σ_rgb weight ×
@@ -31,7 +32,8 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_index) 
     for (var k = lane; k < cl.count; k += WEIGHT_LANES) {
         let e = entries[cl.first + k];
         // Bounded: the entry stands for a disk of radius² e.disk, see light_irradiance_disk.
-        sum += direct_irradiance_disk(e.position, e.normal, e.disk) * e.energy;
+        // Plus the emitters' (baked at unit scale, summed at their scales on the CPU).
+        sum += (direct_irradiance_disk(e.position, e.normal, e.disk) + e.emitted) * e.energy;
         sum_energy += e.energy;
     }
     partial[lane] = sum;

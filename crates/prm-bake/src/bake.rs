@@ -234,8 +234,8 @@ pub fn run(args: &BakeArgs) -> Result<()> {
     }
     let emissive = scene.emissive_materials();
     if !emissive.is_empty() {
-        progress.warn(&format!(
-            "emissive material(s) {}: the bake does not light the scene with them yet (they are              diffuse surfaces here); `prm-bake reference --emitters` renders their light",
+        progress.say(&format!(
+            "  emitters: {} (one group per emissive material; `prm-play --emitter NAME=SCALE` scales them)",
             emissive.join(", ")
         ));
     }
@@ -351,10 +351,14 @@ fn print_summary(r: &Report) {
         ("BVH build", "bvh"),
         ("light tracing", "light_tracing"),
         ("clustering", "clustering"),
+        ("emitters", "emitters"),
         ("pane rendering", "pane_rendering"),
         ("compression + write", "compression_write"),
         ("total", "total"),
     ] {
+        if key == "emitters" && !r.timings.contains_key(key) {
+            continue;
+        }
         println!("  {name:<20} {:>9.3} s", r.timings.get(key).copied().unwrap_or(0.0));
     }
     if let Some(b) = r.peak_rss_bytes {

@@ -151,6 +151,13 @@ pub fn summary_json<R: Read + Seek>(archive: &Archive<R>, file: &Path, report: O
         "covered_texels": atlas.covered_texels(),
         "entries": archive.entries().len(),
         "entry_energy": archive.entry_energy().is_some(),
+        "emitters": archive.emitters().iter().map(|g| json!({
+            "name": g.name,
+            "material": g.material,
+            "radiance": g.radiance,
+            "entry_irradiance_sum": rgb_sum(&g.entry_irradiance),
+            "direct_sum": rgb_sum(&g.direct),
+        })).collect::<Vec<_>>(),
         "clusters": archive.clusters().len(),
         "tiles": {
             "filter": archive.tile_filter().name(),
@@ -248,6 +255,15 @@ pub fn write_summary<W: Write, R: Read + Seek>(
             " (no pane energies: cluster weights are the members' mean; re-bake for 1.1)"
         }
     )?;
+    for g in archive.emitters() {
+        let [r, gr, b] = g.radiance;
+        let [er, eg, eb] = rgb_sum(&g.direct);
+        writeln!(
+            out,
+            "emitter      {:?} (material {}): radiance {r:.3} {gr:.3} {b:.3}, direct irradiance summed over the atlas {er:.1} {eg:.1} {eb:.1}",
+            g.name, g.material
+        )?;
+    }
     writeln!(out, "clusters     {} (one pane each)", archive.clusters().len())?;
 
     writeln!(out, "\nsections")?;
@@ -410,6 +426,12 @@ fn write_exr_files<R: Read + Seek>(archive: &mut Archive<R>, dir: &Path) -> Resu
         names.push("overview.exr".to_string());
     }
     Ok((n, names))
+}
+
+/// Per-channel sum of RGB values (f64 accumulation).
+fn rgb_sum(v: &[[f32; 3]]) -> [f64; 3] {
+    v.iter()
+        .fold([0.0; 3], |s, x| [0, 1, 2].map(|k| s[k] + f64::from(x[k])))
 }
 
 #[cfg(test)]

@@ -29,6 +29,11 @@ pub struct ReferenceArgs {
     /// punctual lights are used only if it has some or `--light` gives them.
     #[arg(long)]
     pub emitters: bool,
+    /// Scale an emitter group (an emissive material): `NAME=S` or `NAME=R,G,B`, repeatable, `*`
+    /// for every group; as `prm-play --emitter`, so that both render the same lighting. Needs
+    /// `--emitters`.
+    #[arg(long = "emitter", value_name = "NAME=SCALE", requires = "emitters")]
+    pub emitter_scales: Vec<String>,
     /// Camera `EX,EY,EZ:TX,TY,TZ:FOV_DEG` (eye, target, vertical FOV; +Y up). Defaults to the
     /// scene's first camera.
     #[arg(long, value_name = "SPEC", conflicts_with = "lightmap")]
@@ -78,7 +83,27 @@ pub fn run(args: &ReferenceArgs) -> Result<()> {
     };
     let emitters = if args.emitters {
         let e = Emitters::from_scene(&scene);
-        if e.is_empty() {
+        let mut scales = vec![glam::Vec3::ONE; e.groups.len()];
+        for spec in &args.emitter_scales {
+            let (name, s) = prm_scene::parse_emitter_scale(spec).context("bad --emitter")?;
+            let mut found = false;
+            for (g, group) in e.groups.iter().enumerate() {
+                if name == "*" || group.name == name {
+                    scales[g] = glam::Vec3::from(s);
+                    found = true;
+                }
+            }
+            if !found {
+                let names: Vec<&str> = e.groups.iter().map(|g| g.name.as_str()).collect();
+                bail!(
+                    "--emitter {spec:?}: no emissive material {name:?}; the scene's are {}",
+                    names.join(", ")
+                );
+            }
+        }
+        let unscaled = e.groups.len();
+        let e = Emitters::with_scales(&scene, &scales)?;
+        if unscaled == 0 {
             bail!(
                 "--emitters: {} has no emissive material (OBJ Ke, glTF emissiveFactor)",
                 args.scene.display()

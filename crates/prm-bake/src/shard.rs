@@ -235,6 +235,15 @@ pub fn merge(parts: &[PathBuf], output: &Path) -> Result<Merged, BakeError> {
             source,
         })?;
     }
+    // Emitters: every shard computes the same section.
+    if !first.emitters().is_empty() {
+        writer
+            .set_emitters(first.emitters().to_vec())
+            .map_err(|source| BakeError::Archive {
+                what: "recording the emitters".to_string(),
+                source,
+            })?;
+    }
     for c in 0..clusters.len() {
         let (p, _, a) = &mut opened[owner(c)];
         let pane = a.read_pane(c).map_err(|source| BakeError::Archive {

@@ -15,6 +15,9 @@ pub enum Phase {
     LightTracing,
     /// Grouping entry points into clusters (one pane each).
     Clustering,
+    /// The emitters' direct irradiance at the entry points and the texels (scenes with
+    /// emissive materials only).
+    Emitters,
     /// Rendering the panes (GPU or CPU) and writing them to the archive.
     PaneRendering,
 }
@@ -27,6 +30,7 @@ impl Phase {
             Phase::Bvh => "bvh",
             Phase::LightTracing => "light tracing",
             Phase::Clustering => "clustering",
+            Phase::Emitters => "emitters",
             Phase::PaneRendering => "pane rendering",
         }
     }

@@ -12,8 +12,8 @@ pub const MAGIC: [u8; 8] = *b"\x89PRM\r\n\x1a\n";
 pub const VERSION_MAJOR: u16 = 1;
 /// Highest minor version this library writes (and knows); a reader accepts every minor. The
 /// writer writes the lowest minor whose features an archive uses: 1.1 adds the entry energy
-/// section.
-pub const VERSION_MINOR: u16 = 1;
+/// section, 1.2 the emitters section.
+pub const VERSION_MINOR: u16 = 2;
 
 /// Size of the fixed file header.
 pub const HEADER_SIZE: usize = 64;
@@ -48,6 +48,8 @@ pub mod kind {
     pub const PANES: u32 = 5;
     /// Per-entry pane energy (since 1.1, optional).
     pub const ENTRY_ENERGY: u32 = 6;
+    /// Emitter groups: entry irradiance and direct lightmaps (since 1.2, optional).
+    pub const EMITTERS: u32 = 7;
     /// First kind reserved for private extensions (never assigned by the spec).
     pub const PRIVATE_FIRST: u32 = 0x8000_0000;
 
@@ -60,6 +62,7 @@ pub mod kind {
             CLUSTERS => Some("clusters"),
             PANES => Some("panes"),
             ENTRY_ENERGY => Some("entry_energy"),
+            EMITTERS => Some("emitters"),
             _ => None,
         }
     }
@@ -99,6 +102,8 @@ pub mod limits {
     pub const MAX_METADATA_BYTES: u64 = 16 << 20;
     /// Most records in the section table.
     pub const MAX_SECTIONS: u32 = 65_536;
+    /// Most emitter groups.
+    pub const MAX_EMITTER_GROUPS: u32 = 256;
 }
 
 /// xxh3-64 (seed 0, default secret) of `bytes`: the checksum used everywhere.

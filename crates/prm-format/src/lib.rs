@@ -11,10 +11,13 @@
 //! * [`Archive`] opens an archive from a path, a byte slice or any
 //!   `Read + Seek`, validates it as it goes and reads panes on demand;
 //!   [`Archive::verify`] checks everything.
+//! * [`EmitterGroup`]: the optional emitters section (1.2), what emissive surfaces give the
+//!   entry points and the atlas texels per unit of their run-time scale.
 //! * [`encode_rgb9e5`] / [`decode_rgb9e5`] implement the texel encoding,
 //!   bit-exact with WebGPU's `rgb9e5ufloat`.
 #![warn(missing_docs)]
 
+mod emitters;
 mod error;
 mod filter;
 mod layout;
@@ -27,6 +30,7 @@ mod sections;
 mod splitmix;
 mod writer;
 
+pub use emitters::{EmitterGroup, EMITTER_NAME_BYTES};
 pub use error::{Error, Result};
 pub use filter::TileFilter;
 pub use layout::{checksum, compression, kind, limits, MAGIC, VERSION_MAJOR, VERSION_MINOR};

@@ -10,6 +10,7 @@ use std::path::Path;
 
 use xxhash_rust::xxh3::Xxh3Default;
 
+use crate::emitters::EmitterGroup;
 use crate::error::{Error, Result};
 use crate::filter::TileFilter;
 use crate::layout::{
@@ -95,6 +96,7 @@ pub struct Archive<R> {
     atlas: AtlasSection,
     entries: Vec<Entry>,
     entry_energy: Option<Vec<[f32; 3]>>,
+    emitters: Vec<EmitterGroup>,
     clusters: Vec<Cluster>,
     tiles: Vec<TileRecord>,
     panes_offset: u64,
@@ -242,6 +244,12 @@ impl<R: Read + Seek> Archive<R> {
         let energy_rec = energy_recs.next().cloned();
         if energy_recs.next().is_some() {
             return Err(Error::inconsistent("entry_energy section appears more than once"));
+        }
+        // Kind 7 is the emitters section from 1.2 on, likewise.
+        let mut emitter_recs = records.iter().filter(|r| r.kind == kind::EMITTERS && header.minor >= 2);
+        let emitters_rec = emitter_recs.next().cloned();
+        if emitter_recs.next().is_some() {
+            return Err(Error::inconsistent("emitters section appears more than once"));
         }
 
         // Every section's raw size is checked against what the counts read so
@@ -400,6 +408,12 @@ impl<R: Read + Seek> Archive<R> {
             }
         };
 
+        // Emitters (1.2, optional): sizes fixed by its header, the entry count and the atlas.
+        let emitters = match &emitters_rec {
+            None => Vec::new(),
+            Some(rec) => read_emitters(&mut src, rec, strict, entry_count, atlas.resolution)?,
+        };
+
         let info = ArchiveInfo {
             major: header.major,
             minor: header.minor,
@@ -430,6 +444,7 @@ impl<R: Read + Seek> Archive<R> {
             atlas,
             entries,
             entry_energy,
+            emitters,
             clusters,
             tiles,
             panes_offset: panes_rec.offset,
@@ -456,6 +471,11 @@ impl<R: Read + Seek> Archive<R> {
     /// Entry points, sorted by cluster.
     pub fn entries(&self) -> &[Entry] {
         &self.entries
+    }
+
+    /// The emitter groups (formats/prm.md §5.2); empty when the archive has none.
+    pub fn emitters(&self) -> &[EmitterGroup] {
+        &self.emitters
     }
 
     /// Every entry's pane energy (RGB, the sum over the atlas of the indirect irradiance its
@@ -889,6 +909,44 @@ impl RawReader<'_> {
 
 /// Reads the atlas section: its 16-byte header first, whose resolution and
 /// triangle count fix the raw size, checked before the rest is decompressed.
+fn read_emitters<R: Read + Seek>(
+    src: &mut R,
+    rec: &SectionRecord,
+    strict: bool,
+    entry_count: u64,
+    resolution: u32,
+) -> Result<Vec<EmitterGroup>> {
+    use crate::emitters::{self, EMITTERS_HEADER_SIZE, EMITTER_GROUP_RECORD_SIZE};
+    let section = open_section(src, rec)?;
+    if section.record.raw_size < EMITTERS_HEADER_SIZE as u64 {
+        return Err(Error::inconsistent(format!(
+            "emitters section has {} raw bytes, less than its {EMITTERS_HEADER_SIZE}-byte header",
+            section.record.raw_size
+        )));
+    }
+    let mut raw = section.raw()?;
+    let mut head = [0u8; EMITTERS_HEADER_SIZE];
+    raw.read_exact(&mut head)?;
+    let (groups, entries, res) = emitters::decode_header(&head, strict).map_err(Error::inconsistent)?;
+    if u64::from(entries) != entry_count || res != resolution {
+        return Err(Error::inconsistent(format!(
+            "emitters section is for {entries} entries at resolution {res}, the archive has {entry_count} at {resolution}"
+        )));
+    }
+    let expected = emitters::raw_size_for(u64::from(groups), entry_count, resolution).unwrap_or(u64::MAX);
+    section.expect_raw_size(expected, || {
+        format!("{groups} groups, {entry_count} entries, resolution {resolution}")
+    })?;
+    let mut out = raw.records(groups as usize, EMITTER_GROUP_RECORD_SIZE, emitters::decode_groups)?;
+    let texels = resolution as usize * resolution as usize;
+    for g in &mut out {
+        g.entry_irradiance = raw.records(entry_count as usize, 12, emitters::decode_entry_irradiance)?;
+        g.direct = raw.records(texels, 4, emitters::decode_direct)?;
+    }
+    raw.finish()?;
+    Ok(out)
+}
+
 fn read_atlas<R: Read + Seek>(src: &mut R, rec: &SectionRecord, strict: bool) -> Result<AtlasSection> {
     let section = open_section(src, rec)?;
     if section.record.raw_size < ATLAS_HEADER_SIZE as u64 {

@@ -358,6 +358,7 @@ pub struct ArchiveWriter {
     clusters: Vec<Cluster>,
     entry_count: usize,
     entry_energy: Option<Vec<[f32; 3]>>,
+    emitters: Option<Vec<crate::EmitterGroup>>,
     custom: Vec<(u32, Vec<u8>)>,
     records: Vec<SectionRecord>,
     resolution: u32,
@@ -452,6 +453,7 @@ impl ArchiveWriter {
             clusters,
             entry_count: entries.len(),
             entry_energy: None,
+            emitters: None,
             custom: Vec::new(),
             records: Vec::new(),
             resolution: atlas.resolution,
@@ -536,6 +538,15 @@ impl ArchiveWriter {
             )));
         }
         self.entry_energy = Some(energy);
+        Ok(())
+    }
+
+    /// Records the emitter groups (formats/prm.md §5.2): one per emissive material, each with
+    /// an irradiance per entry (in the entries' order) and a direct irradiance per atlas texel
+    /// (row-major), all finite and non-negative. An archive with them is 1.2.
+    pub fn set_emitters(&mut self, groups: Vec<crate::EmitterGroup>) -> Result<()> {
+        crate::emitters::validate(&groups, self.entry_count, self.resolution).map_err(Error::InvalidInput)?;
+        self.emitters = Some(groups);
         Ok(())
     }
 
@@ -702,13 +713,18 @@ impl ArchiveWriter {
             return Err(Error::InvalidInput("metadata JSON exceeds 16 MiB".into()));
         }
         self.write_section(kind::METADATA, &json)?;
-        let minor = match self.entry_energy.take() {
+        let mut minor = match self.entry_energy.take() {
             Some(e) => {
                 self.write_section(kind::ENTRY_ENERGY, &encode_entry_energy(&e))?;
                 1
             }
             None => 0,
         };
+        if let Some(groups) = self.emitters.take() {
+            let raw = crate::emitters::encode(&groups, self.entry_count, self.resolution);
+            self.write_section(kind::EMITTERS, &raw)?;
+            minor = 2;
+        }
         for (k, data) in std::mem::take(&mut self.custom) {
             self.write_section(k, &data)?;
         }

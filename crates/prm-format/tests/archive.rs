@@ -759,6 +759,8 @@ fn python_reader_check(path: &Path, filter: TileFilter) -> bool {
     w.add_custom_section(kind::PRIVATE_FIRST, b"skip me".to_vec()).unwrap();
     let energy: Vec<[f32; 3]> = (0..s.entries.len()).map(|i| [0.25 * i as f32, 1.0, 3.5]).collect();
     w.set_entry_energy(energy.clone()).unwrap();
+    let groups = emitter_groups(&s, 2);
+    w.set_emitters(groups.clone()).unwrap();
     for p in &s.panes {
         w.add_pane(p).unwrap();
     }
@@ -792,13 +794,26 @@ fn python_reader_check(path: &Path, filter: TileFilter) -> bool {
     );
     let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     let mut a = Archive::open(path).unwrap();
-    assert_eq!(j["version"], "1.1");
+    assert_eq!(j["version"], "1.2");
     assert_eq!(j["checksums_verified"], true);
     assert_eq!(j["tile_filter"], filter.code());
     assert_eq!(j["resolution"], 16);
     assert_eq!(j["tile_size"], 8);
     assert_eq!(j["covered_texels"], a.atlas().covered_texels());
-    assert_eq!(j["sections"].as_array().unwrap().len(), 7);
+    assert_eq!(j["sections"].as_array().unwrap().len(), 8);
+    let je = j["emitters"].as_array().unwrap();
+    assert_eq!(je.len(), groups.len());
+    let f3 = |v: &serde_json::Value| [0, 1, 2].map(|k| v[k].as_f64().unwrap() as f32);
+    for (jg, g) in je.iter().zip(a.emitters()) {
+        assert_eq!(jg["name"], g.name.as_str());
+        assert_eq!(jg["material"], g.material);
+        assert_eq!(f3(&jg["radiance"]), g.radiance);
+        let irr: Vec<[f32; 3]> = jg["entry_irradiance"].as_array().unwrap().iter().map(f3).collect();
+        assert_eq!(irr, g.entry_irradiance);
+        let direct: Vec<[f32; 3]> = jg["direct"].as_array().unwrap().iter().map(f3).collect();
+        assert_eq!(direct, g.direct);
+    }
+    assert_eq!(a.emitters(), &groups[..]);
     let je: Vec<[f32; 3]> = j["entry_energy"]
         .as_array()
         .unwrap()
@@ -1512,4 +1527,82 @@ fn entry_energy_round_trips_and_is_validated() {
     damaged[at..at + 4].copy_from_slice(&(-1.0f32).to_le_bytes());
     resign(&mut damaged);
     assert!(matches!(Archive::from_bytes(&damaged), Err(Error::Inconsistent { .. })));
+}
+
+// ---------------------------------------------------------------- emitters (1.2)
+
+fn emitter_groups(s: &Scene, count: usize) -> Vec<EmitterGroup> {
+    let texels = (s.atlas.resolution * s.atlas.resolution) as usize;
+    (0..count)
+        .map(|g| EmitterGroup {
+            name: format!("lamp {g}"),
+            material: g as u32 + 1,
+            radiance: [17.0, 12.0 + g as f32, 4.0],
+            entry_irradiance: (0..s.entries.len()).map(|i| [i as f32, 0.5, g as f32]).collect(),
+            direct: (0..texels).map(|i| [(i % 7) as f32 * 0.25, 1.0, 0.0]).collect(),
+        })
+        .collect()
+}
+
+/// The emitters section round-trips (its values are exact in RGB9E5 here), makes the archive
+/// 1.2, and the reader refuses a header for other counts and a group count over the limit
+/// before it decompresses the rest.
+#[test]
+fn emitters_round_trip_and_hostile_headers_are_refused() {
+    let dir = test_dir("emitters");
+    let s = scene(16, 8, 3, 11);
+    let groups = emitter_groups(&s, 2);
+    let path = dir.join("emit.prm");
+    let mut w = ArchiveWriter::create(&path, s.metadata.clone(), &s.atlas, &s.entries, &s.clusters).unwrap();
+    // The writer refuses groups that do not fit the archive.
+    let mut wrong = groups.clone();
+    wrong[1].entry_irradiance.pop();
+    assert!(w.set_emitters(wrong).is_err());
+    assert!(w.set_emitters(Vec::new()).is_err());
+    w.set_emitters(groups.clone()).unwrap();
+    for p in &s.panes {
+        w.add_pane(p).unwrap();
+    }
+    w.finish().unwrap();
+    let bytes = std::fs::read(&path).unwrap();
+    let a = Archive::from_bytes(&bytes).unwrap();
+    assert_eq!(a.info().minor, 2);
+    assert_eq!(a.emitters(), &groups[..]);
+    assert!(a.info().sections.iter().any(|x| x.name == "emitters"));
+    let (plain, _) = small_archive("emitters-none", WriterOptions::default());
+    assert!(Archive::from_bytes(&plain).unwrap().emitters().is_empty());
+
+    // A header naming other entry counts, or too many groups, with a stream of zeros behind it.
+    let header = |groups: u32, entries: u32, res: u32| {
+        let mut d = Vec::new();
+        for v in [groups, entries, res, 0] {
+            d.extend_from_slice(&v.to_le_bytes());
+        }
+        d
+    };
+    let n = s.entries.len() as u32;
+    for (head, what) in [
+        (header(2, n + 1, 16), "entries"),
+        (header(2, n, 32), "resolution"),
+        (header(limits::MAX_EMITTER_GROUPS + 1, n, 16), "emitter groups"),
+    ] {
+        let raw = 64u64 << 20;
+        let mut data = head.clone();
+        data.resize(raw as usize, 0);
+        let stream = zstd::bulk::compress(&data, 3).unwrap();
+        let m = replace_section(&bytes, kind::EMITTERS, &stream, compression::ZSTD, raw);
+        assert_refused_in_bounded_memory(&m, what);
+    }
+    // The right header, a declared size the counts do not give.
+    let raw = 64u64 << 20;
+    let mut data = header(2, n, 16);
+    data.resize(raw as usize, 0);
+    let m = replace_section(
+        &bytes,
+        kind::EMITTERS,
+        &zstd::bulk::compress(&data, 3).unwrap(),
+        compression::ZSTD,
+        raw,
+    );
+    assert_refused_in_bounded_memory(&m, "2 groups");
 }

@@ -55,6 +55,10 @@ pub struct GpuMaterial {
     pub albedo: [f32; 3],
     /// Texture layer or -1.
     pub texture: i32,
+    /// Emitted radiance: the emitter group's baked radiance × its scale (0 if not emissive).
+    pub emission: [f32; 3],
+    /// Padding.
+    pub _pad0: f32,
 }
 
 /// A vertex of the shade pass (flat triangles, no index buffer).
@@ -96,7 +100,7 @@ mod tests {
             [view_proj, eye, mode, width, _pad0, _pad1, _pad2]
         )
         .unwrap();
-        wgsl_layout!(&src, GpuMaterial, "Material", [albedo, texture]).unwrap();
+        wgsl_layout!(&src, GpuMaterial, "Material", [albedo, texture, emission, _pad0]).unwrap();
         check_consts(
             &src,
             &[

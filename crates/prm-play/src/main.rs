@@ -32,6 +32,10 @@ struct Args {
     /// scene's lights.
     #[arg(long = "light")]
     lights: Vec<String>,
+    /// Scale an emitter group (one per emissive material of the bake, listed by `prm-bake dump`):
+    /// `NAME=S` or `NAME=R,G,B`, repeatable, `*` for every group; 0 turns a group off. Default: 1.
+    #[arg(long = "emitter", value_name = "NAME=SCALE")]
+    emitters: Vec<String>,
     /// gi, direct, indirect or split (left direct, right gi).
     #[arg(long, default_value = "gi")]
     mode: Mode,
@@ -119,19 +123,23 @@ fn run() -> Result<()> {
             .collect::<Result<Vec<_>, _>>()?
     };
     let animation = args.animation.as_deref().map(Animation::load).transpose()?;
-    let base_lights = if base_lights.is_empty() && animation.as_ref().is_none_or(|a| a.lights.is_empty()) {
-        // A black frame helps nobody: light the scene, and say where and how to choose.
-        let light = prm_play::default_light(&scene);
-        eprintln!(
-            "warning: the scene has no lights of its own and no --light was given; placing {} \
+    let emitter_infos: Vec<prm_runtime::EmitterInfo> = archive.emitters().iter().map(Into::into).collect();
+    let emitter_scales = prm_play::emitter_scales(&emitter_infos, &args.emitters).map_err(anyhow::Error::msg)?;
+    let lit_by_emitters = emitter_scales.iter().flatten().any(|&s| s > 0.0);
+    let base_lights =
+        if base_lights.is_empty() && !lit_by_emitters && animation.as_ref().is_none_or(|a| a.lights.is_empty()) {
+            // A black frame helps nobody: light the scene, and say where and how to choose.
+            let light = prm_play::default_light(&scene);
+            eprintln!(
+                "warning: the scene has no lights of its own and no --light was given; placing {} \
              (pass --light SPEC to choose, e.g. --light {}; in a window, arrows and PageUp/PageDown move it)",
-            prm_play::describe_light(&light),
-            prm_play::light_spec(&light)
-        );
-        vec![light]
-    } else {
-        base_lights
-    };
+                prm_play::describe_light(&light),
+                prm_play::light_spec(&light)
+            );
+            vec![light]
+        } else {
+            base_lights
+        };
     let runtime = RuntimeOptions {
         top_k,
         shadow_resolution: args.shadow_resolution,
@@ -155,6 +163,7 @@ fn run() -> Result<()> {
             exposure: args.exposure,
             frames: args.frames,
             screenshot: args.screenshot,
+            emitter_scales,
         })
         .with_context(|| format!("playing {} in a window", args.archive.display()));
     }
@@ -168,6 +177,9 @@ fn run() -> Result<()> {
     };
     let mut renderer = Renderer::new(ctx, &scene, &mut archive, opts)
         .with_context(|| format!("playing {}", args.archive.display()))?;
+    if !emitter_scales.is_empty() {
+        renderer.set_emitter_scales(&emitter_scales)?;
+    }
     if args.timings.is_some() && !renderer.has_timestamps() {
         eprintln!("note: this device has no timestamp queries; --timings records CPU frame times only");
     }

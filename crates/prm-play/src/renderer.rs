@@ -304,6 +304,15 @@ impl Renderer {
         self.height = h;
     }
 
+    /// Scales the archive's emitter groups (one RGB triple per group of
+    /// [`Runtime::emitters`]): their light on the scene and their own surfaces' emission, from
+    /// the next frame on.
+    pub fn set_emitter_scales(&mut self, scales: &[[f32; 3]]) -> Result<(), PlayError> {
+        self.runtime.set_emitter_scales(scales)?;
+        self.shade.write_emission(&self.ctx.queue, &self.runtime);
+        Ok(())
+    }
+
     /// Changes the number of clusters kept per frame.
     pub fn set_top_k(&mut self, k: u32) {
         self.runtime.set_top_k(k);

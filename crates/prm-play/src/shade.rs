@@ -1,6 +1,7 @@
 //! The shade pass (`shaders/play/shade.wgsl`): the radiance of every pixel, albedo/π × (direct
-//! irradiance through the run time's shadow maps + indirect irradiance from its lightmap), in
-//! linear HDR, with the material textures of the scene.
+//! irradiance through the run time's shadow maps + the emitters' direct and the indirect
+//! irradiance from its lightmaps) + the emission of emissive materials, in linear HDR, with the
+//! material textures of the scene.
 
 use glam::{Mat4, Vec3};
 use prm_gpu_kit::{pipeline, GpuContext, PassTimer};
@@ -26,6 +27,8 @@ pub fn source() -> [&'static str; 3] {
 /// What the bind group holds besides the run time's buffers.
 struct Resources {
     camera: wgpu::Buffer,
+    /// The scene's materials without emission.
+    base: Vec<GpuMaterial>,
     materials: wgpu::Buffer,
     textures: wgpu::TextureView,
     sampler: wgpu::Sampler,
@@ -59,22 +62,17 @@ impl ShadePass {
                 })
             })
             .collect();
-        let materials: Vec<GpuMaterial> = scene
-            .materials
-            .iter()
-            .map(|m| GpuMaterial {
-                albedo: m.albedo.to_array(),
-                texture: m.texture.map_or(-1, |t| t as i32),
-            })
-            .collect();
+        let base = base_materials(scene);
+        let materials = with_emission(&base, runtime);
         let res = Resources {
             camera: pipeline::uniform(device, "play camera", std::mem::size_of::<GpuCamera>() as u64),
             materials: pipeline::buffer_init(
                 device,
                 "play materials",
                 bytemuck::cast_slice(&materials),
-                wgpu::BufferUsages::STORAGE,
+                wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
             ),
+            base,
             textures: texture_array(ctx, scene),
             sampler: device.create_sampler(&wgpu::SamplerDescriptor {
                 label: Some("play textures"),
@@ -116,6 +114,7 @@ impl ShadePass {
                     wgpu::BindingResource::TextureView(&res.textures),
                     wgpu::BindingResource::Sampler(&res.sampler),
                     res.camera.as_entire_binding(),
+                    wgpu::BindingResource::TextureView(runtime.emitter_lightmap()),
                 ],
             ]
             .concat(),
@@ -125,6 +124,12 @@ impl ShadePass {
     /// Binds the pass again after the run time's shadow maps grew.
     pub fn rebind(&mut self, ctx: &GpuContext, runtime: &Runtime) {
         self.bind_group = Self::group(ctx, &self.pipeline, &self.res, runtime);
+    }
+
+    /// Uploads the materials' emission again after [`Runtime::set_emitter_scales`].
+    pub fn write_emission(&self, queue: &wgpu::Queue, runtime: &Runtime) {
+        let materials = with_emission(&self.res.base, runtime);
+        queue.write_buffer(&self.res.materials, 0, bytemuck::cast_slice(&materials));
     }
 
     /// Uploads the camera: view-projection, eye, [`Mode`](crate::Mode) code and image width.
@@ -159,6 +164,32 @@ impl ShadePass {
         pass.set_vertex_buffer(0, self.res.vertices.slice(..));
         pass.draw(0..self.res.vertex_count, 0..1);
     }
+}
+
+/// The scene's materials, none emitting.
+fn base_materials(scene: &Scene) -> Vec<GpuMaterial> {
+    scene
+        .materials
+        .iter()
+        .map(|m| GpuMaterial {
+            albedo: m.albedo.to_array(),
+            texture: m.texture.map_or(-1, |t| t as i32),
+            emission: [0.0; 3],
+            _pad0: 0.0,
+        })
+        .collect()
+}
+
+/// `base` with the emission of the run time's emitter groups at their scales (the baked
+/// radiance, on the material each group names).
+fn with_emission(base: &[GpuMaterial], runtime: &Runtime) -> Vec<GpuMaterial> {
+    let mut out = base.to_vec();
+    for (g, s) in runtime.emitters().iter().zip(runtime.emitter_scales()) {
+        if let Some(m) = out.get_mut(g.material as usize) {
+            m.emission = [0, 1, 2].map(|k| g.radiance[k] * s[k]);
+        }
+    }
+    out
 }
 
 /// Material textures as layers of one sRGB array, all at the largest size (nearest resampling

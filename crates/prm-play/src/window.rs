@@ -63,6 +63,8 @@ pub struct WindowConfig {
     pub frames: Option<u32>,
     /// Save the last presented frame here (PNG, 8-bit sRGB) when the window closes.
     pub screenshot: Option<PathBuf>,
+    /// Scales of the archive's emitter groups ([`crate::emitter_scales`]; empty: all 1).
+    pub emitter_scales: Vec<[f32; 3]>,
 }
 
 /// Moves `light` by key presses: `right`, `forward` and `up` in steps of `step` scene units along
@@ -325,7 +327,10 @@ impl App {
         let mut presenter = Presenter::new(&ctx, config.format, self.exposure);
         cfg.options.width = config.width;
         cfg.options.height = config.height;
-        let renderer = Renderer::new(ctx, &cfg.scene, &mut cfg.archive, cfg.options)?;
+        let mut renderer = Renderer::new(ctx, &cfg.scene, &mut cfg.archive, cfg.options)?;
+        if !cfg.emitter_scales.is_empty() {
+            renderer.set_emitter_scales(&cfg.emitter_scales)?;
+        }
         presenter.bind(&renderer);
         self.gpu = Some(Gpu {
             window,

@@ -36,6 +36,7 @@
 
 #![warn(missing_docs)]
 
+mod emitters;
 mod irradiance;
 mod lights;
 mod options;
@@ -49,6 +50,7 @@ use prm_format::Archive;
 use prm_gpu_kit::{pipeline, readback, ErrorScopes, PassTimer};
 use prm_scene::{Aabb, Light, Scene};
 
+pub use emitters::EmitterInfo;
 pub use irradiance::DILATE_STEPS;
 pub use lights::{look_to, orthographic, perspective, shadow_views, SPOT_SINGLE_VIEW_MAX_DEG};
 pub use options::{archive_top_k, RuntimeError, RuntimeOptions, MAX_SHADOW_RESOLUTION};
@@ -160,6 +162,9 @@ pub struct Runtime {
     irradiance: std::sync::OnceLock<irradiance::IrradiancePass>,
     /// This frame's shadow views (set by [`Runtime::update`]).
     view_count: u32,
+    /// The entries as uploaded (rewritten when the emitter scales change).
+    entries: Vec<GpuEntry>,
+    emitters: emitters::EmitterState,
 }
 
 impl Runtime {
@@ -234,7 +239,7 @@ impl Runtime {
         let disk = prm_scene::ENTRY_DISK
             * (scene.area() / archive.entries().len().max(1) as f64 / std::f64::consts::PI) as f32;
         let energy = archive.entry_energy();
-        let entries: Vec<GpuEntry> = archive
+        let mut entries: Vec<GpuEntry> = archive
             .entries()
             .iter()
             .enumerate()
@@ -256,6 +261,8 @@ impl Runtime {
                 ..Default::default()
             })
             .collect();
+        let mut emitters = emitters::EmitterState::new(device, archive.emitters(), atlas.resolution);
+        emitters.apply(queue, &mut entries);
         let entry_count = entries.len() as u32;
         let st = wgpu::BufferUsages::STORAGE;
         let src = wgpu::BufferUsages::COPY_SRC;
@@ -275,7 +282,12 @@ impl Runtime {
                 wgpu::BufferUsages::empty(),
             ),
             clusters: pipeline::buffer_init(device, "prm clusters", bytemuck::cast_slice(&clusters), st),
-            entries: pipeline::buffer_init(device, "prm entries", bytemuck::cast_slice(&entries), st),
+            entries: pipeline::buffer_init(
+                device,
+                "prm entries",
+                bytemuck::cast_slice(&entries),
+                st | wgpu::BufferUsages::COPY_DST,
+            ),
             weights: pipeline::storage(device, "prm weights", per_cluster, src),
             ranks: pipeline::storage(device, "prm ranks", cluster_count.max(1) as u64 * 4, src),
             threshold: pipeline::storage(device, "prm threshold", 16, src),
@@ -337,6 +349,8 @@ impl Runtime {
             topk,
             irradiance: std::sync::OnceLock::new(),
             view_count: 0,
+            entries,
+            emitters,
         })
     }
 
@@ -446,6 +460,39 @@ impl Runtime {
         }
     }
 
+    /// The archive's emitter groups (one per emissive material; empty without them), in the
+    /// order [`Runtime::set_emitter_scales`] takes their scales.
+    pub fn emitters(&self) -> &[EmitterInfo] {
+        &self.emitters.info
+    }
+
+    /// The emitter groups' current scales (RGB multipliers of their baked radiance; 1 at
+    /// first).
+    pub fn emitter_scales(&self) -> &[[f32; 3]] {
+        &self.emitters.scales
+    }
+
+    /// Scales each emitter group's radiance (one finite, non-negative RGB triple per group of
+    /// [`Runtime::emitters`]) from the next [`Runtime::encode`] on: the entries' irradiance and
+    /// the emitter lightmap are summed again on the CPU and uploaded (about a millisecond on the
+    /// Cornell box), which changes the indirect light through the cluster weights.
+    pub fn set_emitter_scales(&mut self, scales: &[[f32; 3]]) -> Result<(), RuntimeError> {
+        self.emitters.check(scales)?;
+        self.emitters.scales = scales.to_vec();
+        self.emitters.apply(&self.queue, &mut self.entries);
+        self.queue
+            .write_buffer(&self.buffers.entries, 0, bytemuck::cast_slice(&self.entries));
+        Ok(())
+    }
+
+    /// The emitters' direct irradiance at their current scales (W/m², [`LIGHTMAP_FORMAT`],
+    /// sampled with the same UVs as [`Runtime::lightmap`]; a black 1×1 texture without
+    /// emitters): add it to the lights' direct irradiance, and show each emissive material's
+    /// radiance × its group's scale on its own surfaces.
+    pub fn emitter_lightmap(&self) -> &wgpu::TextureView {
+        &self.emitters.view
+    }
+
     /// The scene's bounds (what [`shadow_views`] fits directional lights to).
     pub fn bounds(&self) -> Aabb {
         self.bounds
@@ -472,7 +519,8 @@ impl Runtime {
         Ok(texels.into_iter().map(|[r, g, b, _]| [r, g, b]).collect())
     }
 
-    /// The full irradiance (direct through the run time's shadow maps + indirect, W/m²) at every
+    /// The full irradiance (direct through the run time's shadow maps, the emitters' direct
+    /// light and the indirect, W/m²) at every
     /// lightmap texel (x, y) at `y·R + x`, for the frame last encoded with [`Shadows::Own`]:
     /// what an engine that takes only static lightmaps bakes in. Texels outside every chart are
     /// dilated from their neighbours [`DILATE_STEPS`] rings deep, 0 beyond. Waits for the device.
@@ -481,7 +529,7 @@ impl Runtime {
         let pass = self
             .irradiance
             .get_or_init(|| irradiance::IrradiancePass::new(&self.device));
-        Ok(pass.render(
+        let mut irradiance = pass.render(
             &self.device,
             &self.queue,
             &[
@@ -492,7 +540,11 @@ impl Runtime {
             &self.atlas_vertices,
             self.vertex_count,
             self.resolution,
-        )?)
+        )?;
+        for (t, e) in irradiance.iter_mut().zip(&self.emitters.combined) {
+            (0..3).for_each(|k| t[k] += e[k]);
+        }
+        Ok(irradiance)
     }
 
     /// Reads the last frame's cluster weights, scores, ranks and effective weights back.

@@ -46,6 +46,9 @@ pub enum RuntimeError {
         /// Lights given.
         count: usize,
     },
+    /// Emitter scales that do not fit the archive's emitter groups.
+    #[error("emitters: {0}")]
+    Emitters(String),
     /// An option is out of range for the run time or this device.
     #[error("{option}: {message}")]
     Option {

@@ -130,6 +130,10 @@ pub struct GpuEntry {
     pub energy: [f32; 3],
     /// Padding.
     pub _pad1: f32,
+    /// Irradiance from the emitters at their current scales (RGB, W/m²), added to the lights'.
+    pub emitted: [f32; 3],
+    /// Padding.
+    pub _pad2: f32,
 }
 
 /// A cluster's weight and score; `Weight` in the shaders.
@@ -196,7 +200,13 @@ mod tests {
         .unwrap();
         wgsl_layout!(s, GpuView, "ShadowView", [view_proj, texel, near, far, orthographic]).unwrap();
         wgsl_layout!(s, GpuCluster, "Cluster", [first, count, _pad0, _pad1, energy, _pad2]).unwrap();
-        wgsl_layout!(s, GpuEntry, "Entry", [position, disk, normal, _pad0, energy, _pad1]).unwrap();
+        wgsl_layout!(
+            s,
+            GpuEntry,
+            "Entry",
+            [position, disk, normal, _pad0, energy, _pad1, emitted, _pad2]
+        )
+        .unwrap();
         wgsl_layout!(s, GpuWeight, "Weight", [weight, score]).unwrap();
         wgsl_layout!(s, GpuEffective, "Effective", [weight, rank]).unwrap();
         wgsl_layout!(s, GpuSelected, "Selected", [weight, cluster]).unwrap();

@@ -224,6 +224,27 @@ pub fn parse_camera(spec: &str) -> Result<Camera, SpecError> {
     })
 }
 
+/// Parses an emitter scale spec `NAME=S` or `NAME=R,G,B` (finite, ≥ 0; `NAME` is an emitter
+/// group's, i.e. an emissive material's, name, or `*` for all): `(NAME, [r, g, b])`.
+pub fn parse_emitter_scale(spec: &str) -> Result<(String, [f32; 3]), SpecError> {
+    let (name, value) = spec
+        .rsplit_once('=')
+        .ok_or_else(|| bad(spec, "emitter scale", spec, "expected NAME=SCALE or NAME=R,G,B"))?;
+    if name.is_empty() {
+        return Err(bad(spec, "emitter name", name, "empty (use * for every group)"));
+    }
+    let parts: Vec<&str> = value.split(',').collect();
+    let s = match parts[..] {
+        [v] => [number(spec, "emitter scale", v)?; 3],
+        [_, _, _] => colour(spec, "emitter scale", value)?.to_array(),
+        _ => return Err(bad(spec, "emitter scale", value, "give one scale or three (R,G,B)")),
+    };
+    if s.iter().any(|v| *v < 0.0) {
+        return Err(bad(spec, "emitter scale", value, "negative"));
+    }
+    Ok((name.to_string(), s))
+}
+
 /// Parses an image size `WxH` (both positive, at most 16384).
 pub fn parse_size(spec: &str) -> Result<(u32, u32), SpecError> {
     let (w, h) = spec

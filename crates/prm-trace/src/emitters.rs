@@ -305,6 +305,51 @@ impl Emitters {
             .sum();
         s / samples as f32
     }
+
+    /// Each group's direct irradiance at each receiver at unit scale, what a bake stores for
+    /// the run time to scale: `out[g][i]` for group `g` (in [`Emitters::groups`] order) and
+    /// receiver `i`, the mean of `samples` two-strategy estimates ([`Emitters::irradiance`])
+    /// with only that group emitting. Each receiver and group has its own random stream (from
+    /// `seed`), so the result does not depend on the thread count.
+    pub fn group_irradiance(
+        &self,
+        scene: &Scene,
+        bvh: &Bvh,
+        receivers: &[Receiver],
+        samples: u32,
+        seed: u64,
+    ) -> Vec<Vec<Vec3>> {
+        use rayon::prelude::*;
+        (0..self.groups.len())
+            .map(|g| {
+                let scales: Vec<Vec3> = (0..self.groups.len())
+                    .map(|k| if k == g { Vec3::ONE } else { Vec3::ZERO })
+                    .collect();
+                let alone = Self::build(scene, &scales);
+                receivers
+                    .par_iter()
+                    .enumerate()
+                    .map(|(i, r)| {
+                        let mut rng = Rng::new(seed, i as u64, g as u64);
+                        alone.irradiance(scene, bvh, r.position, r.ng, r.n, r.triangle, samples, &mut rng)
+                    })
+                    .collect()
+            })
+            .collect()
+    }
+}
+
+/// A surface point that receives the emitters' light ([`Emitters::group_irradiance`]).
+#[derive(Clone, Copy, Debug)]
+pub struct Receiver {
+    /// World position.
+    pub position: Vec3,
+    /// Unit geometric normal of its triangle (its front).
+    pub ng: Vec3,
+    /// Unit shading normal the irradiance is measured with.
+    pub n: Vec3,
+    /// Its triangle (skipped by its own rays).
+    pub triangle: u32,
 }
 
 #[cfg(test)]

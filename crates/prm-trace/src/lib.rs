@@ -28,7 +28,7 @@ pub mod walk;
 pub use bvh::{BuildQuality, Bvh, BvhKind, BvhParams, Hit, NO_OCCLUDER};
 pub use cluster::{energy_weight, ClusterParams, Clustering};
 pub use direct::{bounded_irradiance, direct_irradiance, entry_irradiance};
-pub use emitters::{EmitterGroup, Emitters};
+pub use emitters::{EmitterGroup, Emitters, Receiver};
 pub use error::TraceError;
 pub use pane::{evaluate_atlas_panes, evaluate_panes, Lattice, PaneParams, Panes};
 pub use prm_scene::{parse_camera, parse_light, parse_size, SpecError, ENTRY_DISK};

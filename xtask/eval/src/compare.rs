@@ -109,22 +109,29 @@ fn metrics(t: &Rgb, r: &Rgb) -> Metrics {
     }
 }
 
+/// The metrics of the EXR `test` against the EXR `reference` (same size).
+pub fn compare_files(test: &Path, reference: &Path) -> Result<Metrics> {
+    let (t, r) = (load(test)?, load(reference)?);
+    if (t.width, t.height) != (r.width, r.height) {
+        bail!(
+            "{} is {}x{}, {} {}x{}: compare images of one size",
+            test.display(),
+            t.width,
+            t.height,
+            reference.display(),
+            r.width,
+            r.height
+        );
+    }
+    Ok(metrics(&t, &r))
+}
+
 /// Runs `compare TEST REF`.
 pub fn run(args: &[String]) -> Result<()> {
     let [test, reference] = args else {
         bail!("usage: cargo xtask eval compare TEST.exr REFERENCE.exr");
     };
-    let (t, r) = (load(Path::new(test))?, load(Path::new(reference))?);
-    if (t.width, t.height) != (r.width, r.height) {
-        bail!(
-            "{test} is {}x{}, {reference} {}x{}: compare images of one size",
-            t.width,
-            t.height,
-            r.width,
-            r.height
-        );
-    }
-    let m = metrics(&t, &r);
+    let m = compare_files(Path::new(test), Path::new(reference))?;
     println!(
         "error {:.2}% (4x4 downsample), {:.2}% full resolution; energy {:.3}; shape error {:.2}%; local error {:.2}x",
         100.0 * m.error,

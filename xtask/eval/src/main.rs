@@ -16,6 +16,7 @@
 mod budget;
 mod charts;
 mod compare;
+mod emitters;
 mod measure;
 mod plan;
 mod reference;
@@ -115,7 +116,7 @@ impl Row {
 
 fn usage() -> ! {
     eprintln!(
-        "usage: cargo xtask eval [--quick|--full|--budget] [--out DIR]\n       cargo xtask eval compare TEST.exr REFERENCE.exr   (error, energy, shape and local error as ../shared/notes/metrics.md defines them)\n\n  --quick   Cornell box, a handful of settings, small references (CI; dev-profile binaries); default\n  --full    all scenes and sweeps (release binaries; the README's charts)\n  --budget  the error budget of the default bake, one idealised stage at a time (release; the README's budget table)\n  --out DIR output directory (default target/eval-quick, eval-full or eval-budget)\n\nBakes and references are cached under target/eval/ (delete it to start over)."
+        "usage: cargo xtask eval [--quick|--full|--budget|--emitters] [--out DIR]\n       cargo xtask eval compare TEST.exr REFERENCE.exr   (error, energy, shape and local error as ../shared/notes/metrics.md defines them)\n\n  --quick   Cornell box, a handful of settings, small references (CI; dev-profile binaries); default\n  --full    all scenes and sweeps (release binaries; the README's charts)\n  --budget  the error budget of the default bake, one idealised stage at a time (release; the README's budget table)\n  --emitters emissive surfaces (McGuire's CornellBox-Original by its own lamp, two lamps in our Cornell box) against the reference, and the frame cost of a scale change (release)\n  --out DIR output directory (default target/eval-quick, eval-full, eval-budget or eval-emitters)\n\nBakes and references are cached under target/eval/ (delete it to start over)."
     );
     std::process::exit(2);
 }
@@ -138,6 +139,7 @@ fn run(args: &[String]) -> Result<()> {
     }
     let mut mode = Mode::Quick;
     let mut budget = false;
+    let mut emitters = false;
     let mut out = None;
     let mut it = args.iter();
     while let Some(a) = it.next() {
@@ -146,6 +148,10 @@ fn run(args: &[String]) -> Result<()> {
             "--full" => mode = Mode::Full,
             "--budget" => {
                 budget = true;
+                mode = Mode::Full;
+            }
+            "--emitters" => {
+                emitters = true;
                 mode = Mode::Full;
             }
             "--out" => out = Some(PathBuf::from(it.next().unwrap_or_else(|| usage()))),
@@ -168,6 +174,7 @@ fn run(args: &[String]) -> Result<()> {
     std::env::set_current_dir(&root)?;
     let out = out.unwrap_or_else(|| {
         target.join(match (budget, mode) {
+            _ if emitters => "eval-emitters",
             (true, _) => "eval-budget",
             (false, Mode::Quick) => "eval-quick",
             (false, Mode::Full) => "eval-full",
@@ -192,6 +199,17 @@ fn run(args: &[String]) -> Result<()> {
         .join(format!("prm-bake{}", std::env::consts::EXE_SUFFIX));
 
     let started = Instant::now();
+    if emitters {
+        let table = emitters::run(&bin, &cache, &root, &out)?;
+        let path = out.join("emitters.md");
+        std::fs::write(&path, &table).with_context(|| format!("writing {}", path.display()))?;
+        println!(
+            "\n{table}\nemitters: written to {} in {:.0} s",
+            path.display(),
+            started.elapsed().as_secs_f64()
+        );
+        return Ok(());
+    }
     if budget {
         let table = budget::run(&bin, &cache, &root)?;
         let path = out.join("budget.md");
