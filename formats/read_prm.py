@@ -345,10 +345,11 @@ class Reader:
         self.parse_panes(by_kind[5])
 
     def parse_emitters(self, s):
-        # 1.2: header (groups, entries, resolution, reserved), 80-byte group records, then per
-        # group an RGB f32 triple per entry and an RGB9E5 word per atlas texel.
+        # 1.2: header (groups, entries, resolution, reserved), 88-byte group records, then per
+        # group an RGB f32 triple per entry and two RGB9E5 words per atlas texel (direct, then
+        # indirect: zeros unless flag bit 0 is set).
         n_entries, texels = len(self.entries), self.resolution * self.resolution
-        limit = 16 + MAX_EMITTER_GROUPS * (80 + 12 * n_entries + 4 * texels)
+        limit = 16 + MAX_EMITTER_GROUPS * (88 + 12 * n_entries + 8 * texels)
         raw = self.load(s, limit)
         if len(raw) < 16:
             raise InvalidArchive("emitters: shorter than its header")
@@ -359,12 +360,12 @@ class Reader:
             raise InvalidArchive("emitters: group count outside 1..=256")
         if entries != n_entries or res != self.resolution:
             raise InvalidArchive("emitters: entry count or resolution differs from the archive's")
-        size = 16 + groups * (80 + 12 * n_entries + 4 * texels)
+        size = 16 + groups * (88 + 12 * n_entries + 8 * texels)
         if len(raw) != size:
             raise InvalidArchive("emitters: raw size does not match its counts")
-        out, at = [], 16 + 80 * groups
+        out, at = [], 16 + 88 * groups
         for g in range(groups):
-            rec = raw[16 + 80 * g:16 + 80 * (g + 1)]
+            rec = raw[16 + 88 * g:16 + 88 * (g + 1)]
             name = rec[:64]
             end = name.find(b"\0") if b"\0" in name else 64
             if any(name[end:]):
@@ -373,16 +374,23 @@ class Reader:
                 name = name[:end].decode("utf-8")
             except UnicodeDecodeError:
                 raise InvalidArchive("emitters: a name is not UTF-8")
-            material = struct.unpack_from("<I", rec, 64)[0]
-            radiance = list(struct.unpack_from("<3f", rec, 68))
+            material, flags = struct.unpack_from("<II", rec, 64)
+            radiance = list(struct.unpack_from("<3f", rec, 72))
+            reserved = struct.unpack_from("<I", rec, 84)[0]
+            if flags & ~1 or (self.strict and reserved):
+                raise InvalidArchive("emitters: unknown group flags or a non-zero reserved field")
             irr = [list(struct.unpack_from("<3f", raw, at + 12 * i)) for i in range(n_entries)]
             at += 12 * n_entries
             direct = [decode_rgb9e5(struct.unpack_from("<I", raw, at + 4 * i)[0]) for i in range(texels)]
             at += 4 * texels
+            indirect = None
+            if flags & 1:
+                indirect = [decode_rgb9e5(struct.unpack_from("<I", raw, at + 4 * i)[0]) for i in range(texels)]
+            at += 4 * texels
             if any(v != v or v < 0 or v == float("inf") for r in [radiance] + irr for v in r):
                 raise InvalidArchive("emitters: values must be finite and non-negative")
             out.append(dict(name=name, material=material, radiance=radiance,
-                            entry_irradiance=irr, direct=direct))
+                            entry_irradiance=irr, direct=direct, indirect=indirect))
         self.emitters = out
 
     def load(self, s, max_raw):

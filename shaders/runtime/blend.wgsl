@@ -1,10 +1,13 @@
 // prm-runtime blend pass: the indirect-irradiance lightmap, Σ over the kept clusters of
-// weight_eff × pane, per atlas texel; panes are layers of an rgb9e5ufloat texture array.
+// weight_eff × pane, per atlas texel, plus the emitters' traced indirect light at their scales
+// (emitters.rs; a 1×1 texture, ignored, when no group has one); panes are layers of an
+// rgb9e5ufloat texture array.
 
 @group(0) @binding(0) var<uniform> frame: Frame;
 @group(0) @binding(1) var<storage, read> selected: array<Selected>;
 @group(0) @binding(2) var panes: texture_2d_array<f32>;
 @group(0) @binding(3) var lightmap: texture_storage_2d<rgba32float, write>;
+@group(0) @binding(4) var emitted: texture_2d<f32>;
 
 @compute @workgroup_size(8, 8)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
@@ -18,6 +21,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     for (var k = 0u; k < kept; k++) {
         let s = selected[k];
         sum += s.weight * textureLoad(panes, xy, i32(s.cluster), 0).rgb;
+    }
+    if all(textureDimensions(emitted) == size) {
+        sum += textureLoad(emitted, xy, 0).rgb;
     }
     textureStore(lightmap, xy, vec4<f32>(sum, 1.0));
 }

@@ -157,6 +157,7 @@ pub fn summary_json<R: Read + Seek>(archive: &Archive<R>, file: &Path, report: O
             "radiance": g.radiance,
             "entry_irradiance_sum": rgb_sum(&g.entry_irradiance),
             "direct_sum": rgb_sum(&g.direct),
+            "indirect_sum": g.indirect.as_deref().map(rgb_sum),
         })).collect::<Vec<_>>(),
         "clusters": archive.clusters().len(),
         "tiles": {
@@ -258,9 +259,13 @@ pub fn write_summary<W: Write, R: Read + Seek>(
     for g in archive.emitters() {
         let [r, gr, b] = g.radiance;
         let [er, eg, eb] = rgb_sum(&g.direct);
+        let indirect = match g.indirect.as_deref().map(rgb_sum) {
+            Some([ir, ig, ib]) => format!("indirect {ir:.1} {ig:.1} {ib:.1} (traced)"),
+            None => "indirect through the panes".to_string(),
+        };
         writeln!(
             out,
-            "emitter      {:?} (material {}): radiance {r:.3} {gr:.3} {b:.3}, direct irradiance summed over the atlas {er:.1} {eg:.1} {eb:.1}",
+            "emitter      {:?} (material {}): radiance {r:.3} {gr:.3} {b:.3}; irradiance summed over the atlas: direct {er:.1} {eg:.1} {eb:.1}, {indirect}",
             g.name, g.material
         )?;
     }

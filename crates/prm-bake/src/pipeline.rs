@@ -5,7 +5,10 @@ use prm_format::ArchiveWriter;
 use prm_gpu::{GpuContext, PaneOutput, PaneRenderParams};
 use prm_scene::{Atlas, AtlasParams, AtlasStats, Scene, Sizing};
 use prm_trace::pane::Lattice;
-use prm_trace::{Bvh, BvhParams, Clustering, Emitters, EntryParams, PaneParams, Receiver, SurfaceSample, WalkParams};
+use prm_trace::{
+    Bvh, BvhParams, Clustering, Emitters, EntryParams, Lighting, PaneParams, Receiver, ReferenceParams,
+    ReferenceTracer, SurfaceSample, WalkParams,
+};
 use std::cell::OnceCell;
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -24,6 +27,20 @@ const MAX_ATLAS_RESOLUTION: u32 = 8192;
 /// ([`Emitters::group_irradiance`]). With 256, the McGuire Cornell box's lamp-only direct
 /// lightmap is 1.2% from the reference's (4× downsampled), and the bake spends 3.4 s on it (2 cores).
 pub const EMITTER_SAMPLES: u32 = 256;
+
+/// Paths per exit point of an emitter group's traced indirect lightmap (the reference tracer's
+/// estimator, with only that group emitting). Measured (`cargo xtask eval --emitters`): McGuire's
+/// CornellBox-Original by its own lamp, default bake, indirect image 3.7% from the reference
+/// (energy 0.999) where the same group through the panes gave 11.4% (energy 1.000): the panes'
+/// walk noise and clustering, at 8 walks per entry, cost more than 256 paths' noise once a
+/// texel's is averaged over an image. The price is about 6 s per group on that 256² atlas (two
+/// cores), against 2.5 s for its direct light.
+pub const EMITTER_INDIRECT_SPP: u32 = 256;
+
+/// Most paths (exit points × [`EMITTER_INDIRECT_SPP`]) an emitter group's indirect lightmap may
+/// take, about 30 s per group on two cores; beyond, the group's indirect light comes from the
+/// panes (through its entry irradiance), whose cost does not grow with the atlas.
+pub const EMITTER_INDIRECT_MAX_PATHS: u64 = 1 << 26;
 
 /// Where the panes are rendered.
 #[derive(Clone, Copy)]
@@ -214,7 +231,9 @@ pub struct Baked {
 }
 
 /// The emitters section: each group's direct irradiance at the entry points (in the archive's
-/// `order`) and at the atlas texels (dilated into the gutters like a pane), at unit scale.
+/// `order`) and at the atlas texels, and its indirect irradiance at the texels (traced, when it
+/// fits [`EMITTER_INDIRECT_MAX_PATHS`]), at unit scale; texel images are dilated into the
+/// gutters like a pane.
 fn emitter_section(
     scene: &Scene,
     bvh: &Bvh,
@@ -223,7 +242,7 @@ fn emitter_section(
     entries: &[SurfaceSample],
     order: &[u32],
     seed: u64,
-) -> Vec<prm_format::EmitterGroup> {
+) -> Result<Vec<prm_format::EmitterGroup>, BakeError> {
     let at_entries: Vec<Receiver> = order
         .iter()
         .map(|&k| {
@@ -249,27 +268,51 @@ fn emitter_section(
     let to_entries = emitters.group_irradiance(scene, bvh, &at_entries, EMITTER_SAMPLES, seed);
     let to_exits = emitters.group_irradiance(scene, bvh, &at_exits, EMITTER_SAMPLES, !seed);
     let texels = (atlas.resolution * atlas.resolution) as usize;
-    emitters
+    let image = |values: &[Vec3]| {
+        let mut out = vec![[0f32; 3]; texels];
+        for (x, v) in atlas.exits.iter().zip(values) {
+            out[x.texel as usize] = v.to_array();
+        }
+        for &(dst, src) in &atlas.dilation {
+            out[dst as usize] = out[src as usize];
+        }
+        out
+    };
+    let trace_indirect = atlas.exits.len() as u64 * u64::from(EMITTER_INDIRECT_SPP) <= EMITTER_INDIRECT_MAX_PATHS;
+    let params = ReferenceParams {
+        seed,
+        ..ReferenceParams::with_spp(EMITTER_INDIRECT_SPP)
+    };
+    let mut out = Vec::with_capacity(emitters.groups.len());
+    for (g, (group, (te, tx))) in emitters
         .groups
         .iter()
         .zip(to_entries.into_iter().zip(to_exits))
-        .map(|(g, (te, tx))| {
-            let mut direct = vec![[0f32; 3]; texels];
-            for (x, v) in atlas.exits.iter().zip(&tx) {
-                direct[x.texel as usize] = v.to_array();
-            }
-            for &(dst, src) in &atlas.dilation {
-                direct[dst as usize] = direct[src as usize];
-            }
-            prm_format::EmitterGroup {
-                name: truncate_name(&g.name),
-                material: g.material,
-                radiance: g.radiance.to_array(),
-                entry_irradiance: te.iter().map(|v| v.to_array()).collect(),
-                direct,
-            }
-        })
-        .collect()
+        .enumerate()
+    {
+        let indirect = if trace_indirect {
+            let scales: Vec<Vec3> = (0..emitters.groups.len())
+                .map(|k| if k == g { Vec3::ONE } else { Vec3::ZERO })
+                .collect();
+            let alone = Emitters::with_scales(scene, &scales).map_err(trace("tracing an emitter group"))?;
+            let tracer = ReferenceTracer::new(scene, bvh, Lighting::Lights(&[])).with_emitters(&alone);
+            let estimate = tracer
+                .indirect_at_exits(&atlas.exits, &params, &mut |_, _| {})
+                .map_err(trace("tracing an emitter group's indirect light"))?;
+            Some(image(&estimate.mean))
+        } else {
+            None
+        };
+        out.push(prm_format::EmitterGroup {
+            name: truncate_name(&group.name),
+            material: group.material,
+            radiance: group.radiance.to_array(),
+            entry_irradiance: te.iter().map(|v| v.to_array()).collect(),
+            direct: image(&tx),
+            indirect,
+        });
+    }
+    Ok(out)
 }
 
 /// `name` cut to the archive's [`prm_format::EMITTER_NAME_BYTES`] at a character boundary.
@@ -402,9 +445,17 @@ pub fn bake(job: &BakeJob<'_>, renderer: Renderer<'_>, progress: &mut dyn Progre
     } else {
         let t = Instant::now();
         progress.phase_start(Phase::Emitters, 1);
-        let groups = emitter_section(scene, &bvh, &emitters, &atlas, &entries, &order, params.seed);
+        let groups = emitter_section(scene, &bvh, &emitters, &atlas, &entries, &order, params.seed)?;
         let names: Vec<&str> = groups.iter().map(|g| g.name.as_str()).collect();
-        let detail = format!("{} group(s): {}", groups.len(), names.join(", "));
+        let how = if groups.iter().all(|g| g.indirect.is_some()) {
+            format!("indirect traced, {EMITTER_INDIRECT_SPP} paths per texel")
+        } else {
+            format!(
+                "indirect through the panes: {} exit points × {EMITTER_INDIRECT_SPP} paths exceed {EMITTER_INDIRECT_MAX_PATHS}",
+                atlas.exits.len()
+            )
+        };
+        let detail = format!("{} group(s): {}; {how}", groups.len(), names.join(", "));
         finish_phase(&mut timings, progress, Phase::Emitters, "emitters", t, &detail);
         groups
     };

@@ -1,11 +1,13 @@
 //! The emitters section (format 1.2): every emitter group's name, radiance, irradiance at the
-//! entry points and direct irradiance at the atlas texels, per unit of the group's scale.
+//! entry points, and direct and (when baked) indirect irradiance at the atlas texels, per unit of
+//! the group's scale.
 //!
 //! Layout (formats/prm.md §5.2), all little-endian: a 16-byte header (group count, entry count,
-//! atlas resolution, reserved), one 80-byte record per group (a 64-byte NUL-padded UTF-8 name,
-//! the material index, the radiance), then per group its entry irradiance (one RGB `f32`
-//! triple per entry) and its direct irradiance (one RGB9E5 word per atlas texel). The sizes are
-//! fixed by the header, so a reader checks the raw size before it decompresses anything past it.
+//! atlas resolution, reserved), one 88-byte record per group (a 64-byte NUL-padded UTF-8 name,
+//! the material index, flags, the radiance, reserved), then per group its entry irradiance (one
+//! RGB `f32` triple per entry), its direct and its indirect irradiance (one RGB9E5 word per atlas
+//! texel each; the indirect all zero unless flag bit 0 is set). The sizes are fixed by the
+//! header, so a reader checks the raw size before it decompresses anything past it.
 
 use crate::layout::{limits, Cursor, PutLe};
 use crate::rgb9e5::{decode_rgb9e5, encode_rgb9e5};
@@ -13,7 +15,10 @@ use crate::rgb9e5::{decode_rgb9e5, encode_rgb9e5};
 /// Size of the emitters section's fixed header.
 pub const EMITTERS_HEADER_SIZE: usize = 16;
 /// Size of one emitter group record.
-pub const EMITTER_GROUP_RECORD_SIZE: usize = 80;
+pub const EMITTER_GROUP_RECORD_SIZE: usize = 88;
+/// Group flag: the group's indirect lightmap is baked (else the player lights the entry points
+/// with it and the panes carry its indirect light).
+const FLAG_INDIRECT: u32 = 1;
 /// Bytes of an emitter group's name field (UTF-8, NUL-padded).
 pub const EMITTER_NAME_BYTES: usize = 64;
 
@@ -31,6 +36,10 @@ pub struct EmitterGroup {
     /// Direct irradiance at every atlas texel from the group, with visibility (RGB, row-major,
     /// `resolution²` texels; stored as RGB9E5).
     pub direct: Vec<[f32; 3]>,
+    /// Indirect irradiance at every atlas texel from the group, when the bake traced it (like
+    /// `direct`); `None`: the group's indirect light comes from the panes through
+    /// `entry_irradiance`.
+    pub indirect: Option<Vec<[f32; 3]>>,
 }
 
 /// Raw size of an emitters section, `None` on overflow.
@@ -38,7 +47,7 @@ pub(crate) fn raw_size_for(groups: u64, entries: u64, resolution: u32) -> Option
     let texels = u64::from(resolution) * u64::from(resolution);
     let per_group = (EMITTER_GROUP_RECORD_SIZE as u64)
         .checked_add(entries.checked_mul(12)?)?
-        .checked_add(texels.checked_mul(4)?)?;
+        .checked_add(texels.checked_mul(8)?)?;
     groups.checked_mul(per_group)?.checked_add(EMITTERS_HEADER_SIZE as u64)
 }
 
@@ -91,6 +100,19 @@ pub(crate) fn validate(groups: &[EmitterGroup], entries: usize, resolution: u32)
                 "emitter group {g}: texel {i}'s irradiance is not finite and non-negative"
             ));
         }
+        if let Some(indirect) = &group.indirect {
+            if indirect.len() != texels {
+                return Err(format!(
+                    "emitter group {g} has {} indirect texels, resolution {resolution} needs {texels}",
+                    indirect.len()
+                ));
+            }
+            if let Some(i) = indirect.iter().position(|e| !finite_non_negative(e)) {
+                return Err(format!(
+                    "emitter group {g}: texel {i}'s indirect irradiance is not finite and non-negative"
+                ));
+            }
+        }
     }
     Ok(())
 }
@@ -108,7 +130,9 @@ pub(crate) fn encode(groups: &[EmitterGroup], entries: usize, resolution: u32) -
         name[..g.name.len()].copy_from_slice(g.name.as_bytes());
         b.extend_from_slice(&name);
         b.put_u32(g.material);
+        b.put_u32(if g.indirect.is_some() { FLAG_INDIRECT } else { 0 });
         b.put_vec3(g.radiance);
+        b.put_u32(0);
     }
     for g in groups {
         for e in &g.entry_irradiance {
@@ -116,6 +140,10 @@ pub(crate) fn encode(groups: &[EmitterGroup], entries: usize, resolution: u32) -
         }
         for t in &g.direct {
             b.put_u32(encode_rgb9e5(*t));
+        }
+        match &g.indirect {
+            Some(indirect) => indirect.iter().for_each(|t| b.put_u32(encode_rgb9e5(*t))),
+            None => b.resize(b.len() + g.direct.len() * 4, 0),
         }
     }
     b
@@ -142,8 +170,9 @@ pub(crate) fn decode_header(head: &[u8], strict: bool) -> Result<(u32, u32, u32)
     Ok((groups, entries, resolution))
 }
 
-/// Decodes whole 80-byte group records into groups with empty arrays.
-pub(crate) fn decode_groups(raw: &[u8]) -> Result<Vec<EmitterGroup>, String> {
+/// Decodes whole 88-byte group records into groups with empty arrays (`indirect` is
+/// `Some(empty)` where flag bit 0 is set); `strict` demands a zero reserved field.
+pub(crate) fn decode_groups(raw: &[u8], strict: bool) -> Result<Vec<EmitterGroup>, String> {
     let err = |e: crate::Error| e.to_string();
     let mut c = Cursor::new(raw, "emitter group");
     let mut out = Vec::with_capacity(raw.len() / EMITTER_GROUP_RECORD_SIZE);
@@ -158,7 +187,14 @@ pub(crate) fn decode_groups(raw: &[u8]) -> Result<Vec<EmitterGroup>, String> {
             .map_err(|_| format!("emitter group {g}'s name is not UTF-8"))?
             .to_owned();
         let material = c.u32().map_err(err)?;
+        let flags = c.u32().map_err(err)?;
         let radiance = c.vec3().map_err(err)?;
+        let reserved = c.u32().map_err(err)?;
+        if flags & !FLAG_INDIRECT != 0 || (strict && reserved != 0) {
+            return Err(format!(
+                "emitter group {g} has unknown flags {flags:#x} or a non-zero reserved field"
+            ));
+        }
         if !finite_non_negative(&radiance) {
             return Err(format!(
                 "emitter group {g}'s radiance {radiance:?} is not finite and non-negative"
@@ -170,6 +206,7 @@ pub(crate) fn decode_groups(raw: &[u8]) -> Result<Vec<EmitterGroup>, String> {
             radiance,
             entry_irradiance: Vec::new(),
             direct: Vec::new(),
+            indirect: (flags & FLAG_INDIRECT != 0).then(Vec::new),
         });
     }
     Ok(out)
@@ -208,23 +245,29 @@ mod tests {
             radiance: [17.0, 12.0, 4.0],
             entry_irradiance: (0..entries).map(|i| [i as f32, 0.5, 2.0]).collect(),
             direct: (0..res * res).map(|i| [i as f32 * 0.25, 1.0, 0.0]).collect(),
+            indirect: Some((0..res * res).map(|i| [0.5, i as f32, 2.0]).collect()),
         }
     }
 
     #[test]
     fn round_trip_through_the_encoding() {
-        let groups = vec![group("light", 3, 4), group("lámpara", 3, 4)];
+        let mut groups = vec![group("light", 3, 4), group("lámpara", 3, 4)];
+        groups[1].indirect = None;
         validate(&groups, 3, 4).unwrap();
         let raw = encode(&groups, 3, 4);
         assert_eq!(raw.len() as u64, raw_size_for(2, 3, 4).unwrap());
         let (n, entries, res) = decode_header(&raw[..EMITTERS_HEADER_SIZE], true).unwrap();
         assert_eq!((n, entries, res), (2, 3, 4));
         let mut at = EMITTERS_HEADER_SIZE + 2 * EMITTER_GROUP_RECORD_SIZE;
-        let mut back = decode_groups(&raw[EMITTERS_HEADER_SIZE..at]).unwrap();
+        let mut back = decode_groups(&raw[EMITTERS_HEADER_SIZE..at], true).unwrap();
         for g in &mut back {
             g.entry_irradiance = decode_entry_irradiance(&raw[at..at + 36]).unwrap();
             at += 36;
             g.direct = decode_direct(&raw[at..at + 64]).unwrap();
+            at += 64;
+            if let Some(indirect) = &mut g.indirect {
+                *indirect = decode_direct(&raw[at..at + 64]).unwrap();
+            }
             at += 64;
         }
         // Small integers and quarters are exact in RGB9E5.
@@ -246,6 +289,9 @@ mod tests {
         assert!(decode_header(&head[..16], true).is_err(), "group limit");
         let mut raw = encode(&[group("a", 3, 4)], 3, 4);
         raw[16 + 10] = b'z'; // after the NUL that ends "a"
-        assert!(decode_groups(&raw[16..96]).is_err());
+        assert!(decode_groups(&raw[16..104], true).is_err());
+        let mut raw = encode(&[group("a", 3, 4)], 3, 4);
+        raw[16 + 68] = 2; // an unknown flag
+        assert!(decode_groups(&raw[16..104], false).is_err());
     }
 }

@@ -937,11 +937,18 @@ fn read_emitters<R: Read + Seek>(
     section.expect_raw_size(expected, || {
         format!("{groups} groups, {entry_count} entries, resolution {resolution}")
     })?;
-    let mut out = raw.records(groups as usize, EMITTER_GROUP_RECORD_SIZE, emitters::decode_groups)?;
+    let mut out = raw.records(groups as usize, EMITTER_GROUP_RECORD_SIZE, |b| {
+        emitters::decode_groups(b, strict)
+    })?;
     let texels = resolution as usize * resolution as usize;
     for g in &mut out {
         g.entry_irradiance = raw.records(entry_count as usize, 12, emitters::decode_entry_irradiance)?;
         g.direct = raw.records(texels, 4, emitters::decode_direct)?;
+        // Read either way: without the flag the words are zeros, and skipped.
+        let indirect = raw.records(texels, 4, emitters::decode_direct)?;
+        if let Some(slot) = &mut g.indirect {
+            *slot = indirect;
+        }
     }
     raw.finish()?;
     Ok(out)

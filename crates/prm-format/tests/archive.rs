@@ -812,6 +812,8 @@ fn python_reader_check(path: &Path, filter: TileFilter) -> bool {
         assert_eq!(irr, g.entry_irradiance);
         let direct: Vec<[f32; 3]> = jg["direct"].as_array().unwrap().iter().map(f3).collect();
         assert_eq!(direct, g.direct);
+        let indirect: Option<Vec<[f32; 3]>> = jg["indirect"].as_array().map(|v| v.iter().map(f3).collect());
+        assert_eq!(indirect, g.indirect);
     }
     assert_eq!(a.emitters(), &groups[..]);
     let je: Vec<[f32; 3]> = j["entry_energy"]
@@ -1540,6 +1542,7 @@ fn emitter_groups(s: &Scene, count: usize) -> Vec<EmitterGroup> {
             radiance: [17.0, 12.0 + g as f32, 4.0],
             entry_irradiance: (0..s.entries.len()).map(|i| [i as f32, 0.5, g as f32]).collect(),
             direct: (0..texels).map(|i| [(i % 7) as f32 * 0.25, 1.0, 0.0]).collect(),
+            indirect: (g == 0).then(|| (0..texels).map(|i| [0.5, (i % 5) as f32, 0.0]).collect()),
         })
         .collect()
 }

@@ -15,12 +15,20 @@
 //!   { t = 0.0, spec = "point:0,1.5,0:2,1,1" },   # as --light
 //!   { t = 2.0, spec = "point:0.5,1.5,0:1,1,2" },
 //! ]
+//!
+//! [[emitter]]               # one table per emitter group it scales (as --emitter NAME=SCALE)
+//! name = "light"
+//! keys = [
+//!   { t = 0.0, spec = "1" },            # a scale, or R,G,B
+//!   { t = 2.0, spec = "0.2,0.4,1" },
+//! ]
 //! ```
 //!
 //! Between keys every parameter is interpolated linearly (positions, intensities, cone and
 //! frustum angles; directions are interpolated and renormalised, a rectangular spot's vertical
 //! also made perpendicular to its axis again); before the first key and after the last the
-//! end keys hold. The keys of one light must all be of the same kind.
+//! end keys hold. The keys of one light must all be of the same kind. Emitter groups the
+//! animation does not name keep their `--emitter` scale (1 by default).
 
 use std::path::Path;
 
@@ -42,6 +50,12 @@ struct FileLight {
 }
 
 #[derive(Deserialize)]
+struct FileEmitter {
+    name: String,
+    keys: Vec<FileKey>,
+}
+
+#[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct File {
     fps: Option<f32>,
@@ -49,7 +63,12 @@ struct File {
     camera: Vec<FileKey>,
     #[serde(default)]
     light: Vec<FileLight>,
+    #[serde(default)]
+    emitter: Vec<FileEmitter>,
 }
+
+/// An emitter scale key: time and RGB scale.
+pub type ScaleKey = (f32, [f32; 3]);
 
 /// A parsed animation.
 #[derive(Clone, Debug, Default)]
@@ -60,6 +79,8 @@ pub struct Animation {
     pub camera: Vec<(f32, Camera)>,
     /// Per light, its keys (time, light).
     pub lights: Vec<Vec<(f32, Light)>>,
+    /// Per animated emitter group, its name and keys (time, RGB scale).
+    pub emitters: Vec<(String, Vec<ScaleKey>)>,
 }
 
 fn lerp_light(a: &Light, b: &Light, s: f32) -> Light {
@@ -208,7 +229,31 @@ impl Animation {
             }
             lights.push(parsed);
         }
-        Ok(Animation { fps, camera, lights })
+        let mut emitters = Vec::new();
+        for e in &f.emitter {
+            let keys: Vec<(f32, String)> = e.keys.iter().map(|k| (k.t, k.spec.clone())).collect();
+            if keys.is_empty() || !sorted(&keys) {
+                return Err(format!(
+                    "emitter {:?}: keys must be present and in increasing time",
+                    e.name
+                ));
+            }
+            let parsed = keys
+                .iter()
+                .map(|(t, s)| {
+                    prm_scene::parse_emitter_scale(&format!("{}={s}", e.name))
+                        .map(|(_, v)| (*t, v))
+                        .map_err(|err| format!("emitter {:?}: {err}", e.name))
+                })
+                .collect::<Result<Vec<_>, _>>()?;
+            emitters.push((e.name.clone(), parsed));
+        }
+        Ok(Animation {
+            fps,
+            camera,
+            lights,
+            emitters,
+        })
     }
 
     /// Time of frame `i`.
@@ -228,6 +273,28 @@ impl Animation {
             target: a.target.lerp(b.target, s),
             fov_y_deg: a.fov_y_deg + (b.fov_y_deg - a.fov_y_deg) * s,
         })
+    }
+
+    /// The scales of the emitter groups named `names` at time `t`: `base` (one per group) with
+    /// the animated groups' interpolated keys in place. An animated name that is no group's is
+    /// an error naming the groups.
+    pub fn emitter_scales_at(&self, names: &[&str], base: &[[f32; 3]], t: f32) -> Result<Vec<[f32; 3]>, String> {
+        let mut out = base.to_vec();
+        for (name, keys) in &self.emitters {
+            let g = names.iter().position(|n| n == name).ok_or_else(|| {
+                format!(
+                    "the animation scales emitter {name:?}, which the archive does not have (its groups: {})",
+                    if names.is_empty() {
+                        "none".to_string()
+                    } else {
+                        names.join(", ")
+                    }
+                )
+            })?;
+            let (i, j, s) = locate(keys, t);
+            out[g] = [0, 1, 2].map(|k| keys[i].1[k] + (keys[j].1[k] - keys[i].1[k]) * s);
+        }
+        Ok(out)
     }
 
     /// The lights at time `t` (empty if the animation has none).

@@ -177,6 +177,14 @@ fn run() -> Result<()> {
     };
     let mut renderer = Renderer::new(ctx, &scene, &mut archive, opts)
         .with_context(|| format!("playing {}", args.archive.display()))?;
+    let emitter_names: Vec<&str> = emitter_infos.iter().map(|g| g.name.as_str()).collect();
+    let animated_emitters = animation.as_ref().is_some_and(|a| !a.emitters.is_empty());
+    if let Some(a) = animation.as_ref().filter(|_| animated_emitters) {
+        // Names checked before any frame.
+        a.emitter_scales_at(&emitter_names, &emitter_scales, 0.0)
+            .map_err(anyhow::Error::msg)
+            .with_context(|| format!("in {}", args.animation.clone().unwrap_or_default().display()))?;
+    }
     if !emitter_scales.is_empty() {
         renderer.set_emitter_scales(&emitter_scales)?;
     }
@@ -211,6 +219,12 @@ fn run() -> Result<()> {
             }
             None => (base_camera, base_lights.clone()),
         };
+        if let Some(a) = animation.as_ref().filter(|_| animated_emitters) {
+            let scales = a
+                .emitter_scales_at(&emitter_names, &emitter_scales, a.time(i))
+                .map_err(anyhow::Error::msg)?;
+            renderer.set_emitter_scales(&scales)?;
+        }
         let t = renderer.render(&FrameInput {
             camera,
             lights: &lights,

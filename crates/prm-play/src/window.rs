@@ -236,6 +236,8 @@ struct App {
     selected: usize,
     step: f32,
     animation: Option<Animation>,
+    /// The `--emitter` scales (empty: all 1); an animation's emitter keys replace its groups'.
+    emitter_scales: Vec<[f32; 3]>,
     mode: Mode,
     exposure: f32,
     frame_limit: Option<u32>,
@@ -357,6 +359,19 @@ impl App {
         let Some(gpu) = self.gpu.as_mut() else {
             return Ok(false);
         };
+        if let Some(a) = self.animation.as_ref().filter(|a| !a.emitters.is_empty()) {
+            let infos = gpu.renderer.runtime().emitters();
+            let names: Vec<&str> = infos.iter().map(|g| g.name.as_str()).collect();
+            let base = if self.emitter_scales.is_empty() {
+                vec![[1.0; 3]; names.len()]
+            } else {
+                self.emitter_scales.clone()
+            };
+            let scales = a
+                .emitter_scales_at(&names, &base, self.clock)
+                .map_err(PlayError::Window)?;
+            gpu.renderer.set_emitter_scales(&scales)?;
+        }
         gpu.renderer.render(&FrameInput {
             camera,
             lights: &lights,
@@ -557,6 +572,7 @@ pub fn run(config: WindowConfig) -> Result<(), PlayError> {
         selected: 0,
         step: config.scene.bounds().diagonal().max(1e-3) * LIGHT_STEP,
         animation: config.animation.clone(),
+        emitter_scales: config.emitter_scales.clone(),
         mode: config.mode,
         exposure: config.exposure,
         frame_limit: config.frames,

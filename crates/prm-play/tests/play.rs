@@ -564,10 +564,28 @@ keys = [ { t = 0.0, spec = "rect:0,1,0:0,-1,0:0,0,1:20,10:1,1,1" }, { t = 2.0, s
         ),
         ("[[light]]\nkeys = [ { t = 0.0, spec = \"lamp:0,0,0\" } ]", "light 0"),
         ("colour = 1", "unknown field"),
+        ("[[emitter]]\nname = \"light\"\nkeys = []", "emitter \"light\""),
+        ("[[emitter]]\nname = \"light\"\nkeys = [ { t = 0.0, spec = \"-1\" } ]", "negative"),
     ] {
         let e = Animation::parse(bad).unwrap_err();
         assert!(e.contains(says), "{bad:?} gave {e:?}");
     }
+    // Emitter scales: the animated group interpolates, the others keep their base scale.
+    let e = Animation::parse(
+        "[[emitter]]\nname = \"lamp\"\nkeys = [ { t = 0.0, spec = \"1\" }, { t = 2.0, spec = \"0,0.5,3\" } ]",
+    )
+    .unwrap();
+    let base = [[2.0; 3], [1.0; 3]];
+    assert_eq!(
+        e.emitter_scales_at(&["ceiling", "lamp"], &base, 1.0).unwrap(),
+        [[2.0; 3], [0.5, 0.75, 2.0]]
+    );
+    assert_eq!(
+        e.emitter_scales_at(&["ceiling", "lamp"], &base, 5.0).unwrap()[1],
+        [0.0, 0.5, 3.0]
+    );
+    let missing = e.emitter_scales_at(&["ceiling"], &base[..1], 0.0).unwrap_err();
+    assert!(missing.contains("\"lamp\"") && missing.contains("ceiling"), "{missing}");
 }
 
 /// Window mode's present pass (run offscreen: no display here): the tone-mapped frame equals the

@@ -1,10 +1,12 @@
 //! Emissive surfaces at run time: the archive's emitter groups (formats/prm.md §5.2) scaled by
-//! the caller. A scale change sums each group's baked arrays on the CPU, `Σ_g s_g · entry_g` into
-//! the entries' `emitted` irradiance (which the weights pass adds to the lights', so the panes
-//! carry the emitters' indirect light) and `Σ_g s_g · direct_g` into the emitter lightmap (their
-//! direct light, which the caller adds like the lights' own). On the McGuire Cornell box (one
-//! group, 16 384 entries, 256² texels) that is about 1 ms and two uploads: less than a moved
-//! light's shadow maps.
+//! the caller. A scale change sums each group's baked arrays on the CPU: `Σ_g s_g · direct_g`
+//! into the emitter lightmap (their direct light, which the caller adds like the lights' own);
+//! for groups with a traced indirect lightmap `Σ_g s_g · indirect_g` into a texture the blend
+//! pass adds to the indirect lightmap; for the others `Σ_g s_g · entry_g` into the entries'
+//! `emitted` irradiance, which the weights pass adds to the lights', so the panes carry their
+//! indirect light. On the McGuire Cornell box (one group, 256² texels) that is a few
+//! milliseconds and three uploads, no more than a moved light costs (`cargo xtask eval
+//! --emitters`).
 
 use prm_gpu_kit::pipeline;
 
@@ -31,38 +33,78 @@ impl From<&prm_format::EmitterGroup> for EmitterInfo {
     }
 }
 
-/// The groups, their current scales and the emitter lightmap.
+/// The groups, their current scales and the emitter lightmaps.
 pub(crate) struct EmitterState {
     pub info: Vec<EmitterInfo>,
     entry_irradiance: Vec<Vec<[f32; 3]>>,
     direct: Vec<Vec<[f32; 3]>>,
+    /// Each group's traced indirect lightmap, `None` where its indirect light goes through the
+    /// panes.
+    indirect: Vec<Option<Vec<[f32; 3]>>>,
     pub scales: Vec<[f32; 3]>,
     /// The direct irradiance of the current scales, row-major (empty without groups).
     pub combined: Vec<[f32; 3]>,
     pub texture: wgpu::Texture,
     pub view: wgpu::TextureView,
+    /// The traced indirect irradiance of the current scales (1×1 when no group has it; the
+    /// blend pass adds it).
+    indirect_texture: wgpu::Texture,
+    pub indirect_view: wgpu::TextureView,
+}
+
+/// An `rgba32float` texture of `side`² for the emitter lightmaps.
+fn lightmap(device: &wgpu::Device, label: &str, side: u32) -> (wgpu::Texture, wgpu::TextureView) {
+    let texture = pipeline::texture(
+        device,
+        label,
+        [side, side, 1],
+        LIGHTMAP_FORMAT,
+        wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+    );
+    let view = texture.create_view(&Default::default());
+    (texture, view)
+}
+
+/// `Σ_g s_g · maps[g]` over the groups that have a map, uploaded to `texture`.
+fn sum_into(
+    queue: &wgpu::Queue,
+    texture: &wgpu::Texture,
+    maps: &[Option<&Vec<[f32; 3]>>],
+    scales: &[[f32; 3]],
+) -> Vec<[f32; 3]> {
+    let side = texture.width();
+    let mut sum = vec![[0.0f32; 3]; (side * side) as usize];
+    for (map, s) in maps.iter().zip(scales) {
+        if let Some(map) = map {
+            for (t, v) in sum.iter_mut().zip(map.iter()) {
+                (0..3).for_each(|k| t[k] += s[k] * v[k]);
+            }
+        }
+    }
+    let rgba: Vec<[f32; 4]> = sum.iter().map(|&[r, g, b]| [r, g, b, 1.0]).collect();
+    pipeline::write_layer(queue, texture, 0, bytemuck::cast_slice(&rgba), side * 16);
+    sum
 }
 
 impl EmitterState {
-    /// The archive's groups at scale 1; the lightmap is `resolution`² (1² without groups).
+    /// The archive's groups at scale 1; the lightmaps are `resolution`² (1² when unused).
     pub fn new(device: &wgpu::Device, groups: &[prm_format::EmitterGroup], resolution: u32) -> EmitterState {
         let side = if groups.is_empty() { 1 } else { resolution };
-        let texture = pipeline::texture(
-            device,
-            "prm emitter lightmap",
-            [side, side, 1],
-            LIGHTMAP_FORMAT,
-            wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-        );
-        let view = texture.create_view(&Default::default());
+        let (texture, view) = lightmap(device, "prm emitter lightmap", side);
+        let traced = groups.iter().any(|g| g.indirect.is_some());
+        let (indirect_texture, indirect_view) =
+            lightmap(device, "prm emitter indirect", if traced { resolution } else { 1 });
         EmitterState {
             info: groups.iter().map(EmitterInfo::from).collect(),
             entry_irradiance: groups.iter().map(|g| g.entry_irradiance.clone()).collect(),
             direct: groups.iter().map(|g| g.direct.clone()).collect(),
+            indirect: groups.iter().map(|g| g.indirect.clone()).collect(),
             scales: vec![[1.0; 3]; groups.len()],
             combined: Vec::new(),
             texture,
             view,
+            indirect_texture,
+            indirect_view,
         }
     }
 
@@ -88,8 +130,8 @@ impl EmitterState {
         Ok(())
     }
 
-    /// Sums the groups at the current scales into `entries[i].emitted` and the lightmap, and
-    /// uploads the lightmap.
+    /// Sums the groups at the current scales: into `entries[i].emitted` for the groups whose
+    /// indirect light goes through the panes, and into the two lightmaps, which it uploads.
     pub fn apply(&mut self, queue: &wgpu::Queue, entries: &mut [GpuEntry]) {
         if self.info.is_empty() {
             return;
@@ -97,19 +139,17 @@ impl EmitterState {
         for e in entries.iter_mut() {
             e.emitted = [0.0; 3];
         }
-        let texels = self.direct[0].len();
-        self.combined = vec![[0.0; 3]; texels];
-        for g in 0..self.info.len() {
+        for g in (0..self.info.len()).filter(|&g| self.indirect[g].is_none()) {
             let s = self.scales[g];
             for (e, v) in entries.iter_mut().zip(&self.entry_irradiance[g]) {
                 (0..3).for_each(|k| e.emitted[k] += s[k] * v[k]);
             }
-            for (t, v) in self.combined.iter_mut().zip(&self.direct[g]) {
-                (0..3).for_each(|k| t[k] += s[k] * v[k]);
-            }
         }
-        let rgba: Vec<[f32; 4]> = self.combined.iter().map(|&[r, g, b]| [r, g, b, 1.0]).collect();
-        let side = self.texture.width();
-        pipeline::write_layer(queue, &self.texture, 0, bytemuck::cast_slice(&rgba), side * 16);
+        let direct: Vec<Option<&Vec<[f32; 3]>>> = self.direct.iter().map(Some).collect();
+        self.combined = sum_into(queue, &self.texture, &direct, &self.scales);
+        if self.indirect.iter().any(Option::is_some) {
+            let indirect: Vec<Option<&Vec<[f32; 3]>>> = self.indirect.iter().map(Option::as_ref).collect();
+            sum_into(queue, &self.indirect_texture, &indirect, &self.scales);
+        }
     }
 }

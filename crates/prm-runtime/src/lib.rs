@@ -8,7 +8,9 @@
 //! `rgba32float` lightmap of indirect irradiance in W/m² (`blend.wgsl`). The caller samples it
 //! with the lightmap UVs [`Runtime::lightmap_uvs`] gives per triangle and shades as it likes:
 //! radiance = albedo/π × (direct + indirect irradiance). Its direct light can use the same
-//! shadow maps through [`LIGHTS_WGSL`] and [`Runtime::direct_light_bindings`].
+//! shadow maps through [`LIGHTS_WGSL`] and [`Runtime::direct_light_bindings`]. Emissive surfaces
+//! baked into the archive are scaled with [`Runtime::set_emitter_scales`]; their direct light is
+//! [`Runtime::emitter_lightmap`], their indirect light is in the lightmap.
 //!
 //! Every resource lives on the device given to [`Runtime::new`]; nothing is global.
 //!
@@ -326,7 +328,7 @@ impl Runtime {
         let maps = ShadowMaps::new(device, options.shadow_resolution, 1);
         let shadow = ShadowPass::new(device, &maps);
         let weights = WeightsPass::new(device, &buffers, &maps.array);
-        let topk = TopKPasses::new(device, &buffers, &panes, &lightmap_view);
+        let topk = TopKPasses::new(device, &buffers, &panes, &lightmap_view, &emitters.indirect_view);
         scope.pop("runtime setup")?;
         Ok(Runtime {
             device: device.clone(),
@@ -473,9 +475,10 @@ impl Runtime {
     }
 
     /// Scales each emitter group's radiance (one finite, non-negative RGB triple per group of
-    /// [`Runtime::emitters`]) from the next [`Runtime::encode`] on: the entries' irradiance and
-    /// the emitter lightmap are summed again on the CPU and uploaded (about a millisecond on the
-    /// Cornell box), which changes the indirect light through the cluster weights.
+    /// [`Runtime::emitters`]) from the next [`Runtime::encode`] on: the emitter lightmap, the
+    /// traced indirect lightmaps (added into [`Runtime::lightmap`] by the blend) and, for groups
+    /// without one, the entries' irradiance (the cluster weights) are summed again on the CPU
+    /// and uploaded; nothing is rendered.
     pub fn set_emitter_scales(&mut self, scales: &[[f32; 3]]) -> Result<(), RuntimeError> {
         self.emitters.check(scales)?;
         self.emitters.scales = scales.to_vec();

@@ -19,12 +19,14 @@ pub(crate) struct TopKPasses {
 }
 
 impl TopKPasses {
-    /// The passes on `b`, blending the pane array `panes` into `lightmap`.
+    /// The passes on `b`, blending the pane array `panes` into `lightmap`, plus the emitters'
+    /// traced indirect lightmap `emitted` (used only when it has the lightmap's size).
     pub fn new(
         device: &wgpu::Device,
         b: &Buffers,
         panes: &wgpu::TextureView,
         lightmap: &wgpu::TextureView,
+        emitted: &wgpu::TextureView,
     ) -> TopKPasses {
         let pass = |name, wgsl, resources: &[wgpu::BindingResource]| {
             ComputePass::new(device, name, &[crate::SHARED_WGSL, wgsl], resources)
@@ -51,6 +53,7 @@ impl TopKPasses {
                     b.selected.as_entire_binding(),
                     wgpu::BindingResource::TextureView(panes),
                     wgpu::BindingResource::TextureView(lightmap),
+                    wgpu::BindingResource::TextureView(emitted),
                 ],
             ),
         }

@@ -27,6 +27,8 @@ const SPP: u32 = 1024;
 /// Image size and the McGuire boxes' camera (metrics.md).
 const SIZE: &str = "256x256";
 const MCGUIRE_CAMERA: &str = "0,1,3.6:0,1,0:40";
+/// Our Cornell box's camera (its glTF's; the OBJ has none).
+const CORNELL_CAMERA: &str = "0.278,0.273,-0.8:0.278,0.273,0:39.3076";
 /// Frames per timing.
 const FRAMES: usize = 24;
 
@@ -191,7 +193,7 @@ pub fn run(bake_bin: &Path, cache: &Path, root: &Path, out: &Path) -> Result<Str
     cases.push(Case {
         name: "Cornell box, two lamps".into(),
         scene: two_lamps(root, &cache.join("scenes"))?,
-        camera: None,
+        camera: Some(CORNELL_CAMERA),
         scales: vec![vec![], vec!["lampA=0.25", "lampB=1,0.5,2"]],
     });
     let mut md = String::from(
