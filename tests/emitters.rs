@@ -1,5 +1,5 @@
-//! Emissive surfaces end to end: the bundled Cornell box with two small ceiling lamps of
-//! different colours (two emitter groups) is baked through the library and played with no
+//! Emissive surfaces end to end: `scenes/cornell-box-lamps` (the Cornell box lit by two small
+//! ceiling lamps of different colours, two emitter groups) is baked through the library and played with no
 //! punctual light at several group scales, both ways a group's indirect light can go: its traced
 //! indirect lightmap (what the bake writes for atlases of this size), and, with the same archive
 //! rewritten without those lightmaps, the panes lit by its entry irradiance. Checked: the run
@@ -16,28 +16,6 @@ use prm_trace::{Bvh, BvhParams, Emitters, Lighting, ReferenceParams, ReferenceTr
 
 /// Atlas side of the test bake.
 const RESOLUTION: u32 = 64;
-
-/// The bundled Cornell box plus two 10 × 10 cm lamps 1 mm under its ceiling, facing down:
-/// `lampA` warm, `lampB` blue. Returns the OBJ's path.
-fn two_lamps(dir: &std::path::Path) -> std::path::PathBuf {
-    let obj = std::fs::read_to_string(repo("scenes/cornell-box/cornell-box.obj")).unwrap();
-    let mtl = std::fs::read_to_string(repo("scenes/cornell-box/cornell-box.mtl")).unwrap();
-    let vertices = obj.lines().filter(|l| l.starts_with("v ")).count();
-    let mut obj = obj.replace("mtllib cornell-box.mtl", "mtllib lamps.mtl");
-    let y = 0.5478;
-    for (k, (name, x0, z0)) in [("lampA", 0.10, 0.20), ("lampB", 0.35, 0.25)].into_iter().enumerate() {
-        let (x1, z1) = (x0 + 0.1, z0 + 0.1);
-        obj +=
-            &format!("o {name}\nusemtl {name}\nv {x0} {y} {z0}\nv {x1} {y} {z0}\nv {x1} {y} {z1}\nv {x0} {y} {z1}\n");
-        let b = vertices + 4 * k;
-        obj += &format!("f {} {} {}\nf {} {} {}\n", b + 1, b + 2, b + 3, b + 1, b + 3, b + 4);
-    }
-    let mtl = mtl + "\nnewmtl lampA\nKd 0.78 0.78 0.78\nKe 40 28 10\n\nnewmtl lampB\nKd 0.78 0.78 0.78\nKe 8 16 40\n";
-    std::fs::write(dir.join("lamps.mtl"), mtl).unwrap();
-    let path = dir.join("lamps.obj");
-    std::fs::write(&path, obj).unwrap();
-    path
-}
 
 /// ‖t − r‖ / ‖r‖ over every channel.
 fn rel_error(t: &[Vec3], r: &[Vec3]) -> f64 {
@@ -95,7 +73,7 @@ fn frame(
 #[test]
 fn two_emitter_groups_bake_scale_and_match_the_reference() {
     let dir = temp_dir("emitters");
-    let scene_path = two_lamps(&dir);
+    let scene_path = repo("scenes/cornell-box-lamps/cornell-box-lamps.obj");
     let scene = prm_scene::load(&scene_path).unwrap();
     let traced_path = dir.join("lamps.prm");
     let config = prm_bake::BakeConfig {
@@ -121,7 +99,7 @@ fn two_emitter_groups_bake_scale_and_match_the_reference() {
     let mut traced = Archive::open(&traced_path).unwrap();
     assert_eq!(traced.info().minor, 2);
     let names: Vec<&str> = traced.emitters().iter().map(|g| g.name.as_str()).collect();
-    assert_eq!(names, ["lampA", "lampB"]);
+    assert_eq!(names, ["lamp_warm", "lamp_blue"]);
     let groups = traced.emitters().to_vec();
     assert!(
         groups.iter().all(|g| g.indirect.is_some()),

@@ -81,6 +81,8 @@ pub struct Bundle {
 pub fn bundles() -> Vec<Bundle> {
     let cornell = cornell::scene();
     let cornell_readme = cornell::readme(&Stats::of(&cornell));
+    let lamps = cornell::lamps_scene();
+    let lamps_readme = cornell::lamps_readme(&Stats::of(&lamps));
     let chairs = chairs::scene();
     let chairs_readme = chairs::readme(&Stats::of(&chairs));
     let open = two_rooms::scene(false);
@@ -92,6 +94,12 @@ pub fn bundles() -> Vec<Bundle> {
             summary: "the Cornell box from its published measurements: colour bleeding, soft indirect light",
             scenes: vec![(cornell, Enclosure::Open)],
             readme: cornell_readme,
+        },
+        Bundle {
+            dir: "cornell-box-lamps",
+            summary: "the Cornell box lit by two small emissive ceiling lamps of different colours: emitter groups",
+            scenes: vec![(lamps, Enclosure::Open)],
+            readme: lamps_readme,
         },
         Bundle {
             dir: "chairs",

@@ -4,8 +4,8 @@
 //! Cases, each baked with `prm-bake bake SCENE` and played with `prm-play --headless` (no
 //! punctual light), against `prm-bake reference --emitters` at the same camera and scales:
 //! - McGuire's `CornellBox-Original` lit only by its own ceiling lamp (`../shared/scenes`);
-//! - our Cornell box with two small ceiling lamps of different colours (two emitter groups,
-//!   written under the cache), at scales 1 and 1, then the warm one dimmed and the blue one
+//! - `scenes/cornell-box-lamps` (our Cornell box lit by two small ceiling lamps of different
+//!   colours, two emitter groups), at scales 1 and 1, then the warm one dimmed and the blue one
 //!   tinted.
 //!
 //! Errors are `../shared/notes/metrics.md`'s (`compare.rs`): the indirect image after a 4×4
@@ -27,8 +27,6 @@ const SPP: u32 = 1024;
 /// Image size and the McGuire boxes' camera (metrics.md).
 const SIZE: &str = "256x256";
 const MCGUIRE_CAMERA: &str = "0,1,3.6:0,1,0:40";
-/// Our Cornell box's camera (its glTF's; the OBJ has none).
-const CORNELL_CAMERA: &str = "0.278,0.273,-0.8:0.278,0.273,0:39.3076";
 /// Frames per timing.
 const FRAMES: usize = 24;
 
@@ -38,36 +36,6 @@ struct Case {
     camera: Option<&'static str>,
     /// `--emitter` specs, one set per row.
     scales: Vec<Vec<&'static str>>,
-}
-
-/// The bundled Cornell box with two 10 × 10 cm lamps 1 mm under its ceiling (`lampA` warm,
-/// `lampB` blue), written into `dir`; the same scene as `tests/emitters.rs`.
-fn two_lamps(root: &Path, dir: &Path) -> Result<PathBuf> {
-    std::fs::create_dir_all(dir)?;
-    let obj = std::fs::read_to_string(root.join("scenes/cornell-box/cornell-box.obj"))?;
-    let mtl = std::fs::read_to_string(root.join("scenes/cornell-box/cornell-box.mtl"))?;
-    let vertices = obj.lines().filter(|l| l.starts_with("v ")).count();
-    let mut obj = obj.replace("mtllib cornell-box.mtl", "mtllib two-lamps.mtl");
-    let y = 0.5478;
-    for (k, (name, x0, z0)) in [("lampA", 0.10, 0.20), ("lampB", 0.35, 0.25)].into_iter().enumerate() {
-        let (x1, z1): (f64, f64) = (x0 + 0.1, z0 + 0.1);
-        let _ = write!(
-            obj,
-            "o {name}\nusemtl {name}\nv {x0} {y} {z0}\nv {x1} {y} {z0}\nv {x1} {y} {z1}\nv {x0} {y} {z1}\n"
-        );
-        let b = vertices + 4 * k;
-        let _ = writeln!(obj, "f {} {} {}\nf {} {} {}", b + 1, b + 2, b + 3, b + 1, b + 3, b + 4);
-    }
-    let mtl = mtl + "\nnewmtl lampA\nKd 0.78 0.78 0.78\nKe 40 28 10\n\nnewmtl lampB\nKd 0.78 0.78 0.78\nKe 8 16 40\n";
-    let path = dir.join("two-lamps.obj");
-    // Rewritten only when different, so the file stamp in the bake cache's key stays.
-    if std::fs::read_to_string(dir.join("two-lamps.mtl")).ok().as_deref() != Some(mtl.as_str()) {
-        std::fs::write(dir.join("two-lamps.mtl"), &mtl)?;
-    }
-    if std::fs::read_to_string(&path).ok().as_deref() != Some(obj.as_str()) {
-        std::fs::write(&path, &obj)?;
-    }
-    Ok(path)
 }
 
 /// Runs `cmd`, failing with its output.
@@ -137,8 +105,9 @@ fn play(play_bin: &Path, archive: &Path, case: &Case, scales: &[&str], mode: &st
 }
 
 /// Mean frame times (ms) on one renderer of `archive`: the emitter scales changing every frame,
-/// and a point light moving every frame instead (with the emitters on).
-fn frame_costs(archive: &Path, scene_path: &Path) -> Result<(f64, f64)> {
+/// and a point light moving every frame instead (with the emitters on); and the mean time of the
+/// scale change alone (`Renderer::set_emitter_scales`: CPU sums and uploads).
+fn frame_costs(archive: &Path, scene_path: &Path) -> Result<(f64, f64, f64)> {
     let (mut r, scene) = crate::measure::renderer(archive, scene_path, 32)?;
     let groups = r.runtime().emitters().len();
     let camera = prm_play::default_camera(&scene);
@@ -166,13 +135,18 @@ fn frame_costs(archive: &Path, scene_path: &Path) -> Result<(f64, f64)> {
         position: b.min + b.extent() * glam::Vec3::new(0.2 + 0.6 * (i % 7) as f32 / 6.0, 0.7, 0.5),
         intensity: glam::Vec3::splat(0.05 * b.diagonal() * b.diagonal()),
     };
+    let mut alone = 0.0;
     let scaled = time(&mut r, &mut |r, i| {
         let s = 0.5 + 0.5 * (i % 5) as f32 / 4.0;
+        let t = Instant::now();
         r.set_emitter_scales(&vec![[s, s, 1.0]; groups]).expect("valid scales");
+        if i >= 2 {
+            alone += t.elapsed().as_secs_f64();
+        }
         vec![light_at(0)]
     })?;
     let moved = time(&mut r, &mut |_, i| vec![light_at(i)])?;
-    Ok((scaled, moved))
+    Ok((scaled, moved, alone * 1e3 / FRAMES as f64))
 }
 
 /// Runs the emitter cases; returns the Markdown table.
@@ -192,9 +166,10 @@ pub fn run(bake_bin: &Path, cache: &Path, root: &Path, out: &Path) -> Result<Str
     }
     cases.push(Case {
         name: "Cornell box, two lamps".into(),
-        scene: two_lamps(root, &cache.join("scenes"))?,
-        camera: Some(CORNELL_CAMERA),
-        scales: vec![vec![], vec!["lampA=0.25", "lampB=1,0.5,2"]],
+        // The glTF: its emissive materials and camera.
+        scene: root.join("scenes/cornell-box-lamps/cornell-box-lamps.gltf"),
+        camera: None,
+        scales: vec![vec![], vec!["lamp_warm=0.25", "lamp_blue=1,0.5,2"]],
     });
     let mut md = String::from(
         "| case | scales | indirect error (4×4) | full res. | energy | shape | full image error (4×4) | bake s | frame ms: scales change / light moves |\n| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n",
@@ -213,7 +188,7 @@ pub fn run(bake_bin: &Path, cache: &Path, root: &Path, out: &Path) -> Result<Str
             .as_f64()
             .unwrap_or(t.elapsed().as_secs_f64());
         println!("emitters: {}: baked ({:.1} s)", case.name, bake_s);
-        let (scaled_ms, moved_ms) = frame_costs(&baked.archive, &case.scene)?;
+        let (scaled_ms, moved_ms, alone_ms) = frame_costs(&baked.archive, &case.scene)?;
         for (row, scales) in case.scales.iter().enumerate() {
             let dir = out.join(format!("{}-{row}", spec.name));
             let ind = play(
@@ -244,7 +219,7 @@ pub fn run(bake_bin: &Path, cache: &Path, root: &Path, out: &Path) -> Result<Str
                 100.0 * mi.shape,
                 100.0 * mf.error,
                 if row == 0 {
-                    format!("{scaled_ms:.1} / {moved_ms:.1}")
+                    format!("{scaled_ms:.1} / {moved_ms:.1} ({alone_ms:.2} for the scales)")
                 } else {
                     String::new()
                 }

@@ -133,55 +133,74 @@ fn check_scene(base: &Path, scene: &SceneDesc, enclosure: Enclosure) -> anyhow::
     }
 
     // Light: as specified, and the rays from it behave as the scene's enclosure demands.
-    ensure!(
-        (0..3).all(|k| (g.light_intensity[k] - scene.light.intensity[k]).abs() < 1e-5),
-        "light intensity {:?} W/sr, want {:?}",
-        g.light_intensity,
-        scene.light.intensity
-    );
-    let lp = f64v(g.light_pos);
-    let (mut escaped, mut back, mut in_b) = (0, 0, 0);
-    for i in 0..RAYS {
-        // Fibonacci sphere directions.
-        let z = 1.0 - 2.0 * (i as f64 + 0.5) / RAYS as f64;
-        let phi = i as f64 * std::f64::consts::PI * (3.0 - 5f64.sqrt());
-        let r = (1.0 - z * z).sqrt();
-        let d = [r * phi.cos(), z, r * phi.sin()];
-        match cast(&g.tris, lp, d) {
-            None => escaped += 1,
-            Some(hit) => {
-                back += usize::from(!hit.front);
-                in_b += usize::from(lp[0] + hit.t * d[0] > two_rooms::WALL_X1 - 1e-9);
+    let light_check = || -> anyhow::Result<(usize, f64, String)> {
+        let (light, (light_pos, light_intensity)) = match (&scene.light, g.light) {
+            (Some(l), Some(found)) => (l, found),
+            (None, None) => {
+                return Ok((
+                    g.tris.len(),
+                    ga,
+                    ", no point light (lit by its emissive materials)".to_string(),
+                ))
+            }
+            (want, found) => bail!(
+                "point light {found:?} in the glTF, the scene has {}",
+                if want.is_some() { "one" } else { "none" }
+            ),
+        };
+        ensure!(
+            light_pos == super::mesh::to_f32(light.position),
+            "light at {light_pos:?}"
+        );
+        ensure!(
+            (0..3).all(|k| (light_intensity[k] - light.intensity[k]).abs() < 1e-5),
+            "light intensity {light_intensity:?} W/sr, want {:?}",
+            light.intensity
+        );
+        let lp = f64v(light_pos);
+        let (mut escaped, mut back, mut in_b) = (0, 0, 0);
+        for i in 0..RAYS {
+            // Fibonacci sphere directions.
+            let z = 1.0 - 2.0 * (i as f64 + 0.5) / RAYS as f64;
+            let phi = i as f64 * std::f64::consts::PI * (3.0 - 5f64.sqrt());
+            let r = (1.0 - z * z).sqrt();
+            let d = [r * phi.cos(), z, r * phi.sin()];
+            match cast(&g.tris, lp, d) {
+                None => escaped += 1,
+                Some(hit) => {
+                    back += usize::from(!hit.front);
+                    in_b += usize::from(lp[0] + hit.t * d[0] > two_rooms::WALL_X1 - 1e-9);
+                }
             }
         }
-    }
-    ensure!(
-        back == 0,
-        "{back} of {RAYS} rays from the light hit the back of a surface"
-    );
-    match enclosure {
-        Enclosure::Open => ensure!(escaped < RAYS / 2, "{escaped} of {RAYS} rays from the light escape"),
-        _ => ensure!(
-            escaped == 0,
-            "{escaped} of {RAYS} rays from the light escape a closed scene"
-        ),
-    }
-    match enclosure {
-        Enclosure::ClosedNoLeak => ensure!(in_b == 0, "{in_b} rays from the light reach room B"),
-        Enclosure::ClosedWithDoor => ensure!(in_b > 0, "no ray from the light reaches room B"),
-        _ => {}
-    }
-    let extra = match enclosure {
-        Enclosure::Open => format!(", {escaped}/{RAYS} light rays leave by the open side"),
-        Enclosure::ClosedWithDoor => format!(", {in_b}/{RAYS} light rays reach room B"),
-        Enclosure::ClosedNoLeak => ", no light ray reaches room B".to_string(),
-        Enclosure::Closed => ", closed".to_string(),
+        ensure!(
+            back == 0,
+            "{back} of {RAYS} rays from the light hit the back of a surface"
+        );
+        match enclosure {
+            Enclosure::Open => ensure!(escaped < RAYS / 2, "{escaped} of {RAYS} rays from the light escape"),
+            _ => ensure!(
+                escaped == 0,
+                "{escaped} of {RAYS} rays from the light escape a closed scene"
+            ),
+        }
+        match enclosure {
+            Enclosure::ClosedNoLeak => ensure!(in_b == 0, "{in_b} rays from the light reach room B"),
+            Enclosure::ClosedWithDoor => ensure!(in_b > 0, "no ray from the light reaches room B"),
+            _ => {}
+        }
+        let extra = match enclosure {
+            Enclosure::Open => format!(", {escaped}/{RAYS} light rays leave by the open side"),
+            Enclosure::ClosedWithDoor => format!(", {in_b}/{RAYS} light rays reach room B"),
+            Enclosure::ClosedNoLeak => ", no light ray reaches room B".to_string(),
+            Enclosure::Closed => ", closed".to_string(),
+        };
+        Ok((g.tris.len(), ga, extra))
     };
+    let (tris, ga, extra) = light_check()?;
     Ok(format!(
-        "{}: {} triangles, area {:.6} m² (glTF and OBJ agree){extra}",
-        scene.name,
-        g.tris.len(),
-        ga
+        "{}: {tris} triangles, area {ga:.6} m² (glTF and OBJ agree){extra}",
+        scene.name
     ))
 }
 
@@ -193,8 +212,8 @@ struct Loaded {
     camera_eye: [f32; 3],
     camera_forward: V3,
     camera_yfov_deg: f64,
-    light_pos: [f32; 3],
-    light_intensity: [f64; 3],
+    /// Position and intensity of the point light (glTF only).
+    light: Option<([f32; 3], [f64; 3])>,
 }
 
 /// Albedo rounded to 1e-6 as integers, so tiny float noise cannot break equality.
@@ -214,8 +233,13 @@ fn rotate(q: [f32; 4], v: V3) -> V3 {
 fn load_gltf(path: &Path, scene: &SceneDesc) -> anyhow::Result<Loaded> {
     let (doc, buffers, _) = gltf::import(path)?;
     ensure!(
-        doc.extensions_used().any(|e| e == "KHR_lights_punctual"),
+        scene.light.is_none() || doc.extensions_used().any(|e| e == "KHR_lights_punctual"),
         "KHR_lights_punctual not declared"
+    );
+    let emissive = scene.materials.iter().any(|m| m.emission.is_some());
+    ensure!(
+        !emissive || doc.extensions_used().any(|e| e == "KHR_materials_emissive_strength"),
+        "KHR_materials_emissive_strength not declared"
     );
     let mut tris = Vec::new();
     let mut parts = Vec::new();
@@ -304,15 +328,10 @@ fn load_gltf(path: &Path, scene: &SceneDesc) -> anyhow::Result<Loaded> {
         }
     }
     let (camera_eye, camera_forward, camera_yfov_deg) = camera.context("no camera node")?;
-    let (light_pos, light_intensity) = light.context("no light node")?;
     ensure!(
         camera_eye == super::mesh::to_f32(scene.camera.eye),
         "camera at {camera_eye:?}, want {:?}",
         scene.camera.eye
-    );
-    ensure!(
-        light_pos == super::mesh::to_f32(scene.light.position),
-        "light at {light_pos:?}"
     );
     Ok(Loaded {
         tris,
@@ -321,8 +340,7 @@ fn load_gltf(path: &Path, scene: &SceneDesc) -> anyhow::Result<Loaded> {
         camera_eye,
         camera_forward,
         camera_yfov_deg,
-        light_pos,
-        light_intensity,
+        light,
     })
 }
 
@@ -353,8 +371,7 @@ fn load_obj(path: &Path) -> anyhow::Result<Loaded> {
         camera_eye: [0.0; 3],
         camera_forward: [0.0; 3],
         camera_yfov_deg: 0.0,
-        light_pos: [0.0; 3],
-        light_intensity: [0.0; 3],
+        light: None,
     })
 }
 

@@ -194,38 +194,39 @@ pub fn write_gltf(scene: &SceneDesc, generator: &str) -> String {
         "translation": eye.map(jf),
         "rotation": q,
     }));
-    let light = &scene.light;
-    let peak = light.intensity.iter().cloned().fold(0.0, f64::max);
-    nodes.push(json!({
-        "name": "point_light",
-        "translation": to_f32(light.position).map(jf),
-        "extensions": { "KHR_lights_punctual": { "light": 0 } },
-    }));
+    if let Some(light) = &scene.light {
+        nodes.push(json!({
+            "name": "point_light",
+            "translation": to_f32(light.position).map(jf),
+            "extensions": { "KHR_lights_punctual": { "light": 0 } },
+        }));
+    }
 
     let materials: Vec<Value> = scene
         .materials
         .iter()
         .map(|m| {
-            json!({
+            let mut v = json!({
                 "name": m.name,
                 "pbrMetallicRoughness": {
                     "baseColorFactor": [j4(m.albedo[0]), j4(m.albedo[1]), j4(m.albedo[2]), 1.0],
                     "metallicFactor": 0.0,
                     "roughnessFactor": 1.0,
                 },
-            })
+            });
+            // glTF caps emissiveFactor at 1: the peak goes into the strength extension.
+            if let Some(e) = m.emission {
+                let peak = e.iter().cloned().fold(0.0, f64::max);
+                v["emissiveFactor"] = json!(e.map(|c| round6(c / peak)));
+                v["extensions"] = json!({ "KHR_materials_emissive_strength": { "emissiveStrength": round6(peak) } });
+            }
+            v
         })
         .collect();
 
-    let doc = json!({
+    let mut extensions_used = Vec::new();
+    let mut doc = json!({
         "asset": { "version": "2.0", "generator": generator },
-        "extensionsUsed": ["KHR_lights_punctual"],
-        "extensions": { "KHR_lights_punctual": { "lights": [{
-            "name": "point_light",
-            "type": "point",
-            "color": light.intensity.map(|c| round6(c / peak)),
-            "intensity": round6(peak),
-        }]}},
         "scene": 0,
         "scenes": [{ "name": scene.name, "nodes": (0..nodes.len()).collect::<Vec<_>>() }],
         "nodes": nodes,
@@ -246,6 +247,22 @@ pub fn write_gltf(scene: &SceneDesc, generator: &str) -> String {
             "uri": format!("data:application/octet-stream;base64,{}", base64(&bin)),
         }],
     });
+    if let Some(light) = &scene.light {
+        let peak = light.intensity.iter().cloned().fold(0.0, f64::max);
+        extensions_used.push("KHR_lights_punctual");
+        doc["extensions"] = json!({ "KHR_lights_punctual": { "lights": [{
+            "name": "point_light",
+            "type": "point",
+            "color": light.intensity.map(|c| round6(c / peak)),
+            "intensity": round6(peak),
+        }]}});
+    }
+    if scene.materials.iter().any(|m| m.emission.is_some()) {
+        extensions_used.push("KHR_materials_emissive_strength");
+    }
+    if !extensions_used.is_empty() {
+        doc["extensionsUsed"] = json!(extensions_used);
+    }
     let mut text = serde_json::to_string_pretty(&doc).expect("JSON serialises");
     text.push('\n');
     text

@@ -74,7 +74,8 @@ impl Part {
     }
 }
 
-/// A Lambertian material: linear-RGB albedo, optional emission (written to MTL only).
+/// A Lambertian material: linear-RGB albedo, optional emission (MTL `Ke`; glTF
+/// `emissiveFactor` × `KHR_materials_emissive_strength`).
 pub struct Material {
     pub name: String,
     pub albedo: [f64; 3],
@@ -144,7 +145,8 @@ pub struct SceneDesc {
     pub parts: Vec<Part>,
     pub materials: Vec<Material>,
     pub camera: CameraSpec,
-    pub light: PointLight,
+    /// The scene's point light; `None` for a scene lit by its emissive materials alone.
+    pub light: Option<PointLight>,
 }
 
 impl SceneDesc {
@@ -160,7 +162,7 @@ impl SceneDesc {
             parts,
             materials,
             camera,
-            light,
+            light: Some(light),
         }
     }
 
