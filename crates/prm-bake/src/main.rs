@@ -29,6 +29,8 @@ enum Command {
     /// Bake a scene into a .prm archive (atlas, entry points, walks, clusters, panes).
     ///
     /// Without sizes, the bake derives them from the scene and the budgets and says why.
+    /// Emissive materials (OBJ Ke, glTF emissiveFactor) are baked as emitter groups whose
+    /// direct and indirect light the player scales at run time (prm-play --emitter).
     /// Example: prm-bake bake scenes/cornell-box/cornell-box.gltf -o out/cornell-box.prm
     Bake(Box<bake::BakeArgs>),
     /// Join the partial archives of a sharded bake (`bake --shard I/N`) into one archive.

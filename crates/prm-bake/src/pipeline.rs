@@ -237,12 +237,22 @@ pub struct Baked {
 fn emitter_section(
     scene: &Scene,
     bvh: &Bvh,
-    emitters: &Emitters,
     atlas: &Atlas,
     entries: &[SurfaceSample],
     order: &[u32],
     seed: u64,
+    progress: &mut dyn ProgressSink,
 ) -> Result<Vec<prm_format::EmitterGroup>, BakeError> {
+    let emitters = &Emitters::from_scene(scene);
+    let trace_indirect = atlas.exits.len() as u64 * u64::from(EMITTER_INDIRECT_SPP) <= EMITTER_INDIRECT_MAX_PATHS;
+    let params = ReferenceParams {
+        seed,
+        ..ReferenceParams::with_spp(EMITTER_INDIRECT_SPP)
+    };
+    // Steps: the direct light of every group, then each group's traced passes.
+    let groups = emitters.groups.len() as u64;
+    let passes = if trace_indirect { u64::from(params.passes) } else { 0 };
+    progress.phase_start(Phase::Emitters, 1 + groups * passes);
     let at_entries: Vec<Receiver> = order
         .iter()
         .map(|&k| {
@@ -267,6 +277,7 @@ fn emitter_section(
         .collect();
     let to_entries = emitters.group_irradiance(scene, bvh, &at_entries, EMITTER_SAMPLES, seed);
     let to_exits = emitters.group_irradiance(scene, bvh, &at_exits, EMITTER_SAMPLES, !seed);
+    progress.phase_advance(1);
     let texels = (atlas.resolution * atlas.resolution) as usize;
     let image = |values: &[Vec3]| {
         let mut out = vec![[0f32; 3]; texels];
@@ -277,11 +288,6 @@ fn emitter_section(
             out[dst as usize] = out[src as usize];
         }
         out
-    };
-    let trace_indirect = atlas.exits.len() as u64 * u64::from(EMITTER_INDIRECT_SPP) <= EMITTER_INDIRECT_MAX_PATHS;
-    let params = ReferenceParams {
-        seed,
-        ..ReferenceParams::with_spp(EMITTER_INDIRECT_SPP)
     };
     let mut out = Vec::with_capacity(emitters.groups.len());
     for (g, (group, (te, tx))) in emitters
@@ -296,8 +302,11 @@ fn emitter_section(
                 .collect();
             let alone = Emitters::with_scales(scene, &scales).map_err(trace("tracing an emitter group"))?;
             let tracer = ReferenceTracer::new(scene, bvh, Lighting::Lights(&[])).with_emitters(&alone);
+            let done = 1 + g as u64 * passes;
             let estimate = tracer
-                .indirect_at_exits(&atlas.exits, &params, &mut |_, _| {})
+                .indirect_at_exits(&atlas.exits, &params, &mut |pass, _| {
+                    progress.phase_advance(done + u64::from(pass))
+                })
                 .map_err(trace("tracing an emitter group's indirect light"))?;
             Some(image(&estimate.mean))
         } else {
@@ -439,13 +448,11 @@ pub fn bake(job: &BakeJob<'_>, renderer: Renderer<'_>, progress: &mut dyn Progre
 
     // Entry indices in the archive's order (cluster by cluster).
     let order: Vec<u32> = clustering.members.iter().flatten().copied().collect();
-    let emitters = Emitters::from_scene(scene);
-    let emitter_groups = if emitters.is_empty() {
+    let emitter_groups = if Emitters::from_scene(scene).is_empty() {
         Vec::new()
     } else {
         let t = Instant::now();
-        progress.phase_start(Phase::Emitters, 1);
-        let groups = emitter_section(scene, &bvh, &emitters, &atlas, &entries, &order, params.seed)?;
+        let groups = emitter_section(scene, &bvh, &atlas, &entries, &order, params.seed, progress)?;
         let names: Vec<&str> = groups.iter().map(|g| g.name.as_str()).collect();
         let how = if groups.iter().all(|g| g.indirect.is_some()) {
             format!("indirect traced, {EMITTER_INDIRECT_SPP} paths per texel")
