@@ -297,10 +297,7 @@ fn emitter_section(
         .enumerate()
     {
         let indirect = if trace_indirect {
-            let scales: Vec<Vec3> = (0..emitters.groups.len())
-                .map(|k| if k == g { Vec3::ONE } else { Vec3::ZERO })
-                .collect();
-            let alone = Emitters::with_scales(scene, &scales).map_err(trace("tracing an emitter group"))?;
+            let alone = Emitters::alone(scene, g);
             let tracer = ReferenceTracer::new(scene, bvh, Lighting::Lights(&[])).with_emitters(&alone);
             let done = 1 + g as u64 * passes;
             let estimate = tracer

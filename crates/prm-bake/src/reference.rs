@@ -83,24 +83,12 @@ pub fn run(args: &ReferenceArgs) -> Result<()> {
     };
     let emitters = if args.emitters {
         let e = Emitters::from_scene(&scene);
-        let mut scales = vec![glam::Vec3::ONE; e.groups.len()];
-        for spec in &args.emitter_scales {
-            let (name, s) = prm_scene::parse_emitter_scale(spec).context("bad --emitter")?;
-            let mut found = false;
-            for (g, group) in e.groups.iter().enumerate() {
-                if name == "*" || group.name == name {
-                    scales[g] = glam::Vec3::from(s);
-                    found = true;
-                }
-            }
-            if !found {
-                let names: Vec<&str> = e.groups.iter().map(|g| g.name.as_str()).collect();
-                bail!(
-                    "--emitter {spec:?}: no emissive material {name:?}; the scene's are {}",
-                    names.join(", ")
-                );
-            }
-        }
+        let names: Vec<&str> = e.groups.iter().map(|g| g.name.as_str()).collect();
+        let scales: Vec<glam::Vec3> = prm_scene::resolve_emitter_scales(&names, &args.emitter_scales)
+            .map_err(anyhow::Error::msg)?
+            .into_iter()
+            .map(glam::Vec3::from)
+            .collect();
         let unscaled = e.groups.len();
         let e = Emitters::with_scales(&scene, &scales)?;
         if unscaled == 0 {

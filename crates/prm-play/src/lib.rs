@@ -36,37 +36,11 @@ use prm_scene::{Camera, Light, Scene};
 pub type FileArchive = Archive<std::io::BufReader<std::fs::File>>;
 
 /// The scales of `groups` (the archive's emitter groups, [`prm_runtime::Runtime::emitters`])
-/// from `--emitter` specs ([`prm_scene::parse_emitter_scale`]: `NAME=S` or `NAME=R,G,B`, `*`
+/// from `--emitter` specs ([`prm_scene::resolve_emitter_scales`]: `NAME=S` or `NAME=R,G,B`, `*`
 /// for every group), applied in order. Groups no spec names keep scale 1.
 pub fn emitter_scales(groups: &[prm_runtime::EmitterInfo], specs: &[String]) -> Result<Vec<[f32; 3]>, String> {
     let names: Vec<&str> = groups.iter().map(|g| g.name.as_str()).collect();
-    scales_by_name(&names, specs)
-}
-
-/// [`emitter_scales`] for groups named `names`.
-fn scales_by_name(names: &[&str], specs: &[String]) -> Result<Vec<[f32; 3]>, String> {
-    let mut scales = vec![[1.0f32; 3]; names.len()];
-    for spec in specs {
-        let (name, s) = prm_scene::parse_emitter_scale(spec).map_err(|e| format!("--emitter: {e}"))?;
-        let mut found = false;
-        for (g, n) in names.iter().enumerate() {
-            if name == "*" || *n == name {
-                scales[g] = s;
-                found = true;
-            }
-        }
-        if !found {
-            return Err(if names.is_empty() {
-                format!("--emitter {spec:?}: the archive has no emitter groups (bake a scene with emissive materials)")
-            } else {
-                format!(
-                    "--emitter {spec:?}: no emitter group {name:?}; the groups are {}",
-                    names.join(", ")
-                )
-            });
-        }
-    }
-    Ok(scales)
+    prm_scene::resolve_emitter_scales(&names, specs)
 }
 
 /// Top K when neither `--top-k` nor the archive's `params.top_k` says otherwise.
@@ -219,35 +193,5 @@ pub fn default_camera(scene: &Scene) -> Camera {
         eye: centre + glam::Vec3::new(0.0, 0.0, dist + b.extent().z * 0.5),
         target: centre,
         fov_y_deg: fov,
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::scales_by_name;
-
-    #[test]
-    fn emitter_specs_scale_named_groups_in_order() {
-        let names = ["light", "lamp"];
-        let spec = |v: &[&str]| v.iter().map(|s| s.to_string()).collect::<Vec<_>>();
-        assert_eq!(scales_by_name(&names, &[]).unwrap(), [[1.0; 3]; 2]);
-        assert_eq!(
-            scales_by_name(&names, &spec(&["*=0", "lamp=1,0.5,0"])).unwrap(),
-            [[0.0; 3], [1.0, 0.5, 0.0]]
-        );
-        assert_eq!(
-            scales_by_name(&names, &spec(&["light=2"])).unwrap(),
-            [[2.0; 3], [1.0; 3]]
-        );
-        for bad in ["nope=1", "light", "light=-1", "light=1,2", "light=x", "=1"] {
-            let e = scales_by_name(&names, &spec(&[bad])).unwrap_err();
-            assert!(e.contains("--emitter"), "{bad}: {e}");
-        }
-        assert!(scales_by_name(&names, &spec(&["nope=1"]))
-            .unwrap_err()
-            .contains("light, lamp"));
-        assert!(scales_by_name(&[], &spec(&["*=1"]))
-            .unwrap_err()
-            .contains("no emitter groups"));
     }
 }

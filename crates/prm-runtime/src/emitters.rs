@@ -36,11 +36,8 @@ impl From<&prm_format::EmitterGroup> for EmitterInfo {
 /// The groups, their current scales and the emitter lightmaps.
 pub(crate) struct EmitterState {
     pub info: Vec<EmitterInfo>,
-    entry_irradiance: Vec<Vec<[f32; 3]>>,
-    direct: Vec<Vec<[f32; 3]>>,
-    /// Each group's traced indirect lightmap, `None` where its indirect light goes through the
-    /// panes.
-    indirect: Vec<Option<Vec<[f32; 3]>>>,
+    /// The archive's groups: entry irradiance, direct and (traced) indirect lightmaps.
+    groups: Vec<prm_format::EmitterGroup>,
     pub scales: Vec<[f32; 3]>,
     /// The direct irradiance of the current scales, row-major (empty without groups).
     pub combined: Vec<[f32; 3]>,
@@ -65,20 +62,17 @@ fn lightmap(device: &wgpu::Device, label: &str, side: u32) -> (wgpu::Texture, wg
     (texture, view)
 }
 
-/// `Σ_g s_g · maps[g]` over the groups that have a map, uploaded to `texture`.
-fn sum_into(
+/// `Σ s · map` over `(map, s)` pairs, uploaded to `texture` (whose size the maps have).
+fn sum_into<'a>(
     queue: &wgpu::Queue,
     texture: &wgpu::Texture,
-    maps: &[Option<&Vec<[f32; 3]>>],
-    scales: &[[f32; 3]],
+    maps: impl Iterator<Item = (&'a [[f32; 3]], [f32; 3])>,
 ) -> Vec<[f32; 3]> {
     let side = texture.width();
     let mut sum = vec![[0.0f32; 3]; (side * side) as usize];
-    for (map, s) in maps.iter().zip(scales) {
-        if let Some(map) = map {
-            for (t, v) in sum.iter_mut().zip(map.iter()) {
-                (0..3).for_each(|k| t[k] += s[k] * v[k]);
-            }
+    for (map, s) in maps {
+        for (t, v) in sum.iter_mut().zip(map) {
+            (0..3).for_each(|k| t[k] += s[k] * v[k]);
         }
     }
     let rgba: Vec<[f32; 4]> = sum.iter().map(|&[r, g, b]| [r, g, b, 1.0]).collect();
@@ -96,9 +90,7 @@ impl EmitterState {
             lightmap(device, "prm emitter indirect", if traced { resolution } else { 1 });
         EmitterState {
             info: groups.iter().map(EmitterInfo::from).collect(),
-            entry_irradiance: groups.iter().map(|g| g.entry_irradiance.clone()).collect(),
-            direct: groups.iter().map(|g| g.direct.clone()).collect(),
-            indirect: groups.iter().map(|g| g.indirect.clone()).collect(),
+            groups: groups.to_vec(),
             scales: vec![[1.0; 3]; groups.len()],
             combined: Vec::new(),
             texture,
@@ -133,23 +125,22 @@ impl EmitterState {
     /// Sums the groups at the current scales: into `entries[i].emitted` for the groups whose
     /// indirect light goes through the panes, and into the two lightmaps, which it uploads.
     pub fn apply(&mut self, queue: &wgpu::Queue, entries: &mut [GpuEntry]) {
-        if self.info.is_empty() {
+        if self.groups.is_empty() {
             return;
         }
+        let scaled = || self.groups.iter().zip(self.scales.iter().copied());
         for e in entries.iter_mut() {
             e.emitted = [0.0; 3];
         }
-        for g in (0..self.info.len()).filter(|&g| self.indirect[g].is_none()) {
-            let s = self.scales[g];
-            for (e, v) in entries.iter_mut().zip(&self.entry_irradiance[g]) {
+        for (g, s) in scaled().filter(|(g, _)| g.indirect.is_none()) {
+            for (e, v) in entries.iter_mut().zip(&g.entry_irradiance) {
                 (0..3).for_each(|k| e.emitted[k] += s[k] * v[k]);
             }
         }
-        let direct: Vec<Option<&Vec<[f32; 3]>>> = self.direct.iter().map(Some).collect();
-        self.combined = sum_into(queue, &self.texture, &direct, &self.scales);
-        if self.indirect.iter().any(Option::is_some) {
-            let indirect: Vec<Option<&Vec<[f32; 3]>>> = self.indirect.iter().map(Option::as_ref).collect();
-            sum_into(queue, &self.indirect_texture, &indirect, &self.scales);
+        self.combined = sum_into(queue, &self.texture, scaled().map(|(g, s)| (&g.direct[..], s)));
+        if self.groups.iter().any(|g| g.indirect.is_some()) {
+            let traced = scaled().filter_map(|(g, s)| g.indirect.as_deref().map(|m| (m, s)));
+            sum_into(queue, &self.indirect_texture, traced);
         }
     }
 }

@@ -24,7 +24,7 @@ pub use atlas::{Atlas, AtlasParams, AtlasStats, ExitPoint, Sizing, EMPTY_TEXEL};
 pub use error::SceneError;
 pub use export::{read_exr_rgb, write_exr_rgb, write_gltf, ExportError};
 pub use scene::{Aabb, Camera, Light, LoadReport, Material, Scene, Triangle, RECT_MAX_HALF_ANGLE_DEG};
-pub use spec::{parse_camera, parse_emitter_scale, parse_light, parse_size, SpecError};
+pub use spec::{parse_camera, parse_emitter_scale, parse_light, parse_size, resolve_emitter_scales, SpecError};
 pub use texture::Texture;
 
 /// Radius² of an entry point's disk bound, as a fraction of `A/(Nπ)` (the disk of its whole

@@ -245,6 +245,34 @@ pub fn parse_emitter_scale(spec: &str) -> Result<(String, [f32; 3]), SpecError> 
     Ok((name.to_string(), s))
 }
 
+/// The scales of the emitter groups named `names` from `--emitter` specs
+/// ([`parse_emitter_scale`]), applied in order, `*` naming every group; groups no spec names
+/// keep scale 1. A spec that names no group is an error listing the groups.
+pub fn resolve_emitter_scales(names: &[&str], specs: &[String]) -> Result<Vec<[f32; 3]>, String> {
+    let mut scales = vec![[1.0f32; 3]; names.len()];
+    for spec in specs {
+        let (name, s) = parse_emitter_scale(spec).map_err(|e| format!("--emitter: {e}"))?;
+        let mut found = false;
+        for (g, n) in names.iter().enumerate() {
+            if name == "*" || *n == name {
+                scales[g] = s;
+                found = true;
+            }
+        }
+        if !found {
+            return Err(if names.is_empty() {
+                format!("--emitter {spec:?}: there are no emitter groups (emissive materials)")
+            } else {
+                format!(
+                    "--emitter {spec:?}: no emitter group {name:?}; the groups are {}",
+                    names.join(", ")
+                )
+            });
+        }
+    }
+    Ok(scales)
+}
+
 /// Parses an image size `WxH` (both positive, at most 16384).
 pub fn parse_size(spec: &str) -> Result<(u32, u32), SpecError> {
     let (w, h) = spec
@@ -267,6 +295,31 @@ pub fn parse_size(spec: &str) -> Result<(u32, u32), SpecError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn emitter_specs_scale_named_groups_in_order() {
+        let names = ["light", "lamp"];
+        let spec = |v: &[&str]| v.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+        assert_eq!(resolve_emitter_scales(&names, &[]).unwrap(), [[1.0; 3]; 2]);
+        assert_eq!(
+            resolve_emitter_scales(&names, &spec(&["*=0", "lamp=1,0.5,0"])).unwrap(),
+            [[0.0; 3], [1.0, 0.5, 0.0]]
+        );
+        assert_eq!(
+            resolve_emitter_scales(&names, &spec(&["light=2"])).unwrap(),
+            [[2.0; 3], [1.0; 3]]
+        );
+        for bad in ["nope=1", "light", "light=-1", "light=1,2", "light=x", "=1"] {
+            let e = resolve_emitter_scales(&names, &spec(&[bad])).unwrap_err();
+            assert!(e.contains("--emitter"), "{bad}: {e}");
+        }
+        assert!(resolve_emitter_scales(&names, &spec(&["nope=1"]))
+            .unwrap_err()
+            .contains("light, lamp"));
+        assert!(resolve_emitter_scales(&[], &spec(&["*=1"]))
+            .unwrap_err()
+            .contains("no emitter groups"));
+    }
 
     #[test]
     fn parses_the_readme_specs() {

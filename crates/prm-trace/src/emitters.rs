@@ -108,6 +108,15 @@ impl Emitters {
         Ok(Self::build(scene, scales))
     }
 
+    /// Group `g` alone at its own radiance, the other groups dark: what a bake stores per group
+    /// at unit scale. `g` must be a group index.
+    pub fn alone(scene: &Scene, g: usize) -> Emitters {
+        let scales: Vec<Vec3> = (0..Self::group_materials(scene).len())
+            .map(|k| if k == g { Vec3::ONE } else { Vec3::ZERO })
+            .collect();
+        Self::build(scene, &scales)
+    }
+
     /// The emissive materials, in order.
     fn group_materials(scene: &Scene) -> Vec<u32> {
         (0..scene.materials.len() as u32)
@@ -322,10 +331,7 @@ impl Emitters {
         use rayon::prelude::*;
         (0..self.groups.len())
             .map(|g| {
-                let scales: Vec<Vec3> = (0..self.groups.len())
-                    .map(|k| if k == g { Vec3::ONE } else { Vec3::ZERO })
-                    .collect();
-                let alone = Self::build(scene, &scales);
+                let alone = Self::alone(scene, g);
                 receivers
                     .par_iter()
                     .enumerate()

@@ -199,27 +199,22 @@ fn run(args: &[String]) -> Result<()> {
         .join(format!("prm-bake{}", std::env::consts::EXE_SUFFIX));
 
     let started = Instant::now();
-    if emitters {
-        let table = emitters::run(&bin, &cache, &root, &out)?;
-        let path = out.join("emitters.md");
+    // A mode that makes one Markdown table: written to OUT/NAME.md and printed.
+    let table = |name: &str, table: String| -> Result<()> {
+        let path = out.join(format!("{name}.md"));
         std::fs::write(&path, &table).with_context(|| format!("writing {}", path.display()))?;
         println!(
-            "\n{table}\nemitters: written to {} in {:.0} s",
+            "\n{table}\n{name}: written to {} in {:.0} s",
             path.display(),
             started.elapsed().as_secs_f64()
         );
-        return Ok(());
+        Ok(())
+    };
+    if emitters {
+        return table("emitters", emitters::run(&bin, &cache, &root, &out)?);
     }
     if budget {
-        let table = budget::run(&bin, &cache, &root)?;
-        let path = out.join("budget.md");
-        std::fs::write(&path, &table).with_context(|| format!("writing {}", path.display()))?;
-        println!(
-            "\n{table}\nbudget: written to {} in {:.0} s",
-            path.display(),
-            started.elapsed().as_secs_f64()
-        );
-        return Ok(());
+        return table("budget", budget::run(&bin, &cache, &root)?);
     }
     let scenes = plan::scenes(mode, &root);
     let mut rows: Vec<Row> = Vec::new();
