@@ -23,10 +23,11 @@ import sys
 
 MAGIC = b"\x89PRM\r\n\x1a\n"
 SUPPORTED_MAJOR = 1
-SUPPORTED_MINOR = 2
+SUPPORTED_MINOR = 3
 KINDS = {1: "metadata", 2: "atlas", 3: "entries", 4: "clusters", 5: "panes", 6: "entry_energy",
-         7: "emitters"}
-OPTIONAL = {6, 7}
+         7: "emitters", 8: "sky"}
+OPTIONAL = {6, 7, 8}
+SH_COEFFS = 9
 MAX_EMITTER_GROUPS = 256
 MAX_RESOLUTION = 8192
 MAX_TILE_SIZE = 1024
@@ -294,8 +295,9 @@ class Reader:
             if a[1] > b[0]:
                 raise InvalidArchive("overlapping sections")
         by_kind = {}
-        # Kind 7 is the emitters section from 1.2 on; before, it was unassigned.
-        known = {k: v for k, v in KINDS.items() if k != 7 or minor >= 2}
+        # Kind 7 is the emitters section from 1.2 on, kind 8 the sky from 1.3 on; before,
+        # they were unassigned.
+        known = {k: v for k, v in KINDS.items() if (k != 7 or minor >= 2) and (k != 8 or minor >= 3)}
         for s in sections:
             if s["kind"] in known:
                 if s["kind"] in by_kind:
@@ -342,7 +344,32 @@ class Reader:
         self.emitters = None
         if 7 in by_kind:
             self.parse_emitters(by_kind[7])
+        self.sky = None
+        if 8 in by_kind:
+            self.parse_sky(by_kind[8])
         self.parse_panes(by_kind[5])
+
+    def parse_sky(self, s):
+        # 1.3: header (resolution, coefficient count = 9, flags = 0, reserved), then per texel
+        # 9 direct coefficients, then per texel 9 RGB indirect triples, all IEEE binary16.
+        texels = self.resolution * self.resolution
+        size = 16 + texels * SH_COEFFS * 8
+        raw = self.load(s, size)
+        if len(raw) < 16:
+            raise InvalidArchive("sky: shorter than its header")
+        res, coeffs, flags, reserved = struct.unpack_from("<IIII", raw, 0)
+        if coeffs != SH_COEFFS or flags or (self.strict and reserved):
+            raise InvalidArchive("sky: unknown basis, flags or a non-zero reserved field")
+        if res != self.resolution or len(raw) != size:
+            raise InvalidArchive("sky: resolution or raw size differs from the archive's")
+        n = texels * SH_COEFFS
+        direct = struct.unpack_from(f"<{n}e", raw, 16)
+        indirect = struct.unpack_from(f"<{3 * n}e", raw, 16 + 2 * n)
+        if any(v != v or abs(v) == float("inf") for v in direct + indirect):
+            raise InvalidArchive("sky: values must be finite")
+        self.sky = dict(direct=[list(direct[SH_COEFFS * t:SH_COEFFS * (t + 1)]) for t in range(texels)],
+                        indirect=[[list(indirect[27 * t + 3 * c:27 * t + 3 * c + 3]) for c in range(SH_COEFFS)]
+                                  for t in range(texels)])
 
     def parse_emitters(self, s):
         # 1.2: header (groups, entries, resolution, reserved), 88-byte group records, then per
@@ -530,6 +557,7 @@ class Reader:
             entries=self.entries,
             entry_energy=self.entry_energy,
             emitters=self.emitters,
+            sky=self.sky,
             clusters=self.clusters,
             tile_filter=self.tile_filter,
             stored_tiles=sum(1 for t in self.tiles if t[1]),

@@ -12,8 +12,8 @@ pub const MAGIC: [u8; 8] = *b"\x89PRM\r\n\x1a\n";
 pub const VERSION_MAJOR: u16 = 1;
 /// Highest minor version this library writes (and knows); a reader accepts every minor. The
 /// writer writes the lowest minor whose features an archive uses: 1.1 adds the entry energy
-/// section, 1.2 the emitters section.
-pub const VERSION_MINOR: u16 = 2;
+/// section, 1.2 the emitters section, 1.3 the sky section.
+pub const VERSION_MINOR: u16 = 3;
 
 /// Size of the fixed file header.
 pub const HEADER_SIZE: usize = 64;
@@ -50,6 +50,8 @@ pub mod kind {
     pub const ENTRY_ENERGY: u32 = 6;
     /// Emitter groups: entry irradiance and direct lightmaps (since 1.2, optional).
     pub const EMITTERS: u32 = 7;
+    /// The sky's spherical-harmonic transfer at the atlas texels (since 1.3, optional).
+    pub const SKY: u32 = 8;
     /// First kind reserved for private extensions (never assigned by the spec).
     pub const PRIVATE_FIRST: u32 = 0x8000_0000;
 
@@ -63,6 +65,7 @@ pub mod kind {
             PANES => Some("panes"),
             ENTRY_ENERGY => Some("entry_energy"),
             EMITTERS => Some("emitters"),
+            SKY => Some("sky"),
             _ => None,
         }
     }

@@ -13,6 +13,8 @@
 //!   [`Archive::verify`] checks everything.
 //! * [`EmitterGroup`]: the optional emitters section (1.2), what emissive surfaces give the
 //!   entry points and the atlas texels per unit of their run-time scale.
+//! * [`SkyTransfer`]: the optional sky section (1.3), the sky's transfer at the atlas texels
+//!   in the spherical-harmonic basis [`sh_basis`], which [`sh_rotate_y`] turns about the vertical.
 //! * [`encode_rgb9e5`] / [`decode_rgb9e5`] implement the texel encoding,
 //!   bit-exact with WebGPU's `rgb9e5ufloat`.
 #![warn(missing_docs)]
@@ -25,6 +27,8 @@ mod metadata;
 mod reader;
 mod rgb9e5;
 mod sections;
+mod sh;
+mod sky;
 #[cfg(test)]
 #[path = "../tests/common/splitmix.rs"]
 mod splitmix;
@@ -41,4 +45,6 @@ pub use rgb9e5::{
     RGB9E5_MIN_ABS_ERROR, RGB9E5_MIN_NORMAL, RGB9E5_NAME,
 };
 pub use sections::{AtlasSection, Cluster, Entry};
+pub use sh::{sh_basis, sh_rotate_y, SH_COEFFS};
+pub use sky::SkyTransfer;
 pub use writer::{check_destination, own_temp_files, ArchiveWriter, WriterOptions};

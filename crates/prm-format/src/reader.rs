@@ -24,6 +24,7 @@ use crate::sections::{
     decode_clusters, decode_entries, decode_entry_energy, entries_covered, validate_entries_clusters, AtlasSection,
     Cluster, Entry,
 };
+use crate::sky::SkyTransfer;
 
 /// Largest raw size this reader decompresses for a section kind it does not
 /// interpret (see [`Archive::read_custom_section`]).
@@ -97,6 +98,7 @@ pub struct Archive<R> {
     entries: Vec<Entry>,
     entry_energy: Option<Vec<[f32; 3]>>,
     emitters: Vec<EmitterGroup>,
+    sky: Option<SkyTransfer>,
     clusters: Vec<Cluster>,
     tiles: Vec<TileRecord>,
     panes_offset: u64,
@@ -250,6 +252,12 @@ impl<R: Read + Seek> Archive<R> {
         let emitters_rec = emitter_recs.next().cloned();
         if emitter_recs.next().is_some() {
             return Err(Error::inconsistent("emitters section appears more than once"));
+        }
+        // Kind 8 is the sky section from 1.3 on, likewise.
+        let mut sky_recs = records.iter().filter(|r| r.kind == kind::SKY && header.minor >= 3);
+        let sky_rec = sky_recs.next().cloned();
+        if sky_recs.next().is_some() {
+            return Err(Error::inconsistent("sky section appears more than once"));
         }
 
         // Every section's raw size is checked against what the counts read so
@@ -413,6 +421,11 @@ impl<R: Read + Seek> Archive<R> {
             None => Vec::new(),
             Some(rec) => read_emitters(&mut src, rec, strict, entry_count, atlas.resolution)?,
         };
+        // Sky (1.3, optional): its size is fixed by the atlas resolution.
+        let sky = match &sky_rec {
+            None => None,
+            Some(rec) => Some(read_sky(&mut src, rec, strict, atlas.resolution)?),
+        };
 
         let info = ArchiveInfo {
             major: header.major,
@@ -445,6 +458,7 @@ impl<R: Read + Seek> Archive<R> {
             entries,
             entry_energy,
             emitters,
+            sky,
             clusters,
             tiles,
             panes_offset: panes_rec.offset,
@@ -476,6 +490,11 @@ impl<R: Read + Seek> Archive<R> {
     /// The emitter groups (formats/prm.md §5.2); empty when the archive has none.
     pub fn emitters(&self) -> &[EmitterGroup] {
         &self.emitters
+    }
+
+    /// The sky's transfer at the atlas texels (formats/prm.md §5.3), when the bake made it.
+    pub fn sky(&self) -> Option<&SkyTransfer> {
+        self.sky.as_ref()
     }
 
     /// Every entry's pane energy (RGB, the sum over the atlas of the indirect irradiance its
@@ -907,8 +926,8 @@ impl RawReader<'_> {
     }
 }
 
-/// Reads the atlas section: its 16-byte header first, whose resolution and
-/// triangle count fix the raw size, checked before the rest is decompressed.
+/// Reads the emitters section: its 16-byte header first, whose counts fix the raw size,
+/// checked before the rest is decompressed.
 fn read_emitters<R: Read + Seek>(
     src: &mut R,
     rec: &SectionRecord,
@@ -952,6 +971,36 @@ fn read_emitters<R: Read + Seek>(
     }
     raw.finish()?;
     Ok(out)
+}
+
+/// Reads the sky section: its 16-byte header first, whose resolution (the atlas's) fixes the
+/// raw size, checked before the rest is decompressed.
+fn read_sky<R: Read + Seek>(src: &mut R, rec: &SectionRecord, strict: bool, resolution: u32) -> Result<SkyTransfer> {
+    use crate::sky::{self, DIRECT_TEXEL_BYTES, INDIRECT_TEXEL_BYTES, SKY_HEADER_SIZE};
+    let section = open_section(src, rec)?;
+    if section.record.raw_size < SKY_HEADER_SIZE as u64 {
+        return Err(Error::inconsistent(format!(
+            "sky section has {} raw bytes, less than its {SKY_HEADER_SIZE}-byte header",
+            section.record.raw_size
+        )));
+    }
+    let mut raw = section.raw()?;
+    let mut head = [0u8; SKY_HEADER_SIZE];
+    raw.read_exact(&mut head)?;
+    let res = sky::decode_header(&head, strict).map_err(Error::inconsistent)?;
+    if res != resolution {
+        return Err(Error::inconsistent(format!(
+            "sky section is for resolution {res}, the archive's atlas is {resolution}"
+        )));
+    }
+    section.expect_raw_size(sky::raw_size_for(resolution).unwrap_or(u64::MAX), || {
+        format!("resolution {resolution}")
+    })?;
+    let texels = resolution as usize * resolution as usize;
+    let direct = raw.records(texels, DIRECT_TEXEL_BYTES, sky::decode_direct)?;
+    let indirect = raw.records(texels, INDIRECT_TEXEL_BYTES, sky::decode_indirect)?;
+    raw.finish()?;
+    Ok(SkyTransfer { direct, indirect })
 }
 
 fn read_atlas<R: Read + Seek>(src: &mut R, rec: &SectionRecord, strict: bool) -> Result<AtlasSection> {

@@ -359,6 +359,7 @@ pub struct ArchiveWriter {
     entry_count: usize,
     entry_energy: Option<Vec<[f32; 3]>>,
     emitters: Option<Vec<crate::EmitterGroup>>,
+    sky: Option<crate::SkyTransfer>,
     custom: Vec<(u32, Vec<u8>)>,
     records: Vec<SectionRecord>,
     resolution: u32,
@@ -454,6 +455,7 @@ impl ArchiveWriter {
             entry_count: entries.len(),
             entry_energy: None,
             emitters: None,
+            sky: None,
             custom: Vec::new(),
             records: Vec::new(),
             resolution: atlas.resolution,
@@ -547,6 +549,14 @@ impl ArchiveWriter {
     pub fn set_emitters(&mut self, groups: Vec<crate::EmitterGroup>) -> Result<()> {
         crate::emitters::validate(&groups, self.entry_count, self.resolution).map_err(Error::InvalidInput)?;
         self.emitters = Some(groups);
+        Ok(())
+    }
+
+    /// Records the sky's transfer at the atlas texels (formats/prm.md §5.3): `resolution²` texels
+    /// each, row-major, all finite. An archive with it is 1.3.
+    pub fn set_sky(&mut self, sky: crate::SkyTransfer) -> Result<()> {
+        crate::sky::validate(&sky, self.resolution).map_err(Error::InvalidInput)?;
+        self.sky = Some(sky);
         Ok(())
     }
 
@@ -724,6 +734,10 @@ impl ArchiveWriter {
             let raw = crate::emitters::encode(&groups, self.entry_count, self.resolution);
             self.write_section(kind::EMITTERS, &raw)?;
             minor = 2;
+        }
+        if let Some(sky) = self.sky.take() {
+            self.write_section(kind::SKY, &crate::sky::encode(&sky, self.resolution))?;
+            minor = 3;
         }
         for (k, data) in std::mem::take(&mut self.custom) {
             self.write_section(k, &data)?;

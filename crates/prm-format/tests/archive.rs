@@ -761,6 +761,8 @@ fn python_reader_check(path: &Path, filter: TileFilter) -> bool {
     w.set_entry_energy(energy.clone()).unwrap();
     let groups = emitter_groups(&s, 2);
     w.set_emitters(groups.clone()).unwrap();
+    let sky = sky_transfer(&s);
+    w.set_sky(sky.clone()).unwrap();
     for p in &s.panes {
         w.add_pane(p).unwrap();
     }
@@ -794,13 +796,13 @@ fn python_reader_check(path: &Path, filter: TileFilter) -> bool {
     );
     let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     let mut a = Archive::open(path).unwrap();
-    assert_eq!(j["version"], "1.2");
+    assert_eq!(j["version"], "1.3");
     assert_eq!(j["checksums_verified"], true);
     assert_eq!(j["tile_filter"], filter.code());
     assert_eq!(j["resolution"], 16);
     assert_eq!(j["tile_size"], 8);
     assert_eq!(j["covered_texels"], a.atlas().covered_texels());
-    assert_eq!(j["sections"].as_array().unwrap().len(), 8);
+    assert_eq!(j["sections"].as_array().unwrap().len(), 9);
     let je = j["emitters"].as_array().unwrap();
     assert_eq!(je.len(), groups.len());
     let f3 = |v: &serde_json::Value| [0, 1, 2].map(|k| v[k].as_f64().unwrap() as f32);
@@ -816,6 +818,28 @@ fn python_reader_check(path: &Path, filter: TileFilter) -> bool {
         assert_eq!(indirect, g.indirect);
     }
     assert_eq!(a.emitters(), &groups[..]);
+    let f = |v: &serde_json::Value| v.as_f64().unwrap() as f32;
+    let direct: Vec<Vec<f32>> = j["sky"]["direct"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|t| t.as_array().unwrap().iter().map(f).collect())
+        .collect();
+    assert_eq!(
+        direct,
+        a.sky().unwrap().direct.iter().map(|t| t.to_vec()).collect::<Vec<_>>()
+    );
+    let indirect: Vec<Vec<[f32; 3]>> = j["sky"]["indirect"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|t| t.as_array().unwrap().iter().map(f3).collect())
+        .collect();
+    assert_eq!(
+        indirect,
+        a.sky().unwrap().indirect.iter().map(|t| t.to_vec()).collect::<Vec<_>>()
+    );
+    assert_eq!(a.sky(), Some(&sky));
     let je: Vec<[f32; 3]> = j["entry_energy"]
         .as_array()
         .unwrap()
@@ -1608,4 +1632,71 @@ fn emitters_round_trip_and_hostile_headers_are_refused() {
         raw,
     );
     assert_refused_in_bounded_memory(&m, "2 groups");
+}
+
+// ---------------------------------------------------------------- sky (1.3)
+
+fn sky_transfer(s: &Scene) -> SkyTransfer {
+    let texels = (s.atlas.resolution * s.atlas.resolution) as usize;
+    SkyTransfer {
+        direct: (0..texels)
+            .map(|t| std::array::from_fn(|c| (t % 5) as f32 - 0.25 * c as f32))
+            .collect(),
+        indirect: (0..texels)
+            .map(|t| std::array::from_fn(|c| [0.5 * c as f32, -((t % 3) as f32), 0.375]))
+            .collect(),
+    }
+}
+
+/// The sky section round-trips exactly (its values are exact in f16 here), makes the archive 1.3, and the reader refuses a header
+/// for another resolution or basis, and a declared size the resolution does not give, before it
+/// decompresses the rest.
+#[test]
+fn sky_round_trip_and_hostile_headers_are_refused() {
+    let dir = test_dir("sky");
+    let s = scene(16, 8, 3, 12);
+    let sky = sky_transfer(&s);
+    let path = dir.join("sky.prm");
+    let mut w = ArchiveWriter::create(&path, s.metadata.clone(), &s.atlas, &s.entries, &s.clusters).unwrap();
+    let mut wrong = sky.clone();
+    wrong.direct.pop();
+    assert!(w.set_sky(wrong).is_err());
+    w.set_sky(sky.clone()).unwrap();
+    for p in &s.panes {
+        w.add_pane(p).unwrap();
+    }
+    w.finish().unwrap();
+    let bytes = std::fs::read(&path).unwrap();
+    let a = Archive::from_bytes(&bytes).unwrap();
+    assert_eq!(a.info().minor, 3);
+    assert_eq!(a.sky(), Some(&sky));
+    let (plain, _) = small_archive("sky-none", WriterOptions::default());
+    assert!(Archive::from_bytes(&plain).unwrap().sky().is_none());
+
+    let header = |res: u32, coeffs: u32| {
+        let mut d = Vec::new();
+        for v in [res, coeffs, 0, 0] {
+            d.extend_from_slice(&v.to_le_bytes());
+        }
+        d
+    };
+    for (head, what) in [(header(32, 9), "resolution"), (header(16, 16), "coefficients")] {
+        let raw = 64u64 << 20;
+        let mut data = head.clone();
+        data.resize(raw as usize, 0);
+        let stream = zstd::bulk::compress(&data, 3).unwrap();
+        let m = replace_section(&bytes, kind::SKY, &stream, compression::ZSTD, raw);
+        assert_refused_in_bounded_memory(&m, what);
+    }
+    let raw = 64u64 << 20;
+    let mut data = header(16, 9);
+    data.resize(raw as usize, 0);
+    let m = replace_section(
+        &bytes,
+        kind::SKY,
+        &zstd::bulk::compress(&data, 3).unwrap(),
+        compression::ZSTD,
+        raw,
+    );
+    assert_refused_in_bounded_memory(&m, "resolution 16");
 }
