@@ -9,24 +9,13 @@
 
 use glam::Vec3;
 use prm_format::{Archive, ArchiveWriter, Cluster};
-use prm_runtime::{Runtime, RuntimeOptions, Shadows};
+use prm_runtime::{Runtime, RuntimeOptions};
 use prm_scene::{Atlas, AtlasParams, Sizing};
-use prm_tests::{gpu, repo, temp_dir};
+use prm_tests::{channel_sum as sum, gpu, rel_error, repo, temp_dir, unlit_frame};
 use prm_trace::{Bvh, BvhParams, Emitters, Lighting, ReferenceParams, ReferenceTracer};
 
 /// Atlas side of the test bake.
 const RESOLUTION: u32 = 64;
-
-/// ‖t − r‖ / ‖r‖ over every channel.
-fn rel_error(t: &[Vec3], r: &[Vec3]) -> f64 {
-    let num: f64 = t.iter().zip(r).map(|(a, b)| (*a - *b).length_squared() as f64).sum();
-    let den: f64 = r.iter().map(|b| b.length_squared() as f64).sum();
-    (num / den).sqrt()
-}
-
-fn sum(v: &[Vec3]) -> f64 {
-    v.iter().map(|x| x.element_sum() as f64).sum()
-}
 
 /// `src` rewritten into `dst` with every emitter group's traced indirect lightmap dropped, so
 /// that the run time sends the groups' light through the panes.
@@ -56,17 +45,7 @@ fn frame(
     scales: [[f32; 3]; 2],
 ) -> (Vec<Vec3>, Vec<Vec3>, Vec<prm_runtime::ClusterWeight>) {
     rt.set_emitter_scales(&scales).unwrap();
-    rt.update(&[]).unwrap();
-    let mut enc = ctx.device.create_command_encoder(&Default::default());
-    rt.encode(&mut enc, Shadows::Own, None);
-    ctx.queue.submit([enc.finish()]);
-    let lightmap = rt.read_lightmap().unwrap().into_iter().map(Vec3::from).collect();
-    let full = rt
-        .read_irradiance_lightmap()
-        .unwrap()
-        .into_iter()
-        .map(Vec3::from)
-        .collect();
+    let (lightmap, full) = unlit_frame(ctx, rt);
     (lightmap, full, rt.read_weights().unwrap())
 }
 

@@ -1,5 +1,5 @@
 // prm-play shade pass: radiance of every pixel, albedo/π × (direct irradiance with shadows +
-// the emitters' direct irradiance and the indirect irradiance, bilinearly sampled from their
+// the baked direct irradiance of the emitters and the sky, and the indirect irradiance, bilinearly sampled from their
 // lightmaps) + the surface's own emission, linear HDR. Comes after the run
 // time's shared.wgsl and lights.wgsl (which use `frame`, `lights`, `views`, `shadow_maps`).
 
@@ -39,7 +39,7 @@ struct Material {
 @group(0) @binding(6) var textures: texture_2d_array<f32>;
 @group(0) @binding(7) var texture_sampler: sampler;
 @group(0) @binding(8) var<uniform> camera: Camera;
-// The emitters' direct irradiance (prm_runtime::Runtime::emitter_lightmap), any size.
+// The emitters' and the sky's direct irradiance (prm_runtime::Runtime::emitter_lightmap), any size.
 @group(0) @binding(9) var emitter_lightmap: texture_2d<f32>;
 
 struct VsIn {

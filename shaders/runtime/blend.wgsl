@@ -1,6 +1,6 @@
 // prm-runtime blend pass: the indirect-irradiance lightmap, Σ over the kept clusters of
-// weight_eff × pane, per atlas texel, plus the emitters' traced indirect light at their scales
-// (emitters.rs; a 1×1 texture, ignored, when no group has one); panes are layers of an
+// weight_eff × pane, per atlas texel, plus the traced indirect light of the emitters at their
+// scales and of the sky (baked.rs; a 1×1 texture, ignored, when neither has one); panes are layers of an
 // rgb9e5ufloat texture array.
 
 @group(0) @binding(0) var<uniform> frame: Frame;

@@ -76,7 +76,7 @@ struct Entry {
     // pane energy e_i the cluster weight weighs this member by (1 without an entry-energy section)
     energy: vec3<f32>,
     _pad1: f32,
-    // irradiance from the emitters at their current scales, added to the lights' (emitters.rs)
+    // irradiance from the emitters at their current scales, added to the lights' (baked.rs)
     emitted: vec3<f32>,
     _pad2: f32,
 };

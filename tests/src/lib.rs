@@ -18,6 +18,35 @@ pub fn temp_dir(name: &str) -> PathBuf {
     dir
 }
 
+/// ‖t − r‖ / ‖r‖ over every channel.
+pub fn rel_error(t: &[glam::Vec3], r: &[glam::Vec3]) -> f64 {
+    let num: f64 = t.iter().zip(r).map(|(a, b)| (*a - *b).length_squared() as f64).sum();
+    let den: f64 = r.iter().map(|b| b.length_squared() as f64).sum();
+    (num / den).sqrt()
+}
+
+/// The sum of every channel.
+pub fn channel_sum(v: &[glam::Vec3]) -> f64 {
+    v.iter().map(|x| x.element_sum() as f64).sum()
+}
+
+/// Encodes and runs one frame of `rt` without punctual lights (its baked light as set) and
+/// reads back the indirect lightmap and the full irradiance lightmap.
+pub fn unlit_frame(ctx: &GpuContext, rt: &mut prm_runtime::Runtime) -> (Vec<glam::Vec3>, Vec<glam::Vec3>) {
+    rt.update(&[]).unwrap();
+    let mut enc = ctx.device.create_command_encoder(&Default::default());
+    rt.encode(&mut enc, prm_runtime::Shadows::Own, None);
+    ctx.queue.submit([enc.finish()]);
+    let lightmap = rt.read_lightmap().unwrap().into_iter().map(glam::Vec3::from).collect();
+    let full = rt
+        .read_irradiance_lightmap()
+        .unwrap()
+        .into_iter()
+        .map(glam::Vec3::from)
+        .collect();
+    (lightmap, full)
+}
+
 /// A Vulkan device, explicitly: a missing driver fails loudly instead of falling back to GL.
 pub fn gpu() -> GpuContext {
     GpuContext::new(Backend::Vulkan).expect("a Vulkan adapter (apt-get install mesa-vulkan-drivers)")

@@ -22,7 +22,10 @@ fn cargo_run(package: &str, args: &[&str]) -> Result<()> {
 pub fn run_eval(args: &[String]) -> Result<()> {
     let mut cmd = Command::new(env!("CARGO"));
     cmd.args(["run", "--quiet", "-p", "xtask-eval"]);
-    if args.iter().any(|a| a == "--full" || a == "--budget") {
+    if args
+        .iter()
+        .any(|a| ["--full", "--budget", "--emitters", "--sky"].contains(&a.as_str()))
+    {
         cmd.arg("--release");
     }
     let status = cmd

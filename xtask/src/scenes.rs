@@ -10,6 +10,7 @@ mod chairs;
 mod check;
 mod color;
 mod cornell;
+mod courtyard;
 mod gltf_out;
 mod mesh;
 mod obj;
@@ -83,6 +84,8 @@ pub fn bundles() -> Vec<Bundle> {
     let cornell_readme = cornell::readme(&Stats::of(&cornell));
     let lamps = cornell::lamps_scene();
     let lamps_readme = cornell::lamps_readme(&Stats::of(&lamps));
+    let yard = courtyard::scene();
+    let yard_readme = courtyard::readme(&Stats::of(&yard));
     let chairs = chairs::scene();
     let chairs_readme = chairs::readme(&Stats::of(&chairs));
     let open = two_rooms::scene(false);
@@ -100,6 +103,12 @@ pub fn bundles() -> Vec<Bundle> {
             summary: "the Cornell box lit by two small emissive ceiling lamps of different colours: emitter groups",
             scenes: vec![(lamps, Enclosure::Open)],
             readme: lamps_readme,
+        },
+        Bundle {
+            dir: "courtyard",
+            summary: "a yard open to the sky, walls and a block, no light of its own: sky light",
+            scenes: vec![(yard, Enclosure::Open)],
+            readme: yard_readme,
         },
         Bundle {
             dir: "chairs",

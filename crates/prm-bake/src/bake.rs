@@ -86,6 +86,14 @@ pub struct BakeArgs {
     /// shrink to fit it (default 600). Explicit sizes are never changed.
     #[arg(long, value_name = "SECONDS")]
     pub time_budget: Option<f64>,
+    /// Also bake the sky's transfer (visibility and interreflection in order-2 spherical
+    /// harmonics at every texel), so that the player can light the scene with any sky
+    /// (`prm-play --sky`), turned and scaled at run time.
+    #[arg(long)]
+    pub sky: bool,
+    /// Paths per texel of the sky's transfer (default 256; more: less noise, longer bake).
+    #[arg(long, value_name = "PATHS", requires = "sky")]
+    pub sky_paths: Option<u32>,
     /// TOML file with any of the parameters above (and budgets); the command line wins.
     #[arg(long, value_name = "FILE.toml")]
     pub config: Option<PathBuf>,
@@ -114,7 +122,7 @@ fn parse_shard(s: &str) -> Result<Shard, String> {
 }
 
 impl BakeArgs {
-    fn config(&self) -> BakeConfig {
+    pub(crate) fn config(&self) -> BakeConfig {
         BakeConfig {
             preset: self.preset.map(Preset::from),
             entries: self.entries,
@@ -125,6 +133,7 @@ impl BakeArgs {
             seed: self.seed,
             top_k: self.top_k,
             time_budget_s: self.time_budget,
+            sky_paths: self.sky.then(|| self.sky_paths.unwrap_or(prm_bake::SKY_PATHS)),
             ..Default::default()
         }
     }

@@ -159,6 +159,10 @@ pub fn summary_json<R: Read + Seek>(archive: &Archive<R>, file: &Path, report: O
             "direct_sum": rgb_sum(&g.direct),
             "indirect_sum": g.indirect.as_deref().map(rgb_sum),
         })).collect::<Vec<_>>(),
+        "sky": archive.sky().map(|s| {
+            let (d, i) = uniform_sky_sums(s);
+            json!({"coefficients": prm_format::SH_COEFFS, "unit_uniform_direct_sum": d, "unit_uniform_indirect_sum": i})
+        }),
         "clusters": archive.clusters().len(),
         "tiles": {
             "filter": archive.tile_filter().name(),
@@ -267,6 +271,14 @@ pub fn write_summary<W: Write, R: Read + Seek>(
             out,
             "emitter      {:?} (material {}): radiance {r:.3} {gr:.3} {b:.3}; irradiance summed over the atlas: direct {er:.1} {eg:.1} {eb:.1}, {indirect}",
             g.name, g.material
+        )?;
+    }
+    if let Some(s) = archive.sky() {
+        let ([dr, _, _], [ir, ig, ib]) = uniform_sky_sums(s);
+        writeln!(
+            out,
+            "sky          transfer in {} spherical-harmonic coefficients per texel; a uniform sky of radiance 1 gives, summed over the atlas: direct {dr:.1}, indirect {ir:.1} {ig:.1} {ib:.1}",
+            prm_format::SH_COEFFS
         )?;
     }
     writeln!(out, "clusters     {} (one pane each)", archive.clusters().len())?;
@@ -434,6 +446,20 @@ fn write_exr_files<R: Read + Seek>(archive: &mut Archive<R>, dir: &Path) -> Resu
 }
 
 /// Per-channel sum of RGB values (f64 accumulation).
+/// The sky's direct and indirect irradiance summed over the atlas under a uniform sky of
+/// radiance 1 (only the constant coefficient, `2√π`, is non-zero).
+fn uniform_sky_sums(s: &prm_format::SkyTransfer) -> ([f64; 3], [f64; 3]) {
+    let mut unit = [[0.0f32; 3]; prm_format::SH_COEFFS];
+    unit[0] = [2.0 * std::f32::consts::PI.sqrt(); 3];
+    let (mut d, mut i) = (Vec::new(), Vec::new());
+    for t in 0..s.direct.len() {
+        let (a, b) = s.irradiance(t, &unit);
+        d.push(a);
+        i.push(b);
+    }
+    (rgb_sum(&d), rgb_sum(&i))
+}
+
 fn rgb_sum(v: &[[f32; 3]]) -> [f64; 3] {
     v.iter()
         .fold([0.0; 3], |s, x| [0, 1, 2].map(|k| s[k] + f64::from(x[k])))

@@ -30,7 +30,8 @@ enum Command {
     ///
     /// Without sizes, the bake derives them from the scene and the budgets and says why.
     /// Emissive materials (OBJ Ke, glTF emissiveFactor) are baked as emitter groups whose
-    /// direct and indirect light the player scales at run time (prm-play --emitter).
+    /// direct and indirect light the player scales at run time (prm-play --emitter); --sky also
+    /// bakes the sky's transfer, so that any sky lights the archive (prm-play --sky).
     /// Example: prm-bake bake scenes/cornell-box/cornell-box.gltf -o out/cornell-box.prm
     Bake(Box<bake::BakeArgs>),
     /// Join the partial archives of a sharded bake (`bake --shard I/N`) into one archive.
@@ -71,5 +72,26 @@ fn main() -> ExitCode {
             eprintln!("error: {e:#}");
             ExitCode::FAILURE
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `--sky` alone bakes the library's default paths per texel; `--sky-paths N` takes N.
+    #[test]
+    fn sky_flag_defaults_to_the_library_paths() {
+        let paths =
+            |args: &[&str]| match Cli::parse_from([&["prm-bake", "bake", "s.obj", "-o", "o.prm"], args].concat())
+                .command
+            {
+                Command::Bake(b) => b.config().sky_paths,
+                _ => unreachable!("a bake"),
+            };
+        assert_eq!(paths(&["--sky"]), Some(prm_bake::SKY_PATHS));
+        assert_eq!(paths(&["--sky", "--sky-paths", "64"]), Some(64));
+        assert_eq!(paths(&[]), None);
+        assert!(Cli::try_parse_from(["prm-bake", "bake", "s.obj", "-o", "o.prm", "--sky-paths", "64"]).is_err());
     }
 }

@@ -67,6 +67,8 @@ pub struct BakeConfig {
     pub memory_budget_mib: Option<f64>,
     /// Longest bake the automatic sizes may plan for, seconds (by [`CostModel`]).
     pub time_budget_s: Option<f64>,
+    /// Bake the sky's transfer with this many paths per texel (unset: no sky in the archive).
+    pub sky_paths: Option<u32>,
 }
 
 impl BakeConfig {
@@ -98,6 +100,7 @@ impl BakeConfig {
             archive_budget_mib: over.archive_budget_mib.or(self.archive_budget_mib),
             memory_budget_mib: over.memory_budget_mib.or(self.memory_budget_mib),
             time_budget_s: over.time_budget_s.or(self.time_budget_s),
+            sky_paths: over.sky_paths.or(self.sky_paths),
         }
     }
 }
@@ -138,7 +141,11 @@ pub struct BakeParams {
     pub memory_budget_mib: f64,
     /// Bake time budget of the automatic sizes, seconds.
     pub time_budget_s: f64,
-    /// What [`CostModel`] expects these parameters to cost, seconds.
+    /// Paths per texel of the sky's transfer, when the archive holds one
+    /// ([`crate::SKY_PATHS`] is the command line's default).
+    pub sky_paths: Option<u32>,
+    /// What [`CostModel`] expects these parameters to cost, seconds (without the emitter and
+    /// sky steps).
     pub estimated_seconds: f64,
     /// One line per automatic choice.
     pub reasons: Vec<String>,
@@ -491,6 +498,7 @@ impl BakeParams {
             archive_budget_mib,
             memory_budget_mib,
             time_budget_s,
+            sky_paths: config.sky_paths,
             estimated_seconds,
             reasons,
         };
@@ -532,6 +540,9 @@ impl BakeParams {
         }
         if self.paths_per_entry == 0 {
             invalid!("--paths-per-entry must be at least 1");
+        }
+        if self.sky_paths == Some(0) {
+            invalid!("--sky-paths must be at least 1");
         }
         if let AtlasSize::Resolution(r) = self.atlas {
             if !(8..=8192).contains(&r) {

@@ -34,6 +34,17 @@ pub struct ReferenceArgs {
     /// `--emitters`.
     #[arg(long = "emitter", value_name = "NAME=SCALE", requires = "emitters")]
     pub emitter_scales: Vec<String>,
+    /// Light the scene with a sky too, as `prm-play --sky`: `R,G,B` (uniform radiance) or an
+    /// equirectangular `.hdr`/`.exr` map. Rays that leave the scene see it; the camera's stay
+    /// black.
+    #[arg(long, value_name = "R,G,B|FILE")]
+    pub sky: Option<String>,
+    /// Multiplies the sky's radiance, as `prm-play --sky-intensity`.
+    #[arg(long, default_value_t = 1.0, requires = "sky")]
+    pub sky_intensity: f32,
+    /// Turns the sky about +Y, degrees, as `prm-play --sky-rotation`.
+    #[arg(long, default_value_t = 0.0, requires = "sky", allow_negative_numbers = true)]
+    pub sky_rotation: f32,
     /// Camera `EX,EY,EZ:TX,TY,TZ:FOV_DEG` (eye, target, vertical FOV; +Y up). Defaults to the
     /// scene's first camera.
     #[arg(long, value_name = "SPEC", conflicts_with = "lightmap")]
@@ -107,10 +118,22 @@ pub fn run(args: &ReferenceArgs) -> Result<()> {
     } else {
         Emitters::default()
     };
-    if lights.is_empty() && emitters.is_empty() {
+    let sky = match &args.sky {
+        None => None,
+        Some(spec) => {
+            if !(args.sky_intensity.is_finite() && args.sky_intensity >= 0.0 && args.sky_rotation.is_finite()) {
+                bail!("--sky-intensity must be finite and ≥ 0 and --sky-rotation finite");
+            }
+            let mut sky = prm_scene::Sky::parse(spec).with_context(|| format!("bad --sky {spec:?}"))?;
+            sky.intensity = args.sky_intensity;
+            sky.rotation = args.sky_rotation.to_radians();
+            Some(sky)
+        }
+    };
+    if lights.is_empty() && emitters.is_empty() && sky.is_none() {
         let emissive = Emitters::from_scene(&scene).groups.len();
         bail!(
-            "{} has no lights of its own; give at least one --light SPEC{}",
+            "{} has no lights of its own; give at least one --light SPEC or a --sky{}",
             args.scene.display(),
             if emissive > 0 {
                 format!(", or --emitters for its {emissive} emissive material(s)")
@@ -128,6 +151,10 @@ pub fn run(args: &ReferenceArgs) -> Result<()> {
         bvh.build_time()
     );
     let tracer = ReferenceTracer::new(&scene, &bvh, Lighting::Lights(&lights)).with_emitters(&emitters);
+    let tracer = match &sky {
+        Some(s) => tracer.with_sky(s),
+        None => tracer,
+    };
     let params = ReferenceParams {
         seed: args.seed,
         ..ReferenceParams::with_spp(args.spp)

@@ -244,6 +244,13 @@ pub fn merge(parts: &[PathBuf], output: &Path) -> Result<Merged, BakeError> {
                 source,
             })?;
     }
+    // The sky likewise.
+    if let Some(sky) = first.sky() {
+        writer.set_sky(sky.clone()).map_err(|source| BakeError::Archive {
+            what: "recording the sky".to_string(),
+            source,
+        })?;
+    }
     for c in 0..clusters.len() {
         let (p, _, a) = &mut opened[owner(c)];
         let pane = a.read_pane(c).map_err(|source| BakeError::Archive {

@@ -18,6 +18,8 @@ pub enum Phase {
     /// The emitters' direct irradiance at the entry points and the texels (scenes with
     /// emissive materials only).
     Emitters,
+    /// The sky's transfer at the texels (bakes with `--sky` only).
+    Sky,
     /// Rendering the panes (GPU or CPU) and writing them to the archive.
     PaneRendering,
 }
@@ -31,6 +33,7 @@ impl Phase {
             Phase::LightTracing => "light tracing",
             Phase::Clustering => "clustering",
             Phase::Emitters => "emitters",
+            Phase::Sky => "sky",
             Phase::PaneRendering => "pane rendering",
         }
     }

@@ -22,13 +22,22 @@
 //!   { t = 0.0, spec = "1" },            # a scale, or R,G,B
 //!   { t = 2.0, spec = "0.2,0.4,1" },
 //! ]
+//!
+//! [[sky]]                   # optional keys of the --sky's intensity and rotation
+//! t = 0.0
+//! intensity = 1.0           # default 1
+//! rotation = 0.0            # degrees about +Y, default 0
+//! [[sky]]
+//! t = 2.0
+//! rotation = 90.0
 //! ```
 //!
 //! Between keys every parameter is interpolated linearly (positions, intensities, cone and
 //! frustum angles; directions are interpolated and renormalised, a rectangular spot's vertical
 //! also made perpendicular to its axis again); before the first key and after the last the
 //! end keys hold. The keys of one light must all be of the same kind. Emitter groups the
-//! animation does not name keep their `--emitter` scale (1 by default).
+//! animation does not name keep their `--emitter` scale (1 by default). Sky keys need `--sky`;
+//! they replace its `--sky-intensity` and `--sky-rotation`.
 
 use std::path::Path;
 
@@ -57,6 +66,14 @@ struct FileEmitter {
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
+struct FileSky {
+    t: f32,
+    intensity: Option<f32>,
+    rotation: Option<f32>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
 struct File {
     fps: Option<f32>,
     #[serde(default)]
@@ -65,6 +82,8 @@ struct File {
     light: Vec<FileLight>,
     #[serde(default)]
     emitter: Vec<FileEmitter>,
+    #[serde(default)]
+    sky: Vec<FileSky>,
 }
 
 /// An emitter scale key: time and RGB scale.
@@ -81,6 +100,8 @@ pub struct Animation {
     pub lights: Vec<Vec<(f32, Light)>>,
     /// Per animated emitter group, its name and keys (time, RGB scale).
     pub emitters: Vec<(String, Vec<ScaleKey>)>,
+    /// The sky's keys: time, (intensity, rotation in degrees).
+    pub sky: Vec<(f32, [f32; 2])>,
 }
 
 fn lerp_light(a: &Light, b: &Light, s: f32) -> Light {
@@ -248,11 +269,23 @@ impl Animation {
                 .collect::<Result<Vec<_>, _>>()?;
             emitters.push((e.name.clone(), parsed));
         }
+        let sky: Vec<(f32, [f32; 2])> = f
+            .sky
+            .iter()
+            .map(|k| (k.t, [k.intensity.unwrap_or(1.0), k.rotation.unwrap_or(0.0)]))
+            .collect();
+        if !sky.windows(2).all(|w| w[0].0 <= w[1].0) || sky.iter().any(|(t, v)| !t.is_finite() || !v[1].is_finite()) {
+            return Err("sky keys must be in increasing time, with finite rotations".into());
+        }
+        if let Some((t, _)) = sky.iter().find(|(_, v)| !(v[0].is_finite() && v[0] >= 0.0)) {
+            return Err(format!("sky key at t = {t}: the intensity must be finite and ≥ 0"));
+        }
         Ok(Animation {
             fps,
             camera,
             lights,
             emitters,
+            sky,
         })
     }
 
@@ -295,6 +328,26 @@ impl Animation {
             out[g] = [0, 1, 2].map(|k| keys[i].1[k] + (keys[j].1[k] - keys[i].1[k]) * s);
         }
         Ok(out)
+    }
+
+    /// The sky's intensity and rotation (degrees) at time `t`, if the animation has sky keys.
+    pub fn sky_at(&self, t: f32) -> Option<[f32; 2]> {
+        if self.sky.is_empty() {
+            return None;
+        }
+        let (i, j, s) = locate(&self.sky, t);
+        let (a, b) = (self.sky[i].1, self.sky[j].1);
+        Some([a[0] + (b[0] - a[0]) * s, a[1] + (b[1] - a[1]) * s])
+    }
+
+    /// `sky` with its intensity and rotation at time `t`, when the animation has sky keys.
+    pub fn sky_state_at(&self, sky: &prm_scene::Sky, t: f32) -> Option<prm_scene::Sky> {
+        self.sky_at(t).map(|[intensity, rotation]| {
+            let mut s = sky.clone();
+            s.intensity = intensity;
+            s.rotation = rotation.to_radians();
+            s
+        })
     }
 
     /// The lights at time `t` (empty if the animation has none).

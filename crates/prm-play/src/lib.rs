@@ -35,6 +35,34 @@ use prm_scene::{Camera, Light, Scene};
 /// The archive type [`open`] returns.
 pub type FileArchive = Archive<std::io::BufReader<std::fs::File>>;
 
+/// The sky of `--sky SPEC` ([`prm_scene::Sky::parse`]) at `intensity` and turned by
+/// `rotation_deg` about +Y; `None` without a spec. An archive without the sky's transfer
+/// (`has_transfer` false) cannot take one: the error says how to bake it.
+pub fn sky(
+    spec: Option<&str>,
+    intensity: f32,
+    rotation_deg: f32,
+    has_transfer: bool,
+) -> Result<Option<prm_scene::Sky>, String> {
+    let Some(spec) = spec else {
+        return Ok(None);
+    };
+    if !has_transfer {
+        return Err(format!(
+            "--sky {spec}: the archive has no sky transfer; bake it with `prm-bake bake --sky`"
+        ));
+    }
+    if !(intensity.is_finite() && intensity >= 0.0 && rotation_deg.is_finite()) {
+        return Err(format!(
+            "--sky-intensity {intensity} must be finite and ≥ 0, --sky-rotation {rotation_deg} finite"
+        ));
+    }
+    let mut sky = prm_scene::Sky::parse(spec).map_err(|e| format!("--sky: {e}"))?;
+    sky.intensity = intensity;
+    sky.rotation = rotation_deg.to_radians();
+    Ok(Some(sky))
+}
+
 /// The scales of `groups` (the archive's emitter groups, [`prm_runtime::Runtime::emitters`])
 /// from `--emitter` specs ([`prm_scene::resolve_emitter_scales`]: `NAME=S` or `NAME=R,G,B`, `*`
 /// for every group), applied in order. Groups no spec names keep scale 1.

@@ -2,7 +2,7 @@
 
 use std::path::PathBuf;
 
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
 use clap::Parser;
 use prm_play::animation::Animation;
 use prm_play::{output, FrameInput, Mode, PlayOptions, Renderer, RuntimeOptions};
@@ -36,6 +36,17 @@ struct Args {
     /// `NAME=S` or `NAME=R,G,B`, repeatable, `*` for every group; 0 turns a group off. Default: 1.
     #[arg(long = "emitter", value_name = "NAME=SCALE")]
     emitters: Vec<String>,
+    /// Light the scene with a sky (archives baked with `prm-bake bake --sky`): `R,G,B` for a
+    /// uniform radiance (W/(m²·sr)) or an equirectangular `.hdr`/`.exr` map (row 0 the zenith,
+    /// +Y up, the map's centre column facing -Z). Add the sun with `--light dir:...`.
+    #[arg(long, value_name = "R,G,B|FILE")]
+    sky: Option<String>,
+    /// Multiplies the sky's radiance.
+    #[arg(long, default_value_t = 1.0, requires = "sky")]
+    sky_intensity: f32,
+    /// Turns the sky about the vertical (+Y) axis, degrees (+Z towards +X).
+    #[arg(long, default_value_t = 0.0, requires = "sky", allow_negative_numbers = true)]
+    sky_rotation: f32,
     /// gi, direct, indirect or split (left direct, right gi).
     #[arg(long, default_value = "gi")]
     mode: Mode,
@@ -46,7 +57,7 @@ struct Args {
     /// frames (default: run until closed).
     #[arg(long)]
     frames: Option<u32>,
-    /// Keyframed lights and camera (TOML; see the prm_play::animation docs).
+    /// Keyframed lights, camera, emitter scales and sky (TOML; see the prm_play::animation docs).
     #[arg(long)]
     animation: Option<PathBuf>,
     /// Output directory (headless).
@@ -125,7 +136,17 @@ fn run() -> Result<()> {
     let animation = args.animation.as_deref().map(Animation::load).transpose()?;
     let emitter_infos: Vec<prm_runtime::EmitterInfo> = archive.emitters().iter().map(Into::into).collect();
     let emitter_scales = prm_play::emitter_scales(&emitter_infos, &args.emitters).map_err(anyhow::Error::msg)?;
-    let lit_by_emitters = emitter_scales.iter().flatten().any(|&s| s > 0.0);
+    let sky = prm_play::sky(
+        args.sky.as_deref(),
+        args.sky_intensity,
+        args.sky_rotation,
+        archive.sky().is_some(),
+    )
+    .map_err(anyhow::Error::msg)?;
+    if sky.is_none() && animation.as_ref().is_some_and(|a| !a.sky.is_empty()) {
+        bail!("the animation has sky keys, which animate a --sky: give one");
+    }
+    let lit_by_emitters = emitter_scales.iter().flatten().any(|&s| s > 0.0) || sky.is_some();
     let base_lights =
         if base_lights.is_empty() && !lit_by_emitters && animation.as_ref().is_none_or(|a| a.lights.is_empty()) {
             // A black frame helps nobody: light the scene, and say where and how to choose.
@@ -164,6 +185,7 @@ fn run() -> Result<()> {
             frames: args.frames,
             screenshot: args.screenshot,
             emitter_scales,
+            sky,
         })
         .with_context(|| format!("playing {} in a window", args.archive.display()));
     }
@@ -187,6 +209,9 @@ fn run() -> Result<()> {
     }
     if !emitter_scales.is_empty() {
         renderer.set_emitter_scales(&emitter_scales)?;
+    }
+    if let Some(sky) = &sky {
+        renderer.set_sky(sky)?;
     }
     if args.timings.is_some() && !renderer.has_timestamps() {
         eprintln!("note: this device has no timestamp queries; --timings records CPU frame times only");
@@ -224,6 +249,13 @@ fn run() -> Result<()> {
                 .emitter_scales_at(&emitter_names, &emitter_scales, a.time(i))
                 .map_err(anyhow::Error::msg)?;
             renderer.set_emitter_scales(&scales)?;
+        }
+        if let Some(s) = animation
+            .as_ref()
+            .zip(sky.as_ref())
+            .and_then(|(a, s)| a.sky_state_at(s, a.time(i)))
+        {
+            renderer.set_sky(&s)?;
         }
         let t = renderer.render(&FrameInput {
             camera,

@@ -313,6 +313,13 @@ impl Renderer {
         Ok(())
     }
 
+    /// Lights the scene with `sky` (its intensity and rotation as they are now), from the next
+    /// frame on; refused when the archive has no sky transfer.
+    pub fn set_sky(&mut self, sky: &prm_scene::Sky) -> Result<(), PlayError> {
+        self.runtime.set_sky(&sky.sh())?;
+        Ok(())
+    }
+
     /// Changes the number of clusters kept per frame.
     pub fn set_top_k(&mut self, k: u32) {
         self.runtime.set_top_k(k);

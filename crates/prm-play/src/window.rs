@@ -65,6 +65,8 @@ pub struct WindowConfig {
     pub screenshot: Option<PathBuf>,
     /// Scales of the archive's emitter groups ([`crate::emitter_scales`]; empty: all 1).
     pub emitter_scales: Vec<[f32; 3]>,
+    /// The sky ([`crate::sky`]), for archives with the sky's transfer.
+    pub sky: Option<prm_scene::Sky>,
 }
 
 /// Moves `light` by key presses: `right`, `forward` and `up` in steps of `step` scene units along
@@ -238,6 +240,8 @@ struct App {
     animation: Option<Animation>,
     /// The `--emitter` scales (empty: all 1); an animation's emitter keys replace its groups'.
     emitter_scales: Vec<[f32; 3]>,
+    /// The `--sky`, whose intensity and rotation an animation's sky keys drive.
+    sky: Option<prm_scene::Sky>,
     mode: Mode,
     exposure: f32,
     frame_limit: Option<u32>,
@@ -333,6 +337,9 @@ impl App {
         if !cfg.emitter_scales.is_empty() {
             renderer.set_emitter_scales(&cfg.emitter_scales)?;
         }
+        if let Some(sky) = &cfg.sky {
+            renderer.set_sky(sky)?;
+        }
         presenter.bind(&renderer);
         self.gpu = Some(Gpu {
             window,
@@ -371,6 +378,14 @@ impl App {
                 .emitter_scales_at(&names, &base, self.clock)
                 .map_err(PlayError::Window)?;
             gpu.renderer.set_emitter_scales(&scales)?;
+        }
+        if let Some(s) = self
+            .animation
+            .as_ref()
+            .zip(self.sky.as_ref())
+            .and_then(|(a, s)| a.sky_state_at(s, self.clock))
+        {
+            gpu.renderer.set_sky(&s)?;
         }
         gpu.renderer.render(&FrameInput {
             camera,
@@ -573,6 +588,7 @@ pub fn run(config: WindowConfig) -> Result<(), PlayError> {
         step: config.scene.bounds().diagonal().max(1e-3) * LIGHT_STEP,
         animation: config.animation.clone(),
         emitter_scales: config.emitter_scales.clone(),
+        sky: config.sky.clone(),
         mode: config.mode,
         exposure: config.exposure,
         frame_limit: config.frames,

@@ -566,6 +566,9 @@ keys = [ { t = 0.0, spec = "rect:0,1,0:0,-1,0:0,0,1:20,10:1,1,1" }, { t = 2.0, s
         ("colour = 1", "unknown field"),
         ("[[emitter]]\nname = \"light\"\nkeys = []", "emitter \"light\""),
         ("[[emitter]]\nname = \"light\"\nkeys = [ { t = 0.0, spec = \"-1\" } ]", "negative"),
+        ("[[sky]]\nt = 1.0\n[[sky]]\nt = 0.0", "increasing"),
+        ("[[sky]]\nt = 0.0\nintensity = -1.0", "intensity"),
+        ("[[sky]]\nt = 0.0\nturn = 1.0", "unknown field"),
     ] {
         let e = Animation::parse(bad).unwrap_err();
         assert!(e.contains(says), "{bad:?} gave {e:?}");
@@ -586,6 +589,13 @@ keys = [ { t = 0.0, spec = "rect:0,1,0:0,-1,0:0,0,1:20,10:1,1,1" }, { t = 2.0, s
     );
     let missing = e.emitter_scales_at(&["ceiling"], &base[..1], 0.0).unwrap_err();
     assert!(missing.contains("\"lamp\"") && missing.contains("ceiling"), "{missing}");
+    // Sky keys: intensity and rotation interpolate, defaults 1 and 0; none without keys.
+    let s = Animation::parse("[[sky]]\nt = 0.0\nintensity = 2.0\n[[sky]]\nt = 2.0\nrotation = 90.0").unwrap();
+    assert_eq!(s.sky_at(1.0), Some([1.5, 45.0]));
+    assert_eq!(s.sky_at(3.0), Some([1.0, 90.0]));
+    assert_eq!(e.sky_at(1.0), None);
+    let sky = s.sky_state_at(&prm_scene::Sky::uniform(Vec3::ONE), 1.0).unwrap();
+    assert!((sky.intensity - 1.5).abs() < 1e-6 && (sky.rotation - 45f32.to_radians()).abs() < 1e-6);
 }
 
 /// Window mode's present pass (run offscreen: no display here): the tone-mapped frame equals the

@@ -9,7 +9,8 @@
 //! with the lightmap UVs [`Runtime::lightmap_uvs`] gives per triangle and shades as it likes:
 //! radiance = albedo/π × (direct + indirect irradiance). Its direct light can use the same
 //! shadow maps through [`LIGHTS_WGSL`] and [`Runtime::direct_light_bindings`]. Emissive surfaces
-//! baked into the archive are scaled with [`Runtime::set_emitter_scales`]; their direct light is
+//! baked into the archive are scaled with [`Runtime::set_emitter_scales`], and the sky, when the
+//! archive holds its transfer, is set with [`Runtime::set_sky`]; their direct light is
 //! [`Runtime::emitter_lightmap`], their indirect light is in the lightmap.
 //!
 //! Every resource lives on the device given to [`Runtime::new`]; nothing is global.
@@ -38,7 +39,7 @@
 
 #![warn(missing_docs)]
 
-mod emitters;
+mod baked;
 mod irradiance;
 mod lights;
 mod options;
@@ -52,7 +53,7 @@ use prm_format::Archive;
 use prm_gpu_kit::{pipeline, readback, ErrorScopes, PassTimer};
 use prm_scene::{Aabb, Light, Scene};
 
-pub use emitters::EmitterInfo;
+pub use baked::EmitterInfo;
 pub use irradiance::DILATE_STEPS;
 pub use lights::{look_to, orthographic, perspective, shadow_views, SPOT_SINGLE_VIEW_MAX_DEG};
 pub use options::{archive_top_k, RuntimeError, RuntimeOptions, MAX_SHADOW_RESOLUTION};
@@ -166,7 +167,7 @@ pub struct Runtime {
     view_count: u32,
     /// The entries as uploaded (rewritten when the emitter scales change).
     entries: Vec<GpuEntry>,
-    emitters: emitters::EmitterState,
+    emitters: baked::BakedLights,
 }
 
 impl Runtime {
@@ -263,7 +264,7 @@ impl Runtime {
                 ..Default::default()
             })
             .collect();
-        let mut emitters = emitters::EmitterState::new(device, archive.emitters(), atlas.resolution);
+        let mut emitters = baked::BakedLights::new(device, archive.emitters(), archive.sky(), atlas.resolution);
         emitters.apply(queue, &mut entries);
         let entry_count = entries.len() as u32;
         let st = wgpu::BufferUsages::STORAGE;
@@ -488,10 +489,28 @@ impl Runtime {
         Ok(())
     }
 
-    /// The emitters' direct irradiance at their current scales (W/m², [`LIGHTMAP_FORMAT`],
-    /// sampled with the same UVs as [`Runtime::lightmap`]; a black 1×1 texture without
-    /// emitters): add it to the lights' direct irradiance, and show each emissive material's
-    /// radiance × its group's scale on its own surfaces.
+    /// Whether the archive holds the sky's transfer, so that [`Runtime::set_sky`] can light it.
+    pub fn has_sky(&self) -> bool {
+        self.emitters.sky.is_some()
+    }
+
+    /// Lights the scene with a sky of these coefficients in the basis of
+    /// [`prm_format::sh_basis`] (RGB radiance, already turned and scaled:
+    /// [`prm_scene::Sky::sh`] gives them; all zero: no sky), from the next [`Runtime::encode`]
+    /// on. Its direct light joins [`Runtime::emitter_lightmap`] and its indirect light the
+    /// lightmap: both are summed on the CPU from the archive's transfer and uploaded, nothing is
+    /// rendered. Refused when the archive has no sky transfer ([`Runtime::has_sky`]).
+    pub fn set_sky(&mut self, coeffs: &[[f32; 3]; prm_format::SH_COEFFS]) -> Result<(), RuntimeError> {
+        self.emitters.check_sky(coeffs)?;
+        self.emitters.sky_coeffs = *coeffs;
+        self.emitters.apply(&self.queue, &mut self.entries);
+        Ok(())
+    }
+
+    /// The baked direct irradiance now: the emitters' at their current scales and the sky's
+    /// (W/m², [`LIGHTMAP_FORMAT`], sampled with the same UVs as [`Runtime::lightmap`]; a black
+    /// 1×1 texture without emitters or sky): add it to the lights' direct irradiance, and show
+    /// each emissive material's radiance × its group's scale on its own surfaces.
     pub fn emitter_lightmap(&self) -> &wgpu::TextureView {
         &self.emitters.view
     }

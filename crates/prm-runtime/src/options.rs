@@ -49,6 +49,9 @@ pub enum RuntimeError {
     /// Emitter scales that do not fit the archive's emitter groups.
     #[error("emitters: {0}")]
     Emitters(String),
+    /// Sky coefficients the archive cannot take (no sky transfer) or not finite.
+    #[error("sky: {0}")]
+    Sky(String),
     /// An option is out of range for the run time or this device.
     #[error("{option}: {message}")]
     Option {

@@ -5,8 +5,8 @@
 //! list of triangles with per-corner attributes (no index buffer), a material table, textures,
 //! lights and cameras, all in world space (right-handed, +Y up, metres by convention).
 //!
-//! Emissive materials (`Ke` in MTL, `emissiveFactor` in glTF) are treated as ordinary diffuse
-//! surfaces in this version: light comes only from punctual lights.
+//! Light comes from punctual [`Light`]s, from emissive materials (`Ke` in MTL, `emissiveFactor`
+//! in glTF, see [`Material`]) and from a [`Sky`].
 
 #![warn(missing_docs)]
 
@@ -17,6 +17,7 @@ pub mod export;
 mod gltf_load;
 mod obj;
 mod scene;
+mod sky;
 mod spec;
 mod texture;
 
@@ -24,6 +25,7 @@ pub use atlas::{Atlas, AtlasParams, AtlasStats, ExitPoint, Sizing, EMPTY_TEXEL};
 pub use error::SceneError;
 pub use export::{read_exr_rgb, write_exr_rgb, write_gltf, ExportError};
 pub use scene::{Aabb, Camera, Light, LoadReport, Material, Scene, Triangle, RECT_MAX_HALF_ANGLE_DEG};
+pub use sky::{Sky, SkyMap, SkySource, MAX_SKY_MAP_SIDE};
 pub use spec::{parse_camera, parse_emitter_scale, parse_light, parse_size, resolve_emitter_scales, SpecError};
 pub use texture::Texture;
 

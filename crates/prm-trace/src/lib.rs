@@ -5,7 +5,8 @@
 //! every exit point of the atlas). At run time `E_ind(x) = Σ_c weight_c · pane_c(x)` where
 //! `weight_c` is the cluster's members' direct irradiance weighed by their pane energy
 //! ([`entry_irradiance`], [`Clustering::weights_by_energy`], [`Panes::combine`]). The estimator and its
-//! units are written out in [`walk`]. [`ReferenceTracer`] is the ground truth it is tested against.
+//! units are written out in [`walk`]. [`ReferenceTracer`] is the ground truth it is tested against;
+//! [`sky_transfer_at_exits`] bakes the sky's spherical-harmonic transfer with its estimator.
 //!
 //! Every random decision draws from a stream keyed by `(seed, item, sub-item)` ([`Rng`]), and
 //! every parallel loop writes per-item results in order, so outputs are identical for any number
@@ -22,6 +23,7 @@ pub mod pane;
 pub mod reference;
 pub mod rng;
 pub mod sampling;
+pub mod sky;
 pub mod vpl;
 pub mod walk;
 
@@ -32,8 +34,9 @@ pub use emitters::{EmitterGroup, Emitters, Receiver};
 pub use error::TraceError;
 pub use pane::{evaluate_atlas_panes, evaluate_panes, Lattice, PaneParams, Panes};
 pub use prm_scene::{parse_camera, parse_light, parse_size, SpecError, ENTRY_DISK};
-pub use reference::{Estimate, ImageMode, Lighting, ReferenceParams, ReferenceTracer};
+pub use reference::{Estimate, ImageMode, Lighting, ReferenceParams, ReferenceTracer, SKY_DIRECT_SAMPLES};
 pub use rng::Rng;
 pub use sampling::{cosine_hemisphere, sample_surface, sobol2, EntryParams, SurfaceSample};
+pub use sky::sky_transfer_at_exits;
 pub use vpl::VplBound;
 pub use walk::{trace_walks, Roulette, Vpl, VplSet, WalkParams, WalkStats};

@@ -35,6 +35,14 @@
 //! irradiance at exit points takes [`EMITTER_DIRECT_SAMPLES`] samples each (stream
 //! `(0, exit, u64::MAX)`, fixed), and an image's full radiance adds the emission `L_e` of the
 //! surface seen and a fresh sample of its direct light every pass.
+//!
+//! **The sky** ([`ReferenceTracer::with_sky`]) is radiance from every direction the scene leaves
+//! open. A path ray from a vertex that leaves the scene along `ω` scores `π·L_sky(ω)` times its
+//! weight: it is the cosine sample of that vertex's direct sky light, and the only one (there is
+//! no next-event estimation of the sky, which suits smooth skies; a sun belongs in a
+//! [`Light::Directional`]). The direct sky light at exit points takes [`SKY_DIRECT_SAMPLES`]
+//! cosine samples (stream `(1, exit, u64::MAX)`), and an image's full radiance a fresh
+//! `samples_per_pass` every pass. Camera rays that leave the scene stay black.
 
 use glam::{Vec2, Vec3};
 use prm_scene::{Camera, ExitPoint, Light, Scene};
@@ -47,6 +55,7 @@ use crate::rng::Rng;
 use crate::sampling::cosine_hemisphere;
 use crate::walk::Roulette;
 use crate::TraceError;
+use prm_scene::Sky;
 
 /// Where direct light comes from.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -168,12 +177,16 @@ impl Welford {
 /// per texel where an emitter is seen at a grazing angle, far less once averaged over an image.
 pub const EMITTER_DIRECT_SAMPLES: u32 = 256;
 
+/// Cosine samples of the sky per exit point in [`ReferenceTracer::direct_at_exits`].
+pub const SKY_DIRECT_SAMPLES: u32 = 256;
+
 /// The reference path tracer over one scene and lighting.
 pub struct ReferenceTracer<'a> {
     scene: &'a Scene,
     bvh: &'a Bvh,
     lighting: Lighting<'a>,
     emitters: Option<&'a Emitters>,
+    sky: Option<&'a Sky>,
 }
 
 impl<'a> ReferenceTracer<'a> {
@@ -184,7 +197,33 @@ impl<'a> ReferenceTracer<'a> {
             bvh,
             lighting,
             emitters: None,
+            sky: None,
         }
+    }
+
+    /// The same tracer with `sky` lighting it besides the lighting (module docs).
+    pub fn with_sky(self, sky: &'a Sky) -> Self {
+        ReferenceTracer { sky: Some(sky), ..self }
+    }
+
+    /// The sky's direct irradiance at `p`, `samples` cosine samples about `n` (zero without a
+    /// sky): `π·L(ω)` for each ray `ω` that leaves the scene.
+    pub(crate) fn sky_direct(&self, p: Vec3, ng: Vec3, n: Vec3, tri: u32, samples: u32, rng: &mut Rng) -> Vec3 {
+        let Some(sky) = self.sky else {
+            return Vec3::ZERO;
+        };
+        let mut sum = Vec3::ZERO;
+        for _ in 0..samples {
+            let dir = cosine_hemisphere(rng.next_vec2(), n);
+            if dir.dot(ng) > 0.0
+                && !self
+                    .bvh
+                    .occluded(self.bvh.spawn(p, ng, dir), dir, f32::INFINITY, [tri, tri])
+            {
+                sum += sky.radiance(dir);
+            }
+        }
+        sum * (std::f32::consts::PI / samples.max(1) as f32)
     }
 
     /// The same tracer with `emitters` as area lights besides the lighting (module docs).
@@ -212,7 +251,8 @@ impl<'a> ReferenceTracer<'a> {
     }
 
     /// Direct irradiance at every exit point (receiving with the exit point's normal): the
-    /// lighting's, plus [`EMITTER_DIRECT_SAMPLES`] emitter samples with emitters.
+    /// lighting's, plus [`EMITTER_DIRECT_SAMPLES`] emitter samples with emitters and
+    /// [`SKY_DIRECT_SAMPLES`] sky samples with a sky.
     pub fn direct_at_exits(&self, exits: &[ExitPoint]) -> Vec<Vec3> {
         exits
             .par_iter()
@@ -220,52 +260,64 @@ impl<'a> ReferenceTracer<'a> {
             .map(|(i, x)| {
                 let ng = self.bvh.geometric_normal(x.triangle);
                 let mut rng = Rng::new(0, i as u64, u64::MAX);
+                let mut sky_rng = Rng::new(1, i as u64, u64::MAX);
                 self.direct(x.position, ng, x.normal, x.triangle)
                     + self.emitted(x.position, ng, x.normal, x.triangle, EMITTER_DIRECT_SAMPLES, &mut rng)
+                    + self.sky_direct(x.position, ng, x.normal, x.triangle, SKY_DIRECT_SAMPLES, &mut sky_rng)
+            })
+            .collect()
+    }
+
+    /// The sky's direct irradiance alone at every exit point, `samples` cosine samples each
+    /// (stream `(1, exit, u64::MAX)`, as in [`ReferenceTracer::direct_at_exits`]; zero without
+    /// a sky).
+    pub fn sky_direct_at_exits(&self, exits: &[ExitPoint], samples: u32) -> Vec<Vec3> {
+        exits
+            .par_iter()
+            .enumerate()
+            .map(|(i, x)| {
+                let ng = self.bvh.geometric_normal(x.triangle);
+                let mut rng = Rng::new(1, i as u64, u64::MAX);
+                self.sky_direct(x.position, ng, x.normal, x.triangle, samples, &mut rng)
             })
             .collect()
     }
 
     /// One path estimate of the indirect irradiance at `x`.
     fn indirect_path(&self, x: Vec3, ng: Vec3, n: Vec3, tri: u32, p: &ReferenceParams, rng: &mut Rng) -> Vec3 {
-        let (mut pos, mut ng, mut n, mut tri) = (x, ng, n, tri);
-        let mut throughput = Vec3::ONE;
         let mut sum = Vec3::ZERO;
-        for bounce in 0..p.max_bounces {
-            let dir = cosine_hemisphere(rng.next_vec2(), n);
-            if dir.dot(ng) <= 0.0 {
-                break;
-            }
-            let Some(hit) = self
-                .bvh
-                .closest_hit(self.bvh.spawn(pos, ng, dir), dir, f32::INFINITY, tri)
-            else {
-                break;
-            };
-            if !hit.front {
-                break;
-            }
-            // The segment from a vertex (not from x: light straight from an emitter to x is
-            // direct light there) is also the cosine half of that vertex's emitter estimate; it
-            // was traced with probability q, which `throughput` already divides by.
-            if let (Some(e), true) = (self.emitters, bounce > 0) {
-                sum += throughput * e.cosine_hit(self.scene, self.bvh, &hit, dir, n.dot(dir));
-            }
-            tri = hit.triangle;
-            pos = self.scene.triangles[tri as usize].point(hit.b1, hit.b2);
-            ng = self.bvh.geometric_normal(tri);
-            n = ng;
-            let rho = self.scene.albedo(tri as usize, hit.b1, hit.b2);
-            let emitted = self.emitters.map_or(Vec3::ZERO, |e| {
-                e.sample_weighted(self.scene, self.bvh, pos, ng, n, tri, rng)
-            });
-            sum += throughput * rho * (self.direct(pos, ng, n, tri) + emitted);
-            let q = p.roulette.survival(rho);
-            if rng.next_f32() >= q {
-                break;
-            }
-            throughput *= rho / q;
-        }
+        walk_path(
+            self.scene,
+            self.bvh,
+            (x, ng, n, tri),
+            p,
+            rng,
+            &mut |step, rng| match step {
+                Step::Vertex(v) => {
+                    // The segment from a vertex (not from x: light straight from an emitter to x is
+                    // direct light there) is also the cosine half of that vertex's emitter estimate;
+                    // it was traced with probability q, which `throughput` already divides by.
+                    if let (Some(e), true) = (self.emitters, v.bounce > 0) {
+                        sum += v.throughput * e.cosine_hit(self.scene, self.bvh, v.hit, v.dir, v.cos_from);
+                    }
+                    let emitted = self.emitters.map_or(Vec3::ZERO, |e| {
+                        e.sample_weighted(self.scene, self.bvh, v.pos, v.ng, v.ng, v.tri, rng)
+                    });
+                    sum += v.throughput * v.rho * (self.direct(v.pos, v.ng, v.ng, v.tri) + emitted);
+                }
+                // Likewise the sky seen from a vertex is that vertex's direct sky light, sampled by
+                // the cosine; from x it is x's own direct light.
+                Step::Escape {
+                    bounce,
+                    throughput,
+                    dir,
+                } => {
+                    if let (Some(sky), true) = (self.sky, bounce > 0) {
+                        sum += throughput * std::f32::consts::PI * sky.radiance(dir);
+                    }
+                }
+            },
+        );
         sum
     }
 
@@ -367,7 +419,10 @@ impl<'a> ReferenceTracer<'a> {
             };
             let ng = self.bvh.geometric_normal(tri);
             let emitted = match mode {
-                ImageMode::Full => self.emitted(p, ng, ng, tri, params.samples_per_pass, rng),
+                ImageMode::Full => {
+                    self.emitted(p, ng, ng, tri, params.samples_per_pass, rng)
+                        + self.sky_direct(p, ng, ng, tri, params.samples_per_pass, rng)
+                }
                 ImageMode::IndirectOnly => Vec3::ZERO,
             };
             emission
@@ -375,6 +430,96 @@ impl<'a> ReferenceTracer<'a> {
                     * std::f32::consts::FRAC_1_PI
                     * (direct + emitted + self.indirect_mean(p, ng, ng, tri, params, rng))
         }))
+    }
+}
+
+/// One event of a path: it met a surface, or left the scene.
+pub(crate) enum Step<'h> {
+    /// The path's ray `bounce` (0: the one leaving x) met the front of a surface.
+    Vertex(&'h Vertex<'h>),
+    /// Ray `bounce`, sampled with weight `throughput`, left the scene along `dir`.
+    Escape {
+        /// Which ray (0: from x).
+        bounce: u32,
+        /// The path weight the ray was traced with.
+        throughput: Vec3,
+        /// Its unit direction.
+        dir: Vec3,
+    },
+}
+
+/// A surface vertex of a path.
+pub(crate) struct Vertex<'h> {
+    pub bounce: u32,
+    /// The path weight before this vertex's albedo.
+    pub throughput: Vec3,
+    pub hit: &'h crate::Hit,
+    /// The ray's direction and its cosine at the vertex it left.
+    pub dir: Vec3,
+    pub cos_from: f32,
+    pub pos: Vec3,
+    /// Geometric normal (vertices shade with it).
+    pub ng: Vec3,
+    pub tri: u32,
+    pub rho: Vec3,
+}
+
+/// Follows one cosine-sampled path from `start = (x, ng, n, triangle)` (the first cosine about
+/// the shading normal `n`, later ones about geometric normals), with Russian roulette after each
+/// vertex and at most `max_bounces` rays, calling `visit` at every event. A ray below the
+/// geometric surface or meeting a back face ends the path without an event.
+pub(crate) fn walk_path(
+    scene: &Scene,
+    bvh: &Bvh,
+    start: (Vec3, Vec3, Vec3, u32),
+    p: &ReferenceParams,
+    rng: &mut Rng,
+    visit: &mut dyn FnMut(Step, &mut Rng),
+) {
+    let (mut pos, mut ng, mut n, mut tri) = start;
+    let mut throughput = Vec3::ONE;
+    for bounce in 0..p.max_bounces {
+        let dir = cosine_hemisphere(rng.next_vec2(), n);
+        if dir.dot(ng) <= 0.0 {
+            return;
+        }
+        let Some(hit) = bvh.closest_hit(bvh.spawn(pos, ng, dir), dir, f32::INFINITY, tri) else {
+            visit(
+                Step::Escape {
+                    bounce,
+                    throughput,
+                    dir,
+                },
+                rng,
+            );
+            return;
+        };
+        if !hit.front {
+            return;
+        }
+        let cos_from = n.dot(dir);
+        tri = hit.triangle;
+        pos = scene.triangles[tri as usize].point(hit.b1, hit.b2);
+        ng = bvh.geometric_normal(tri);
+        n = ng;
+        let rho = scene.albedo(tri as usize, hit.b1, hit.b2);
+        let v = Vertex {
+            bounce,
+            throughput,
+            hit: &hit,
+            dir,
+            cos_from,
+            pos,
+            ng,
+            tri,
+            rho,
+        };
+        visit(Step::Vertex(&v), rng);
+        let q = p.roulette.survival(rho);
+        if rng.next_f32() >= q {
+            return;
+        }
+        throughput *= rho / q;
     }
 }
 
@@ -409,7 +554,7 @@ fn progressive(
     w.estimate()
 }
 
-fn validate(p: &ReferenceParams) -> Result<(), TraceError> {
+pub(crate) fn validate(p: &ReferenceParams) -> Result<(), TraceError> {
     if p.passes == 0 || p.samples_per_pass == 0 {
         return Err(TraceError::InvalidParameter(
             "passes and samples per pass must be positive".into(),

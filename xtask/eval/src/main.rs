@@ -20,6 +20,7 @@ mod emitters;
 mod measure;
 mod plan;
 mod reference;
+mod sky;
 
 use anyhow::{bail, Context, Result};
 use plan::{Mode, Params, SceneSpec};
@@ -116,7 +117,7 @@ impl Row {
 
 fn usage() -> ! {
     eprintln!(
-        "usage: cargo xtask eval [--quick|--full|--budget|--emitters] [--out DIR]\n       cargo xtask eval compare TEST.exr REFERENCE.exr   (error, energy, shape and local error as ../shared/notes/metrics.md defines them)\n\n  --quick   Cornell box, a handful of settings, small references (CI; dev-profile binaries); default\n  --full    all scenes and sweeps (release binaries; the README's charts)\n  --budget  the error budget of the default bake, one idealised stage at a time (release; the README's budget table)\n  --emitters emissive surfaces (McGuire's CornellBox-Original by its own lamp, two lamps in our Cornell box) against the reference, and the frame cost of a scale change (release)\n  --out DIR output directory (default target/eval-quick, eval-full, eval-budget or eval-emitters)\n\nBakes and references are cached under target/eval/ (delete it to start over)."
+        "usage: cargo xtask eval [--quick|--full|--budget|--emitters|--sky] [--out DIR]\n       cargo xtask eval compare TEST.exr REFERENCE.exr   (error, energy, shape and local error as ../shared/notes/metrics.md defines them)\n\n  --quick   Cornell box, a handful of settings, small references (CI; dev-profile binaries); default\n  --full    all scenes and sweeps (release binaries; the README's charts)\n  --budget  the error budget of the default bake, one idealised stage at a time (release; the README's budget table)\n  --emitters emissive surfaces (McGuire's CornellBox-Original by its own lamp, two lamps in our Cornell box) against the reference, and the frame cost of a scale change (release)\n  --sky     the sky and a sun (our courtyard; Sponza) against the reference, and the frame cost of turning the sky (release)\n  --out DIR output directory (default target/eval-quick, eval-full, eval-budget, eval-emitters or eval-sky)\n\nBakes and references are cached under target/eval/ (delete it to start over)."
     );
     std::process::exit(2);
 }
@@ -140,6 +141,7 @@ fn run(args: &[String]) -> Result<()> {
     let mut mode = Mode::Quick;
     let mut budget = false;
     let mut emitters = false;
+    let mut sky = false;
     let mut out = None;
     let mut it = args.iter();
     while let Some(a) = it.next() {
@@ -152,6 +154,10 @@ fn run(args: &[String]) -> Result<()> {
             }
             "--emitters" => {
                 emitters = true;
+                mode = Mode::Full;
+            }
+            "--sky" => {
+                sky = true;
                 mode = Mode::Full;
             }
             "--out" => out = Some(PathBuf::from(it.next().unwrap_or_else(|| usage()))),
@@ -175,6 +181,7 @@ fn run(args: &[String]) -> Result<()> {
     let out = out.unwrap_or_else(|| {
         target.join(match (budget, mode) {
             _ if emitters => "eval-emitters",
+            _ if sky => "eval-sky",
             (true, _) => "eval-budget",
             (false, Mode::Quick) => "eval-quick",
             (false, Mode::Full) => "eval-full",
@@ -212,6 +219,9 @@ fn run(args: &[String]) -> Result<()> {
     };
     if emitters {
         return table("emitters", emitters::run(&bin, &cache, &root, &out)?);
+    }
+    if sky {
+        return table("sky", sky::run(&bin, &cache, &root, &out)?);
     }
     if budget {
         return table("budget", budget::run(&bin, &cache, &root)?);

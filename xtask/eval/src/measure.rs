@@ -185,3 +185,53 @@ pub fn renderer(
     let r = Renderer::new(ctx, &scene, &mut a, opts).context("creating the renderer")?;
     Ok((r, scene))
 }
+
+/// What a baked light's change costs a frame, on one renderer of `archive` (`frames` timed after
+/// two warm-up frames each, at the scene's default camera, one shadow-mapped point light):
+/// mean frame ms with `change(renderer, frame)` applied before every frame, mean frame ms with
+/// the point light moving every frame instead, and the mean ms of `change` alone. The two series
+/// run twice, interleaved (moved, changed, moved, changed), so that neither gains from going
+/// second on a warmed-up device.
+pub fn change_costs(
+    archive: &std::path::Path,
+    scene_path: &std::path::Path,
+    frames: usize,
+    change: &mut dyn FnMut(&mut Renderer, usize),
+) -> Result<(f64, f64, f64)> {
+    let (mut r, scene) = renderer(archive, scene_path, 32)?;
+    let camera = prm_play::default_camera(&scene);
+    let b = scene.bounds();
+    let light_at = |i: usize| Light::Point {
+        position: b.min + b.extent() * Vec3::new(0.2 + 0.6 * (i % 7) as f32 / 6.0, 0.7, 0.5),
+        intensity: Vec3::splat(0.05 * b.diagonal() * b.diagonal()),
+    };
+    let time = |r: &mut Renderer, f: &mut dyn FnMut(&mut Renderer, usize) -> Vec<Light>| -> Result<f64> {
+        let mut total = 0.0;
+        for i in 0..frames + 2 {
+            let t = std::time::Instant::now();
+            let lights = f(r, i);
+            r.render(&FrameInput {
+                camera,
+                lights: &lights,
+                mode: Mode::Gi,
+            })?;
+            if i >= 2 {
+                total += t.elapsed().as_secs_f64();
+            }
+        }
+        Ok(total * 1e3 / frames as f64)
+    };
+    let (mut alone, mut changed, mut moved) = (0.0, 0.0, 0.0);
+    for _ in 0..2 {
+        moved += time(&mut r, &mut |_, i| vec![light_at(i)])? / 2.0;
+        changed += time(&mut r, &mut |r, i| {
+            let t = std::time::Instant::now();
+            change(r, i);
+            if i >= 2 {
+                alone += t.elapsed().as_secs_f64();
+            }
+            vec![light_at(0)]
+        })? / 2.0;
+    }
+    Ok((changed, moved, alone * 1e3 / (2 * frames) as f64))
+}

@@ -1,0 +1,287 @@
+//! `cargo xtask eval --sky`: the sky (and a sun) against the reference tracer (issue #15's
+//! targets), and what a change of the sky costs a frame.
+//!
+//! Cases, each baked with `prm-bake bake SCENE --sky` and played with `prm-play --headless
+//! --sky ...`, against `prm-bake reference --sky ...` at the same camera, sky and sun:
+//! - `scenes/courtyard` (a yard open to the sky) under a uniform blue sky with a low sun, and
+//!   under a smooth environment map (written here: bright towards one side of the horizon and
+//!   the zenith) turned by 40°, without a sun;
+//! - the Dabrovic Sponza (`../shared/scenes`) under the uniform sky and a high sun, baked with
+//!   `--time-budget 60` (the default budget, 600 s, is more than this eval affords).
+//!
+//! Errors are `../shared/notes/metrics.md`'s (`compare.rs`): the indirect image after a 4×4
+//! downsample and the full image. The frame cost compares, on one renderer, frames whose sky
+//! turns every frame with frames whose point light moves.
+
+use anyhow::Result;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::Instant;
+
+use crate::compare;
+use crate::emitters::run_cmd;
+use crate::plan::{self, SceneSpec};
+
+/// Image size and reference paths per pixel.
+const SIZE: &str = "192x144";
+const SPP: u32 = 1024;
+/// Frames per timing.
+const FRAMES: usize = 24;
+/// The uniform sky (radiance, W/(m²·sr)).
+const BLUE_SKY: &str = "0.4,0.6,1.0";
+
+struct Case {
+    name: &'static str,
+    scene: PathBuf,
+    camera: Option<&'static str>,
+    bake_args: Vec<String>,
+    /// Per row: label, then the lighting arguments both `prm-play` and `prm-bake reference`
+    /// take (`--sky`, `--sky-rotation`, `--light`).
+    rows: Vec<(&'static str, Vec<String>)>,
+}
+
+fn strings(v: &[&str]) -> Vec<String> {
+    v.iter().map(|s| s.to_string()).collect()
+}
+
+/// Writes the courtyard's environment map (EXR, 128 × 64) under `cache`.
+fn gradient_map(cache: &Path) -> Result<PathBuf> {
+    let path = cache.join("sky-gradient.exr");
+    let map = prm_scene::SkyMap::from_fn(128, 64, |d| {
+        glam::Vec3::new(0.3, 0.5, 0.9) * d.y.max(0.0) * 1.5
+            + glam::Vec3::new(1.2, 0.8, 0.4) * (0.5 + 0.5 * d.x).powi(2) * d.y.max(0.0).sqrt()
+    });
+    let rgb: Vec<[f32; 3]> = map.texels.iter().map(|t| t.to_array()).collect();
+    std::fs::create_dir_all(cache)?;
+    prm_scene::write_exr_rgb(&path, map.width, map.height, &rgb)?;
+    Ok(path)
+}
+
+/// Where one case is played and traced: the binaries, the cache, the archive and its scene,
+/// the camera, the image size and the reference's paths per pixel.
+pub(crate) struct Playback<'a> {
+    pub bake_bin: &'a Path,
+    pub play_bin: &'a Path,
+    pub cache: &'a Path,
+    /// Names the reference cache (`cache/refs-NAME`).
+    pub name: &'a str,
+    pub archive: &'a Path,
+    pub scene: &'a Path,
+    pub camera: Option<&'a str>,
+    pub size: &'a str,
+    pub spp: u32,
+}
+
+impl Playback<'_> {
+    /// The archive played (indirect, then gi) with `play_args` into `out`, against the
+    /// reference with `reference_args` (indirect-only, then full): the two comparisons.
+    pub fn compare(
+        &self,
+        play_args: &[String],
+        reference_args: &[String],
+        out: &Path,
+    ) -> Result<(compare::Metrics, compare::Metrics)> {
+        let play = |mode: &str| {
+            play_image(
+                self.play_bin,
+                self.archive,
+                self.camera,
+                play_args,
+                (self.size, mode),
+                &out.join(mode),
+            )
+        };
+        let reference = |indirect| reference_image(self, reference_args, indirect);
+        let indirect = compare::compare_files(&play("indirect")?, &reference(true)?)?;
+        let full = compare::compare_files(&play("gi")?, &reference(false)?)?;
+        Ok((indirect, full))
+    }
+}
+
+/// The table cells of an indirect and a full comparison: indirect error (4×4), at full
+/// resolution, energy, shape, full image error (4×4).
+pub(crate) fn metric_cells(indirect: &compare::Metrics, full: &compare::Metrics) -> String {
+    format!(
+        "{:.2}% | {:.2}% | {:.3} | {:.2}% | {:.2}%",
+        100.0 * indirect.error,
+        100.0 * indirect.error_full,
+        indirect.energy,
+        100.0 * indirect.shape,
+        100.0 * full.error
+    )
+}
+
+/// The reference image of the playback's scene at its camera under the lighting `args` of
+/// `prm-bake reference` (cached under `cache/refs-NAME` by scene stamp, camera, arguments, mode,
+/// size and paths).
+fn reference_image(p: &Playback, args: &[String], indirect: bool) -> Result<PathBuf> {
+    let (bake_bin, cache, name, scene, camera, size, spp) =
+        (p.bake_bin, p.cache, p.name, p.scene, p.camera, p.size, p.spp);
+    let key = format!(
+        "{}|{:?}|{camera:?}|{args:?}|{indirect}|{spp}|{size}",
+        scene.display(),
+        std::fs::metadata(scene).map(|m| m.len()).unwrap_or(0),
+    );
+    let dir = cache.join(format!("refs-{name}"));
+    std::fs::create_dir_all(&dir)?;
+    let path = dir.join(format!("{:016x}.exr", xxhash_rust::xxh3::xxh3_64(key.as_bytes())));
+    if path.is_file() {
+        return Ok(path);
+    }
+    let t = Instant::now();
+    let mut cmd = Command::new(bake_bin);
+    cmd.arg("reference").arg(scene).args(args);
+    if let Some(c) = camera {
+        cmd.args(["--camera", c]);
+    }
+    cmd.args(["--size", size, "--spp", &spp.to_string(), "-o"]).arg(&path);
+    if indirect {
+        cmd.arg("--indirect-only");
+    }
+    run_cmd(cmd, "prm-bake reference")?;
+    println!(
+        "{name}: {} reference ({}) in {:.0} s",
+        scene.display(),
+        if indirect { "indirect" } else { "full" },
+        t.elapsed().as_secs_f64()
+    );
+    Ok(path)
+}
+
+/// Plays `archive` headless at `camera` with the extra `args` into `out` and returns the
+/// frame's EXR.
+fn play_image(
+    play_bin: &Path,
+    archive: &Path,
+    camera: Option<&str>,
+    args: &[String],
+    (size, mode): (&str, &str),
+    out: &Path,
+) -> Result<PathBuf> {
+    let mut cmd = Command::new(play_bin);
+    cmd.arg(archive)
+        .args(["--headless", "--size", size, "--mode", mode])
+        .args(args);
+    if let Some(c) = camera {
+        cmd.args(["--camera", c]);
+    }
+    cmd.arg("--out").arg(out);
+    run_cmd(cmd, "prm-play --headless")?;
+    Ok(out.join("frame0000.exr"))
+}
+
+/// Mean frame times (ms) on one renderer of `archive`: the sky turning (and its intensity
+/// changing) every frame, and a point light moving every frame instead; and the mean time of the
+/// sky change alone (`Renderer::set_sky`: CPU dot products and uploads).
+fn frame_costs(archive: &Path, scene_path: &Path) -> Result<(f64, f64, f64)> {
+    let mut sky = prm_scene::Sky::parse(BLUE_SKY)?;
+    crate::measure::change_costs(archive, scene_path, FRAMES, &mut |r, i| {
+        sky.rotation = i as f32 * 0.3;
+        sky.intensity = 0.5 + 0.5 * (i % 5) as f32 / 4.0;
+        r.set_sky(&sky).expect("the archive has the sky's transfer");
+    })
+}
+
+/// Runs the sky cases; returns the Markdown table.
+pub fn run(bake_bin: &Path, cache: &Path, root: &Path, out: &Path) -> Result<String> {
+    let play_bin = bake_bin.with_file_name(format!("prm-play{}", std::env::consts::EXE_SUFFIX));
+    let map = gradient_map(cache)?;
+    let mut cases = vec![Case {
+        name: "courtyard",
+        // The glTF: it has the camera.
+        scene: root.join("scenes/courtyard/courtyard.gltf"),
+        camera: None,
+        bake_args: strings(&["--sky"]),
+        rows: vec![
+            (
+                "blue sky + low sun",
+                strings(&["--sky", BLUE_SKY, "--light", "dir:-0.3,-0.5,0.8:3,2.8,2.5"]),
+            ),
+            (
+                "map turned 40°, no sun",
+                vec![
+                    "--sky".into(),
+                    map.display().to_string(),
+                    "--sky-rotation".into(),
+                    "40".into(),
+                ],
+            ),
+        ],
+    }];
+    let sponza = root.join("../shared/scenes/sponza-dabrovic/sponza.obj");
+    if sponza.is_file() {
+        cases.push(Case {
+            name: "sponza",
+            scene: sponza,
+            camera: Some("14,3,0:-10,5,0:60"),
+            bake_args: strings(&["--sky", "--time-budget", "60"]),
+            rows: vec![
+                (
+                    "blue sky + high sun",
+                    strings(&["--sky", BLUE_SKY, "--light", "dir:-0.25,-0.9,0.35:6,5.6,5"]),
+                ),
+                ("blue sky alone", strings(&["--sky", BLUE_SKY])),
+                (
+                    "high sun alone (no --sky)",
+                    strings(&["--light", "dir:-0.25,-0.9,0.35:6,5.6,5"]),
+                ),
+            ],
+        });
+        // The same bake with four times the sky's paths: how much of the error is their noise.
+        cases.push(Case {
+            name: "sponza, --sky-paths 1024",
+            scene: cases[1].scene.clone(),
+            camera: cases[1].camera,
+            bake_args: strings(&["--sky", "--sky-paths", "1024", "--time-budget", "60"]),
+            rows: vec![("blue sky alone", strings(&["--sky", BLUE_SKY]))],
+        });
+    } else {
+        println!("sky: {} is absent: sponza skipped", sponza.display());
+    }
+    let mut md = String::from(
+        "| case | lighting | indirect error (4×4) | full res. | energy | shape | full image error (4×4) | bake s (sky step) | frame ms: sky turns / light moves |\n| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n",
+    );
+    for case in &cases {
+        let spec = SceneSpec::new(
+            &format!("sky-{}", case.name.replace([' ', ','], "-")),
+            case.scene.clone(),
+            vec![],
+            Default::default(),
+            SPP,
+        );
+        let t = Instant::now();
+        let baked = plan::bake(bake_bin, cache, &spec, &case.bake_args, None, false)?;
+        let timing = |k: &str| baked.report["timings"][k].as_f64();
+        let bake_s = timing("total").unwrap_or(t.elapsed().as_secs_f64());
+        let sky_s = timing("sky").unwrap_or(f64::NAN);
+        println!("sky: {}: baked ({bake_s:.1} s, sky {sky_s:.1} s)", case.name);
+        let (turned_ms, moved_ms, alone_ms) = frame_costs(&baked.archive, &case.scene)?;
+        for (row, (label, lighting)) in case.rows.iter().enumerate() {
+            let playback = Playback {
+                bake_bin,
+                play_bin: &play_bin,
+                cache,
+                name: "sky",
+                archive: &baked.archive,
+                scene: &case.scene,
+                camera: case.camera,
+                size: SIZE,
+                spp: SPP,
+            };
+            let (mi, mf) = playback.compare(lighting, lighting, &out.join(format!("{}-{row}", spec.name)))?;
+            let _ = writeln!(
+                md,
+                "| {} | {label} | {} | {bake_s:.1} ({sky_s:.1}) | {} |",
+                case.name,
+                metric_cells(&mi, &mf),
+                if row == 0 {
+                    format!("{turned_ms:.1} / {moved_ms:.1} ({alone_ms:.2} for the sky)")
+                } else {
+                    String::new()
+                }
+            );
+        }
+    }
+    Ok(md)
+}
