@@ -23,10 +23,12 @@ import sys
 
 MAGIC = b"\x89PRM\r\n\x1a\n"
 SUPPORTED_MAJOR = 1
-SUPPORTED_MINOR = 3
+SUPPORTED_MINOR = 4
 KINDS = {1: "metadata", 2: "atlas", 3: "entries", 4: "clusters", 5: "panes", 6: "entry_energy",
-         7: "emitters", 8: "sky"}
-OPTIONAL = {6, 7, 8}
+         7: "emitters", 8: "sky", 9: "probes"}
+OPTIONAL = {6, 7, 8, 9}
+MAX_PROBES = 1 << 16
+MAX_PROBE_CELLS = 1 << 24
 SH_COEFFS = 9
 MAX_EMITTER_GROUPS = 256
 MAX_RESOLUTION = 8192
@@ -295,9 +297,10 @@ class Reader:
             if a[1] > b[0]:
                 raise InvalidArchive("overlapping sections")
         by_kind = {}
-        # Kind 7 is the emitters section from 1.2 on, kind 8 the sky from 1.3 on; before,
-        # they were unassigned.
-        known = {k: v for k, v in KINDS.items() if (k != 7 or minor >= 2) and (k != 8 or minor >= 3)}
+        # Kind 7 is the emitters section from 1.2 on, kind 8 the sky from 1.3 on, kind 9 the
+        # probes from 1.4 on; before, they were unassigned.
+        since = {7: 2, 8: 3, 9: 4}
+        known = {k: v for k, v in KINDS.items() if minor >= since.get(k, 0)}
         for s in sections:
             if s["kind"] in known:
                 if s["kind"] in by_kind:
@@ -347,7 +350,47 @@ class Reader:
         self.sky = None
         if 8 in by_kind:
             self.parse_sky(by_kind[8])
+        self.probes = None
+        if 9 in by_kind:
+            self.parse_probes(by_kind[9])
         self.parse_panes(by_kind[5])
+
+    def parse_probes(self, s):
+        # 1.4: 48-byte header (probes N, clusters C, coefficient count = 9, flags = 0, grid
+        # nx ny nz, reserved, origin xyz, spacing), N records (cell u32, position 3 f32), then
+        # C x N transfers of 9 RGB binary16, cluster by cluster.
+        c_count = len(self.clusters)
+        raw = self.load(s, 48 + (16 + 54 * c_count) * MAX_PROBES)
+        head = raw[:48]
+        if len(head) < 48:
+            raise InvalidArchive("probes: shorter than its header")
+        n, c, coeffs, flags, nx, ny, nz, reserved = struct.unpack_from("<8I", head, 0)
+        origin = list(struct.unpack_from("<3f", head, 32))
+        spacing, = struct.unpack_from("<f", head, 44)
+        if coeffs != SH_COEFFS or flags or (self.strict and reserved):
+            raise InvalidArchive("probes: unknown basis, flags or a non-zero reserved field")
+        cells = nx * ny * nz
+        if not 1 <= n <= MAX_PROBES or c != c_count or not 1 <= cells <= MAX_PROBE_CELLS or 0 in (nx, ny, nz):
+            raise InvalidArchive("probes: probe count, cluster count or grid out of range")
+        if not (spacing > 0 and spacing != float("inf")) or any(v != v or abs(v) == float("inf") for v in origin):
+            raise InvalidArchive("probes: origin or spacing not finite and positive")
+        size = 48 + 16 * n + 54 * n * c
+        if len(raw) != size:
+            raise InvalidArchive("probes: raw size differs from what the header gives")
+        recs = [struct.unpack_from("<I3f", raw, 48 + 16 * i) for i in range(n)]
+        cell_list = [r[0] for r in recs]
+        if any(a >= b for a, b in zip(cell_list, cell_list[1:])) or cell_list[-1] >= cells:
+            raise InvalidArchive("probes: cells must increase strictly and lie in the grid")
+        if any(v != v or abs(v) == float("inf") for r in recs for v in r[1:]):
+            raise InvalidArchive("probes: positions must be finite")
+        m = 27 * n * c
+        t = struct.unpack_from(f"<{m}e", raw, 48 + 16 * n)
+        if any(v != v or abs(v) == float("inf") for v in t):
+            raise InvalidArchive("probes: values must be finite")
+        self.probes = dict(dims=[nx, ny, nz], origin=origin, spacing=spacing, cells=cell_list,
+                           positions=[list(r[1:]) for r in recs],
+                           transfer=[[list(t[27 * i + 3 * k:27 * i + 3 * k + 3]) for k in range(SH_COEFFS)]
+                                     for i in range(n * c)])
 
     def parse_sky(self, s):
         # 1.3: header (resolution, coefficient count = 9, flags = 0, reserved), then per texel
@@ -558,6 +601,7 @@ class Reader:
             entry_energy=self.entry_energy,
             emitters=self.emitters,
             sky=self.sky,
+            probes=self.probes,
             clusters=self.clusters,
             tile_filter=self.tile_filter,
             stored_tiles=sum(1 for t in self.tiles if t[1]),

@@ -12,8 +12,8 @@ pub const MAGIC: [u8; 8] = *b"\x89PRM\r\n\x1a\n";
 pub const VERSION_MAJOR: u16 = 1;
 /// Highest minor version this library writes (and knows); a reader accepts every minor. The
 /// writer writes the lowest minor whose features an archive uses: 1.1 adds the entry energy
-/// section, 1.2 the emitters section, 1.3 the sky section.
-pub const VERSION_MINOR: u16 = 3;
+/// section, 1.2 the emitters section, 1.3 the sky section, 1.4 the probes section.
+pub const VERSION_MINOR: u16 = 4;
 
 /// Size of the fixed file header.
 pub const HEADER_SIZE: usize = 64;
@@ -52,6 +52,9 @@ pub mod kind {
     pub const EMITTERS: u32 = 7;
     /// The sky's spherical-harmonic transfer at the atlas texels (since 1.3, optional).
     pub const SKY: u32 = 8;
+    /// Irradiance probes and every cluster's spherical-harmonic transfer to them (since 1.4,
+    /// optional).
+    pub const PROBES: u32 = 9;
     /// First kind reserved for private extensions (never assigned by the spec).
     pub const PRIVATE_FIRST: u32 = 0x8000_0000;
 
@@ -66,6 +69,7 @@ pub mod kind {
             ENTRY_ENERGY => Some("entry_energy"),
             EMITTERS => Some("emitters"),
             SKY => Some("sky"),
+            PROBES => Some("probes"),
             _ => None,
         }
     }

@@ -15,6 +15,8 @@
 //!   entry points and the atlas texels per unit of their run-time scale.
 //! * [`SkyTransfer`]: the optional sky section (1.3), the sky's transfer at the atlas texels
 //!   in the spherical-harmonic basis [`sh_basis`], which [`sh_rotate_y`] turns about the vertical.
+//! * [`Probes`]: the optional probes section (1.4), irradiance probes on a grid in the scene's
+//!   empty space and every cluster's transfer to them, so the run-time weights light them too.
 //! * [`encode_rgb9e5`] / [`decode_rgb9e5`] implement the texel encoding,
 //!   bit-exact with WebGPU's `rgb9e5ufloat`.
 #![warn(missing_docs)]
@@ -24,6 +26,7 @@ mod error;
 mod filter;
 mod layout;
 mod metadata;
+mod probes;
 mod reader;
 mod rgb9e5;
 mod sections;
@@ -39,6 +42,7 @@ pub use error::{Error, Result};
 pub use filter::TileFilter;
 pub use layout::{checksum, compression, kind, limits, MAGIC, VERSION_MAJOR, VERSION_MINOR};
 pub use metadata::{Generator, Metadata, Units};
+pub use probes::{sh_irradiance, ProbeGrid, Probes, AXIS_NORMALS, MAX_PROBES, MAX_PROBE_CELLS};
 pub use reader::{pane_energy_peak, Archive, ArchiveInfo, SectionInfo, VerifyReport};
 pub use rgb9e5::{
     decode_rgb9e5, decode_rgb9e5_slice, encode_rgb9e5, encode_rgb9e5_slice, RGB9E5_MAX, RGB9E5_MAX_RELATIVE_ERROR,

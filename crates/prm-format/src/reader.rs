@@ -19,6 +19,7 @@ use crate::layout::{
     SECTION_RECORD_SIZE, TEXEL_FORMAT_RGB9E5, TILE_RECORD_SIZE,
 };
 use crate::metadata::Metadata;
+use crate::probes::Probes;
 use crate::rgb9e5::decode_rgb9e5;
 use crate::sections::{
     decode_clusters, decode_entries, decode_entry_energy, entries_covered, validate_entries_clusters, AtlasSection,
@@ -99,6 +100,7 @@ pub struct Archive<R> {
     entry_energy: Option<Vec<[f32; 3]>>,
     emitters: Vec<EmitterGroup>,
     sky: Option<SkyTransfer>,
+    probes: Option<Probes>,
     clusters: Vec<Cluster>,
     tiles: Vec<TileRecord>,
     panes_offset: u64,
@@ -258,6 +260,12 @@ impl<R: Read + Seek> Archive<R> {
         let sky_rec = sky_recs.next().cloned();
         if sky_recs.next().is_some() {
             return Err(Error::inconsistent("sky section appears more than once"));
+        }
+        // Kind 9 is the probes section from 1.4 on, likewise.
+        let mut probe_recs = records.iter().filter(|r| r.kind == kind::PROBES && header.minor >= 4);
+        let probes_rec = probe_recs.next().cloned();
+        if probe_recs.next().is_some() {
+            return Err(Error::inconsistent("probes section appears more than once"));
         }
 
         // Every section's raw size is checked against what the counts read so
@@ -426,6 +434,11 @@ impl<R: Read + Seek> Archive<R> {
             None => None,
             Some(rec) => Some(read_sky(&mut src, rec, strict, atlas.resolution)?),
         };
+        // Probes (1.4, optional): sizes fixed by its header and the cluster count.
+        let probes = match &probes_rec {
+            None => None,
+            Some(rec) => Some(read_probes(&mut src, rec, strict, clusters.len())?),
+        };
 
         let info = ArchiveInfo {
             major: header.major,
@@ -459,6 +472,7 @@ impl<R: Read + Seek> Archive<R> {
             entry_energy,
             emitters,
             sky,
+            probes,
             clusters,
             tiles,
             panes_offset: panes_rec.offset,
@@ -495,6 +509,12 @@ impl<R: Read + Seek> Archive<R> {
     /// The sky's transfer at the atlas texels (formats/prm.md §5.3), when the bake made it.
     pub fn sky(&self) -> Option<&SkyTransfer> {
         self.sky.as_ref()
+    }
+
+    /// The probes and every cluster's transfer to them (formats/prm.md §5.4), when the bake
+    /// placed them.
+    pub fn probes(&self) -> Option<&Probes> {
+        self.probes.as_ref()
     }
 
     /// Every entry's pane energy (RGB, the sum over the atlas of the indirect irradiance its
@@ -1030,4 +1050,39 @@ fn read_atlas<R: Read + Seek>(src: &mut R, rec: &SectionRecord, strict: bool) ->
     };
     atlas.validate().map_err(Error::inconsistent)?;
     Ok(atlas)
+}
+
+/// Reads the probes section: its 48-byte header first, whose probe count and the archive's
+/// cluster count fix the raw size, checked before the rest is decompressed.
+fn read_probes<R: Read + Seek>(src: &mut R, rec: &SectionRecord, strict: bool, clusters: usize) -> Result<Probes> {
+    use crate::probes::{self, PROBES_HEADER_SIZE, PROBE_RECORD_SIZE, PROBE_TRANSFER_BYTES};
+    let section = open_section(src, rec)?;
+    if section.record.raw_size < PROBES_HEADER_SIZE as u64 {
+        return Err(Error::inconsistent(format!(
+            "probes section has {} raw bytes, less than its {PROBES_HEADER_SIZE}-byte header",
+            section.record.raw_size
+        )));
+    }
+    let mut raw = section.raw()?;
+    let mut head = [0u8; PROBES_HEADER_SIZE];
+    raw.read_exact(&mut head)?;
+    let (n, c, grid) = probes::decode_header(&head, strict).map_err(Error::inconsistent)?;
+    if c as usize != clusters {
+        return Err(Error::inconsistent(format!(
+            "probes section is for {c} clusters, the archive has {clusters}"
+        )));
+    }
+    let expected = probes::raw_size_for(u64::from(n), clusters as u64).unwrap_or(u64::MAX);
+    section.expect_raw_size(expected, || format!("{n} probes, {clusters} clusters"))?;
+    let records = raw.records(n as usize, PROBE_RECORD_SIZE, probes::decode_records)?;
+    let transfer = raw.records(n as usize * clusters, PROBE_TRANSFER_BYTES, probes::decode_transfer)?;
+    raw.finish()?;
+    let out = Probes {
+        grid,
+        cells: records.iter().map(|r| r.0).collect(),
+        positions: records.iter().map(|r| r.1).collect(),
+        transfer,
+    };
+    probes::validate(&out, clusters).map_err(Error::inconsistent)?;
+    Ok(out)
 }

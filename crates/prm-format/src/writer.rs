@@ -360,6 +360,7 @@ pub struct ArchiveWriter {
     entry_energy: Option<Vec<[f32; 3]>>,
     emitters: Option<Vec<crate::EmitterGroup>>,
     sky: Option<crate::SkyTransfer>,
+    probes: Option<crate::Probes>,
     custom: Vec<(u32, Vec<u8>)>,
     records: Vec<SectionRecord>,
     resolution: u32,
@@ -456,6 +457,7 @@ impl ArchiveWriter {
             entry_energy: None,
             emitters: None,
             sky: None,
+            probes: None,
             custom: Vec::new(),
             records: Vec::new(),
             resolution: atlas.resolution,
@@ -557,6 +559,15 @@ impl ArchiveWriter {
     pub fn set_sky(&mut self, sky: crate::SkyTransfer) -> Result<()> {
         crate::sky::validate(&sky, self.resolution).map_err(Error::InvalidInput)?;
         self.sky = Some(sky);
+        Ok(())
+    }
+
+    /// Records the probes and every cluster's transfer to them (formats/prm.md §5.4): one
+    /// transfer per cluster of the table and probe, cluster by cluster, all finite. An archive
+    /// with them is 1.4.
+    pub fn set_probes(&mut self, probes: crate::Probes) -> Result<()> {
+        crate::probes::validate(&probes, self.clusters.len()).map_err(Error::InvalidInput)?;
+        self.probes = Some(probes);
         Ok(())
     }
 
@@ -738,6 +749,10 @@ impl ArchiveWriter {
         if let Some(sky) = self.sky.take() {
             self.write_section(kind::SKY, &crate::sky::encode(&sky, self.resolution))?;
             minor = 3;
+        }
+        if let Some(probes) = self.probes.take() {
+            self.write_section(kind::PROBES, &crate::probes::encode(&probes))?;
+            minor = 4;
         }
         for (k, data) in std::mem::take(&mut self.custom) {
             self.write_section(k, &data)?;

@@ -763,6 +763,8 @@ fn python_reader_check(path: &Path, filter: TileFilter) -> bool {
     w.set_emitters(groups.clone()).unwrap();
     let sky = sky_transfer(&s);
     w.set_sky(sky.clone()).unwrap();
+    let probes = probe_set(&s);
+    w.set_probes(probes.clone()).unwrap();
     for p in &s.panes {
         w.add_pane(p).unwrap();
     }
@@ -796,13 +798,13 @@ fn python_reader_check(path: &Path, filter: TileFilter) -> bool {
     );
     let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     let mut a = Archive::open(path).unwrap();
-    assert_eq!(j["version"], "1.3");
+    assert_eq!(j["version"], "1.4");
     assert_eq!(j["checksums_verified"], true);
     assert_eq!(j["tile_filter"], filter.code());
     assert_eq!(j["resolution"], 16);
     assert_eq!(j["tile_size"], 8);
     assert_eq!(j["covered_texels"], a.atlas().covered_texels());
-    assert_eq!(j["sections"].as_array().unwrap().len(), 9);
+    assert_eq!(j["sections"].as_array().unwrap().len(), 10);
     let je = j["emitters"].as_array().unwrap();
     assert_eq!(je.len(), groups.len());
     let f3 = |v: &serde_json::Value| [0, 1, 2].map(|k| v[k].as_f64().unwrap() as f32);
@@ -840,6 +842,25 @@ fn python_reader_check(path: &Path, filter: TileFilter) -> bool {
         a.sky().unwrap().indirect.iter().map(|t| t.to_vec()).collect::<Vec<_>>()
     );
     assert_eq!(a.sky(), Some(&sky));
+    let jp = &j["probes"];
+    let u = |v: &serde_json::Value| v.as_u64().unwrap() as u32;
+    let back = Probes {
+        grid: ProbeGrid {
+            dims: [0, 1, 2].map(|k| u(&jp["dims"][k])),
+            origin: f3(&jp["origin"]),
+            spacing: f(&jp["spacing"]),
+        },
+        cells: jp["cells"].as_array().unwrap().iter().map(u).collect(),
+        positions: jp["positions"].as_array().unwrap().iter().map(f3).collect(),
+        transfer: jp["transfer"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|t| std::array::from_fn(|c| f3(&t[c])))
+            .collect(),
+    };
+    assert_eq!(a.probes(), Some(&back));
+    assert_eq!(a.probes(), Some(&probes));
     let je: Vec<[f32; 3]> = j["entry_energy"]
         .as_array()
         .unwrap()
@@ -1699,4 +1720,76 @@ fn sky_round_trip_and_hostile_headers_are_refused() {
         raw,
     );
     assert_refused_in_bounded_memory(&m, "resolution 16");
+}
+
+// ---------------------------------------------------------------- probes (1.4)
+
+fn probe_set(s: &Scene) -> Probes {
+    let grid = ProbeGrid {
+        dims: [3, 2, 2],
+        origin: [-1.0, 0.0, 0.0],
+        spacing: 0.5,
+    };
+    let cells = vec![0, 1, 4, 7, 11];
+    let positions = cells.iter().map(|&c| grid.cell_centre(c)).collect();
+    let transfer = (0..s.clusters.len() * cells.len())
+        .map(|i| std::array::from_fn(|c| [(i % 7) as f32 * 0.5, -0.25 * c as f32, 2.0]))
+        .collect();
+    Probes {
+        grid,
+        cells,
+        positions,
+        transfer,
+    }
+}
+
+/// The probes section round-trips exactly (its values are exact in f16 here) and makes the
+/// archive 1.4; the reader refuses a header for another cluster count or basis, and a declared
+/// size its counts do not give, before it decompresses the rest.
+#[test]
+fn probes_round_trip_and_hostile_headers_are_refused() {
+    let dir = test_dir("probes");
+    let s = scene(16, 8, 3, 13);
+    let probes = probe_set(&s);
+    let path = dir.join("probes.prm");
+    let mut w = ArchiveWriter::create(&path, s.metadata.clone(), &s.atlas, &s.entries, &s.clusters).unwrap();
+    let mut wrong = probes.clone();
+    wrong.transfer.pop();
+    assert!(w.set_probes(wrong).is_err());
+    w.set_probes(probes.clone()).unwrap();
+    for p in &s.panes {
+        w.add_pane(p).unwrap();
+    }
+    w.finish().unwrap();
+    let bytes = std::fs::read(&path).unwrap();
+    let a = Archive::from_bytes(&bytes).unwrap();
+    assert_eq!(a.info().minor, 4);
+    assert_eq!(a.probes(), Some(&probes));
+    let (plain, _) = small_archive("probes-none", WriterOptions::default());
+    assert!(Archive::from_bytes(&plain).unwrap().probes().is_none());
+
+    let header = |n: u32, clusters: u32, coeffs: u32| {
+        let mut d = Vec::new();
+        for v in [n, clusters, coeffs, 0, 3, 2, 2, 0] {
+            d.extend_from_slice(&v.to_le_bytes());
+        }
+        for v in [-1.0f32, 0.0, 0.0, 0.5] {
+            d.extend_from_slice(&v.to_le_bytes());
+        }
+        d
+    };
+    let c = s.clusters.len() as u32;
+    for (head, what) in [
+        (header(5, c + 1, 9), "clusters"),
+        (header(5, c, 16), "coefficients"),
+        (header(5, c, 9), "5 probes"),
+        (header(MAX_PROBES, c, 9), "probes"),
+    ] {
+        let raw = 64u64 << 20;
+        let mut data = head.clone();
+        data.resize(raw as usize, 0);
+        let stream = zstd::bulk::compress(&data, 3).unwrap();
+        let m = replace_section(&bytes, kind::PROBES, &stream, compression::ZSTD, raw);
+        assert_refused_in_bounded_memory(&m, what);
+    }
 }

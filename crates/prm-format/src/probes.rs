@@ -1,0 +1,361 @@
+//! The probes section (format 1.4): irradiance probes in the scene's empty space, baked as extra
+//! exit points of the same panes. For every cluster `c` and probe `p` it stores the nine
+//! spherical-harmonic coefficients (RGB, basis [`crate::sh_basis`]) of the indirect irradiance
+//! the cluster's VPLs give the probe per unit weight, already convolved with the clamped cosine:
+//! with the run time's cluster weights `w_c`, a surface of unit normal `n` at the probe receives
+//! `E(n) = Σ_c w_c ⊙ Σ_i T[c][p][i] · Y_i(n)`.
+//!
+//! Layout (formats/prm.md §5.4), little-endian: a 48-byte header (probe count `N`, cluster
+//! count `C`, coefficient count = [`SH_COEFFS`], flags = 0, grid dimensions `nx, ny, nz`,
+//! reserved = 0, grid origin `[f32; 3]`, cell spacing `f32`), then `N` probe records of 16 bytes
+//! (cell index `u32`, position `[f32; 3]`), then `C × N` transfers of 9 RGB `f16` (54 bytes),
+//! cluster by cluster. Cell `(i, j, k)` is index `i + nx·(j + ny·k)`, its centre
+//! `origin + spacing·(i + ½, j + ½, k + ½)`; cells without a probe (inside geometry) are absent,
+//! and the indices increase strictly. `f16` for the same reason as the sky section: noise that
+//! does not compress, carried far above its precision.
+
+use crate::layout::{Cursor, PutLe};
+use crate::sh::SH_COEFFS;
+
+/// Size of the probes section's fixed header.
+pub const PROBES_HEADER_SIZE: usize = 48;
+/// Bytes of one probe record.
+pub(crate) const PROBE_RECORD_SIZE: usize = 16;
+/// Bytes of one cluster's transfer to one probe.
+pub(crate) const PROBE_TRANSFER_BYTES: usize = SH_COEFFS * 6;
+/// Most probes a section may hold.
+pub const MAX_PROBES: u32 = 1 << 16;
+/// Most grid cells a section may span.
+pub const MAX_PROBE_CELLS: u64 = 1 << 24;
+
+/// The regular grid the probes sit on.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ProbeGrid {
+    /// Cells along x, y and z (each at least 1).
+    pub dims: [u32; 3],
+    /// World position of the grid's lower corner.
+    pub origin: [f32; 3],
+    /// Edge of a (cubic) cell, positive.
+    pub spacing: f32,
+}
+
+impl ProbeGrid {
+    /// Number of cells.
+    pub fn cells(&self) -> u64 {
+        self.dims.iter().map(|&d| u64::from(d)).product()
+    }
+
+    /// Centre of cell `index` (`i + nx·(j + ny·k)`).
+    pub fn cell_centre(&self, index: u32) -> [f32; 3] {
+        let [nx, ny, _] = self.dims;
+        let ijk = [index % nx, (index / nx) % ny, index / (nx * ny)];
+        std::array::from_fn(|a| self.origin[a] + self.spacing * (ijk[a] as f32 + 0.5))
+    }
+}
+
+/// The probes of an archive and every cluster's transfer to them.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Probes {
+    /// The grid.
+    pub grid: ProbeGrid,
+    /// Each probe's cell, strictly increasing.
+    pub cells: Vec<u32>,
+    /// Each probe's world position (its cell's centre, or moved off a surface).
+    pub positions: Vec<[f32; 3]>,
+    /// Cluster-major: `transfer[c * N + p]` is cluster `c`'s irradiance coefficients at probe `p`
+    /// per unit weight.
+    pub transfer: Vec<[[f32; 3]; SH_COEFFS]>,
+}
+
+impl Probes {
+    /// Number of probes.
+    pub fn len(&self) -> usize {
+        self.cells.len()
+    }
+
+    /// Whether there are none.
+    pub fn is_empty(&self) -> bool {
+        self.cells.is_empty()
+    }
+
+    /// Number of clusters the transfer covers.
+    pub fn clusters(&self) -> usize {
+        self.transfer.len().checked_div(self.len()).unwrap_or(0)
+    }
+
+    /// Every probe's irradiance coefficients under the cluster weights `weights` (one RGB
+    /// weight per cluster): `Σ_c w_c ⊙ T[c][p]`.
+    pub fn irradiance_sh(&self, weights: &[[f32; 3]]) -> Vec<[[f32; 3]; SH_COEFFS]> {
+        let n = self.len();
+        let mut out = vec![[[0.0f32; 3]; SH_COEFFS]; n];
+        for (c, w) in weights.iter().enumerate().take(self.clusters()) {
+            for (p, o) in out.iter_mut().enumerate() {
+                for (oi, ti) in o.iter_mut().zip(&self.transfer[c * n + p]) {
+                    for k in 0..3 {
+                        oi[k] += w[k] * ti[k];
+                    }
+                }
+            }
+        }
+        out
+    }
+}
+
+/// The six axis directions, +X −X +Y −Y +Z −Z: the normals probes are compared and summarised at.
+pub const AXIS_NORMALS: [[f32; 3]; 6] = [
+    [1.0, 0.0, 0.0],
+    [-1.0, 0.0, 0.0],
+    [0.0, 1.0, 0.0],
+    [0.0, -1.0, 0.0],
+    [0.0, 0.0, 1.0],
+    [0.0, 0.0, -1.0],
+];
+
+/// The irradiance (RGB) on a surface of unit normal `n` from irradiance coefficients `coeffs`.
+pub fn sh_irradiance(coeffs: &[[f32; 3]; SH_COEFFS], n: [f32; 3]) -> [f32; 3] {
+    let y = crate::sh::sh_basis(n);
+    let mut e = [0.0f32; 3];
+    for (c, yi) in coeffs.iter().zip(y) {
+        for k in 0..3 {
+            e[k] += c[k] * yi;
+        }
+    }
+    e
+}
+
+/// Raw size of a probes section, `None` on overflow.
+pub(crate) fn raw_size_for(probes: u64, clusters: u64) -> Option<u64> {
+    probes
+        .checked_mul(clusters)?
+        .checked_mul(PROBE_TRANSFER_BYTES as u64)?
+        .checked_add(probes.checked_mul(PROBE_RECORD_SIZE as u64)?)?
+        .checked_add(PROBES_HEADER_SIZE as u64)
+}
+
+/// Checks the grid's own fields.
+fn validate_grid(grid: &ProbeGrid) -> Result<(), String> {
+    if grid.dims.contains(&0) || grid.cells() > MAX_PROBE_CELLS {
+        return Err(format!(
+            "probe grid {:?} is empty or has more than {MAX_PROBE_CELLS} cells",
+            grid.dims
+        ));
+    }
+    let finite = grid.spacing.is_finite() && grid.spacing > 0.0 && grid.origin.iter().all(|v| v.is_finite());
+    if !finite {
+        return Err(format!(
+            "probe grid origin {:?} or spacing {} is not finite and positive",
+            grid.origin, grid.spacing
+        ));
+    }
+    Ok(())
+}
+
+/// Checks `probes` against the archive's cluster count.
+pub(crate) fn validate(probes: &Probes, clusters: usize) -> Result<(), String> {
+    validate_grid(&probes.grid)?;
+    let n = probes.len();
+    if n == 0 || n > MAX_PROBES as usize || probes.positions.len() != n {
+        return Err(format!(
+            "{n} probe cells and {} positions: need as many, between 1 and {MAX_PROBES}",
+            probes.positions.len()
+        ));
+    }
+    if probes.transfer.len() != n * clusters {
+        return Err(format!(
+            "probe transfer has {} values, {clusters} clusters × {n} probes need {}",
+            probes.transfer.len(),
+            n * clusters
+        ));
+    }
+    let cells = probes.grid.cells();
+    if probes.cells.windows(2).any(|w| w[0] >= w[1]) || u64::from(*probes.cells.last().unwrap_or(&0)) >= cells {
+        return Err("probe cells must increase strictly and lie in the grid".to_string());
+    }
+    if let Some(p) = probes.positions.iter().position(|v| !v.iter().all(|x| x.is_finite())) {
+        return Err(format!("probe {p}'s position is not finite"));
+    }
+    let storable = |v: &f32| v.abs() <= crate::sky::SKY_MAX_VALUE;
+    if let Some(i) = probes.transfer.iter().position(|t| !t.iter().flatten().all(storable)) {
+        return Err(format!(
+            "probe transfer {i} (cluster {}, probe {}) is not finite within ±{}",
+            i / n,
+            i % n,
+            crate::sky::SKY_MAX_VALUE
+        ));
+    }
+    Ok(())
+}
+
+/// Encodes validated probes.
+pub(crate) fn encode(probes: &Probes) -> Vec<u8> {
+    let n = probes.len() as u64;
+    let clusters = probes.clusters() as u64;
+    let mut b = Vec::with_capacity(raw_size_for(n, clusters).unwrap_or(0) as usize);
+    b.put_u32(n as u32);
+    b.put_u32(clusters as u32);
+    b.put_u32(SH_COEFFS as u32);
+    b.put_u32(0);
+    for d in probes.grid.dims {
+        b.put_u32(d);
+    }
+    b.put_u32(0);
+    for o in probes.grid.origin {
+        b.put_f32(o);
+    }
+    b.put_f32(probes.grid.spacing);
+    for (cell, pos) in probes.cells.iter().zip(&probes.positions) {
+        b.put_u32(*cell);
+        for v in pos {
+            b.put_f32(*v);
+        }
+    }
+    for v in probes.transfer.iter().flatten().flatten() {
+        b.extend_from_slice(&half::f16::from_f32(*v).to_le_bytes());
+    }
+    b
+}
+
+/// Parses and checks the header: probe count, cluster count and grid. The caller checks the
+/// cluster count against the archive.
+pub(crate) fn decode_header(head: &[u8], strict: bool) -> Result<(u32, u32, ProbeGrid), String> {
+    let err = |e: crate::Error| e.to_string();
+    let mut c = Cursor::new(head, "probes");
+    let n = c.u32().map_err(err)?;
+    let clusters = c.u32().map_err(err)?;
+    let coeffs = c.u32().map_err(err)?;
+    let flags = c.u32().map_err(err)?;
+    let dims = [c.u32().map_err(err)?, c.u32().map_err(err)?, c.u32().map_err(err)?];
+    let reserved = c.u32().map_err(err)?;
+    let origin = c.vec3().map_err(err)?;
+    let spacing = c.f32().map_err(err)?;
+    if coeffs != SH_COEFFS as u32 {
+        return Err(format!(
+            "probes section has {coeffs} coefficients per probe, this reader knows {SH_COEFFS}"
+        ));
+    }
+    if flags != 0 || (strict && reserved != 0) {
+        return Err(format!(
+            "probes section has unknown flags {flags:#x} or a non-zero reserved field"
+        ));
+    }
+    if n == 0 || n > MAX_PROBES {
+        return Err(format!("probes section has {n} probes, not between 1 and {MAX_PROBES}"));
+    }
+    let grid = ProbeGrid { dims, origin, spacing };
+    validate_grid(&grid)?;
+    Ok((n, clusters, grid))
+}
+
+/// Decodes whole probe records; positions must be finite.
+pub(crate) fn decode_records(raw: &[u8]) -> Result<Vec<(u32, [f32; 3])>, String> {
+    raw.chunks_exact(PROBE_RECORD_SIZE)
+        .map(|r| {
+            let mut c = Cursor::new(r, "probe");
+            let cell = c.u32().map_err(|e| e.to_string())?;
+            let pos = c.vec3().map_err(|e| e.to_string())?;
+            if !pos.iter().all(|v| v.is_finite()) {
+                return Err(format!("probe in cell {cell} has a position that is not finite"));
+            }
+            Ok((cell, pos))
+        })
+        .collect()
+}
+
+/// Decodes whole transfers; infinities and NaNs are refused.
+pub(crate) fn decode_transfer(raw: &[u8]) -> Result<Vec<[[f32; 3]; SH_COEFFS]>, String> {
+    crate::sky::decode_indirect(raw).map_err(|_| "a probe transfer value is not finite".to_string())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn probes(clusters: usize) -> Probes {
+        let grid = ProbeGrid {
+            dims: [2, 3, 1],
+            origin: [-1.0, 0.0, 0.5],
+            spacing: 0.5,
+        };
+        let cells = vec![0, 2, 5];
+        let positions = cells.iter().map(|&c| grid.cell_centre(c)).collect();
+        let transfer = (0..clusters * 3)
+            .map(|i| std::array::from_fn(|c| [i as f32, -(c as f32), 0.25]))
+            .collect();
+        Probes {
+            grid,
+            cells,
+            positions,
+            transfer,
+        }
+    }
+
+    #[test]
+    fn round_trip_through_the_encoding() {
+        let p = probes(4);
+        validate(&p, 4).unwrap();
+        let raw = encode(&p);
+        assert_eq!(raw.len() as u64, raw_size_for(3, 4).unwrap());
+        let (n, c, grid) = decode_header(&raw[..PROBES_HEADER_SIZE], true).unwrap();
+        assert_eq!((n, c, grid), (3, 4, p.grid));
+        let split = PROBES_HEADER_SIZE + 3 * PROBE_RECORD_SIZE;
+        let records = decode_records(&raw[PROBES_HEADER_SIZE..split]).unwrap();
+        let back = Probes {
+            grid,
+            cells: records.iter().map(|r| r.0).collect(),
+            positions: records.iter().map(|r| r.1).collect(),
+            transfer: decode_transfer(&raw[split..]).unwrap(),
+        };
+        assert_eq!(back, p);
+        assert_eq!(p.grid.cell_centre(5), [-0.25, 1.25, 0.75]);
+    }
+
+    #[test]
+    fn rejects_what_the_layout_cannot_hold() {
+        assert!(validate(&probes(4), 5).is_err(), "cluster count");
+        let mut p = probes(2);
+        p.cells = vec![0, 2, 2];
+        assert!(validate(&p, 2).is_err(), "repeated cell");
+        let mut p = probes(2);
+        p.cells[2] = 6;
+        assert!(validate(&p, 2).is_err(), "cell outside the grid");
+        let mut p = probes(2);
+        p.grid.spacing = 0.0;
+        assert!(validate(&p, 2).is_err(), "spacing");
+        let mut p = probes(2);
+        p.transfer[1][3][0] = 1e6;
+        assert!(validate(&p, 2).is_err(), "beyond f16");
+        let mut p = probes(2);
+        p.positions[0][1] = f32::NAN;
+        assert!(validate(&p, 2).is_err(), "position");
+        let raw = encode(&probes(2));
+        let mut bad = raw.clone();
+        bad[8] = 16;
+        assert!(decode_header(&bad[..PROBES_HEADER_SIZE], true).is_err(), "coefficients");
+        let mut bad = raw.clone();
+        bad[0..4].copy_from_slice(&(MAX_PROBES + 1).to_le_bytes());
+        assert!(decode_header(&bad[..PROBES_HEADER_SIZE], true).is_err(), "count");
+        let mut bad = raw.clone();
+        bad[16..20].copy_from_slice(&u32::MAX.to_le_bytes());
+        bad[20..24].copy_from_slice(&u32::MAX.to_le_bytes());
+        assert!(decode_header(&bad[..PROBES_HEADER_SIZE], true).is_err(), "grid size");
+        let mut bad = raw;
+        bad[28] = 1;
+        assert!(decode_header(&bad[..PROBES_HEADER_SIZE], true).is_err(), "reserved");
+        assert!(
+            decode_header(&bad[..PROBES_HEADER_SIZE], false).is_ok(),
+            "reserved, lenient"
+        );
+    }
+
+    #[test]
+    fn irradiance_sums_the_weighted_clusters() {
+        let p = probes(2);
+        let sh = p.irradiance_sh(&[[1.0, 0.0, 2.0], [0.5, 1.0, 0.0]]);
+        // Probe 1: cluster 0's transfer index 1, cluster 1's index 4.
+        assert_eq!(sh[1][0], [1.0 + 2.0, 0.0, 0.5]);
+        let mut flat = [[0.0f32; 3]; SH_COEFFS];
+        flat[0] = [1.0, 2.0, 3.0];
+        let y00 = crate::sh::sh_basis([0.0, 1.0, 0.0])[0];
+        assert_eq!(sh_irradiance(&flat, [0.0, 1.0, 0.0]), [y00, 2.0 * y00, 3.0 * y00]);
+    }
+}
