@@ -1,25 +1,8 @@
 // prm-play shade pass: radiance of every pixel, albedo/π × (direct irradiance with shadows +
 // the baked direct irradiance of the emitters and the sky, and the indirect irradiance, bilinearly sampled from their
 // lightmaps) + the surface's own emission, linear HDR. Comes after the run
-// time's shared.wgsl and lights.wgsl (which use `frame`, `lights`, `views`, `shadow_maps`).
-
-// What a frame shows (prm_play::Mode).
-const MODE_GI: u32 = 0u;
-const MODE_DIRECT: u32 = 1u;
-const MODE_INDIRECT: u32 = 2u;
-// Left half direct, right half gi.
-const MODE_SPLIT: u32 = 3u;
-
-struct Camera {
-    view_proj: mat4x4<f32>,
-    eye: vec3<f32>,
-    mode: u32,
-    // image width in pixels (split mode)
-    width: f32,
-    _pad0: f32,
-    _pad1: f32,
-    _pad2: f32,
-};
+// time's shared.wgsl and lights.wgsl (which use `frame`, `lights`, `views`, `shadow_maps`) and
+// play/camera.wgsl.
 
 struct Material {
     albedo: vec3<f32>,

@@ -98,3 +98,12 @@ struct Selected {
     weight: vec3<f32>,
     cluster: u32,
 };
+
+// The probe grid (`prm_format::ProbeGrid`): cell (i, j, k) is index i + nx·(j + ny·k), its centre
+// origin + spacing·(i + ½, j + ½, k + ½); `count` probes.
+struct ProbeGrid {
+    origin: vec3<f32>,
+    spacing: f32,
+    dims: vec3<u32>,
+    count: u32,
+};

@@ -18,6 +18,20 @@ pub fn temp_dir(name: &str) -> PathBuf {
     dir
 }
 
+/// Bakes `scene` (loaded from `scene_path`) with `config` into `output` on the CPU renderer,
+/// through the library as `prm-bake bake` does.
+pub fn bake_cpu(scene: &prm_scene::Scene, scene_path: &Path, config: &prm_bake::BakeConfig, output: &Path) {
+    let plan = prm_bake::Plan::new(config, scene).expect("a valid plan");
+    let job = prm_bake::BakeJob {
+        scene,
+        scene_path,
+        plan: &plan,
+        output,
+        shard: None,
+    };
+    prm_bake::bake(&job, prm_bake::Renderer::Cpu, &mut prm_bake::NoProgress).expect("the bake");
+}
+
 /// ‖t − r‖ / ‖r‖ over every channel.
 pub fn rel_error(t: &[glam::Vec3], r: &[glam::Vec3]) -> f64 {
     let num: f64 = t.iter().zip(r).map(|(a, b)| (*a - *b).length_squared() as f64).sum();

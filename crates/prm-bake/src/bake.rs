@@ -94,6 +94,11 @@ pub struct BakeArgs {
     /// Paths per texel of the sky's transfer (default 256; more: less noise, longer bake).
     #[arg(long, value_name = "PATHS", requires = "sky")]
     pub sky_paths: Option<u32>,
+    /// Also place irradiance probes for moving objects: a grid of at most CELLS cells over the
+    /// scene (default 512), a probe at every cell centre not inside geometry, each lit by the
+    /// same panes' clusters so the run-time weights light it (`prm-play --probe-sphere`).
+    #[arg(long, value_name = "CELLS", num_args = 0..=1, default_missing_value = "512")]
+    pub probes: Option<u32>,
     /// TOML file with any of the parameters above (and budgets); the command line wins.
     #[arg(long, value_name = "FILE.toml")]
     pub config: Option<PathBuf>,
@@ -134,6 +139,7 @@ impl BakeArgs {
             top_k: self.top_k,
             time_budget_s: self.time_budget,
             sky_paths: self.sky.then(|| self.sky_paths.unwrap_or(prm_bake::SKY_PATHS)),
+            probes: self.probes,
             ..Default::default()
         }
     }
@@ -361,11 +367,13 @@ fn print_summary(r: &Report) {
         ("light tracing", "light_tracing"),
         ("clustering", "clustering"),
         ("emitters", "emitters"),
+        ("sky", "sky"),
         ("pane rendering", "pane_rendering"),
+        ("probes", "probes"),
         ("compression + write", "compression_write"),
         ("total", "total"),
     ] {
-        if key == "emitters" && !r.timings.contains_key(key) {
+        if matches!(key, "emitters" | "sky" | "probes") && !r.timings.contains_key(key) {
             continue;
         }
         println!("  {name:<20} {:>9.3} s", r.timings.get(key).copied().unwrap_or(0.0));

@@ -163,6 +163,14 @@ pub fn summary_json<R: Read + Seek>(archive: &Archive<R>, file: &Path, report: O
             let (d, i) = uniform_sky_sums(s);
             json!({"coefficients": prm_format::SH_COEFFS, "unit_uniform_direct_sum": d, "unit_uniform_indirect_sum": i})
         }),
+        "probes": archive.probes().map(|p| json!({
+            "count": p.len(),
+            "grid": p.grid.dims,
+            "origin": p.grid.origin,
+            "spacing": p.grid.spacing,
+            "coefficients": prm_format::SH_COEFFS,
+            "unit_weight_mean_irradiance": probe_mean_irradiance(p),
+        })),
         "clusters": archive.clusters().len(),
         "tiles": {
             "filter": archive.tile_filter().name(),
@@ -278,6 +286,22 @@ pub fn write_summary<W: Write, R: Read + Seek>(
         writeln!(
             out,
             "sky          transfer in {} spherical-harmonic coefficients per texel; a uniform sky of radiance 1 gives, summed over the atlas: direct {dr:.1}, indirect {ir:.1} {ig:.1} {ib:.1}",
+            prm_format::SH_COEFFS
+        )?;
+    }
+    if let Some(p) = archive.probes() {
+        let [r, g, b] = probe_mean_irradiance(p);
+        writeln!(
+            out,
+            "probes       {} on a {}×{}×{} grid of {:.3} from ({:.3}, {:.3}, {:.3}), {} spherical-harmonic coefficients per cluster; unit weights give a probe {r:.3} {g:.3} {b:.3} on average (mean over six axis normals)",
+            p.len(),
+            p.grid.dims[0],
+            p.grid.dims[1],
+            p.grid.dims[2],
+            p.grid.spacing,
+            p.grid.origin[0],
+            p.grid.origin[1],
+            p.grid.origin[2],
             prm_format::SH_COEFFS
         )?;
     }
@@ -446,6 +470,22 @@ fn write_exr_files<R: Read + Seek>(archive: &mut Archive<R>, dir: &Path) -> Resu
 }
 
 /// Per-channel sum of RGB values (f64 accumulation).
+/// A probe's indirect irradiance with every cluster's weight 1, averaged over the probes and
+/// the six axis normals: a scale to compare bakes by.
+fn probe_mean_irradiance(p: &prm_format::Probes) -> [f64; 3] {
+    let sh = p.irradiance_sh(&vec![[1.0; 3]; p.clusters()]);
+    let mut sum = [0.0f64; 3];
+    for c in &sh {
+        for n in prm_format::AXIS_NORMALS {
+            let e = prm_format::sh_irradiance(c, n);
+            for k in 0..3 {
+                sum[k] += f64::from(e[k]);
+            }
+        }
+    }
+    sum.map(|s| s / (6 * p.len().max(1)) as f64)
+}
+
 /// The sky's direct and indirect irradiance summed over the atlas under a uniform sky of
 /// radiance 1 (only the constant coefficient, `2√π`, is non-zero).
 fn uniform_sky_sums(s: &prm_format::SkyTransfer) -> ([f64; 3], [f64; 3]) {

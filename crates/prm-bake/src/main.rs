@@ -94,4 +94,19 @@ mod tests {
         assert_eq!(paths(&[]), None);
         assert!(Cli::try_parse_from(["prm-bake", "bake", "s.obj", "-o", "o.prm", "--sky-paths", "64"]).is_err());
     }
+
+    /// `--probes` alone takes the library's cell budget; `--probes N` takes N.
+    #[test]
+    fn probes_flag_defaults_to_the_library_budget() {
+        let cells =
+            |args: &[&str]| match Cli::parse_from([&["prm-bake", "bake", "s.obj", "-o", "o.prm"], args].concat())
+                .command
+            {
+                Command::Bake(b) => b.config().probes,
+                _ => unreachable!("a bake"),
+            };
+        assert_eq!(cells(&["--probes"]), Some(prm_bake::PROBE_CELLS));
+        assert_eq!(cells(&["--probes", "64"]), Some(64));
+        assert_eq!(cells(&[]), None);
+    }
 }

@@ -69,6 +69,8 @@ pub struct BakeConfig {
     pub time_budget_s: Option<f64>,
     /// Bake the sky's transfer with this many paths per texel (unset: no sky in the archive).
     pub sky_paths: Option<u32>,
+    /// Place irradiance probes on a grid of at most this many cells (unset: no probes).
+    pub probes: Option<u32>,
 }
 
 impl BakeConfig {
@@ -101,6 +103,7 @@ impl BakeConfig {
             memory_budget_mib: over.memory_budget_mib.or(self.memory_budget_mib),
             time_budget_s: over.time_budget_s.or(self.time_budget_s),
             sky_paths: over.sky_paths.or(self.sky_paths),
+            probes: over.probes.or(self.probes),
         }
     }
 }
@@ -144,8 +147,11 @@ pub struct BakeParams {
     /// Paths per texel of the sky's transfer, when the archive holds one
     /// ([`crate::SKY_PATHS`] is the command line's default).
     pub sky_paths: Option<u32>,
-    /// What [`CostModel`] expects these parameters to cost, seconds (without the emitter and
-    /// sky steps).
+    /// Most grid cells of the irradiance probes, when the archive holds them
+    /// ([`crate::PROBE_CELLS`] is the command line's default).
+    pub probes: Option<u32>,
+    /// What [`CostModel`] expects these parameters to cost, seconds (without the emitter, sky and
+    /// probe steps).
     pub estimated_seconds: f64,
     /// One line per automatic choice.
     pub reasons: Vec<String>,
@@ -499,6 +505,7 @@ impl BakeParams {
             memory_budget_mib,
             time_budget_s,
             sky_paths: config.sky_paths,
+            probes: config.probes,
             estimated_seconds,
             reasons,
         };
@@ -543,6 +550,11 @@ impl BakeParams {
         }
         if self.sky_paths == Some(0) {
             invalid!("--sky-paths must be at least 1");
+        }
+        if let Some(p) = self.probes {
+            if p == 0 || p > prm_format::MAX_PROBES {
+                invalid!("--probes {p} is outside 1..={} grid cells", prm_format::MAX_PROBES);
+            }
         }
         if let AtlasSize::Resolution(r) = self.atlas {
             if !(8..=8192).contains(&r) {

@@ -50,6 +50,11 @@ pub const EMITTER_INDIRECT_MAX_PATHS: u64 = 1 << 26;
 /// for 3.5%.
 pub const SKY_PATHS: u32 = 256;
 
+/// The command line's probe budget (`prm-bake bake --probes`), grid cells: on our Cornell box
+/// (2 m) a spacing of 0.25 m, about a sphere's diameter in the player. The transfer costs one
+/// shadow ray per probe and VPL.
+pub const PROBE_CELLS: u32 = 512;
+
 /// Where the panes are rendered.
 #[derive(Clone, Copy)]
 pub enum Renderer<'a> {
@@ -269,6 +274,43 @@ fn sky_section(
         out.indirect[dst as usize] = out.indirect[src as usize];
     }
     Ok(out)
+}
+
+/// The probes section: probes placed on a grid of at most `cells` cells, and every cluster's
+/// transfer to them from its VPLs (a shard's own clusters only; the others stay zero, so
+/// `prm-bake merge` adds the parts).
+fn probe_section(
+    scene: &Scene,
+    bvh: &Bvh,
+    vpls: &prm_trace::VplSet,
+    clustering: &Clustering,
+    cells: u32,
+    bound: prm_trace::VplBound,
+    progress: &mut dyn ProgressSink,
+) -> Result<(prm_format::Probes, String), BakeError> {
+    let layout = prm_trace::place_probes(scene, bvh, cells).map_err(trace("placing probes"))?;
+    progress.phase_start(Phase::Probes, layout.positions.len() as u64);
+    let (transfer, rays) = prm_trace::probe_transfer(bvh, vpls, clustering, &layout.positions, bound, &mut |done| {
+        progress.phase_advance(done)
+    })
+    .map_err(trace("the probes' transfer"))?;
+    let g = layout.grid;
+    let detail = format!(
+        "{} probes on a {}×{}×{} grid of {:.3} ({} cells inside geometry), {rays} shadow rays",
+        layout.positions.len(),
+        g.dims[0],
+        g.dims[1],
+        g.dims[2],
+        g.spacing,
+        layout.inside
+    );
+    let probes = prm_format::Probes {
+        grid: g,
+        cells: layout.cells,
+        positions: layout.positions.iter().map(|p| p.to_array()).collect(),
+        transfer,
+    };
+    Ok((probes, detail))
 }
 
 /// The emitters section: each group's direct irradiance at the entry points (in the archive's
@@ -685,6 +727,16 @@ pub fn bake(job: &BakeJob<'_>, renderer: Renderer<'_>, progress: &mut dyn Progre
         phase_started.elapsed().as_secs_f64(),
     );
     timings.insert("pane_rendering".to_string(), render_s);
+
+    if let Some(cells) = params.probes {
+        let t = Instant::now();
+        let (probes, detail) = probe_section(scene, &bvh, &vpls, &clustering, cells, params.bound(), progress)?;
+        writer.set_probes(probes).map_err(|source| BakeError::Archive {
+            what: "recording the probes".to_string(),
+            source,
+        })?;
+        finish_phase(&mut timings, progress, Phase::Probes, "probes", t, &detail);
+    }
 
     // Timings go to the caller only: the archive's bytes depend on nothing but the scene, the
     // parameters and the backend, so caches and content-addressed pipelines can key on them

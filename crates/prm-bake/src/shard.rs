@@ -251,6 +251,29 @@ pub fn merge(parts: &[PathBuf], output: &Path) -> Result<Merged, BakeError> {
             source,
         })?;
     }
+    // Probes: every shard places the same ones; each cluster's transfer from its owner.
+    if let Some(probes) = first.probes() {
+        let n = probes.len();
+        let mut merged = probes.clone();
+        for c in 0..clusters.len() {
+            let part = opened[owner(c)]
+                .2
+                .probes()
+                .filter(|q| q.len() == n && q.cells == probes.cells);
+            let Some(part) = part else {
+                return Err(invalid(format!(
+                    "{} has no probes or other ones than {}",
+                    opened[owner(c)].0.display(),
+                    first_path.display()
+                )));
+            };
+            merged.transfer[c * n..(c + 1) * n].copy_from_slice(&part.transfer[c * n..(c + 1) * n]);
+        }
+        writer.set_probes(merged).map_err(|source| BakeError::Archive {
+            what: "recording the probes".to_string(),
+            source,
+        })?;
+    }
     for c in 0..clusters.len() {
         let (p, _, a) = &mut opened[owner(c)];
         let pane = a.read_pane(c).map_err(|source| BakeError::Archive {

@@ -22,6 +22,8 @@ pub enum Phase {
     Sky,
     /// Rendering the panes (GPU or CPU) and writing them to the archive.
     PaneRendering,
+    /// The clusters' transfer to the irradiance probes (bakes with `--probes` only).
+    Probes,
 }
 
 impl Phase {
@@ -35,6 +37,7 @@ impl Phase {
             Phase::Emitters => "emitters",
             Phase::Sky => "sky",
             Phase::PaneRendering => "pane rendering",
+            Phase::Probes => "probes",
         }
     }
 }

@@ -61,6 +61,32 @@ pub struct GpuMaterial {
     pub _pad0: f32,
 }
 
+/// The probe sphere; `Sphere` in `sphere.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct GpuSphere {
+    /// Centre.
+    pub centre: [f32; 3],
+    /// Radius.
+    pub radius: f32,
+    /// Diffuse albedo.
+    pub albedo: [f32; 3],
+    /// Padding.
+    pub _pad0: f32,
+}
+
+/// A vertex of the probe sphere: a point of the unit sphere.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+pub struct SphereVertex {
+    /// Position on the unit sphere, also the normal.
+    pub unit: [f32; 3],
+}
+
+impl prm_gpu_kit::pipeline::Vertex for SphereVertex {
+    const ATTRIBUTES: &'static [wgpu::VertexAttribute] = &wgpu::vertex_attr_array![0 => Float32x3];
+}
+
 /// A vertex of the shade pass (flat triangles, no index buffer).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
@@ -101,6 +127,8 @@ mod tests {
         )
         .unwrap();
         wgsl_layout!(&src, GpuMaterial, "Material", [albedo, texture, emission, _pad0]).unwrap();
+        let sphere = crate::sphere::source().join("\n");
+        wgsl_layout!(&sphere, GpuSphere, "Sphere", [centre, radius, albedo, _pad0]).unwrap();
         check_consts(
             &src,
             &[

@@ -14,6 +14,7 @@ mod error;
 mod gpu;
 mod renderer;
 pub mod shade;
+pub mod sphere;
 
 pub mod animation;
 pub mod export;
@@ -26,6 +27,7 @@ pub use error::PlayError;
 pub use gpu::{open_vulkan, open_vulkan_for, vulkan_instance};
 pub use prm_runtime::{archive_top_k, synthetic, ClusterWeight, RuntimeOptions};
 pub use renderer::{FrameInput, FrameTimings, Image, Mode, PlayOptions, Renderer, MAX_LIGHTS, PASS_NAMES};
+pub use sphere::ProbeSphere;
 
 use std::path::{Path, PathBuf};
 

@@ -47,6 +47,12 @@ struct Args {
     /// Turns the sky about the vertical (+Y) axis, degrees (+Z towards +X).
     #[arg(long, default_value_t = 0.0, requires = "sky", allow_negative_numbers = true)]
     sky_rotation: f32,
+    /// Show a moving sphere lit by the archive's irradiance probes (archives baked with
+    /// `prm-bake bake --probes`) and by the lights: it circles the scene's vertical axis at a
+    /// third of its height, one turn every 8 s (headless: frame i at the animation's time, or
+    /// i/30 s).
+    #[arg(long)]
+    probe_sphere: bool,
     /// gi, direct, indirect or split (left direct, right gi).
     #[arg(long, default_value = "gi")]
     mode: Mode,
@@ -186,6 +192,7 @@ fn run() -> Result<()> {
             screenshot: args.screenshot,
             emitter_scales,
             sky,
+            probe_sphere: args.probe_sphere,
         })
         .with_context(|| format!("playing {} in a window", args.archive.display()));
     }
@@ -256,6 +263,10 @@ fn run() -> Result<()> {
             .and_then(|(a, s)| a.sky_state_at(s, a.time(i)))
         {
             renderer.set_sky(&s)?;
+        }
+        if args.probe_sphere {
+            let t = animation.as_ref().map_or(i as f32 / 30.0, |a| a.time(i));
+            renderer.set_probe_sphere(Some(prm_play::ProbeSphere::orbit(&scene.bounds(), t)))?;
         }
         let t = renderer.render(&FrameInput {
             camera,

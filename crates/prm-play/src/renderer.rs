@@ -12,12 +12,13 @@ use prm_runtime::{look_to, perspective, ClusterWeight, Runtime, RuntimeError, Ru
 use prm_scene::{Aabb, Camera, Light, Scene};
 
 use crate::shade::{ShadePass, COLOR_FORMAT, DEPTH_FORMAT};
+use crate::sphere::{ProbeSphere, SpherePass};
 use crate::PlayError;
 
 pub use prm_runtime::MAX_LIGHTS;
 
 /// Names of the timed passes, in frame order: the run time's, then the shading.
-pub const PASS_NAMES: [&str; 6] = ["shadow", "weights", "rank", "select", "blend", "shade"];
+pub const PASS_NAMES: [&str; 7] = ["shadow", "weights", "rank", "select", "blend", "probes", "shade"];
 
 /// What a frame shows; the codes are `MODE_*` in `shade.wgsl`.
 #[repr(u32)]
@@ -180,6 +181,9 @@ pub struct Renderer {
     timestamps: bool,
     runtime: Runtime,
     shade: ShadePass,
+    /// The probe sphere's pass (archives with probes) and the sphere it draws, when one is set.
+    sphere: Option<SpherePass>,
+    probe_sphere: Option<ProbeSphere>,
     color: wgpu::Texture,
     color_view: wgpu::TextureView,
     depth_view: wgpu::TextureView,
@@ -233,12 +237,15 @@ impl Renderer {
         } = opts;
         let runtime = Runtime::new(&ctx.device, &ctx.queue, archive, scene, runtime)?;
         let shade = ShadePass::new(&ctx, scene, &runtime);
+        let sphere = SpherePass::new(&ctx, &runtime, shade.camera());
         let (color, color_view, depth_view) = targets(&ctx.device, width, height);
         let timer = timestamps.then(|| PassTimer::new(&ctx.device, &PASS_NAMES)).flatten();
         check(&ctx, scope, "renderer setup")?;
         Ok(Renderer {
             runtime,
             shade,
+            sphere,
+            probe_sphere: None,
             color,
             color_view,
             depth_view,
@@ -320,6 +327,25 @@ impl Renderer {
         Ok(())
     }
 
+    /// Shows `sphere` lit by the archive's probes from the next frame on (`None`: no sphere);
+    /// refused when the archive has no probes.
+    pub fn set_probe_sphere(&mut self, sphere: Option<ProbeSphere>) -> Result<(), PlayError> {
+        match (&self.sphere, sphere) {
+            (_, None) => self.probe_sphere = None,
+            (None, Some(_)) => {
+                return Err(PlayError::Option {
+                    option: "--probe-sphere",
+                    message: "the archive has no probes: bake it with prm-bake bake --probes".to_string(),
+                })
+            }
+            (Some(pass), Some(s)) => {
+                pass.write(&self.ctx.queue, &s);
+                self.probe_sphere = Some(s);
+            }
+        }
+        Ok(())
+    }
+
     /// Changes the number of clusters kept per frame.
     pub fn set_top_k(&mut self, k: u32) {
         self.runtime.set_top_k(k);
@@ -343,6 +369,9 @@ impl Renderer {
         let scope = ErrorScopes::push(&self.ctx.device);
         if self.runtime.update(lights)? {
             self.shade.rebind(&self.ctx, &self.runtime);
+            if let Some(s) = &mut self.sphere {
+                s.rebind(&self.ctx, &self.runtime, self.shade.camera());
+            }
         }
         let view_proj = self.camera_matrix(&input.camera, &self.runtime.bounds());
         self.shade.write_camera(
@@ -359,7 +388,9 @@ impl Renderer {
         } else {
             self.runtime.encode_shadow_maps(&mut enc, timer);
         }
-        self.shade.encode(&mut enc, &self.color_view, &self.depth_view, timer);
+        let sphere = self.sphere.as_ref().filter(|_| self.probe_sphere.is_some());
+        self.shade
+            .encode(&mut enc, &self.color_view, &self.depth_view, sphere, timer);
         if let Some(t) = timer {
             t.resolve(&mut enc);
         }

@@ -15,11 +15,16 @@ pub const COLOR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
 /// The depth buffer's format.
 pub const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 
-/// The shade pass source: the run time's shared structs and direct light, then the pass.
-pub fn source() -> [&'static str; 3] {
+/// The player's camera and modes (`shaders/play/camera.wgsl`), shared by its passes.
+pub const CAMERA_WGSL: &str = include_str!("../../../shaders/play/camera.wgsl");
+
+/// The shade pass source: the run time's shared structs and direct light, the camera, then the
+/// pass.
+pub fn source() -> [&'static str; 4] {
     [
         prm_runtime::SHARED_WGSL,
         prm_runtime::LIGHTS_WGSL,
+        CAMERA_WGSL,
         include_str!("../../../shaders/play/shade.wgsl"),
     ]
 }
@@ -144,12 +149,18 @@ impl ShadePass {
         queue.write_buffer(&self.res.camera, 0, bytemuck::bytes_of(&camera));
     }
 
-    /// Draws the scene into `color` with depth buffer `depth`.
+    /// The camera buffer (the probe sphere draws with it).
+    pub fn camera(&self) -> &wgpu::Buffer {
+        &self.res.camera
+    }
+
+    /// Draws the scene, and the probe sphere when given, into `color` with depth buffer `depth`.
     pub fn encode(
         &self,
         encoder: &mut wgpu::CommandEncoder,
         color: &wgpu::TextureView,
         depth: &wgpu::TextureView,
+        sphere: Option<&crate::sphere::SpherePass>,
         timer: Option<&PassTimer>,
     ) {
         let mut pass = pipeline::begin_render_pass(
@@ -163,6 +174,9 @@ impl ShadePass {
         pass.set_bind_group(0, &self.bind_group, &[]);
         pass.set_vertex_buffer(0, self.res.vertices.slice(..));
         pass.draw(0..self.res.vertex_count, 0..1);
+        if let Some(s) = sphere {
+            s.draw(&mut pass);
+        }
     }
 }
 

@@ -67,6 +67,8 @@ pub struct WindowConfig {
     pub emitter_scales: Vec<[f32; 3]>,
     /// The sky ([`crate::sky`]), for archives with the sky's transfer.
     pub sky: Option<prm_scene::Sky>,
+    /// Show the probe sphere ([`crate::ProbeSphere::orbit`], on the window's clock).
+    pub probe_sphere: bool,
 }
 
 /// Moves `light` by key presses: `right`, `forward` and `up` in steps of `step` scene units along
@@ -242,6 +244,8 @@ struct App {
     emitter_scales: Vec<[f32; 3]>,
     /// The `--sky`, whose intensity and rotation an animation's sky keys drive.
     sky: Option<prm_scene::Sky>,
+    /// The scene's bounds, when the probe sphere is shown.
+    probe_sphere: Option<prm_scene::Aabb>,
     mode: Mode,
     exposure: f32,
     frame_limit: Option<u32>,
@@ -386,6 +390,10 @@ impl App {
             .and_then(|(a, s)| a.sky_state_at(s, self.clock))
         {
             gpu.renderer.set_sky(&s)?;
+        }
+        if let Some(b) = &self.probe_sphere {
+            gpu.renderer
+                .set_probe_sphere(Some(crate::ProbeSphere::orbit(b, self.clock)))?;
         }
         gpu.renderer.render(&FrameInput {
             camera,
@@ -589,6 +597,7 @@ pub fn run(config: WindowConfig) -> Result<(), PlayError> {
         animation: config.animation.clone(),
         emitter_scales: config.emitter_scales.clone(),
         sky: config.sky.clone(),
+        probe_sphere: config.probe_sphere.then(|| config.scene.bounds()),
         mode: config.mode,
         exposure: config.exposure,
         frame_limit: config.frames,

@@ -416,6 +416,97 @@ fn refuses_archive_of_other_geometry() {
     assert!(err.to_string().contains("baked for another scene"), "{err}");
 }
 
+/// The synthetic archive again, with eight probes (a 2×2×2 grid over the box) whose transfer
+/// from every cluster is uniform: `E(n) = Σ_c w_c ⊙ (1, 0.5, 0.25)` for every normal.
+fn archive_with_uniform_probes() -> PathBuf {
+    let mut a = Archive::open(cornell_archive()).unwrap();
+    let path = out_dir("probes").join("cornell-probes.prm");
+    let clusters: Vec<prm_format::Cluster> = a
+        .clusters()
+        .iter()
+        .map(|c| prm_format::Cluster::new(c.first, c.count, c.centroid, c.mean_normal))
+        .collect();
+    let atlas = a.atlas().clone();
+    let entries = a.entries().to_vec();
+    let mut w = prm_format::ArchiveWriter::create(&path, a.metadata().clone(), &atlas, &entries, &clusters).unwrap();
+    if let Some(e) = a.entry_energy() {
+        w.set_entry_energy(e.to_vec()).unwrap();
+    }
+    let scene = prm_scene::load(&cornell_box_path()).unwrap();
+    let b = scene.bounds();
+    let grid = prm_format::ProbeGrid {
+        dims: [2, 2, 2],
+        origin: b.min.to_array(),
+        spacing: b.extent().max_element() / 2.0,
+    };
+    let y00 = prm_format::sh_basis([0.0, 1.0, 0.0])[0];
+    let mut uniform = [[0.0f32; 3]; prm_format::SH_COEFFS];
+    uniform[0] = [1.0 / y00, 0.5 / y00, 0.25 / y00];
+    w.set_probes(prm_format::Probes {
+        grid,
+        cells: (0..8).collect(),
+        positions: (0..8).map(|c| grid.cell_centre(c)).collect(),
+        transfer: vec![uniform; 8 * clusters.len()],
+    })
+    .unwrap();
+    for c in 0..clusters.len() {
+        w.add_pane(&a.read_pane(c).unwrap()).unwrap();
+    }
+    w.finish().unwrap();
+    path
+}
+
+/// The probe sphere is lit by the probe volume: in the indirect image every pixel it covers is
+/// albedo/π × the probes' irradiance (uniform here, so one value), the rest of the frame is
+/// unchanged, and an archive without probes refuses a sphere.
+#[test]
+fn probe_sphere_is_lit_by_the_probes() {
+    let (mut plain, _) = renderer(small(64));
+    let sphere = prm_play::ProbeSphere {
+        centre: Vec3::new(0.2, 0.42, 0.35),
+        radius: 0.06,
+        albedo: Vec3::new(0.8, 0.6, 0.4),
+    };
+    assert!(
+        plain.set_probe_sphere(Some(sphere)).is_err(),
+        "no probes in the archive"
+    );
+
+    let path = archive_with_uniform_probes();
+    let (mut archive, scene) = prm_play::open(&path, None).unwrap();
+    let ctx = prm_play::open_vulkan().expect("a Vulkan device (install mesa-vulkan-drivers for lavapipe)");
+    let mut r = Renderer::new(ctx, &scene, &mut archive, small(64)).unwrap();
+    let lights = cornell_lights(&scene);
+    let input = FrameInput {
+        camera: prm_play::default_camera(&scene),
+        lights: &lights,
+        mode: Mode::Indirect,
+    };
+    r.render(&input).unwrap();
+    let without = r.read_image().unwrap();
+    r.set_probe_sphere(Some(sphere)).unwrap();
+    r.render(&input).unwrap();
+    let with = r.read_image().unwrap();
+    let weights = r.read_weights().unwrap();
+    let e: Vec3 = weights
+        .iter()
+        .map(|w| Vec3::from(w.weight) * Vec3::new(1.0, 0.5, 0.25))
+        .sum();
+    let expected = sphere.albedo / std::f32::consts::PI * e;
+    let mut covered = 0;
+    for (a, b) in with.rgb.iter().zip(&without.rgb) {
+        if a != b {
+            covered += 1;
+            let d = (Vec3::from(*a) - expected).abs().max_element();
+            assert!(
+                d <= 1e-4 * expected.max_element(),
+                "sphere pixel {a:?}, expected {expected}"
+            );
+        }
+    }
+    assert!(covered > 20, "the sphere covers {covered} pixels");
+}
+
 const EIGHT_LIGHTS: &str = include_str!("../examples/eight-lights.toml");
 
 /// Eight coloured, moving lights of all three kinds, from an animation.

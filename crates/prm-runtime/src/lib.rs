@@ -11,7 +11,10 @@
 //! shadow maps through [`LIGHTS_WGSL`] and [`Runtime::direct_light_bindings`]. Emissive surfaces
 //! baked into the archive are scaled with [`Runtime::set_emitter_scales`], and the sky, when the
 //! archive holds its transfer, is set with [`Runtime::set_sky`]; their direct light is
-//! [`Runtime::emitter_lightmap`], their indirect light is in the lightmap.
+//! [`Runtime::emitter_lightmap`], their indirect light is in the lightmap. When the archive
+//! holds probes, every frame also sums their irradiance coefficients under the same cluster
+//! weights (`probes.wgsl`), and [`Runtime::probes`] gives shaders the volume to light moving
+//! objects from with [`PROBES_WGSL`].
 //!
 //! Every resource lives on the device given to [`Runtime::new`]; nothing is global.
 //!
@@ -43,6 +46,7 @@ mod baked;
 mod irradiance;
 mod lights;
 mod options;
+mod probes;
 mod shadow;
 mod shared;
 pub mod synthetic;
@@ -57,10 +61,11 @@ pub use baked::EmitterInfo;
 pub use irradiance::DILATE_STEPS;
 pub use lights::{look_to, orthographic, perspective, shadow_views, SPOT_SINGLE_VIEW_MAX_DEG};
 pub use options::{archive_top_k, RuntimeError, RuntimeOptions, MAX_SHADOW_RESOLUTION};
+pub use probes::ProbeVolume;
 pub use shadow::SHADOW_FORMAT;
 pub use shared::{
-    GpuCluster, GpuEffective, GpuEntry, GpuFrame, GpuLight, GpuSelected, GpuView, GpuWeight, LightKind, LIGHTS_WGSL,
-    SHARED_WGSL,
+    GpuCluster, GpuEffective, GpuEntry, GpuFrame, GpuLight, GpuProbeGrid, GpuSelected, GpuView, GpuWeight, LightKind,
+    LIGHTS_WGSL, PROBES_WGSL, SHARED_WGSL,
 };
 
 use shadow::{ShadowMaps, ShadowPass};
@@ -70,7 +75,7 @@ use weights::WeightsPass;
 /// Most lights a frame may have.
 pub const MAX_LIGHTS: usize = 256;
 /// Names of the timed passes in frame order, for a [`PassTimer`] handed to [`Runtime::encode`].
-pub const PASS_NAMES: [&str; 5] = ["shadow", "weights", "rank", "select", "blend"];
+pub const PASS_NAMES: [&str; 6] = ["shadow", "weights", "rank", "select", "blend", "probes"];
 /// Format of the lightmap [`Runtime::lightmap`] (not filterable everywhere: sample it with
 /// `textureLoad` and filter by hand, as `prm-play`'s shading does).
 pub const LIGHTMAP_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
@@ -168,6 +173,7 @@ pub struct Runtime {
     /// The entries as uploaded (rewritten when the emitter scales change).
     entries: Vec<GpuEntry>,
     emitters: baked::BakedLights,
+    probes: Option<probes::ProbesPass>,
 }
 
 impl Runtime {
@@ -330,6 +336,10 @@ impl Runtime {
         let shadow = ShadowPass::new(device, &maps);
         let weights = WeightsPass::new(device, &buffers, &maps.array);
         let topk = TopKPasses::new(device, &buffers, &panes, &lightmap_view, &emitters.indirect_view);
+        let probes = match archive.probes() {
+            Some(p) => Some(probes::ProbesPass::new(device, &buffers, p)?),
+            None => None,
+        };
         scope.pop("runtime setup")?;
         Ok(Runtime {
             device: device.clone(),
@@ -354,6 +364,7 @@ impl Runtime {
             view_count: 0,
             entries,
             emitters,
+            probes,
         })
     }
 
@@ -431,6 +442,41 @@ impl Runtime {
             timer,
         );
         self.topk.encode(encoder, self.cluster_count, self.resolution, timer);
+        if let Some(p) = &self.probes {
+            p.encode(encoder, timer);
+        }
+    }
+
+    /// The probe volume, when the archive holds probes: bindings for [`PROBES_WGSL`], whose
+    /// coefficients every [`Runtime::encode`] sums under the frame's weights of all clusters (the
+    /// lights' indirect light through the panes; the emitters' traced and the sky's indirect
+    /// light do not reach the probes).
+    pub fn probes(&self) -> Option<ProbeVolume<'_>> {
+        self.probes.as_ref().map(|p| ProbeVolume {
+            grid: &p.grid,
+            cells: &p.cells,
+            coefficients: &p.coefficients,
+            probes: &p.probes,
+        })
+    }
+
+    /// Reads the last frame's probe coefficients back (nine RGB per probe; empty without
+    /// probes), waiting for the device.
+    pub fn read_probes(&self) -> Result<Vec<[[f32; 3]; prm_format::SH_COEFFS]>, RuntimeError> {
+        let Some(p) = &self.probes else {
+            return Ok(Vec::new());
+        };
+        let n = p.probes.len();
+        let bytes = readback::read_buffer(
+            &self.device,
+            &self.queue,
+            &p.coefficients,
+            (n * prm_format::SH_COEFFS * 16) as u64,
+        )?;
+        let v: &[[f32; 4]] = bytemuck::cast_slice(&bytes);
+        Ok(v.chunks_exact(prm_format::SH_COEFFS)
+            .map(|c| std::array::from_fn(|i| [c[i][0], c[i][1], c[i][2]]))
+            .collect())
     }
 
     /// The indirect-irradiance lightmap (W/m², [`LIGHTMAP_FORMAT`]) of the last encoded frame.

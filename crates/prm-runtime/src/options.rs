@@ -52,6 +52,9 @@ pub enum RuntimeError {
     /// Sky coefficients the archive cannot take (no sky transfer) or not finite.
     #[error("sky: {0}")]
     Sky(String),
+    /// The archive's probes do not fit this device.
+    #[error("probes: {0}")]
+    Probes(String),
     /// An option is out of range for the run time or this device.
     #[error("{option}: {message}")]
     Option {

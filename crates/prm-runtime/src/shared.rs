@@ -12,6 +12,11 @@ pub const SHARED_WGSL: &str = include_str!("../../../shaders/runtime/shared.wgsl
 /// (see [`Runtime::direct_light_bindings`](crate::Runtime::direct_light_bindings)).
 pub const LIGHTS_WGSL: &str = include_str!("../../../shaders/runtime/lights.wgsl");
 
+/// The indirect irradiance at a point from the probes around it, `probe_irradiance(x, n)`
+/// (`shaders/runtime/probe_volume.wgsl`); needs [`SHARED_WGSL`] before it, and the including
+/// shader binds `probe_grid`, `probe_cells` and `probe_sh` ([`crate::ProbeVolume`]).
+pub const PROBES_WGSL: &str = include_str!("../../../shaders/runtime/probe_volume.wgsl");
+
 /// A light's kind, as `Light.kind` holds it.
 #[repr(u32)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -47,6 +52,20 @@ pub struct GpuFrame {
     pub normal_offset: f32,
     /// Depth bias of shadow lookups, in shadow texels.
     pub depth_bias: f32,
+}
+
+/// The probe grid; `ProbeGrid` in the shaders.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct GpuProbeGrid {
+    /// The grid's lower corner.
+    pub origin: [f32; 3],
+    /// Cell edge.
+    pub spacing: f32,
+    /// Cells along x, y, z.
+    pub dims: [u32; 3],
+    /// Probes.
+    pub count: u32,
 }
 
 /// A light; `Light` in the shaders.
@@ -210,6 +229,7 @@ mod tests {
         wgsl_layout!(s, GpuWeight, "Weight", [weight, score]).unwrap();
         wgsl_layout!(s, GpuEffective, "Effective", [weight, rank]).unwrap();
         wgsl_layout!(s, GpuSelected, "Selected", [weight, cluster]).unwrap();
+        wgsl_layout!(s, GpuProbeGrid, "ProbeGrid", [origin, spacing, dims, count]).unwrap();
     }
 
     #[test]

@@ -19,6 +19,19 @@ pub struct Triangle {
 }
 
 impl Triangle {
+    /// A flat triangle: its geometric normal at every corner, no texture coordinates.
+    pub fn flat(positions: [Vec3; 3], material: u32) -> Triangle {
+        let n = (positions[1] - positions[0])
+            .cross(positions[2] - positions[0])
+            .normalize_or_zero();
+        Triangle {
+            positions,
+            normals: [n; 3],
+            uvs: [Vec2::ZERO; 3],
+            material,
+        }
+    }
+
     /// Unnormalised geometric normal, `(p1 - p0) × (p2 - p0)`; its length is twice the area.
     pub fn cross(&self) -> Vec3 {
         (self.positions[1] - self.positions[0]).cross(self.positions[2] - self.positions[0])
@@ -231,7 +244,34 @@ pub struct Scene {
     pub report: LoadReport,
 }
 
+impl Material {
+    /// A diffuse material without texture or emission.
+    pub fn diffuse(name: &str, albedo: Vec3) -> Material {
+        Material {
+            name: name.to_string(),
+            albedo,
+            texture: None,
+            emission: Vec3::ZERO,
+        }
+    }
+}
+
 impl Scene {
+    /// A scene of these triangles and materials alone: no lights, cameras, textures or lightmap
+    /// UVs (tests and generated scenes).
+    pub fn from_parts(triangles: Vec<Triangle>, materials: Vec<Material>) -> Scene {
+        Scene {
+            source: PathBuf::from("parts"),
+            triangles,
+            lightmap_uvs: None,
+            materials,
+            textures: Vec::new(),
+            lights: Vec::new(),
+            cameras: Vec::new(),
+            report: LoadReport::default(),
+        }
+    }
+
     /// Bounds of all triangle corners.
     pub fn bounds(&self) -> Aabb {
         let mut b = Aabb::EMPTY;

@@ -346,6 +346,22 @@ impl<'a> ReferenceTracer<'a> {
         }))
     }
 
+    /// Indirect irradiance (W/m²) at points of empty space, each `(position, unit normal)` a
+    /// surface element on no triangle (a probe's), progressively; the light reaching it
+    /// straight from a light, an emitter or the sky is direct and not counted.
+    pub fn indirect_at_points(
+        &self,
+        points: &[(Vec3, Vec3)],
+        params: &ReferenceParams,
+        progress: &mut dyn FnMut(u32, u32),
+    ) -> Result<Estimate, TraceError> {
+        validate(params)?;
+        Ok(progressive(points.len(), params, progress, |i, rng| {
+            let (x, n) = points[i];
+            self.indirect_mean(x, n, n, u32::MAX, params, rng)
+        }))
+    }
+
     /// Radiance image (W/(m²·sr)) seen by `camera`, `width × height`, row-major from the top row.
     pub fn render(
         &self,

@@ -19,6 +19,7 @@ mod compare;
 mod emitters;
 mod measure;
 mod plan;
+mod probes;
 mod reference;
 mod sky;
 
@@ -117,7 +118,7 @@ impl Row {
 
 fn usage() -> ! {
     eprintln!(
-        "usage: cargo xtask eval [--quick|--full|--budget|--emitters|--sky] [--out DIR]\n       cargo xtask eval compare TEST.exr REFERENCE.exr   (error, energy, shape and local error as ../shared/notes/metrics.md defines them)\n\n  --quick   Cornell box, a handful of settings, small references (CI; dev-profile binaries); default\n  --full    all scenes and sweeps (release binaries; the README's charts)\n  --budget  the error budget of the default bake, one idealised stage at a time (release; the README's budget table)\n  --emitters emissive surfaces (McGuire's CornellBox-Original by its own lamp, two lamps in our Cornell box) against the reference, and the frame cost of a scale change (release)\n  --sky     the sky and a sun (our courtyard; Sponza) against the reference, and the frame cost of turning the sky (release)\n  --out DIR output directory (default target/eval-quick, eval-full, eval-budget, eval-emitters or eval-sky)\n\nBakes and references are cached under target/eval/ (delete it to start over)."
+        "usage: cargo xtask eval [--quick|--full|--budget|--emitters|--sky|--probes] [--out DIR]\n       cargo xtask eval compare TEST.exr REFERENCE.exr   (error, energy, shape and local error as ../shared/notes/metrics.md defines them)\n\n  --quick   Cornell box, a handful of settings, small references (CI; dev-profile binaries); default\n  --full    all scenes and sweeps (release binaries; the README's charts)\n  --budget  the error budget of the default bake, one idealised stage at a time (release; the README's budget table)\n  --emitters emissive surfaces (McGuire's CornellBox-Original by its own lamp, two lamps in our Cornell box) against the reference, and the frame cost of a scale change (release)\n  --sky     the sky and a sun (our courtyard; Sponza) against the reference, and the frame cost of turning the sky (release)\n  --probes  irradiance probes (our Cornell box, two rooms) against the reference at the probe positions, and their cost (release)\n  --out DIR output directory (default target/eval-quick, eval-full, eval-budget, eval-emitters, eval-sky or eval-probes)\n\nBakes and references are cached under target/eval/ (delete it to start over)."
     );
     std::process::exit(2);
 }
@@ -142,6 +143,7 @@ fn run(args: &[String]) -> Result<()> {
     let mut budget = false;
     let mut emitters = false;
     let mut sky = false;
+    let mut probes = false;
     let mut out = None;
     let mut it = args.iter();
     while let Some(a) = it.next() {
@@ -158,6 +160,10 @@ fn run(args: &[String]) -> Result<()> {
             }
             "--sky" => {
                 sky = true;
+                mode = Mode::Full;
+            }
+            "--probes" => {
+                probes = true;
                 mode = Mode::Full;
             }
             "--out" => out = Some(PathBuf::from(it.next().unwrap_or_else(|| usage()))),
@@ -182,6 +188,7 @@ fn run(args: &[String]) -> Result<()> {
         target.join(match (budget, mode) {
             _ if emitters => "eval-emitters",
             _ if sky => "eval-sky",
+            _ if probes => "eval-probes",
             (true, _) => "eval-budget",
             (false, Mode::Quick) => "eval-quick",
             (false, Mode::Full) => "eval-full",
@@ -222,6 +229,9 @@ fn run(args: &[String]) -> Result<()> {
     }
     if sky {
         return table("sky", sky::run(&bin, &cache, &root, &out)?);
+    }
+    if probes {
+        return table("probes", probes::run(&bin, &cache, &root)?);
     }
     if budget {
         return table("budget", budget::run(&bin, &cache, &root)?);

@@ -1,0 +1,115 @@
+//! The probes pass (`shaders/runtime/probes.wgsl`): every probe's irradiance coefficients under
+//! this frame's cluster weights, Σ_c weight_c ⊙ transfer[c][probe] over all clusters (not the
+//! blend's top K, see the shader), one invocation per probe and coefficient, after the weights;
+//! and the probe volume it fills, which shaders sample with [`crate::PROBES_WGSL`].
+
+use prm_format::{Probes, SH_COEFFS};
+use prm_gpu_kit::{pipeline, ComputePass, PassTimer};
+
+use crate::{Buffers, GpuProbeGrid, RuntimeError};
+
+/// What a shader needs to light moving objects from the probes with [`crate::PROBES_WGSL`]:
+/// bind `grid` as `var<uniform> probe_grid: ProbeGrid`, `cells` as
+/// `var<storage, read> probe_cells: array<i32>` and `coefficients` as
+/// `var<storage, read> probe_sh: array<vec4<f32>>`.
+pub struct ProbeVolume<'a> {
+    /// The grid and probe count (uniform [`GpuProbeGrid`]).
+    pub grid: &'a wgpu::Buffer,
+    /// Every grid cell's probe index, or −1 where the cell is inside geometry (storage `i32`).
+    pub cells: &'a wgpu::Buffer,
+    /// Nine RGB coefficients per probe (storage `vec4<f32>`, `w` unused), rewritten by every
+    /// [`crate::Runtime::encode`]: `E(n) = Σ_i c_i · Y_i(n)` in [`prm_format::sh_basis`].
+    pub coefficients: &'a wgpu::Buffer,
+    /// The archive's probes: grid, cells and positions (and the transfer the pass reads).
+    pub probes: &'a Probes,
+}
+
+impl<'a> ProbeVolume<'a> {
+    /// `grid`, `cells` and `coefficients`, in that order.
+    pub fn resources(&self) -> [wgpu::BindingResource<'a>; 3] {
+        [
+            self.grid.as_entire_binding(),
+            self.cells.as_entire_binding(),
+            self.coefficients.as_entire_binding(),
+        ]
+    }
+}
+
+/// Sums the probes' coefficients.
+pub(crate) struct ProbesPass {
+    pass: ComputePass,
+    pub grid: wgpu::Buffer,
+    pub cells: wgpu::Buffer,
+    pub coefficients: wgpu::Buffer,
+    pub probes: Probes,
+}
+
+impl ProbesPass {
+    /// Uploads the archive's probes and their transfer; refused when the transfer exceeds the
+    /// device's storage binding size.
+    pub fn new(device: &wgpu::Device, b: &Buffers, probes: &Probes) -> Result<ProbesPass, RuntimeError> {
+        let transfer: Vec<f32> = probes.transfer.iter().flatten().flatten().copied().collect();
+        let bytes = transfer.len() as u64 * 4;
+        let max = device.limits().max_storage_buffer_binding_size;
+        if bytes > max {
+            return Err(RuntimeError::Probes(format!(
+                "{} probes × {} clusters take {:.1} MiB of transfer, over the device's {:.1} MiB storage binding",
+                probes.len(),
+                probes.clusters(),
+                bytes as f64 / (1 << 20) as f64,
+                max as f64 / (1 << 20) as f64
+            )));
+        }
+        let st = wgpu::BufferUsages::STORAGE;
+        let g = probes.grid;
+        let gpu_grid = GpuProbeGrid {
+            origin: g.origin,
+            spacing: g.spacing,
+            dims: g.dims,
+            count: probes.len() as u32,
+        };
+        let grid = pipeline::buffer_init(
+            device,
+            "prm probe grid",
+            bytemuck::bytes_of(&gpu_grid),
+            wgpu::BufferUsages::UNIFORM,
+        );
+        let mut cell_probe = vec![-1i32; g.cells() as usize];
+        for (p, &c) in probes.cells.iter().enumerate() {
+            cell_probe[c as usize] = p as i32;
+        }
+        let cells = pipeline::buffer_init(device, "prm probe cells", bytemuck::cast_slice(&cell_probe), st);
+        let transfer = pipeline::buffer_init(device, "prm probe transfer", bytemuck::cast_slice(&transfer), st);
+        let coefficients = pipeline::storage(
+            device,
+            "prm probe coefficients",
+            (probes.len() * SH_COEFFS * 16) as u64,
+            wgpu::BufferUsages::COPY_SRC,
+        );
+        let pass = ComputePass::new(
+            device,
+            "probes",
+            &[crate::SHARED_WGSL, include_str!("../../../shaders/runtime/probes.wgsl")],
+            &[
+                b.frame.as_entire_binding(),
+                b.weights.as_entire_binding(),
+                grid.as_entire_binding(),
+                transfer.as_entire_binding(),
+                coefficients.as_entire_binding(),
+            ],
+        );
+        Ok(ProbesPass {
+            pass,
+            grid,
+            cells,
+            coefficients,
+            probes: probes.clone(),
+        })
+    }
+
+    /// One invocation per probe and coefficient (workgroups of 64).
+    pub fn encode(&self, encoder: &mut wgpu::CommandEncoder, timer: Option<&PassTimer>) {
+        let slots = (self.probes.len() * SH_COEFFS) as u32;
+        self.pass.encode(encoder, [slots.div_ceil(64), 1, 1], timer);
+    }
+}

@@ -1,0 +1,162 @@
+//! `cargo xtask eval --probes`: the irradiance probes against the reference tracer at the probe
+//! positions (issue #15's target: within 10%), at default bake settings and beside a larger
+//! bake, and what the probes cost the bake and a frame.
+//!
+//! Each case is baked with `prm-bake bake SCENE --probes` (the default 512-cell budget), played
+//! for one frame with one point light in-process (`prm_play::Renderer`, the run time's probes
+//! pass), and each probe's irradiance is taken at the six axis normals from its coefficients
+//! (negative values clamped, as `probe_volume.wgsl` does). The reference is
+//! `prm_trace::ReferenceTracer::indirect_at_points` at the same points and normals, twice with
+//! different seeds for its own noise. Error = ‖t − r‖/‖r‖ over every probe, normal and channel;
+//! energy = Σt/Σr; shape = the error after the best global scale (metrics.md's split).
+
+use anyhow::{Context, Result};
+use glam::Vec3;
+use std::fmt::Write as _;
+use std::path::Path;
+
+use crate::plan::{self, SceneSpec};
+use prm_play::{FrameInput, Mode};
+use prm_scene::Light;
+use prm_trace::{Bvh, BvhParams, Lighting, ReferenceParams, ReferenceTracer};
+
+/// Reference paths per probe and normal: its noise stays under a fifth of the errors measured.
+const SPP: u32 = 16384;
+/// Frames timed with and without the probes pass.
+const FRAMES: usize = 24;
+use prm_format::AXIS_NORMALS as NORMALS;
+
+fn rel(t: &[Vec3], r: &[Vec3]) -> f64 {
+    let num: f64 = t.iter().zip(r).map(|(a, b)| (*a - *b).length_squared() as f64).sum();
+    let den: f64 = r.iter().map(|b| b.length_squared() as f64).sum();
+    (num / den).sqrt()
+}
+
+fn sum(v: &[Vec3]) -> f64 {
+    v.iter().map(|x| x.element_sum() as f64).sum()
+}
+
+/// Runs the probe cases; returns the Markdown table.
+pub fn run(bake_bin: &Path, cache: &Path, root: &Path) -> Result<String> {
+    // (name, scene, extra bake arguments, light position as a fraction of the bounds)
+    let cases: [(&str, &str, &[&str], [f32; 3]); 3] = [
+        (
+            "Cornell box, default bake",
+            "scenes/cornell-box/cornell-box.obj",
+            &[],
+            [0.36, 0.82, 0.54],
+        ),
+        (
+            "Cornell box, 8192 entries, 256 clusters",
+            "scenes/cornell-box/cornell-box.obj",
+            &["--entries", "8192", "--clusters", "256"],
+            [0.36, 0.82, 0.54],
+        ),
+        (
+            "two rooms, default bake",
+            "scenes/two-rooms/two-rooms.obj",
+            &[],
+            [0.25, 0.8, 0.5],
+        ),
+    ];
+    let mut md = String::from(
+        "| case | probes | error | energy | shape | reference noise | probes bake s | frame ms: with probes / without |\n| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n",
+    );
+    for (name, scene_rel, extra, frac) in cases {
+        let scene_path = root.join(scene_rel);
+        let spec = SceneSpec::new(
+            &name.replace([' ', ','], "-"),
+            scene_path.clone(),
+            vec![],
+            Default::default(),
+            64,
+        );
+        let args: Vec<String> = std::iter::once("--probes")
+            .chain(extra.iter().copied())
+            .map(String::from)
+            .collect();
+        let baked = plan::bake(bake_bin, cache, &spec, &args, None, false)?;
+        let probe_s = baked.report["timings"]["probes"].as_f64().unwrap_or(f64::NAN);
+        let archive = prm_format::Archive::open(&baked.archive)
+            .with_context(|| format!("opening {}", baked.archive.display()))?;
+        let probes = archive.probes().context("the bake placed no probes")?.clone();
+        let (mut r, scene) = crate::measure::renderer(&baked.archive, &scene_path, 32)?;
+        let b = scene.bounds();
+        let light = Light::Point {
+            position: b.min + b.extent() * Vec3::from(frac),
+            intensity: Vec3::splat(0.8 * b.diagonal() * b.diagonal()),
+        };
+        let lights = [light];
+        let camera = prm_play::default_camera(&scene);
+        let input = FrameInput {
+            camera,
+            lights: &lights,
+            mode: Mode::Gi,
+        };
+        r.render(&input)?;
+        let played: Vec<Vec3> = r
+            .runtime()
+            .read_probes()?
+            .iter()
+            .flat_map(|c| NORMALS.map(|n| Vec3::from(prm_format::sh_irradiance(c, n)).max(Vec3::ZERO)))
+            .collect();
+        // Frame cost: the same bake without probes (the same archive but for the section),
+        // timed alternately with this one.
+        let plain = plan::bake(bake_bin, cache, &spec, &args[1..], None, false)?;
+        let (mut without, _) = crate::measure::renderer(&plain.archive, &scene_path, 32)?;
+        let (mut with_ms, mut without_ms) = (0.0, 0.0);
+        for _ in 0..2 {
+            for (renderer, total) in [(&mut r, &mut with_ms), (&mut without, &mut without_ms)] {
+                for i in 0..FRAMES / 2 + 2 {
+                    let t = std::time::Instant::now();
+                    renderer.render(&input)?;
+                    if i >= 2 {
+                        *total += t.elapsed().as_secs_f64();
+                    }
+                }
+            }
+        }
+        let per_frame = |total: f64| total * 1e3 / FRAMES as f64;
+        let (with_ms, without_ms) = (per_frame(with_ms), per_frame(without_ms));
+
+        let bvh = Bvh::build(&scene, &BvhParams::DEFAULT)?;
+        let points: Vec<(Vec3, Vec3)> = probes
+            .positions
+            .iter()
+            .flat_map(|p| NORMALS.map(|n| (Vec3::from(*p), Vec3::from(n))))
+            .collect();
+        let tracer = ReferenceTracer::new(&scene, &bvh, Lighting::Lights(&lights));
+        let reference = |seed| -> Result<Vec<Vec3>> {
+            let params = ReferenceParams {
+                seed,
+                ..ReferenceParams::with_spp(SPP)
+            };
+            Ok(tracer.indirect_at_points(&points, &params, &mut |_, _| {})?.mean)
+        };
+        let (r1, r2) = (reference(41)?, reference(43)?);
+        let error = rel(&played, &r1);
+        let energy = sum(&played) / sum(&r1);
+        let dot: f64 = played.iter().zip(&r1).map(|(a, b)| a.dot(*b) as f64).sum();
+        let tt: f64 = played.iter().map(|a| a.length_squared() as f64).sum();
+        let scale = (dot / tt.max(1e-30)) as f32;
+        let scaled: Vec<Vec3> = played.iter().map(|a| *a * scale).collect();
+        let shape = rel(&scaled, &r1);
+        let noise = rel(&r2, &r1) / 2f64.sqrt();
+        println!(
+            "probes: {name}: {} probes, error {:.2}%, energy {energy:.3}, shape {:.2}%, reference noise {:.2}%",
+            probes.len(),
+            100.0 * error,
+            100.0 * shape,
+            100.0 * noise
+        );
+        writeln!(
+            md,
+            "| {name} | {} | {:.1}% | {energy:.3} | {:.1}% | {:.1}% | {probe_s:.2} | {with_ms:.1} / {without_ms:.1} |",
+            probes.len(),
+            100.0 * error,
+            100.0 * shape,
+            100.0 * noise
+        )?;
+    }
+    Ok(md)
+}
