@@ -651,17 +651,21 @@ fn destinations_are_checked_before_work_and_symlinks_written_through() {
     assert_eq!(source.canonicalize().unwrap(), scene_path().canonicalize().unwrap());
 }
 
-/// `--shard I/N` on two processes at once, then `merge`: exactly the bytes of the single bake,
-/// whatever order the parts come in; and the merge refuses what does not make one bake.
+/// `--shard I/N` on two processes at once, then `merge`: exactly the bytes of the single bake
+/// (probes included: each part has its own clusters' transfer), whatever order the parts come
+/// in; and the merge refuses what does not make one bake.
 #[test]
 fn shards_merge_into_the_single_bake_byte_for_byte() {
     let dir = temp_dir("shards");
     let parts_dir = dir.join("parts");
     std::fs::create_dir_all(&parts_dir).unwrap();
-    let (single, _, _) = bake(&dir, "single", 1, "cpu", &["--quiet"]);
+    let (single, _, _) = bake(&dir, "single", 1, "cpu", &["--quiet", "--probes", "32"]);
+    assert!(Archive::open(&single).unwrap().probes().is_some());
+    let shard = |i| ["--quiet", "--probes", "32", "--shard", i];
+    let (args0, args1) = (shard("0/2"), shard("1/2"));
     let (part0, part1) = std::thread::scope(|s| {
-        let a = s.spawn(|| bake(&parts_dir, "part0", 1, "cpu", &["--quiet", "--shard", "0/2"]).0);
-        let b = s.spawn(|| bake(&parts_dir, "part1", 1, "cpu", &["--quiet", "--shard", "1/2"]).0);
+        let a = s.spawn(|| bake(&parts_dir, "part0", 1, "cpu", &args0).0);
+        let b = s.spawn(|| bake(&parts_dir, "part1", 1, "cpu", &args1).0);
         (a.join().unwrap(), b.join().unwrap())
     });
     let part = Archive::open(&part0).unwrap();
