@@ -11,7 +11,7 @@ use glam::Vec3;
 use prm_format::{Archive, ArchiveWriter, Cluster};
 use prm_runtime::{Runtime, RuntimeOptions};
 use prm_scene::{Atlas, AtlasParams, Sizing};
-use prm_tests::{channel_sum as sum, gpu, rel_error, repo, temp_dir, unlit_frame};
+use prm_tests::{bake_cpu, channel_sum as sum, gpu, rel_error, repo, temp_dir, unlit_frame};
 use prm_trace::{Bvh, BvhParams, Emitters, Lighting, ReferenceParams, ReferenceTracer};
 
 /// Atlas side of the test bake.
@@ -63,15 +63,7 @@ fn two_emitter_groups_bake_scale_and_match_the_reference() {
         seed: Some(3),
         ..Default::default()
     };
-    let plan = prm_bake::Plan::new(&config, &scene).unwrap();
-    let job = prm_bake::BakeJob {
-        scene: &scene,
-        scene_path: &scene_path,
-        plan: &plan,
-        output: &traced_path,
-        shard: None,
-    };
-    prm_bake::bake(&job, prm_bake::Renderer::Cpu, &mut prm_bake::NoProgress).unwrap();
+    bake_cpu(&scene, &scene_path, &config, &traced_path);
     let panes_path = dir.join("lamps-panes.prm");
     without_traced_indirect(&traced_path, &panes_path);
 

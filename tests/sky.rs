@@ -8,7 +8,7 @@ use glam::Vec3;
 use prm_format::Archive;
 use prm_runtime::{Runtime, RuntimeOptions};
 use prm_scene::{Atlas, AtlasParams, Sizing, Sky, SkyMap};
-use prm_tests::{channel_sum as sum, gpu, rel_error, repo, temp_dir, unlit_frame};
+use prm_tests::{bake_cpu, channel_sum as sum, gpu, rel_error, repo, temp_dir, unlit_frame};
 use prm_trace::{Bvh, BvhParams, Lighting, ReferenceParams, ReferenceTracer};
 
 /// Atlas side of the test bake.
@@ -49,15 +49,7 @@ fn sky_bakes_plays_and_matches_the_reference() {
         sky_paths: Some(4 * prm_bake::SKY_PATHS),
         ..Default::default()
     };
-    let plan = prm_bake::Plan::new(&config, &scene).unwrap();
-    let job = prm_bake::BakeJob {
-        scene: &scene,
-        scene_path: &scene_path,
-        plan: &plan,
-        output: &path,
-        shard: None,
-    };
-    prm_bake::bake(&job, prm_bake::Renderer::Cpu, &mut prm_bake::NoProgress).unwrap();
+    bake_cpu(&scene, &scene_path, &config, &path);
     let mut archive = Archive::open(&path).unwrap();
     assert_eq!(archive.info().minor, 3);
     let transfer = archive.sky().expect("the bake wrote the sky's transfer").clone();

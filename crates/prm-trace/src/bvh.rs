@@ -378,20 +378,11 @@ fn barycentric(t: &RtTriangle, p: Vec3) -> (f32, f32) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use glam::Vec2;
-    use prm_scene::{LoadReport, Material, Triangle};
+    use prm_scene::{Material, Triangle};
 
     fn quad_scene() -> Scene {
         // Two unit squares: floor y=0 facing up and ceiling y=1 facing down.
-        let tri = |p: [Vec3; 3]| {
-            let n = (p[1] - p[0]).cross(p[2] - p[0]).normalize();
-            Triangle {
-                positions: p,
-                normals: [n; 3],
-                uvs: [Vec2::ZERO; 3],
-                material: 0,
-            }
-        };
+        let tri = |p: [Vec3; 3]| Triangle::flat(p, 0);
         let (a, b, c, d) = (
             Vec3::new(0.0, 0.0, 0.0),
             Vec3::new(1.0, 0.0, 0.0),
@@ -399,26 +390,15 @@ mod tests {
             Vec3::new(0.0, 0.0, 1.0),
         );
         let up = Vec3::Y;
-        Scene {
-            source: "test".into(),
-            triangles: vec![
+        Scene::from_parts(
+            vec![
                 tri([a, d, c]),
                 tri([a, c, b]),
                 tri([a + up, b + up, c + up]),
                 tri([a + up, c + up, d + up]),
             ],
-            lightmap_uvs: None,
-            materials: vec![Material {
-                name: "m".into(),
-                albedo: Vec3::splat(0.5),
-                texture: None,
-                emission: Vec3::ZERO,
-            }],
-            textures: vec![],
-            lights: vec![],
-            cameras: vec![],
-            report: LoadReport::default(),
-        }
+            vec![Material::diffuse("m", Vec3::splat(0.5))],
+        )
     }
 
     #[test]

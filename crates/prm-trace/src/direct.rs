@@ -93,8 +93,7 @@ pub fn entry_irradiance(bvh: &Bvh, lights: &[Light], entries: &[SurfaceSample]) 
 mod tests {
     use super::*;
     use crate::BvhParams;
-    use glam::Vec2;
-    use prm_scene::{LoadReport, Material, Scene, Triangle};
+    use prm_scene::{Material, Scene, Triangle};
 
     /// A floor 20 × 20 at y = 0, facing up.
     fn floor() -> Scene {
@@ -104,27 +103,10 @@ mod tests {
             Vec3::new(10.0, 0.0, 10.0),
             Vec3::new(-10.0, 0.0, 10.0),
         );
-        let tri = |positions: [Vec3; 3]| Triangle {
-            positions,
-            normals: [Vec3::Y; 3],
-            uvs: [Vec2::ZERO; 3],
-            material: 0,
-        };
-        Scene {
-            source: "floor".into(),
-            triangles: vec![tri([a, d, c]), tri([a, c, b])],
-            lightmap_uvs: None,
-            materials: vec![Material {
-                name: "m".into(),
-                albedo: Vec3::splat(0.5),
-                texture: None,
-                emission: Vec3::ZERO,
-            }],
-            textures: vec![],
-            lights: vec![],
-            cameras: vec![],
-            report: LoadReport::default(),
-        }
+        Scene::from_parts(
+            vec![Triangle::flat([a, d, c], 0), Triangle::flat([a, c, b], 0)],
+            vec![Material::diffuse("m", Vec3::splat(0.5))],
+        )
     }
 
     #[test]

@@ -362,23 +362,17 @@ pub struct Receiver {
 mod tests {
     use super::*;
     use crate::BvhParams;
-    use prm_scene::{LoadReport, Material, Triangle};
+    use prm_scene::{Material, Triangle};
 
     /// A receiving floor at y = 0 (20 × 20) and an emitting `a × b` rectangle at height `c`
     /// centred above the origin, facing down.
     fn lamp_over_floor(a: f32, b: f32, c: f32, le: Vec3) -> Scene {
-        let tri = |positions: [Vec3; 3], material: u32| {
-            let n = (positions[1] - positions[0])
-                .cross(positions[2] - positions[0])
-                .normalize();
-            Triangle {
-                positions,
-                normals: [n; 3],
-                uvs: [Vec2::ZERO; 3],
-                material,
-            }
+        let quad = |p: [Vec3; 4], m: u32| {
+            [
+                Triangle::flat([p[0], p[1], p[2]], m),
+                Triangle::flat([p[0], p[2], p[3]], m),
+            ]
         };
-        let quad = |p: [Vec3; 4], m: u32| [tri([p[0], p[1], p[2]], m), tri([p[0], p[2], p[3]], m)];
         let f = 10.0;
         let floor = quad(
             [
@@ -399,22 +393,14 @@ mod tests {
             ],
             1,
         );
-        let material = |name: &str, emission| Material {
-            name: name.into(),
-            albedo: Vec3::splat(0.5),
-            texture: None,
-            emission,
+        let lamp_material = Material {
+            emission: le,
+            ..Material::diffuse("lamp", Vec3::splat(0.5))
         };
-        Scene {
-            source: "lamp".into(),
-            triangles: floor.into_iter().chain(lamp).collect(),
-            lightmap_uvs: None,
-            materials: vec![material("floor", Vec3::ZERO), material("lamp", le)],
-            textures: vec![],
-            lights: vec![],
-            cameras: vec![],
-            report: LoadReport::default(),
-        }
+        Scene::from_parts(
+            floor.into_iter().chain(lamp).collect(),
+            vec![Material::diffuse("floor", Vec3::splat(0.5)), lamp_material],
+        )
     }
 
     /// Form factor from a point to a parallel `x × y` rectangle `c` above it, the point under

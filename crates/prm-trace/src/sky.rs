@@ -144,42 +144,19 @@ mod tests {
     /// A floor (albedo 0.5) and a red wall standing on it along x = 0, facing +x: the floor
     /// sees the wall, the wall the floor, both the sky.
     fn corner() -> Scene {
-        let tri = |p: [[f32; 3]; 3], material| {
-            let positions = p.map(Vec3::from);
-            let n = (positions[1] - positions[0])
-                .cross(positions[2] - positions[0])
-                .normalize();
-            Triangle {
-                positions,
-                normals: [n; 3],
-                uvs: [glam::Vec2::ZERO; 3],
-                material,
-            }
-        };
-        let material = |name: &str, albedo| Material {
-            name: name.into(),
-            albedo,
-            texture: None,
-            emission: Vec3::ZERO,
-        };
-        Scene {
-            triangles: vec![
+        let tri = |p: [[f32; 3]; 3], material| Triangle::flat(p.map(Vec3::from), material);
+        Scene::from_parts(
+            vec![
                 tri([[0.0, 0.0, 0.0], [1.0, 0.0, 1.0], [1.0, 0.0, 0.0]], 0),
                 tri([[0.0, 0.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 1.0]], 0),
                 tri([[0.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 1.0, 1.0]], 1),
                 tri([[0.0, 0.0, 0.0], [0.0, 1.0, 1.0], [0.0, 0.0, 1.0]], 1),
             ],
-            materials: vec![
-                material("grey", Vec3::splat(0.5)),
-                material("red", Vec3::new(0.8, 0.2, 0.1)),
+            vec![
+                Material::diffuse("grey", Vec3::splat(0.5)),
+                Material::diffuse("red", Vec3::new(0.8, 0.2, 0.1)),
             ],
-            source: "corner".into(),
-            lightmap_uvs: None,
-            textures: vec![],
-            lights: vec![],
-            cameras: vec![],
-            report: prm_scene::LoadReport::default(),
-        }
+        )
     }
 
     /// Two floor points (near and far from the wall) and one on the wall.
