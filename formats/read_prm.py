@@ -356,25 +356,27 @@ class Reader:
         self.parse_panes(by_kind[5])
 
     def parse_probes(self, s):
-        # 1.4: 48-byte header (probes N, clusters C, coefficient count = 9, flags = 0, grid
-        # nx ny nz, reserved, origin xyz, spacing), N records (cell u32, position 3 f32), then
-        # C x N transfers of 9 RGB binary16, cluster by cluster.
+        # 1.4: 48-byte header (probes N, clusters C, coefficient count = 9, flags (bit 0: sky),
+        # grid nx ny nz, reserved, origin xyz, spacing), N records (cell u32, position 3 f32),
+        # C x N transfers of 9 RGB binary16, cluster by cluster, then with the sky flag N sky
+        # transfers of 9 x 9 RGB binary16.
         c_count = len(self.clusters)
-        raw = self.load(s, 48 + (16 + 54 * c_count) * MAX_PROBES)
+        raw = self.load(s, 48 + (16 + 54 * c_count + 486) * MAX_PROBES)
         head = raw[:48]
         if len(head) < 48:
             raise InvalidArchive("probes: shorter than its header")
         n, c, coeffs, flags, nx, ny, nz, reserved = struct.unpack_from("<8I", head, 0)
         origin = list(struct.unpack_from("<3f", head, 32))
         spacing, = struct.unpack_from("<f", head, 44)
-        if coeffs != SH_COEFFS or flags or (self.strict and reserved):
+        if coeffs != SH_COEFFS or flags & ~1 or (self.strict and reserved):
             raise InvalidArchive("probes: unknown basis, flags or a non-zero reserved field")
+        has_sky = bool(flags & 1)
         cells = nx * ny * nz
         if not 1 <= n <= MAX_PROBES or c != c_count or not 1 <= cells <= MAX_PROBE_CELLS or 0 in (nx, ny, nz):
             raise InvalidArchive("probes: probe count, cluster count or grid out of range")
         if not (spacing > 0 and spacing != float("inf")) or any(v != v or abs(v) == float("inf") for v in origin):
             raise InvalidArchive("probes: origin or spacing not finite and positive")
-        size = 48 + 16 * n + 54 * n * c
+        size = 48 + 16 * n + 54 * n * c + (486 * n if has_sky else 0)
         if len(raw) != size:
             raise InvalidArchive("probes: raw size differs from what the header gives")
         recs = [struct.unpack_from("<I3f", raw, 48 + 16 * i) for i in range(n)]
@@ -385,12 +387,16 @@ class Reader:
             raise InvalidArchive("probes: positions must be finite")
         m = 27 * n * c
         t = struct.unpack_from(f"<{m}e", raw, 48 + 16 * n)
-        if any(v != v or abs(v) == float("inf") for v in t):
+        sky = struct.unpack_from(f"<{243 * n}e", raw, 48 + 16 * n + 2 * m) if has_sky else ()
+        if any(v != v or abs(v) == float("inf") for v in t + sky):
             raise InvalidArchive("probes: values must be finite")
         self.probes = dict(dims=[nx, ny, nz], origin=origin, spacing=spacing, cells=cell_list,
                            positions=[list(r[1:]) for r in recs],
                            transfer=[[list(t[27 * i + 3 * k:27 * i + 3 * k + 3]) for k in range(SH_COEFFS)]
-                                     for i in range(n * c)])
+                                     for i in range(n * c)],
+                           sky=[[[list(sky[243 * p + 27 * i + 3 * k:243 * p + 27 * i + 3 * k + 3])
+                                  for k in range(SH_COEFFS)] for i in range(SH_COEFFS)]
+                                for p in range(n)] if has_sky else None)
 
     def parse_sky(self, s):
         # 1.3: header (resolution, coefficient count = 9, flags = 0, reserved), then per texel

@@ -14,6 +14,8 @@
 @group(0) @binding(2) var<uniform> grid: ProbeGrid;
 @group(0) @binding(3) var<storage, read> transfer: array<f32>;
 @group(0) @binding(4) var<storage, read_write> probe_sh: array<vec4<f32>>;
+// The sky's part (direct and bounced), summed on the CPU when the sky changes; zero without one.
+@group(0) @binding(5) var<storage, read> sky_sh: array<vec4<f32>>;
 
 @compute @workgroup_size(64)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
@@ -27,5 +29,5 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         let base = (c * n * 9u + slot) * 3u;
         sum += weights[c].weight * vec3<f32>(transfer[base], transfer[base + 1u], transfer[base + 2u]);
     }
-    probe_sh[slot] = vec4<f32>(sum, 0.0);
+    probe_sh[slot] = vec4<f32>(sum + sky_sh[slot].rgb, 0.0);
 }

@@ -170,6 +170,7 @@ pub fn summary_json<R: Read + Seek>(archive: &Archive<R>, file: &Path, report: O
             "spacing": p.grid.spacing,
             "coefficients": prm_format::SH_COEFFS,
             "unit_weight_mean_irradiance": probe_mean_irradiance(p),
+            "sky": p.sky.is_some(),
         })),
         "clusters": archive.clusters().len(),
         "tiles": {
@@ -293,7 +294,7 @@ pub fn write_summary<W: Write, R: Read + Seek>(
         let [r, g, b] = probe_mean_irradiance(p);
         writeln!(
             out,
-            "probes       {} on a {}×{}×{} grid of {:.3} from ({:.3}, {:.3}, {:.3}), {} spherical-harmonic coefficients per cluster; unit weights give a probe {r:.3} {g:.3} {b:.3} on average (mean over six axis normals)",
+            "probes       {} on a {}×{}×{} grid of {:.3} from ({:.3}, {:.3}, {:.3}), {} spherical-harmonic coefficients per cluster; unit weights give a probe {r:.3} {g:.3} {b:.3} on average (mean over six axis normals){}",
             p.len(),
             p.grid.dims[0],
             p.grid.dims[1],
@@ -302,7 +303,12 @@ pub fn write_summary<W: Write, R: Read + Seek>(
             p.grid.origin[0],
             p.grid.origin[1],
             p.grid.origin[2],
-            prm_format::SH_COEFFS
+            prm_format::SH_COEFFS,
+            if p.sky.is_some() {
+                "; with the sky's transfer to them"
+            } else {
+                ""
+            }
         )?;
     }
     writeln!(out, "clusters     {} (one pane each)", archive.clusters().len())?;

@@ -55,6 +55,14 @@ pub const SKY_PATHS: u32 = 256;
 /// transfer takes 0.3 s (one shadow ray per probe and VPL, 4.4 M for its 10,668 VPLs).
 pub const PROBE_CELLS: u32 = 512;
 
+/// Paths per probe of the sky's transfer to the probes (bakes with `--sky` and `--probes`): 16
+/// times a texel's [`SKY_PATHS`], since a probe gathers over the whole sphere and its 81
+/// coefficients are not smoothed, while the probes are few (512 probes cost what 8192 texels
+/// do). Measured (`cargo xtask eval --probes`): the courtyard's 488 probes take 1.5 s with it
+/// (against 0.3–0.5 s without a sky elsewhere) and are 3.0% from the reference under a uniform
+/// sky.
+pub const PROBE_SKY_PATHS: u32 = 4096;
+
 /// Where the panes are rendered.
 #[derive(Clone, Copy)]
 pub enum Renderer<'a> {
@@ -285,30 +293,51 @@ fn probe_section(
     vpls: &prm_trace::VplSet,
     clustering: &Clustering,
     cells: u32,
-    bound: prm_trace::VplBound,
+    params: &BakeParams,
     progress: &mut dyn ProgressSink,
 ) -> Result<(prm_format::Probes, String), BakeError> {
+    let bound = params.bound();
     let layout = prm_trace::place_probes(scene, bvh, cells).map_err(trace("placing probes"))?;
     progress.phase_start(Phase::Probes, layout.positions.len() as u64);
     let (transfer, rays) = prm_trace::probe_transfer(bvh, vpls, clustering, &layout.positions, bound, &mut |done| {
         progress.phase_advance(done)
     })
     .map_err(trace("the probes' transfer"))?;
+    // With the sky: its transfer to the probes too (they are few: many paths each).
+    let sky = match params.sky_paths {
+        None => None,
+        Some(_) => {
+            let sky_params = ReferenceParams {
+                seed: params.seed,
+                ..ReferenceParams::with_spp(PROBE_SKY_PATHS)
+            };
+            Some(
+                prm_trace::probes::sky_transfer_at_probes(scene, bvh, &layout.positions, &sky_params, &mut |_, _| {})
+                    .map_err(trace("the sky's transfer to the probes"))?,
+            )
+        }
+    };
     let g = layout.grid;
     let detail = format!(
-        "{} probes on a {}×{}×{} grid of {:.3} ({} cells inside geometry), {rays} shadow rays",
+        "{} probes on a {}×{}×{} grid of {:.3} ({} cells inside geometry), {rays} shadow rays{}",
         layout.positions.len(),
         g.dims[0],
         g.dims[1],
         g.dims[2],
         g.spacing,
-        layout.inside
+        layout.inside,
+        if sky.is_some() {
+            format!("; the sky's transfer, {PROBE_SKY_PATHS} paths each")
+        } else {
+            String::new()
+        }
     );
     let probes = prm_format::Probes {
         grid: g,
         cells: layout.cells,
         positions: layout.positions.iter().map(|p| p.to_array()).collect(),
         transfer,
+        sky,
     };
     Ok((probes, detail))
 }
@@ -730,7 +759,7 @@ pub fn bake(job: &BakeJob<'_>, renderer: Renderer<'_>, progress: &mut dyn Progre
 
     if let Some(cells) = params.probes {
         let t = Instant::now();
-        let (probes, detail) = probe_section(scene, &bvh, &vpls, &clustering, cells, params.bound(), progress)?;
+        let (probes, detail) = probe_section(scene, &bvh, &vpls, &clustering, cells, params, progress)?;
         writer.set_probes(probes).map_err(|source| BakeError::Archive {
             what: "recording the probes".to_string(),
             source,

@@ -9,7 +9,9 @@
 //! count `C`, coefficient count = [`SH_COEFFS`], flags = 0, grid dimensions `nx, ny, nz`,
 //! reserved = 0, grid origin `[f32; 3]`, cell spacing `f32`), then `N` probe records of 16 bytes
 //! (cell index `u32`, position `[f32; 3]`), then `C × N` transfers of 9 RGB `f16` (54 bytes),
-//! cluster by cluster. Cell `(i, j, k)` is index `i + nx·(j + ny·k)`, its centre
+//! cluster by cluster, and with flag bit 0 ([`FLAG_SKY`]) `N` sky transfers of 9 × 9 RGB `f16`
+//! (486 bytes): probe `p`'s irradiance coefficient `i` per unit of the sky's coefficient `k`
+//! (direct and after bounces). Cell `(i, j, k)` is index `i + nx·(j + ny·k)`, its centre
 //! `origin + spacing·(i + ½, j + ½, k + ½)`; cells without a probe (inside geometry) are absent,
 //! and the indices increase strictly. `f16` for the same reason as the sky section: noise that
 //! does not compress, carried far above its precision.
@@ -23,6 +25,14 @@ pub const PROBES_HEADER_SIZE: usize = 48;
 pub(crate) const PROBE_RECORD_SIZE: usize = 16;
 /// Bytes of one cluster's transfer to one probe.
 pub(crate) const PROBE_TRANSFER_BYTES: usize = SH_COEFFS * 6;
+/// Flag bit 0: the section holds the sky's transfer to every probe.
+pub const FLAG_SKY: u32 = 1;
+/// Bytes of one probe's sky transfer.
+pub(crate) const PROBE_SKY_BYTES: usize = SH_COEFFS * SH_COEFFS * 6;
+/// A probe's sky transfer: `[i][k]` is irradiance coefficient `i` (RGB) per unit of the sky's
+/// coefficient `k`.
+pub type ProbeSkyTransfer = [[[f32; 3]; SH_COEFFS]; SH_COEFFS];
+
 /// Most probes a section may hold.
 pub const MAX_PROBES: u32 = 1 << 16;
 /// Most grid cells a section may span.
@@ -65,6 +75,9 @@ pub struct Probes {
     /// Cluster-major: `transfer[c * N + p]` is cluster `c`'s irradiance coefficients at probe `p`
     /// per unit weight.
     pub transfer: Vec<[[f32; 3]; SH_COEFFS]>,
+    /// The sky's transfer to every probe (bakes with the sky), `[p]`: the probes' irradiance
+    /// coefficients under a sky of coefficients `L_k` are `Σ_k sky[p][i][k] ⊙ L_k`.
+    pub sky: Option<Vec<ProbeSkyTransfer>>,
 }
 
 impl Probes {
@@ -99,6 +112,28 @@ impl Probes {
         }
         out
     }
+
+    /// Every probe's irradiance coefficients from the sky of coefficients `coeffs` (RGB radiance
+    /// in the basis of [`crate::sh_basis`], turned and scaled), direct and bounced; zeros without
+    /// a sky transfer.
+    pub fn sky_irradiance_sh(&self, coeffs: &[[f32; 3]; SH_COEFFS]) -> Vec<[[f32; 3]; SH_COEFFS]> {
+        let Some(sky) = &self.sky else {
+            return vec![[[0.0; 3]; SH_COEFFS]; self.len()];
+        };
+        sky.iter()
+            .map(|m| {
+                std::array::from_fn(|i| {
+                    let mut e = [0.0f32; 3];
+                    for (t, l) in m[i].iter().zip(coeffs) {
+                        for c in 0..3 {
+                            e[c] += t[c] * l[c];
+                        }
+                    }
+                    e
+                })
+            })
+            .collect()
+    }
 }
 
 /// The six axis directions, +X −X +Y −Y +Z −Z: the normals probes are compared and summarised at.
@@ -124,11 +159,12 @@ pub fn sh_irradiance(coeffs: &[[f32; 3]; SH_COEFFS], n: [f32; 3]) -> [f32; 3] {
 }
 
 /// Raw size of a probes section, `None` on overflow.
-pub(crate) fn raw_size_for(probes: u64, clusters: u64) -> Option<u64> {
+pub(crate) fn raw_size_for(probes: u64, clusters: u64, sky: bool) -> Option<u64> {
+    let sky_bytes = if sky { PROBE_SKY_BYTES as u64 } else { 0 };
     probes
         .checked_mul(clusters)?
         .checked_mul(PROBE_TRANSFER_BYTES as u64)?
-        .checked_add(probes.checked_mul(PROBE_RECORD_SIZE as u64)?)?
+        .checked_add(probes.checked_mul(PROBE_RECORD_SIZE as u64 + sky_bytes)?)?
         .checked_add(PROBES_HEADER_SIZE as u64)
 }
 
@@ -175,6 +211,17 @@ pub(crate) fn validate(probes: &Probes, clusters: usize) -> Result<(), String> {
         return Err(format!("probe {p}'s position is not finite"));
     }
     let storable = |v: &f32| v.abs() <= crate::sky::SKY_MAX_VALUE;
+    if let Some(sky) = &probes.sky {
+        if sky.len() != n {
+            return Err(format!("{} probe sky transfers for {n} probes", sky.len()));
+        }
+        if let Some(p) = sky.iter().position(|m| !m.iter().flatten().flatten().all(storable)) {
+            return Err(format!(
+                "probe {p}'s sky transfer is not finite within ±{}",
+                crate::sky::SKY_MAX_VALUE
+            ));
+        }
+    }
     if let Some(i) = probes.transfer.iter().position(|t| !t.iter().flatten().all(storable)) {
         return Err(format!(
             "probe transfer {i} (cluster {}, probe {}) is not finite within ±{}",
@@ -190,11 +237,11 @@ pub(crate) fn validate(probes: &Probes, clusters: usize) -> Result<(), String> {
 pub(crate) fn encode(probes: &Probes) -> Vec<u8> {
     let n = probes.len() as u64;
     let clusters = probes.clusters() as u64;
-    let mut b = Vec::with_capacity(raw_size_for(n, clusters).unwrap_or(0) as usize);
+    let mut b = Vec::with_capacity(raw_size_for(n, clusters, probes.sky.is_some()).unwrap_or(0) as usize);
     b.put_u32(n as u32);
     b.put_u32(clusters as u32);
     b.put_u32(SH_COEFFS as u32);
-    b.put_u32(0);
+    b.put_u32(if probes.sky.is_some() { FLAG_SKY } else { 0 });
     for d in probes.grid.dims {
         b.put_u32(d);
     }
@@ -212,12 +259,23 @@ pub(crate) fn encode(probes: &Probes) -> Vec<u8> {
     for v in probes.transfer.iter().flatten().flatten() {
         b.extend_from_slice(&half::f16::from_f32(*v).to_le_bytes());
     }
+    for v in probes.sky.iter().flatten().flatten().flatten().flatten() {
+        b.extend_from_slice(&half::f16::from_f32(*v).to_le_bytes());
+    }
     b
 }
 
-/// Parses and checks the header: probe count, cluster count and grid. The caller checks the
-/// cluster count against the archive.
-pub(crate) fn decode_header(head: &[u8], strict: bool) -> Result<(u32, u32, ProbeGrid), String> {
+/// What the header gives: probe count, cluster count, grid and whether the sky transfer follows.
+#[derive(Debug, PartialEq)]
+pub(crate) struct Header {
+    pub probes: u32,
+    pub clusters: u32,
+    pub grid: ProbeGrid,
+    pub sky: bool,
+}
+
+/// Parses and checks the header. The caller checks the cluster count against the archive.
+pub(crate) fn decode_header(head: &[u8], strict: bool) -> Result<Header, String> {
     let err = |e: crate::Error| e.to_string();
     let mut c = Cursor::new(head, "probes");
     let n = c.u32().map_err(err)?;
@@ -233,7 +291,7 @@ pub(crate) fn decode_header(head: &[u8], strict: bool) -> Result<(u32, u32, Prob
             "probes section has {coeffs} coefficients per probe, this reader knows {SH_COEFFS}"
         ));
     }
-    if flags != 0 || (strict && reserved != 0) {
+    if flags & !FLAG_SKY != 0 || (strict && reserved != 0) {
         return Err(format!(
             "probes section has unknown flags {flags:#x} or a non-zero reserved field"
         ));
@@ -243,7 +301,12 @@ pub(crate) fn decode_header(head: &[u8], strict: bool) -> Result<(u32, u32, Prob
     }
     let grid = ProbeGrid { dims, origin, spacing };
     validate_grid(&grid)?;
-    Ok((n, clusters, grid))
+    Ok(Header {
+        probes: n,
+        clusters,
+        grid,
+        sky: flags & FLAG_SKY != 0,
+    })
 }
 
 /// Decodes whole probe records; positions must be finite.
@@ -259,6 +322,14 @@ pub(crate) fn decode_records(raw: &[u8]) -> Result<Vec<(u32, [f32; 3])>, String>
             Ok((cell, pos))
         })
         .collect()
+}
+
+/// Decodes whole sky transfers; infinities and NaNs are refused.
+pub(crate) fn decode_sky(raw: &[u8]) -> Result<Vec<ProbeSkyTransfer>, String> {
+    let v = decode_transfer(raw)?;
+    Ok(v.chunks_exact(SH_COEFFS)
+        .map(|m| std::array::from_fn(|i| m[i]))
+        .collect())
 }
 
 /// Decodes whole transfers; infinities and NaNs are refused.
@@ -286,27 +357,53 @@ mod tests {
             cells,
             positions,
             transfer,
+            sky: None,
         }
+    }
+
+    fn sky(n: usize) -> Vec<ProbeSkyTransfer> {
+        (0..n)
+            .map(|p| std::array::from_fn(|i| std::array::from_fn(|k| [p as f32, i as f32 * 0.5, -(k as f32)])))
+            .collect()
     }
 
     #[test]
     fn round_trip_through_the_encoding() {
-        let p = probes(4);
-        validate(&p, 4).unwrap();
-        let raw = encode(&p);
-        assert_eq!(raw.len() as u64, raw_size_for(3, 4).unwrap());
-        let (n, c, grid) = decode_header(&raw[..PROBES_HEADER_SIZE], true).unwrap();
-        assert_eq!((n, c, grid), (3, 4, p.grid));
-        let split = PROBES_HEADER_SIZE + 3 * PROBE_RECORD_SIZE;
-        let records = decode_records(&raw[PROBES_HEADER_SIZE..split]).unwrap();
-        let back = Probes {
-            grid,
-            cells: records.iter().map(|r| r.0).collect(),
-            positions: records.iter().map(|r| r.1).collect(),
-            transfer: decode_transfer(&raw[split..]).unwrap(),
-        };
-        assert_eq!(back, p);
-        assert_eq!(p.grid.cell_centre(5), [-0.25, 1.25, 0.75]);
+        for with_sky in [false, true] {
+            let mut p = probes(4);
+            p.sky = with_sky.then(|| sky(3));
+            validate(&p, 4).unwrap();
+            let raw = encode(&p);
+            assert_eq!(raw.len() as u64, raw_size_for(3, 4, with_sky).unwrap());
+            let h = decode_header(&raw[..PROBES_HEADER_SIZE], true).unwrap();
+            assert_eq!((h.probes, h.clusters, h.grid, h.sky), (3, 4, p.grid, with_sky));
+            let split = PROBES_HEADER_SIZE + 3 * PROBE_RECORD_SIZE;
+            let end = split + 12 * PROBE_TRANSFER_BYTES;
+            let records = decode_records(&raw[PROBES_HEADER_SIZE..split]).unwrap();
+            let back = Probes {
+                grid: h.grid,
+                cells: records.iter().map(|r| r.0).collect(),
+                positions: records.iter().map(|r| r.1).collect(),
+                transfer: decode_transfer(&raw[split..end]).unwrap(),
+                sky: with_sky.then(|| decode_sky(&raw[end..]).unwrap()),
+            };
+            assert_eq!(back, p);
+        }
+        assert_eq!(probes(1).grid.cell_centre(5), [-0.25, 1.25, 0.75]);
+    }
+
+    #[test]
+    fn the_sky_transfer_maps_sky_coefficients_to_irradiance_coefficients() {
+        let mut p = probes(1);
+        assert_eq!(p.sky_irradiance_sh(&[[1.0; 3]; SH_COEFFS])[0], [[0.0; 3]; SH_COEFFS]);
+        p.sky = Some(sky(3));
+        let mut l = [[0.0f32; 3]; SH_COEFFS];
+        l[2] = [2.0, 1.0, 1.0];
+        // Probe 1, coefficient 4: [1, 2, -2] ⊙ [2, 1, 1].
+        assert_eq!(p.sky_irradiance_sh(&l)[1][4], [2.0, 2.0, -2.0]);
+        let mut short = p.clone();
+        short.sky = Some(sky(2));
+        assert!(validate(&short, 1).is_err(), "one sky transfer per probe");
     }
 
     #[test]

@@ -1055,7 +1055,7 @@ fn read_atlas<R: Read + Seek>(src: &mut R, rec: &SectionRecord, strict: bool) ->
 /// Reads the probes section: its 48-byte header first, whose probe count and the archive's
 /// cluster count fix the raw size, checked before the rest is decompressed.
 fn read_probes<R: Read + Seek>(src: &mut R, rec: &SectionRecord, strict: bool, clusters: usize) -> Result<Probes> {
-    use crate::probes::{self, PROBES_HEADER_SIZE, PROBE_RECORD_SIZE, PROBE_TRANSFER_BYTES};
+    use crate::probes::{self, PROBES_HEADER_SIZE, PROBE_RECORD_SIZE, PROBE_SKY_BYTES, PROBE_TRANSFER_BYTES};
     let section = open_section(src, rec)?;
     if section.record.raw_size < PROBES_HEADER_SIZE as u64 {
         return Err(Error::inconsistent(format!(
@@ -1066,19 +1066,26 @@ fn read_probes<R: Read + Seek>(src: &mut R, rec: &SectionRecord, strict: bool, c
     let mut raw = section.raw()?;
     let mut head = [0u8; PROBES_HEADER_SIZE];
     raw.read_exact(&mut head)?;
-    let (n, c, grid) = probes::decode_header(&head, strict).map_err(Error::inconsistent)?;
+    let h = probes::decode_header(&head, strict).map_err(Error::inconsistent)?;
+    let (n, c) = (h.probes, h.clusters);
     if c as usize != clusters {
         return Err(Error::inconsistent(format!(
             "probes section is for {c} clusters, the archive has {clusters}"
         )));
     }
-    let expected = probes::raw_size_for(u64::from(n), clusters as u64).unwrap_or(u64::MAX);
+    let expected = probes::raw_size_for(u64::from(n), clusters as u64, h.sky).unwrap_or(u64::MAX);
     section.expect_raw_size(expected, || format!("{n} probes, {clusters} clusters"))?;
     let records = raw.records(n as usize, PROBE_RECORD_SIZE, probes::decode_records)?;
     let transfer = raw.records(n as usize * clusters, PROBE_TRANSFER_BYTES, probes::decode_transfer)?;
+    let sky = if h.sky {
+        Some(raw.records(n as usize, PROBE_SKY_BYTES, probes::decode_sky)?)
+    } else {
+        None
+    };
     raw.finish()?;
     let out = Probes {
-        grid,
+        grid: h.grid,
+        sky,
         cells: records.iter().map(|r| r.0).collect(),
         positions: records.iter().map(|r| r.1).collect(),
         transfer,

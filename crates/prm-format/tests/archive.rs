@@ -858,6 +858,11 @@ fn python_reader_check(path: &Path, filter: TileFilter) -> bool {
             .iter()
             .map(|t| std::array::from_fn(|c| f3(&t[c])))
             .collect(),
+        sky: jp["sky"].as_array().map(|s| {
+            s.iter()
+                .map(|m| std::array::from_fn(|i| std::array::from_fn(|k| f3(&m[i][k]))))
+                .collect()
+        }),
     };
     assert_eq!(a.probes(), Some(&back));
     assert_eq!(a.probes(), Some(&probes));
@@ -1735,11 +1740,15 @@ fn probe_set(s: &Scene) -> Probes {
     let transfer = (0..s.clusters.len() * cells.len())
         .map(|i| std::array::from_fn(|c| [(i % 7) as f32 * 0.5, -0.25 * c as f32, 2.0]))
         .collect();
+    let sky = (0..5)
+        .map(|p| std::array::from_fn(|i| std::array::from_fn(|k| [p as f32 * 0.25, i as f32, -0.5 * k as f32])))
+        .collect();
     Probes {
         grid,
         cells,
         positions,
         transfer,
+        sky: Some(sky),
     }
 }
 

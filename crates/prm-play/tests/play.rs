@@ -447,6 +447,7 @@ fn archive_with_uniform_probes() -> PathBuf {
         cells: (0..8).collect(),
         positions: (0..8).map(|c| grid.cell_centre(c)).collect(),
         transfer: vec![uniform; 8 * clusters.len()],
+        sky: None,
     })
     .unwrap();
     for c in 0..clusters.len() {

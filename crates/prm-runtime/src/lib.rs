@@ -449,8 +449,9 @@ impl Runtime {
 
     /// The probe volume, when the archive holds probes: bindings for [`PROBES_WGSL`], whose
     /// coefficients every [`Runtime::encode`] sums under the frame's weights of all clusters (the
-    /// lights' indirect light through the panes; the emitters' traced and the sky's indirect
-    /// light do not reach the probes).
+    /// lights' indirect light through the panes), plus the sky's light, direct and bounced,
+    /// when the archive holds its transfer to the probes (the emitters' traced light does not
+    /// reach the probes).
     pub fn probes(&self) -> Option<ProbeVolume<'_>> {
         self.probes.as_ref().map(|p| ProbeVolume {
             grid: &p.grid,
@@ -550,6 +551,9 @@ impl Runtime {
         self.emitters.check_sky(coeffs)?;
         self.emitters.sky_coeffs = *coeffs;
         self.emitters.apply(&self.queue, &mut self.entries);
+        if let Some(p) = &self.probes {
+            p.write_sky(&self.queue, coeffs);
+        }
         Ok(())
     }
 

@@ -1,7 +1,8 @@
 //! The probes pass (`shaders/runtime/probes.wgsl`): every probe's irradiance coefficients under
 //! this frame's cluster weights, Σ_c weight_c ⊙ transfer[c][probe] over all clusters (not the
 //! blend's top K, see the shader), one invocation per probe and coefficient, after the weights;
-//! and the probe volume it fills, which shaders sample with [`crate::PROBES_WGSL`].
+//! plus the sky's part, summed on the CPU when the sky changes ([`ProbesPass::write_sky`]); and
+//! the probe volume it fills, which shaders sample with [`crate::PROBES_WGSL`].
 
 use prm_format::{Probes, SH_COEFFS};
 use prm_gpu_kit::{pipeline, ComputePass, PassTimer};
@@ -41,6 +42,9 @@ pub(crate) struct ProbesPass {
     pub grid: wgpu::Buffer,
     pub cells: wgpu::Buffer,
     pub coefficients: wgpu::Buffer,
+    /// The sky's part of every probe's coefficients (vec4 per coefficient), written by
+    /// [`ProbesPass::write_sky`]; zero without a sky.
+    sky: wgpu::Buffer,
     pub probes: Probes,
 }
 
@@ -86,6 +90,12 @@ impl ProbesPass {
             (probes.len() * SH_COEFFS * 16) as u64,
             wgpu::BufferUsages::COPY_SRC,
         );
+        let sky = pipeline::storage(
+            device,
+            "prm probe sky coefficients",
+            (probes.len() * SH_COEFFS * 16) as u64,
+            wgpu::BufferUsages::empty(),
+        );
         let pass = ComputePass::new(
             device,
             "probes",
@@ -96,6 +106,7 @@ impl ProbesPass {
                 grid.as_entire_binding(),
                 transfer.as_entire_binding(),
                 coefficients.as_entire_binding(),
+                sky.as_entire_binding(),
             ],
         );
         Ok(ProbesPass {
@@ -103,8 +114,22 @@ impl ProbesPass {
             grid,
             cells,
             coefficients,
+            sky,
             probes: probes.clone(),
         })
+    }
+
+    /// Uploads the sky's part of the probes' coefficients under the sky `coeffs` (zeros when
+    /// the archive has no sky transfer to the probes).
+    pub fn write_sky(&self, queue: &wgpu::Queue, coeffs: &[[f32; 3]; SH_COEFFS]) {
+        let v: Vec<[f32; 4]> = self
+            .probes
+            .sky_irradiance_sh(coeffs)
+            .iter()
+            .flatten()
+            .map(|c| [c[0], c[1], c[2], 0.0])
+            .collect();
+        queue.write_buffer(&self.sky, 0, bytemuck::cast_slice(&v));
     }
 
     /// One invocation per probe and coefficient (workgroups of 64).

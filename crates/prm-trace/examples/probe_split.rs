@@ -66,6 +66,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         cells: layout.cells.clone(),
         positions: layout.positions.iter().map(|p| p.to_array()).collect(),
         transfer,
+        sky: None,
     };
     let w: Vec<[f32; 3]> = clustering
         .members

@@ -37,12 +37,14 @@
 //! a surface beside it agree.
 
 use glam::Vec3;
-use prm_format::{sh_basis, ProbeGrid, SH_COEFFS};
+use prm_format::{sh_basis, ProbeGrid, ProbeSkyTransfer, SH_COEFFS};
 use prm_scene::Scene;
 use rayon::prelude::*;
 
 use crate::bvh::Bvh;
 use crate::cluster::Clustering;
+use crate::reference::{validate, walk_path, ReferenceParams, Step};
+use crate::rng::Rng;
 use crate::vpl::VplBound;
 use crate::walk::VplSet;
 use crate::TraceError;
@@ -224,6 +226,76 @@ pub fn probe_transfer(
     Ok((out, rays))
 }
 
+/// The sky's transfer to every probe: `[p][i][k]`, probe `p`'s irradiance coefficient `i` (RGB)
+/// per unit of the sky's coefficient `k` ([`prm_format::sh_basis`]), the sky seen directly and
+/// after one or more bounces, with the reference tracer's path estimator and
+/// `passes × samples_per_pass` paths per probe. A path leaves the probe in a direction `ω` uniform
+/// over the sphere (a cosine sample about a uniform axis, whose density over `ω` is `1/4π`);
+/// the radiance it brings back per unit of `Y_k`, `T · Y_k(d)` for a path that leaves the scene
+/// along `d` with throughput `T`, is projected onto `Â_i Y_i(ω)`. Probe `p` in pass `q` draws
+/// from the stream `(seed, p, q)`; `progress(pass, passes)` after every pass.
+pub fn sky_transfer_at_probes(
+    scene: &Scene,
+    bvh: &Bvh,
+    positions: &[Vec3],
+    params: &ReferenceParams,
+    progress: &mut dyn FnMut(u32, u32),
+) -> Result<Vec<ProbeSkyTransfer>, TraceError> {
+    validate(params)?;
+    let mut sums = vec![[[Vec3::ZERO; SH_COEFFS]; SH_COEFFS]; positions.len()];
+    for pass in 0..params.passes {
+        sums.par_iter_mut().enumerate().for_each(|(p, m)| {
+            let x = positions[p];
+            let mut rng = Rng::new(params.seed, p as u64, u64::from(pass));
+            for _ in 0..params.samples_per_pass {
+                let u = rng.next_vec2();
+                let z = 1.0 - 2.0 * u.x;
+                let r = (1.0 - z * z).max(0.0).sqrt();
+                let phi = std::f32::consts::TAU * u.y;
+                let axis = Vec3::new(r * phi.cos(), r * phi.sin(), z);
+                let mut first = Vec3::ZERO;
+                walk_path(
+                    scene,
+                    bvh,
+                    (x, axis, axis, u32::MAX),
+                    params,
+                    &mut rng,
+                    &mut |step, _| match step {
+                        Step::Vertex(v) => {
+                            if v.bounce == 0 {
+                                first = v.dir;
+                            }
+                        }
+                        Step::Escape {
+                            bounce,
+                            throughput,
+                            dir,
+                        } => {
+                            if bounce == 0 {
+                                first = dir;
+                            }
+                            let yi = sh_basis(first.to_array());
+                            let yk = sh_basis(dir.to_array());
+                            for i in 0..SH_COEFFS {
+                                let wi = 4.0 * std::f32::consts::PI * COSINE_LOBE[ORDER[i]] * yi[i];
+                                for k in 0..SH_COEFFS {
+                                    m[i][k] += throughput * (wi * yk[k]);
+                                }
+                            }
+                        }
+                    },
+                );
+            }
+        });
+        progress(pass + 1, params.passes);
+    }
+    let n = (params.passes * params.samples_per_pass) as f32;
+    Ok(sums
+        .iter()
+        .map(|m| std::array::from_fn(|i| std::array::from_fn(|k| (m[i][k] / n).to_array())))
+        .collect())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -269,6 +341,42 @@ mod tests {
             );
         }
         assert!(probe_grid(&scene, 0).is_err());
+    }
+
+    /// Far above the scene a uniform sky of radiance `L` gives every normal `πL`, and the
+    /// transfer is the cosine lobe's diagonal `Â_i δ_ik` (the harmonics are orthonormal).
+    #[test]
+    fn an_open_sky_gives_every_normal_pi_l() {
+        let scene = cube_over_floor();
+        let bvh = Bvh::build(&scene, &crate::BvhParams::DEFAULT).unwrap();
+        let params = ReferenceParams {
+            seed: 3,
+            ..ReferenceParams::with_spp(4096)
+        };
+        let t = sky_transfer_at_probes(&scene, &bvh, &[Vec3::new(0.0, 60.0, 0.0)], &params, &mut |_, _| {}).unwrap();
+        let l = 0.7;
+        let mut coeffs = [[0.0f32; 3]; SH_COEFFS];
+        coeffs[0] = [2.0 * std::f32::consts::PI.sqrt() * l; 3];
+        let set = prm_format::Probes {
+            grid: ProbeGrid {
+                dims: [1, 1, 1],
+                origin: [0.0; 3],
+                spacing: 1.0,
+            },
+            cells: vec![0],
+            positions: vec![[0.0, 60.0, 0.0]],
+            transfer: vec![],
+            sky: Some(t.clone()),
+        };
+        let sh = set.sky_irradiance_sh(&coeffs)[0];
+        for n in prm_format::AXIS_NORMALS {
+            let e = prm_format::sh_irradiance(&sh, n)[0];
+            assert!((e / (std::f32::consts::PI * l) - 1.0).abs() < 0.03, "{n:?}: {e}");
+        }
+        for i in 0..SH_COEFFS {
+            let d = t[0][i][i][0];
+            assert!((d / COSINE_LOBE[ORDER[i]] - 1.0).abs() < 0.1, "diagonal {i}: {d}");
+        }
     }
 
     #[test]

@@ -283,6 +283,20 @@ impl<'a> ReferenceTracer<'a> {
             .collect()
     }
 
+    /// The sky's direct irradiance alone at points of empty space, each `(position, unit
+    /// normal)` on no triangle (a probe's), `samples` cosine samples each (stream
+    /// `(1, point, u64::MAX)`; zero without a sky).
+    pub fn sky_direct_at_points(&self, points: &[(Vec3, Vec3)], samples: u32) -> Vec<Vec3> {
+        points
+            .par_iter()
+            .enumerate()
+            .map(|(i, &(x, n))| {
+                let mut rng = Rng::new(1, i as u64, u64::MAX);
+                self.sky_direct(x, n, n, u32::MAX, samples, &mut rng)
+            })
+            .collect()
+    }
+
     /// One path estimate of the indirect irradiance at `x`.
     fn indirect_path(&self, x: Vec3, ng: Vec3, n: Vec3, tri: u32, p: &ReferenceParams, rng: &mut Rng) -> Vec3 {
         let mut sum = Vec3::ZERO;

@@ -3,7 +3,8 @@
 //! bake, and what the probes cost the bake and a frame.
 //!
 //! Each case is baked with `prm-bake bake SCENE --probes` (the default 512-cell budget), played
-//! for one frame with one point light in-process (`prm_play::Renderer`, the run time's probes
+//! for one frame with one point light (or, for the courtyard, a uniform sky and no light; its
+//! reference then adds the sky's direct light) in-process (`prm_play::Renderer`, the run time's probes
 //! pass), and each probe's irradiance is taken at the six axis normals from its coefficients
 //! (negative values clamped, as `probe_volume.wgsl` does). The reference is
 //! `prm_trace::ReferenceTracer::indirect_at_points` at the same points and normals, twice with
@@ -36,27 +37,36 @@ fn sum(v: &[Vec3]) -> f64 {
     v.iter().map(|x| x.element_sum() as f64).sum()
 }
 
+/// A case: name, scene, extra bake arguments, and the point light's position as a fraction of
+/// the bounds (none: a uniform blue sky, no light).
+type Case = (&'static str, &'static str, &'static [&'static str], Option<[f32; 3]>);
+
 /// Runs the probe cases; returns the Markdown table.
 pub fn run(bake_bin: &Path, cache: &Path, root: &Path) -> Result<String> {
-    // (name, scene, extra bake arguments, light position as a fraction of the bounds)
-    let cases: [(&str, &str, &[&str], [f32; 3]); 3] = [
+    let cases: [Case; 4] = [
         (
             "Cornell box, default bake",
             "scenes/cornell-box/cornell-box.obj",
             &[],
-            [0.36, 0.82, 0.54],
+            Some([0.36, 0.82, 0.54]),
         ),
         (
             "Cornell box, 8192 entries, 256 clusters",
             "scenes/cornell-box/cornell-box.obj",
             &["--entries", "8192", "--clusters", "256"],
-            [0.36, 0.82, 0.54],
+            Some([0.36, 0.82, 0.54]),
         ),
         (
             "two rooms, default bake",
             "scenes/two-rooms/two-rooms.obj",
             &[],
-            [0.25, 0.8, 0.5],
+            Some([0.25, 0.8, 0.5]),
+        ),
+        (
+            "courtyard, default bake --sky, blue sky",
+            "scenes/courtyard/courtyard.obj",
+            &["--sky"],
+            None,
         ),
     ];
     let mut md = String::from(
@@ -82,11 +92,19 @@ pub fn run(bake_bin: &Path, cache: &Path, root: &Path) -> Result<String> {
         let probes = archive.probes().context("the bake placed no probes")?.clone();
         let (mut r, scene) = crate::measure::renderer(&baked.archive, &scene_path, 32)?;
         let b = scene.bounds();
-        let light = Light::Point {
-            position: b.min + b.extent() * Vec3::from(frac),
-            intensity: Vec3::splat(0.8 * b.diagonal() * b.diagonal()),
-        };
-        let lights = [light];
+        let lights: Vec<Light> = frac
+            .map(|f| Light::Point {
+                position: b.min + b.extent() * Vec3::from(f),
+                intensity: Vec3::splat(0.8 * b.diagonal() * b.diagonal()),
+            })
+            .into_iter()
+            .collect();
+        let sky = frac
+            .is_none()
+            .then(|| prm_scene::Sky::uniform(Vec3::new(0.4, 0.6, 1.0)));
+        if let Some(s) = &sky {
+            r.set_sky(s)?;
+        }
         let camera = prm_play::default_camera(&scene);
         let input = FrameInput {
             camera,
@@ -104,6 +122,9 @@ pub fn run(bake_bin: &Path, cache: &Path, root: &Path) -> Result<String> {
         // timed alternately with this one.
         let plain = plan::bake(bake_bin, cache, &spec, &args[1..], None, false)?;
         let (mut without, _) = crate::measure::renderer(&plain.archive, &scene_path, 32)?;
+        if let Some(s) = &sky {
+            without.set_sky(s)?;
+        }
         let (mut with_ms, mut without_ms) = (0.0, 0.0);
         for _ in 0..2 {
             for (renderer, total) in [(&mut r, &mut with_ms), (&mut without, &mut without_ms)] {
@@ -125,13 +146,22 @@ pub fn run(bake_bin: &Path, cache: &Path, root: &Path) -> Result<String> {
             .iter()
             .flat_map(|p| NORMALS.map(|n| (Vec3::from(*p), Vec3::from(n))))
             .collect();
-        let tracer = ReferenceTracer::new(&scene, &bvh, Lighting::Lights(&lights));
+        let mut tracer = ReferenceTracer::new(&scene, &bvh, Lighting::Lights(&lights));
+        if let Some(s) = &sky {
+            tracer = tracer.with_sky(s);
+        }
+        // With a sky the probes hold its direct light too.
+        let direct = match &sky {
+            Some(_) => tracer.sky_direct_at_points(&points, SPP),
+            None => vec![Vec3::ZERO; points.len()],
+        };
         let reference = |seed| -> Result<Vec<Vec3>> {
             let params = ReferenceParams {
                 seed,
                 ..ReferenceParams::with_spp(SPP)
             };
-            Ok(tracer.indirect_at_points(&points, &params, &mut |_, _| {})?.mean)
+            let indirect = tracer.indirect_at_points(&points, &params, &mut |_, _| {})?.mean;
+            Ok(indirect.iter().zip(&direct).map(|(i, d)| *i + *d).collect())
         };
         let (r1, r2) = (reference(41)?, reference(43)?);
         let error = rel(&played, &r1);
