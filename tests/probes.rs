@@ -54,7 +54,7 @@ fn probes_bake_play_and_match_the_reference() {
     let ctx = gpu();
     let options = RuntimeOptions::for_archive(&archive);
     let mut rt = Runtime::new(&ctx.device, &ctx.queue, &mut archive, &scene, options).unwrap();
-    assert_eq!(rt.probes().map(|v| v.probes.len()), Some(probes.len()));
+    assert_eq!(rt.probes().map(|v| v.positions.len()), Some(probes.len()));
     let light = Light::Point {
         position: Vec3::new(0.2, 0.45, 0.3),
         intensity: Vec3::splat(0.25),

@@ -42,7 +42,9 @@ pub use error::{Error, Result};
 pub use filter::TileFilter;
 pub use layout::{checksum, compression, kind, limits, MAGIC, VERSION_MAJOR, VERSION_MINOR};
 pub use metadata::{Generator, Metadata, Units};
-pub use probes::{sh_irradiance, ProbeGrid, ProbeSkyTransfer, Probes, AXIS_NORMALS, MAX_PROBES, MAX_PROBE_CELLS};
+pub use probes::{
+    sh_irradiance, sky_irradiance_sh, ProbeGrid, ProbeSkyTransfer, Probes, AXIS_NORMALS, MAX_PROBES, MAX_PROBE_CELLS,
+};
 pub use reader::{pane_energy_peak, Archive, ArchiveInfo, SectionInfo, VerifyReport};
 pub use rgb9e5::{
     decode_rgb9e5, decode_rgb9e5_slice, encode_rgb9e5, encode_rgb9e5_slice, RGB9E5_MAX, RGB9E5_MAX_RELATIVE_ERROR,

@@ -117,23 +117,29 @@ impl Probes {
     /// in the basis of [`crate::sh_basis`], turned and scaled), direct and bounced; zeros without
     /// a sky transfer.
     pub fn sky_irradiance_sh(&self, coeffs: &[[f32; 3]; SH_COEFFS]) -> Vec<[[f32; 3]; SH_COEFFS]> {
-        let Some(sky) = &self.sky else {
-            return vec![[[0.0; 3]; SH_COEFFS]; self.len()];
-        };
-        sky.iter()
-            .map(|m| {
-                std::array::from_fn(|i| {
-                    let mut e = [0.0f32; 3];
-                    for (t, l) in m[i].iter().zip(coeffs) {
-                        for c in 0..3 {
-                            e[c] += t[c] * l[c];
-                        }
-                    }
-                    e
-                })
-            })
-            .collect()
+        match &self.sky {
+            Some(sky) => sky_irradiance_sh(sky, coeffs),
+            None => vec![[[0.0; 3]; SH_COEFFS]; self.len()],
+        }
     }
+}
+
+/// Each probe's irradiance coefficients from its sky transfer `sky[p]` under the sky `coeffs`:
+/// `Σ_k sky[p][i][k] ⊙ coeffs[k]` ([`Probes::sky_irradiance_sh`] on a transfer kept alone).
+pub fn sky_irradiance_sh(sky: &[ProbeSkyTransfer], coeffs: &[[f32; 3]; SH_COEFFS]) -> Vec<[[f32; 3]; SH_COEFFS]> {
+    sky.iter()
+        .map(|m| {
+            std::array::from_fn(|i| {
+                let mut e = [0.0f32; 3];
+                for (t, l) in m[i].iter().zip(coeffs) {
+                    for c in 0..3 {
+                        e[c] += t[c] * l[c];
+                    }
+                }
+                e
+            })
+        })
+        .collect()
 }
 
 /// The six axis directions, +X −X +Y −Y +Z −Z: the normals probes are compared and summarised at.

@@ -181,9 +181,9 @@ pub struct Renderer {
     timestamps: bool,
     runtime: Runtime,
     shade: ShadePass,
-    /// The probe sphere's pass (archives with probes) and the sphere it draws, when one is set.
+    /// The probe sphere's pass (archives with probes), and whether a sphere is set.
     sphere: Option<SpherePass>,
-    probe_sphere: Option<ProbeSphere>,
+    sphere_shown: bool,
     color: wgpu::Texture,
     color_view: wgpu::TextureView,
     depth_view: wgpu::TextureView,
@@ -245,7 +245,7 @@ impl Renderer {
             runtime,
             shade,
             sphere,
-            probe_sphere: None,
+            sphere_shown: false,
             color,
             color_view,
             depth_view,
@@ -331,7 +331,7 @@ impl Renderer {
     /// refused when the archive has no probes.
     pub fn set_probe_sphere(&mut self, sphere: Option<ProbeSphere>) -> Result<(), PlayError> {
         match (&self.sphere, sphere) {
-            (_, None) => self.probe_sphere = None,
+            (_, None) => self.sphere_shown = false,
             (None, Some(_)) => {
                 return Err(PlayError::Option {
                     option: "--probe-sphere",
@@ -340,7 +340,7 @@ impl Renderer {
             }
             (Some(pass), Some(s)) => {
                 pass.write(&self.ctx.queue, &s);
-                self.probe_sphere = Some(s);
+                self.sphere_shown = true;
             }
         }
         Ok(())
@@ -388,7 +388,7 @@ impl Renderer {
         } else {
             self.runtime.encode_shadow_maps(&mut enc, timer);
         }
-        let sphere = self.sphere.as_ref().filter(|_| self.probe_sphere.is_some());
+        let sphere = self.sphere.as_ref().filter(|_| self.sphere_shown);
         self.shade
             .encode(&mut enc, &self.color_view, &self.depth_view, sphere, timer);
         if let Some(t) = timer {

@@ -457,7 +457,7 @@ impl Runtime {
             grid: &p.grid,
             cells: &p.cells,
             coefficients: &p.coefficients,
-            probes: &p.probes,
+            positions: &p.positions,
         })
     }
 
@@ -467,7 +467,7 @@ impl Runtime {
         let Some(p) = &self.probes else {
             return Ok(Vec::new());
         };
-        let n = p.probes.len();
+        let n = p.positions.len();
         let bytes = readback::read_buffer(
             &self.device,
             &self.queue,

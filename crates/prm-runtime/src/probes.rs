@@ -4,7 +4,7 @@
 //! plus the sky's part, summed on the CPU when the sky changes ([`ProbesPass::write_sky`]); and
 //! the probe volume it fills, which shaders sample with [`crate::PROBES_WGSL`].
 
-use prm_format::{Probes, SH_COEFFS};
+use prm_format::{sky_irradiance_sh, ProbeSkyTransfer, Probes, SH_COEFFS};
 use prm_gpu_kit::{pipeline, ComputePass, PassTimer};
 
 use crate::{Buffers, GpuProbeGrid, RuntimeError};
@@ -21,8 +21,8 @@ pub struct ProbeVolume<'a> {
     /// Nine RGB coefficients per probe (storage `vec4<f32>`, `w` unused), rewritten by every
     /// [`crate::Runtime::encode`]: `E(n) = Σ_i c_i · Y_i(n)` in [`prm_format::sh_basis`].
     pub coefficients: &'a wgpu::Buffer,
-    /// The archive's probes: grid, cells and positions (and the transfer the pass reads).
-    pub probes: &'a Probes,
+    /// Each probe's world position, in the order of `coefficients`.
+    pub positions: &'a [[f32; 3]],
 }
 
 impl<'a> ProbeVolume<'a> {
@@ -45,15 +45,19 @@ pub(crate) struct ProbesPass {
     /// The sky's part of every probe's coefficients (vec4 per coefficient), written by
     /// [`ProbesPass::write_sky`]; zero without a sky.
     sky: wgpu::Buffer,
-    pub probes: Probes,
+    /// Each probe's position (for [`ProbeVolume`]) and the sky's transfer to the probes (for
+    /// [`ProbesPass::write_sky`]); the cluster transfer lives on the device only.
+    pub positions: Vec<[f32; 3]>,
+    sky_transfer: Option<Vec<ProbeSkyTransfer>>,
 }
 
 impl ProbesPass {
     /// Uploads the archive's probes and their transfer; refused when the transfer exceeds the
     /// device's storage binding size.
     pub fn new(device: &wgpu::Device, b: &Buffers, probes: &Probes) -> Result<ProbesPass, RuntimeError> {
-        let transfer: Vec<f32> = probes.transfer.iter().flatten().flatten().copied().collect();
-        let bytes = transfer.len() as u64 * 4;
+        // Cluster-major arrays of nine RGB triples: the f32 layout the shader reads, as is.
+        let transfer: &[u8] = bytemuck::cast_slice(&probes.transfer);
+        let bytes = transfer.len() as u64;
         let max = device.limits().max_storage_buffer_binding_size;
         if bytes > max {
             return Err(RuntimeError::Probes(format!(
@@ -83,7 +87,7 @@ impl ProbesPass {
             cell_probe[c as usize] = p as i32;
         }
         let cells = pipeline::buffer_init(device, "prm probe cells", bytemuck::cast_slice(&cell_probe), st);
-        let transfer = pipeline::buffer_init(device, "prm probe transfer", bytemuck::cast_slice(&transfer), st);
+        let transfer = pipeline::buffer_init(device, "prm probe transfer", transfer, st);
         let coefficients = pipeline::storage(
             device,
             "prm probe coefficients",
@@ -115,16 +119,18 @@ impl ProbesPass {
             cells,
             coefficients,
             sky,
-            probes: probes.clone(),
+            positions: probes.positions.clone(),
+            sky_transfer: probes.sky.clone(),
         })
     }
 
     /// Uploads the sky's part of the probes' coefficients under the sky `coeffs` (zeros when
     /// the archive has no sky transfer to the probes).
     pub fn write_sky(&self, queue: &wgpu::Queue, coeffs: &[[f32; 3]; SH_COEFFS]) {
-        let v: Vec<[f32; 4]> = self
-            .probes
-            .sky_irradiance_sh(coeffs)
+        let Some(sky) = &self.sky_transfer else {
+            return;
+        };
+        let v: Vec<[f32; 4]> = sky_irradiance_sh(sky, coeffs)
             .iter()
             .flatten()
             .map(|c| [c[0], c[1], c[2], 0.0])
@@ -134,7 +140,7 @@ impl ProbesPass {
 
     /// One invocation per probe and coefficient (workgroups of 64).
     pub fn encode(&self, encoder: &mut wgpu::CommandEncoder, timer: Option<&PassTimer>) {
-        let slots = (self.probes.len() * SH_COEFFS) as u32;
+        let slots = (self.positions.len() * SH_COEFFS) as u32;
         self.pass.encode(encoder, [slots.div_ceil(64), 1, 1], timer);
     }
 }
