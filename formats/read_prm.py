@@ -23,7 +23,7 @@ import sys
 
 MAGIC = b"\x89PRM\r\n\x1a\n"
 SUPPORTED_MAJOR = 1
-SUPPORTED_MINOR = 4
+SUPPORTED_MINOR = 5
 KINDS = {1: "metadata", 2: "atlas", 3: "entries", 4: "clusters", 5: "panes", 6: "entry_energy",
          7: "emitters", 8: "sky", 9: "probes"}
 OPTIONAL = {6, 7, 8, 9}
@@ -330,6 +330,7 @@ class Reader:
         fp = meta.get("scene_fingerprint")
         if not (isinstance(fp, str) and len(fp) == 16 and all(c in "0123456789abcdefABCDEF" for c in fp)):
             raise InvalidArchive("metadata: scene_fingerprint must be 16 hex digits")
+        self.accuracy = self.parse_accuracy(meta.get("accuracy")) if minor >= 5 else None
         self.metadata = meta
 
         self.parse_atlas(raw[2])
@@ -592,6 +593,35 @@ class Reader:
                             peak[c] = max(peak[c], v[c])
         return texels, [to_f32(e) for e in energy], peak
 
+    @staticmethod
+    def parse_accuracy(a):
+        # 1.5: the bake's own accuracy estimate, optional (formats/prm.md section 3).
+        if a is None:
+            return None
+        def number(v, what):
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or v != v or v in (float("inf"), float("-inf")):
+                raise InvalidArchive(f"metadata: accuracy {what} is not a finite number")
+            return float(v)
+        if not isinstance(a, dict) or not isinstance(a.get("lights"), list):
+            raise InvalidArchive("metadata: accuracy must be an object with a lights array")
+        for k in ("exit_points", "paths", "top_k"):
+            if isinstance(a.get(k), bool) or not isinstance(a.get(k), int) or a[k] < 0:
+                raise InvalidArchive(f"metadata: accuracy {k} must be a non-negative integer")
+        lights = []
+        for i, l in enumerate(a["lights"]):
+            if not isinstance(l, dict) or not isinstance(l.get("position"), list) or len(l["position"]) != 3:
+                raise InvalidArchive(f"metadata: accuracy light {i} needs a position of 3 numbers")
+            rec = {"position": [number(p, f"light {i} position") for p in l["position"]]}
+            for k in ("error", "measured", "reference_noise", "energy", "error_all_clusters", "standard_error"):
+                rec[k] = number(l.get(k), f"light {i} {k}")
+                if rec[k] < 0:
+                    raise InvalidArchive(f"metadata: accuracy light {i} {k} is negative")
+            lights.append(rec)
+        n = len(lights)
+        mean = lambda k: sum(l[k] for l in lights) / n if n else 0.0
+        return dict(exit_points=a["exit_points"], paths=a["paths"], top_k=a["top_k"], lights=lights,
+                    mean_error=mean("error"), mean_energy=mean("energy"))
+
     def summary(self, pane=None):
         out = dict(
             version=self.version,
@@ -608,6 +638,7 @@ class Reader:
             emitters=self.emitters,
             sky=self.sky,
             probes=self.probes,
+            accuracy=self.accuracy,
             clusters=self.clusters,
             tile_filter=self.tile_filter,
             stored_tiles=sum(1 for t in self.tiles if t[1]),

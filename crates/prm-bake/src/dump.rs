@@ -172,6 +172,16 @@ pub fn summary_json<R: Read + Seek>(archive: &Archive<R>, file: &Path, report: O
             "unit_weight_mean_irradiance": probe_mean_irradiance(p),
             "sky": p.sky.is_some(),
         })),
+        "accuracy": meta.accuracy.as_ref().map(|a| json!({
+            "exit_points": a.exit_points,
+            "paths": a.paths,
+            "top_k": a.top_k,
+            "mean_error": a.mean_error(),
+            "mean_error_all_clusters": a.mean_error_all_clusters(),
+            "mean_energy": a.mean_energy(),
+            "mean_standard_error": a.mean_standard_error(),
+            "lights": a.lights,
+        })),
         "clusters": archive.clusters().len(),
         "tiles": {
             "filter": archive.tile_filter().name(),
@@ -312,6 +322,26 @@ pub fn write_summary<W: Write, R: Read + Seek>(
         )?;
     }
     writeln!(out, "clusters     {} (one pane each)", archive.clusters().len())?;
+    match &meta.accuracy {
+        None => writeln!(out, "accuracy     not estimated by the bake")?,
+        Some(a) => {
+            writeln!(out, "accuracy     {}", prm_bake::accuracy_line(a))?;
+            for l in &a.lights {
+                writeln!(
+                    out,
+                    "               light at ({:.3}, {:.3}, {:.3}): {:.1}% ± {:.1} (measured {:.1}%, K = all {:.1}%), energy {:.3}",
+                    l.position[0],
+                    l.position[1],
+                    l.position[2],
+                    100.0 * l.error,
+                    100.0 * l.standard_error,
+                    100.0 * l.measured,
+                    100.0 * l.error_all_clusters,
+                    l.energy
+                )?;
+            }
+        }
+    }
 
     writeln!(out, "\nsections")?;
     let w = info.sections.iter().map(|s| s.name.len()).max().unwrap_or(0).max(8);
@@ -544,7 +574,12 @@ mod tests {
     }
 
     fn write_archive(path: &Path) {
+        write_archive_with(path, None);
+    }
+
+    fn write_archive_with(path: &Path, accuracy: Option<prm_format::Accuracy>) {
         let mut meta = Metadata::new("dump-test", "1.0");
+        meta.accuracy = accuracy;
         meta.params.insert("bounces".into(), 2.into());
         meta.timings.insert("trace".into(), 3.5);
         meta.timings.insert("compress".into(), 0.25);
@@ -620,6 +655,49 @@ mod tests {
             "verify       OK",
         ] {
             assert!(text.contains(needle), "missing {needle:?} in\n{text}");
+        }
+        std::fs::remove_dir_all(dir).unwrap();
+    }
+
+    #[test]
+    fn the_bake_s_accuracy_estimate_is_shown() {
+        let dir = temp_dir("accuracy");
+        let path = dir.join("a.prm");
+        let light = prm_format::LightAccuracy {
+            position: [0.5, 1.5, 0.0],
+            error: 0.125,
+            measured: 0.15,
+            reference_noise: 0.08,
+            energy: 0.96,
+            error_all_clusters: 0.1,
+            standard_error: 0.02,
+        };
+        write_archive_with(
+            &path,
+            Some(prm_format::Accuracy {
+                exit_points: 256,
+                paths: 256,
+                top_k: 32,
+                lights: vec![light],
+            }),
+        );
+        let a = Archive::open(&path).unwrap();
+        let v = summary_json(&a, &path, None);
+        assert_eq!(v["version"], "1.5");
+        assert_eq!(v["accuracy"]["mean_error"], 0.125);
+        assert_eq!(v["accuracy"]["lights"][0]["energy"], 0.96);
+        let mut text = Vec::new();
+        write_summary(&mut text, &a, &path, None).unwrap();
+        let text = String::from_utf8(text).unwrap();
+        for needle in [
+            "12.5% ± 2.0 off the reference (K = all: 10.0%), energy 0.960",
+            "light at (0.500, 1.500, 0.000): 12.5% ± 2.0 (measured 15.0%",
+        ] {
+            assert!(
+                text.contains(needle),
+                "missing {needle:?} in
+{text}"
+            );
         }
         std::fs::remove_dir_all(dir).unwrap();
     }

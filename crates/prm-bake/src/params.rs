@@ -71,6 +71,11 @@ pub struct BakeConfig {
     pub sky_paths: Option<u32>,
     /// Place irradiance probes on a grid of at most this many cells (unset: no probes).
     pub probes: Option<u32>,
+    /// Exit points of the bake's accuracy check (0: no check; default
+    /// [`crate::ACCURACY_POINTS`]).
+    pub accuracy_points: Option<u32>,
+    /// Reference paths per checked exit point and light (default [`crate::ACCURACY_PATHS`]).
+    pub accuracy_paths: Option<u32>,
 }
 
 impl BakeConfig {
@@ -104,6 +109,8 @@ impl BakeConfig {
             time_budget_s: over.time_budget_s.or(self.time_budget_s),
             sky_paths: over.sky_paths.or(self.sky_paths),
             probes: over.probes.or(self.probes),
+            accuracy_points: over.accuracy_points.or(self.accuracy_points),
+            accuracy_paths: over.accuracy_paths.or(self.accuracy_paths),
         }
     }
 }
@@ -150,6 +157,10 @@ pub struct BakeParams {
     /// Most grid cells of the irradiance probes, when the archive holds them
     /// ([`crate::PROBE_CELLS`] is the command line's default).
     pub probes: Option<u32>,
+    /// Exit points of the accuracy check after the panes (0: none; a shard never checks).
+    pub accuracy_points: u32,
+    /// Reference paths per checked exit point and light.
+    pub accuracy_paths: u32,
     /// What [`CostModel`] expects these parameters to cost, seconds (without the emitter, sky and
     /// probe steps).
     pub estimated_seconds: f64,
@@ -506,6 +517,8 @@ impl BakeParams {
             time_budget_s,
             sky_paths: config.sky_paths,
             probes: config.probes,
+            accuracy_points: config.accuracy_points.unwrap_or(crate::ACCURACY_POINTS),
+            accuracy_paths: config.accuracy_paths.unwrap_or(crate::ACCURACY_PATHS),
             estimated_seconds,
             reasons,
         };
@@ -547,6 +560,9 @@ impl BakeParams {
         }
         if self.paths_per_entry == 0 {
             invalid!("--paths-per-entry must be at least 1");
+        }
+        if self.accuracy_paths == 0 {
+            invalid!("--accuracy-paths must be at least 1");
         }
         if self.sky_paths == Some(0) {
             invalid!("--sky-paths must be at least 1");

@@ -24,6 +24,9 @@ pub enum Phase {
     PaneRendering,
     /// The clusters' transfer to the irradiance probes (bakes with `--probes` only).
     Probes,
+    /// The bake's estimate of its own accuracy against the reference tracer
+    /// ([`prm_trace::check_accuracy`]; whole bakes with `accuracy_points` > 0).
+    AccuracyCheck,
 }
 
 impl Phase {
@@ -38,6 +41,7 @@ impl Phase {
             Phase::Sky => "sky",
             Phase::PaneRendering => "pane rendering",
             Phase::Probes => "probes",
+            Phase::AccuracyCheck => "accuracy check",
         }
     }
 }

@@ -214,6 +214,21 @@ fn bake_writes_a_valid_archive_and_report() {
     assert_eq!(json["entries"], 256);
     assert_eq!(json["clusters"], 16);
     eprintln!("report timings: {timings:?}");
+    // The accuracy check: three test lights free in the box, a plausible estimate, the same in
+    // the report and the archive (which it makes format 1.5).
+    let accuracy = meta.accuracy.as_ref().expect("the bake estimates its accuracy");
+    assert_eq!(archive.info().minor, 5);
+    assert_eq!(accuracy.lights.len(), 3, "{accuracy:?}");
+    assert_eq!(accuracy.exit_points, prm_bake::ACCURACY_POINTS);
+    assert_eq!(accuracy.top_k, meta.params["top_k"].as_u64().unwrap() as u32);
+    for l in &accuracy.lights {
+        assert!(l.error < 0.6 && l.error_all_clusters < 0.6, "{l:?}");
+        assert!((0.7..1.3).contains(&l.energy), "{l:?}");
+        assert!(l.standard_error > 0.0 && l.standard_error < l.error.max(0.05), "{l:?}");
+        assert!(l.measured >= l.error && l.reference_noise > 0.0, "{l:?}");
+    }
+    let reported: prm_format::Accuracy = serde_json::from_value(json["accuracy"].clone()).unwrap();
+    assert_eq!(&reported, accuracy);
     // Nothing but the archive, the report and the config is left in the output directory.
     let mut names: Vec<String> = std::fs::read_dir(&b.dir)
         .unwrap()
@@ -651,17 +666,54 @@ fn destinations_are_checked_before_work_and_symlinks_written_through() {
     assert_eq!(source.canonicalize().unwrap(), scene_path().canonicalize().unwrap());
 }
 
+/// The accuracy check sees what a bake gets wrong: the same panes blended with K = 1 of 16
+/// clusters are estimated worse than with all of them, and their K = all estimate is the same
+/// number. `--accuracy-points 0` skips it: the archive is then of minor 1 (entry energies, nothing later).
+#[test]
+fn the_accuracy_check_sees_a_worse_bake() {
+    let dir = temp_dir("accuracy");
+    let estimate = |name: &str, extra: &[&str]| {
+        let (path, _, _) = bake(&dir, name, 3, "cpu", &[&["--quiet"][..], extra].concat());
+        Archive::open(&path).unwrap().metadata().accuracy.clone()
+    };
+    let all = estimate("all", &[]).expect("checked");
+    let one = estimate("one", &["--top-k", "1"]).expect("checked");
+    assert_eq!(all.top_k, 16);
+    assert_eq!(one.top_k, 1);
+    assert_eq!(all.mean_error(), all.mean_error_all_clusters(), "K = 16 of 16 is all");
+    assert_eq!(
+        one.mean_error_all_clusters(),
+        all.mean_error_all_clusters(),
+        "the same panes"
+    );
+    assert!(
+        one.mean_error() > all.mean_error() + 2.0 * one.mean_standard_error(),
+        "K = 1: {one:?}\nK = all: {all:?}"
+    );
+    let (path, _, _) = bake(&dir, "none", 3, "cpu", &["--quiet", "--accuracy-points", "0"]);
+    let a = Archive::open(&path).unwrap();
+    assert!(a.metadata().accuracy.is_none());
+    assert_eq!(a.info().minor, 1);
+}
+
 /// `--shard I/N` on two processes at once, then `merge`: exactly the bytes of the single bake
 /// (probes included: each part has its own clusters' transfer), whatever order the parts come
-/// in; and the merge refuses what does not make one bake.
+/// in; and the merge refuses what does not make one bake. A shard never checks its accuracy, so
+/// the single bake is made without the check to compare.
 #[test]
 fn shards_merge_into_the_single_bake_byte_for_byte() {
     let dir = temp_dir("shards");
     let parts_dir = dir.join("parts");
     std::fs::create_dir_all(&parts_dir).unwrap();
-    let (single, _, _) = bake(&dir, "single", 1, "cpu", &["--quiet", "--probes", "32"]);
+    let (single, _, _) = bake(
+        &dir,
+        "single",
+        1,
+        "cpu",
+        &["--quiet", "--probes", "32", "--accuracy-points", "0"],
+    );
     assert!(Archive::open(&single).unwrap().probes().is_some());
-    let shard = |i| ["--quiet", "--probes", "32", "--shard", i];
+    let shard = |i| ["--quiet", "--probes", "32", "--accuracy-points", "0", "--shard", i];
     let (args0, args1) = (shard("0/2"), shard("1/2"));
     let (part0, part1) = std::thread::scope(|s| {
         let a = s.spawn(|| bake(&parts_dir, "part0", 1, "cpu", &args0).0);

@@ -12,8 +12,9 @@ pub const MAGIC: [u8; 8] = *b"\x89PRM\r\n\x1a\n";
 pub const VERSION_MAJOR: u16 = 1;
 /// Highest minor version this library writes (and knows); a reader accepts every minor. The
 /// writer writes the lowest minor whose features an archive uses: 1.1 adds the entry energy
-/// section, 1.2 the emitters section, 1.3 the sky section, 1.4 the probes section.
-pub const VERSION_MINOR: u16 = 4;
+/// section, 1.2 the emitters section, 1.3 the sky section, 1.4 the probes section, 1.5 the
+/// metadata's `accuracy` key.
+pub const VERSION_MINOR: u16 = 5;
 
 /// Size of the fixed file header.
 pub const HEADER_SIZE: usize = 64;

@@ -41,7 +41,7 @@ pub use emitters::{EmitterGroup, EMITTER_NAME_BYTES};
 pub use error::{Error, Result};
 pub use filter::TileFilter;
 pub use layout::{checksum, compression, kind, limits, MAGIC, VERSION_MAJOR, VERSION_MINOR};
-pub use metadata::{Generator, Metadata, Units};
+pub use metadata::{Accuracy, Generator, LightAccuracy, Metadata, Units};
 pub use probes::{
     sh_irradiance, sky_irradiance_sh, ProbeGrid, ProbeSkyTransfer, Probes, AXIS_NORMALS, MAX_PROBES, MAX_PROBE_CELLS,
 };

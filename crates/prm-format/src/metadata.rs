@@ -59,6 +59,105 @@ pub struct Metadata {
     /// Relative error bound of the largest channel of a texel (set by the
     /// writer: `2^-9` for RGB9E5).
     pub texel_relative_error_bound: f64,
+    /// The bake's estimate of its own accuracy (since 1.5, optional; absent from the JSON when
+    /// `None`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub accuracy: Option<Accuracy>,
+}
+
+/// The bake's estimate of its own accuracy (metadata key `accuracy`, since 1.5): the archive's
+/// indirect light, blended as the player blends it, against a reference path tracer at a sample
+/// of exit points, for a few point lights the bake placed itself (formats/prm.md §3).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Accuracy {
+    /// Exit points compared (one drawn at random from each of as many equal runs of the atlas's
+    /// exit points).
+    pub exit_points: u32,
+    /// Reference paths per exit point and light.
+    pub paths: u32,
+    /// Clusters blended per frame in the estimate (the archive's `top_k`).
+    pub top_k: u32,
+    /// One record per test light.
+    pub lights: Vec<LightAccuracy>,
+}
+
+/// One test light of an [`Accuracy`] estimate. Errors are relative L2 over the exit points and
+/// the three channels, `‖PRM − ref‖ / ‖ref‖`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LightAccuracy {
+    /// Where the point light was.
+    pub position: [f32; 3],
+    /// The error with the reference's own noise removed in quadrature,
+    /// `√max(0, measured² − reference_noise²)`.
+    pub error: f64,
+    /// The error as measured, the reference's noise included.
+    pub measured: f64,
+    /// The reference's own noise, `√Σ variance / ‖ref‖`.
+    pub reference_noise: f64,
+    /// Energy, `Σ PRM / Σ ref` over the exit points and channels.
+    pub energy: f64,
+    /// [`LightAccuracy::error`] with every cluster blended (K = all, no truncation).
+    pub error_all_clusters: f64,
+    /// Standard error of [`LightAccuracy::error`] over draws of the exit points and the
+    /// reference's paths.
+    pub standard_error: f64,
+}
+
+impl Accuracy {
+    /// Mean of the lights' errors (noise removed); 0 without lights.
+    pub fn mean_error(&self) -> f64 {
+        mean(self.lights.iter().map(|l| l.error))
+    }
+
+    /// Mean of the lights' errors with every cluster blended.
+    pub fn mean_error_all_clusters(&self) -> f64 {
+        mean(self.lights.iter().map(|l| l.error_all_clusters))
+    }
+
+    /// Mean of the lights' energies; 0 without lights.
+    pub fn mean_energy(&self) -> f64 {
+        mean(self.lights.iter().map(|l| l.energy))
+    }
+
+    /// Standard error of [`Accuracy::mean_error`] (the lights' combined in quadrature).
+    pub fn mean_standard_error(&self) -> f64 {
+        let n = self.lights.len();
+        if n == 0 {
+            return 0.0;
+        }
+        self.lights.iter().map(|l| l.standard_error.powi(2)).sum::<f64>().sqrt() / n as f64
+    }
+
+    /// Mean of the reference's noise over the lights.
+    pub fn mean_reference_noise(&self) -> f64 {
+        mean(self.lights.iter().map(|l| l.reference_noise))
+    }
+
+    fn validate(&self) -> Result<(), String> {
+        for (i, l) in self.lights.iter().enumerate() {
+            let values = [
+                l.error,
+                l.measured,
+                l.reference_noise,
+                l.energy,
+                l.error_all_clusters,
+                l.standard_error,
+            ];
+            if !values.iter().all(|v| v.is_finite() && *v >= 0.0) || !l.position.iter().all(|p| p.is_finite()) {
+                return Err(format!("accuracy of light {i} is not finite and non-negative: {l:?}"));
+            }
+        }
+        Ok(())
+    }
+}
+
+fn mean(values: impl ExactSizeIterator<Item = f64>) -> f64 {
+    let n = values.len();
+    if n == 0 {
+        0.0
+    } else {
+        values.sum::<f64>() / n as f64
+    }
 }
 
 impl Metadata {
@@ -77,6 +176,7 @@ impl Metadata {
             scene_fingerprint: 0,
             texel_encoding: RGB9E5_NAME.into(),
             texel_relative_error_bound: RGB9E5_MAX_RELATIVE_ERROR,
+            accuracy: None,
         }
     }
 
@@ -95,6 +195,9 @@ impl Metadata {
                 "texel_encoding is {:?}, v1 only has {RGB9E5_NAME:?}",
                 self.texel_encoding
             ));
+        }
+        if let Some(a) = &self.accuracy {
+            a.validate()?;
         }
         Ok(())
     }
@@ -122,6 +225,38 @@ mod hex_u64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn accuracy_is_optional_and_round_trips() {
+        let mut m = Metadata::new("test", "1.2.3");
+        let s = serde_json::to_string(&m).unwrap();
+        assert!(!s.contains("accuracy"), "{s}");
+        assert_eq!(serde_json::from_str::<Metadata>(&s).unwrap().accuracy, None);
+        let light = |error: f64| LightAccuracy {
+            position: [0.0, 1.0, 0.0],
+            error,
+            measured: 0.12,
+            reference_noise: 0.05,
+            energy: 0.97,
+            error_all_clusters: 0.08,
+            standard_error: 0.01,
+        };
+        m.accuracy = Some(Accuracy {
+            exit_points: 256,
+            paths: 256,
+            top_k: 32,
+            lights: vec![light(0.1), light(0.2)],
+        });
+        let s = serde_json::to_string(&m).unwrap();
+        let back: Metadata = serde_json::from_str(&s).unwrap();
+        assert_eq!(back, m);
+        let a = back.accuracy.unwrap();
+        assert!((a.mean_error() - 0.15).abs() < 1e-12);
+        assert!((a.mean_energy() - 0.97).abs() < 1e-12);
+        assert!(m.validate().is_ok());
+        m.accuracy.as_mut().unwrap().lights[1].energy = f64::NAN;
+        assert!(m.validate().unwrap_err().contains("light 1"));
+    }
 
     #[test]
     fn json_round_trip_and_hex_fingerprint() {

@@ -285,8 +285,15 @@ impl<R: Read + Seek> Archive<R> {
         }
         let raw = meta.read_all()?;
         drop(meta);
-        let metadata: Metadata =
-            serde_json::from_slice(&raw).map_err(|e| Error::inconsistent(format!("metadata JSON: {e}")))?;
+        let json = |e: serde_json::Error| Error::inconsistent(format!("metadata JSON: {e}"));
+        let mut value: serde_json::Value = serde_json::from_slice(&raw).map_err(json)?;
+        if header.minor < 5 {
+            // Before 1.5 an `accuracy` key is not the bake's estimate (§3.1): ignored.
+            if let Some(object) = value.as_object_mut() {
+                object.remove("accuracy");
+            }
+        }
+        let metadata: Metadata = serde_json::from_value(value).map_err(json)?;
         metadata
             .validate()
             .map_err(|e| Error::inconsistent(format!("metadata: {e}")))?;

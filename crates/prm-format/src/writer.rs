@@ -754,6 +754,9 @@ impl ArchiveWriter {
             self.write_section(kind::PROBES, &crate::probes::encode(&probes))?;
             minor = 4;
         }
+        if self.metadata.accuracy.is_some() {
+            minor = 5;
+        }
         for (k, data) in std::mem::take(&mut self.custom) {
             self.write_section(k, &data)?;
         }

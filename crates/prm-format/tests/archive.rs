@@ -542,6 +542,27 @@ fn unknown_sections_are_skipped() {
     );
 }
 
+/// An `accuracy` key means the bake's estimate only from 1.5 on (formats/prm.md §3.1): before,
+/// whatever it holds is ignored; from 1.5 a malformed one is corrupt metadata.
+#[test]
+fn the_accuracy_key_is_read_only_from_1_5() {
+    let (bytes, _) = small_archive("accuracy-key", WriterOptions::default());
+    let a = Archive::from_bytes(&bytes).unwrap();
+    assert!(a.info().minor < 5 && a.metadata().accuracy.is_none());
+    let mut json = serde_json::to_value(a.metadata()).unwrap();
+    json["accuracy"] = serde_json::json!("an extension of some other writer");
+    let raw = serde_json::to_vec(&json).unwrap();
+    let older = replace_section(&bytes, kind::METADATA, &raw, compression::NONE, raw.len() as u64);
+    let a = Archive::from_bytes(&older).unwrap();
+    assert_eq!(a.metadata().accuracy, None);
+    let mut newer = older.clone();
+    put_u16(&mut newer, 10, 5);
+    resign(&mut newer);
+    let err = Archive::from_bytes(&newer).err().unwrap();
+    assert!(matches!(err, Error::Inconsistent { .. }), "{err}");
+    assert!(err.to_string().to_lowercase().contains("accuracy"), "{err}");
+}
+
 #[test]
 fn newer_major_is_refused_newer_minor_accepted() {
     let (bytes, _) = small_archive("versions", WriterOptions::default());
@@ -754,8 +775,23 @@ fn python_reader_check(path: &Path, filter: TileFilter) -> bool {
         tile_filter: filter,
         ..WriterOptions::default()
     };
-    let mut w =
-        ArchiveWriter::create_with_options(path, s.metadata.clone(), &s.atlas, &s.entries, &s.clusters, opts).unwrap();
+    let mut metadata = s.metadata.clone();
+    let accuracy = prm_format::Accuracy {
+        exit_points: 1024,
+        paths: 64,
+        top_k: 4,
+        lights: vec![prm_format::LightAccuracy {
+            position: [0.25, 1.5, -0.5],
+            error: 0.125,
+            measured: 0.25,
+            reference_noise: 0.2,
+            energy: 0.96875,
+            error_all_clusters: 0.0625,
+            standard_error: 0.015625,
+        }],
+    };
+    metadata.accuracy = Some(accuracy.clone());
+    let mut w = ArchiveWriter::create_with_options(path, metadata, &s.atlas, &s.entries, &s.clusters, opts).unwrap();
     w.add_custom_section(kind::PRIVATE_FIRST, b"skip me".to_vec()).unwrap();
     let energy: Vec<[f32; 3]> = (0..s.entries.len()).map(|i| [0.25 * i as f32, 1.0, 3.5]).collect();
     w.set_entry_energy(energy.clone()).unwrap();
@@ -798,8 +834,24 @@ fn python_reader_check(path: &Path, filter: TileFilter) -> bool {
     );
     let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     let mut a = Archive::open(path).unwrap();
-    assert_eq!(j["version"], "1.4");
+    assert_eq!(j["version"], "1.5");
     assert_eq!(j["checksums_verified"], true);
+    let ja = &j["accuracy"];
+    assert_eq!(ja["exit_points"], 1024);
+    assert_eq!(ja["top_k"], 4);
+    assert_eq!(ja["mean_error"], 0.125);
+    let l = &ja["lights"][0];
+    assert_eq!(l["position"], serde_json::json!([0.25, 1.5, -0.5]));
+    for (k, v) in [
+        ("measured", 0.25),
+        ("reference_noise", 0.2),
+        ("energy", 0.96875),
+        ("error_all_clusters", 0.0625),
+        ("standard_error", 0.015625),
+    ] {
+        assert_eq!(l[k], v, "{k}");
+    }
+    assert_eq!(Archive::open(path).unwrap().metadata().accuracy, Some(accuracy));
     assert_eq!(j["tile_filter"], filter.code());
     assert_eq!(j["resolution"], 16);
     assert_eq!(j["tile_size"], 8);

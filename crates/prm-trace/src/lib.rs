@@ -6,7 +6,8 @@
 //! `weight_c` is the cluster's members' direct irradiance weighed by their pane energy
 //! ([`entry_irradiance`], [`Clustering::weights_by_energy`], [`Panes::combine`]). The estimator and its
 //! units are written out in [`walk`]. [`ReferenceTracer`] is the ground truth it is tested against;
-//! [`sky_transfer_at_exits`] bakes the sky's spherical-harmonic transfer with its estimator.
+//! [`sky_transfer_at_exits`] bakes the sky's spherical-harmonic transfer with its estimator;
+//! [`check_accuracy`] is the bake's estimate of its own error against it.
 //!
 //! Every random decision draws from a stream keyed by `(seed, item, sub-item)` ([`Rng`]), and
 //! every parallel loop writes per-item results in order, so outputs are identical for any number
@@ -15,6 +16,7 @@
 #![warn(missing_docs)]
 
 pub mod bvh;
+pub mod check;
 pub mod cluster;
 pub mod direct;
 pub mod emitters;
@@ -29,6 +31,7 @@ pub mod vpl;
 pub mod walk;
 
 pub use bvh::{BuildQuality, Bvh, BvhKind, BvhParams, Hit, NO_OCCLUDER};
+pub use check::{check_accuracy, check_exits, check_lights, CheckParams, CheckedArchive};
 pub use cluster::{energy_weight, ClusterParams, Clustering};
 pub use direct::{bounded_irradiance, direct_irradiance, entry_irradiance};
 pub use emitters::{EmitterGroup, Emitters, Receiver};

@@ -117,7 +117,7 @@ pub fn probe_grid(scene: &Scene, max_cells: u32) -> Result<ProbeGrid, TraceError
 }
 
 /// Direction `i` of `n` spread evenly over the sphere (a spherical Fibonacci set).
-fn fibonacci_direction(i: u32, n: u32) -> Vec3 {
+pub(crate) fn fibonacci_direction(i: u32, n: u32) -> Vec3 {
     let golden = std::f32::consts::PI * (3.0 - 5f32.sqrt());
     let y = 1.0 - 2.0 * (i as f32 + 0.5) / n as f32;
     let r = (1.0 - y * y).max(0.0).sqrt();

@@ -16,11 +16,12 @@ pub fn scratch_dir(suite: &str, name: &str) -> PathBuf {
 }
 
 /// The steps every bake times (`Baked::timings`, the report's `timings`).
-pub const STEPS: [&str; 6] = [
+pub const STEPS: [&str; 7] = [
     "atlas",
     "bvh",
     "light_tracing",
     "clustering",
     "pane_rendering",
+    "accuracy_check",
     "compression_write",
 ];

@@ -1,0 +1,380 @@
+//! The bake's estimate of its own accuracy: the archive's indirect light, blended as the player
+//! blends it, against [`ReferenceTracer`] at a sample of exit points, for a few point lights the
+//! check places itself.
+//!
+//! **Lights** ([`check_lights`]): the first [`CHECK_LIGHTS`] of [`CANDIDATES`] (fractions of the
+//! scene's bounds, the first one high and central, the next two low and off-centre on opposite
+//! sides) that are neither inside geometry ([`crate::probes::is_inside`]) nor closer than
+//! [`CLEARANCE`] of the bounds' diagonal to a surface. Nothing about the scene's own lights is
+//! known at bake time, so the check lights it as a user would first try.
+//!
+//! **The archive's side** ([`check_accuracy`]): each entry's direct irradiance ray-cast with the
+//! run time's disk bound ([`entry_irradiance`]), each cluster weighed by its members' pane
+//! energy ([`energy_weight`]), the top K kept, faded and rescaled like prm-runtime's rank and
+//! select passes ([`select_top_k`]), and the panes summed at the sampled exit points. The run
+//! time's shadow maps are not modelled: the error budget (`cargo xtask eval --budget`) measured
+//! ray-cast against shadow-mapped entry irradiance within 0.1 points on every case.
+//!
+//! **The reference** is [`ReferenceTracer::indirect_at_exits`] with [`CheckParams::paths`] paths
+//! per point. Its own noise is measured from its passes and removed from the error in
+//! quadrature (`err² ≈ true² + noise²`, the eval's convention), so a cheap reference still gives
+//! an unbiased estimate of the squared error; what the noise costs is the estimate's spread.
+//!
+//! **How much** ([`CheckParams::DEFAULT`], 1024 points × 64 paths × 3 lights). Measured with
+//! release binaries of default bakes, against the same check at 4096 points × 1024–4096 paths
+//! ("truth"): the bundled Cornell box 12.7 ± 0.4% true, four draws of the default (1000–1036
+//! points) 10.6–13.7% with a standard error of 1.3–2.1 points that matches their spread, in
+//! 0.10–0.15 s of a 4.3–5.9 s bake; chairs 23.3 ± 0.6% against 23.5% true (0.21 s of 27 s);
+//! CornellBox-Sphere 12.4 ± 0.7% against 12.6% (0.20 s of 20 s). Fewer points traced longer
+//! spread wider, since the error varies more between points than the reference's noise does:
+//! 256 × 256 gave 9.7–24.7% on the Cornell box (one light at 47.7%), 512 × 128 11.1–15.3%,
+//! 2048 × 32 9.7–13.3%. The error budget's even-stride measurement of the same bakes
+//! (`cargo xtask eval --budget`: 13.0%, 21.6%, 12.3%, with one light each) agrees.
+
+use glam::Vec3;
+use prm_format::{Accuracy, LightAccuracy};
+use prm_scene::{ExitPoint, Light, Scene};
+
+use crate::bvh::Bvh;
+use crate::cluster::energy_weight;
+use crate::direct::entry_irradiance;
+use crate::reference::{Lighting, ReferenceParams, ReferenceTracer};
+use crate::sampling::SurfaceSample;
+use crate::TraceError;
+
+/// Test lights of a check.
+pub const CHECK_LIGHTS: usize = 3;
+
+/// Candidate positions of the test lights, as fractions of the scene's bounds (y up), tried in
+/// order.
+pub const CANDIDATES: [[f32; 3]; 9] = [
+    [0.5, 0.8, 0.5],
+    [0.25, 0.4, 0.3],
+    [0.75, 0.3, 0.7],
+    [0.5, 0.5, 0.5],
+    [0.3, 0.65, 0.7],
+    [0.7, 0.6, 0.3],
+    [0.5, 0.25, 0.5],
+    [0.2, 0.2, 0.8],
+    [0.8, 0.8, 0.2],
+];
+
+/// Least distance from a test light to the nearest surface, as a fraction of the bounds'
+/// diagonal: a light closer than that is the method's known failure (the stability suite's),
+/// not what a first estimate should report.
+pub const CLEARANCE: f32 = 0.03;
+
+/// Directions of the clearance test.
+const CLEARANCE_DIRECTIONS: u32 = 64;
+
+/// The width of the run time's fade band above the K-th score (prm-runtime's
+/// `RuntimeOptions::fade_band` default; `tests/check.rs` keeps the two equal).
+pub const FADE_BAND: f32 = 0.25;
+
+/// How much the check measures.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CheckParams {
+    /// Exit points compared (see [`check_exits`]).
+    pub exit_points: u32,
+    /// Reference paths per exit point and light.
+    pub paths: u32,
+    /// Seed of the reference.
+    pub seed: u64,
+}
+
+impl CheckParams {
+    /// 1024 exit points × 64 paths (see the module's *How much*).
+    pub const DEFAULT: CheckParams = CheckParams {
+        exit_points: 1024,
+        paths: 64,
+        seed: 0,
+    };
+}
+
+impl Default for CheckParams {
+    fn default() -> Self {
+        Self::DEFAULT
+    }
+}
+
+/// Positions of at most [`CHECK_LIGHTS`] test lights in `scene` (fewer when fewer candidates are
+/// free).
+pub fn check_lights(scene: &Scene, bvh: &Bvh) -> Vec<Vec3> {
+    let b = scene.bounds();
+    let clearance = CLEARANCE * b.diagonal();
+    CANDIDATES
+        .iter()
+        .map(|f| b.min + (b.max - b.min) * Vec3::from_array(*f))
+        .filter(|&p| !crate::probes::is_inside(bvh, p) && nearest_surface(bvh, p, clearance) >= clearance)
+        .take(CHECK_LIGHTS)
+        .collect()
+}
+
+/// Distance from `p` to the nearest surface along [`CLEARANCE_DIRECTIONS`] rays, at most `tmax`.
+fn nearest_surface(bvh: &Bvh, p: Vec3, tmax: f32) -> f32 {
+    (0..CLEARANCE_DIRECTIONS)
+        .filter_map(|i| {
+            let d = crate::probes::fibonacci_direction(i, CLEARANCE_DIRECTIONS);
+            bvh.closest_hit(p, d, tmax, u32::MAX).map(|h| h.t)
+        })
+        .fold(tmax, f32::min)
+}
+
+/// Indices of `sample` exit points out of `count`, ascending: one drawn at random (seeded) from
+/// each of `sample` equal runs of the atlas's exit points (all of them when `sample ≥ count`).
+///
+/// Exit points run in texel order, row by row, so an even stride samples the atlas along
+/// diagonal lines and a light's error along them: on our Cornell box, five strides near 256
+/// points gave 9.1–14.3% where the truth (2048 points × 4096 paths) is 11.7%.
+pub fn check_exits(count: usize, sample: u32, seed: u64) -> Vec<usize> {
+    let s = (sample as usize).min(count);
+    (0..s)
+        .map(|i| {
+            let (a, b) = (i * count / s, (i + 1) * count / s);
+            let mut rng = crate::rng::Rng::new(seed, CHECK_STREAM, i as u64);
+            a + ((rng.next_f32() * (b - a) as f32) as usize).min(b - a - 1)
+        })
+        .collect()
+}
+
+/// The random stream of [`check_exits`] (apart from every other use of the bake's seed).
+const CHECK_STREAM: u64 = 0x636865636b;
+
+/// The weights the run time blends, on the CPU (prm-runtime's rank and select passes): with
+/// `score_c = Σ_rgb weight_c · energy_c`, the `top_k` clusters of highest score are kept (ties
+/// to the lower index), each faded by `smoothstep(t, t·(1 + fade_band), score)` where `t` is
+/// the score of the first one dropped, and all kept weights scaled by `Σ_all score / Σ_kept
+/// score · fade`; the others get 0. With `top_k ≥` the cluster count the weights are returned
+/// as they are.
+pub fn select_top_k(weights: &[Vec3], cluster_energy: &[Vec3], top_k: usize, fade_band: f32) -> Vec<Vec3> {
+    let n = weights.len();
+    if top_k >= n {
+        return weights.to_vec();
+    }
+    let score: Vec<f32> = weights.iter().zip(cluster_energy).map(|(w, e)| w.dot(*e)).collect();
+    let mut order: Vec<usize> = (0..n).collect();
+    order.sort_by(|&a, &b| score[b].total_cmp(&score[a]).then(a.cmp(&b)));
+    let t = score[order[top_k]];
+    let width = t * fade_band;
+    let fade = |s: f32| {
+        if width <= 0.0 {
+            if s > t {
+                1.0
+            } else {
+                0.0
+            }
+        } else {
+            let x = ((s - t) / width).clamp(0.0, 1.0);
+            x * x * (3.0 - 2.0 * x)
+        }
+    };
+    let all: f32 = score.iter().sum();
+    let kept: f32 = order[..top_k].iter().map(|&c| score[c] * fade(score[c])).sum();
+    let factor = if kept > 0.0 { all / kept } else { 1.0 };
+    let mut out = vec![Vec3::ZERO; n];
+    for &c in &order[..top_k] {
+        out[c] = weights[c] * (fade(score[c]) * factor);
+    }
+    out
+}
+
+/// What an archive holds, at the checked exit points.
+#[derive(Clone, Copy, Debug)]
+pub struct CheckedArchive<'a> {
+    /// Entry points, in sampling order.
+    pub entries: &'a [SurfaceSample],
+    /// Entry points of every cluster (indices into `entries`).
+    pub members: &'a [Vec<u32>],
+    /// Every entry's pane energy, in sampling order (`None`: members weigh equally, as the
+    /// player does with archives without them).
+    pub entry_energy: Option<&'a [Vec3]>,
+    /// Every pane's energy (the archive's cluster table, the sum of its texels).
+    pub cluster_energy: &'a [Vec3],
+    /// Every pane at the checked exit points, `[cluster][point]`.
+    pub panes: &'a [Vec<Vec3>],
+    /// Clusters the player blends.
+    pub top_k: usize,
+    /// The player's fade band ([`FADE_BAND`]).
+    pub fade_band: f32,
+}
+
+/// The archive's indirect light at `exits` (the checked exit points) under `light`, for the
+/// player's K (first) and for every cluster (second).
+pub fn played_indirect(bvh: &Bvh, archive: &CheckedArchive<'_>, light: Light) -> (Vec<Vec3>, Vec<Vec3>) {
+    let e = entry_irradiance(bvh, &[light], archive.entries);
+    let ones;
+    let energy = match archive.entry_energy {
+        Some(en) => en,
+        None => {
+            ones = vec![Vec3::ONE; archive.entries.len()];
+            &ones
+        }
+    };
+    let weights: Vec<Vec3> = archive
+        .members
+        .iter()
+        .map(|m| energy_weight(m.iter().map(|&k| k as usize), &e, energy))
+        .collect();
+    let kept = select_top_k(&weights, archive.cluster_energy, archive.top_k, archive.fade_band);
+    let points = archive.panes.first().map_or(0, Vec::len);
+    let blend = |w: &[Vec3]| {
+        let mut out = vec![Vec3::ZERO; points];
+        for (wc, pane) in w.iter().zip(archive.panes) {
+            if *wc != Vec3::ZERO {
+                for (o, v) in out.iter_mut().zip(pane) {
+                    *o += *wc * *v;
+                }
+            }
+        }
+        out
+    };
+    (blend(&kept), blend(&weights))
+}
+
+/// Compares the archive's indirect light with the reference's at `exits` for a point light at
+/// each of `lights`. `progress(done)` is called with the reference passes done so far, out of
+/// `lights.len() × ReferenceParams::with_spp(params.paths).passes`.
+pub fn check_accuracy(
+    scene: &Scene,
+    bvh: &Bvh,
+    exits: &[ExitPoint],
+    archive: &CheckedArchive<'_>,
+    lights: &[Vec3],
+    params: &CheckParams,
+    progress: &mut dyn FnMut(u64),
+) -> Result<Accuracy, TraceError> {
+    if archive.panes.iter().any(|p| p.len() != exits.len()) || archive.panes.len() != archive.members.len() {
+        return Err(TraceError::InvalidParameter(
+            "every pane needs one value per checked exit point".into(),
+        ));
+    }
+    let d = scene.bounds().diagonal();
+    let reference = ReferenceParams {
+        seed: params.seed,
+        ..ReferenceParams::with_spp(params.paths)
+    };
+    let mut done = 0u64;
+    let mut out = Vec::with_capacity(lights.len());
+    for &position in lights {
+        let light = Light::Point {
+            position,
+            intensity: Vec3::splat(d * d),
+        };
+        let lighting = [light];
+        let tracer = ReferenceTracer::new(scene, bvh, Lighting::Lights(&lighting));
+        let r = tracer.indirect_at_exits(exits, &reference, &mut |pass, _| progress(done + u64::from(pass)))?;
+        done += u64::from(reference.passes);
+        let (played, all) = played_indirect(bvh, archive, light);
+        let norm2: f64 = r.mean.iter().map(|v| f64::from(v.length_squared())).sum();
+        let noise2: f64 = r.variance.iter().map(|v| f64::from(v.element_sum())).sum();
+        let err2 = |t: &[Vec3]| -> f64 {
+            t.iter()
+                .zip(&r.mean)
+                .map(|(a, b)| f64::from((*a - *b).length_squared()))
+                .sum()
+        };
+        let rel = |x: f64| if norm2 > 0.0 { (x / norm2).sqrt() } else { 0.0 };
+        let measured = rel(err2(&played));
+        let reference_noise = rel(noise2);
+        let corrected = |m: f64| (m * m - reference_noise * reference_noise).max(0.0).sqrt();
+        let sum_ref: f64 = r.mean.iter().map(|v| f64::from(v.element_sum())).sum();
+        let sum_played: f64 = played.iter().map(|v| f64::from(v.element_sum())).sum();
+        let error = corrected(measured);
+        out.push(LightAccuracy {
+            position: position.to_array(),
+            error,
+            measured,
+            reference_noise,
+            energy: if sum_ref > 0.0 { sum_played / sum_ref } else { 0.0 },
+            error_all_clusters: corrected(rel(err2(&all))),
+            standard_error: standard_error(&played, &r.mean, &r.variance, error),
+        });
+    }
+    Ok(Accuracy {
+        exit_points: exits.len() as u32,
+        paths: reference.passes * reference.samples_per_pass,
+        top_k: archive.top_k as u32,
+        lights: out,
+    })
+}
+
+/// The standard error of `error`, the noise-corrected `√(Σ t_i / Σ q_i)` with per point
+/// `t_i = |played_i − ref_i|² − Σ_rgb var_i` and `q_i = |ref_i|²`, from the points' own spread
+/// (the delta method on the ratio of the two sums, and `d√x = dx / (2√x)`). The points are a
+/// random sample of the exit points, so this is the spread of the estimate over draws of them
+/// and of the reference's paths.
+fn standard_error(played: &[Vec3], reference: &[Vec3], variance: &[Vec3], error: f64) -> f64 {
+    let n = reference.len();
+    if n < 2 {
+        return 0.0;
+    }
+    let t: Vec<f64> = played
+        .iter()
+        .zip(reference)
+        .zip(variance)
+        .map(|((a, b), v)| f64::from((*a - *b).length_squared()) - f64::from(v.element_sum()))
+        .collect();
+    let q: Vec<f64> = reference.iter().map(|v| f64::from(v.length_squared())).collect();
+    let nf = n as f64;
+    let (mt, mq) = (t.iter().sum::<f64>() / nf, q.iter().sum::<f64>() / nf);
+    if mq <= 0.0 {
+        return 0.0;
+    }
+    let ratio = mt / mq;
+    // Var of the ratio of means: Var(t − ratio·q) / (n · mq²).
+    let var: f64 = t.iter().zip(&q).map(|(a, b)| (a - ratio * b).powi(2)).sum::<f64>() / (nf - 1.0);
+    let se2 = (var / nf).sqrt() / mq;
+    // Near zero the square root's slope diverges: bound by the error of `√se²`.
+    if error > 0.0 {
+        (se2 / (2.0 * error)).min(se2.sqrt())
+    } else {
+        se2.sqrt()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn selection_keeps_everything_when_k_covers_the_clusters() {
+        let w = vec![Vec3::new(1.0, 2.0, 3.0), Vec3::splat(0.5)];
+        let e = vec![Vec3::ONE; 2];
+        assert_eq!(select_top_k(&w, &e, 2, FADE_BAND), w);
+        assert_eq!(select_top_k(&w, &e, 5, FADE_BAND), w);
+    }
+
+    #[test]
+    fn selection_drops_the_lowest_and_keeps_the_total_score() {
+        // Scores 8, 4, 2, 1 (unit energies, grey weights / 3): K = 2 drops the last two; the
+        // first dropped (2) sets the fade, 4 lies above 2·1.25, so nothing fades.
+        let w: Vec<Vec3> = [8.0f32, 4.0, 2.0, 1.0].iter().map(|s| Vec3::splat(s / 3.0)).collect();
+        let e = vec![Vec3::ONE; 4];
+        let kept = select_top_k(&w, &e, 2, FADE_BAND);
+        assert_eq!(kept[2], Vec3::ZERO);
+        assert_eq!(kept[3], Vec3::ZERO);
+        let total = |w: &[Vec3]| w.iter().zip(&e).map(|(a, b)| a.dot(*b)).sum::<f32>();
+        assert!((total(&kept) - total(&w)).abs() < 1e-5 * total(&w));
+        assert!((kept[0].x / kept[1].x - 2.0).abs() < 1e-6, "{kept:?}");
+        // A cluster just above the threshold fades: scores 8, 2.1, 2, 1.
+        let w: Vec<Vec3> = [8.0f32, 2.1, 2.0, 1.0].iter().map(|s| Vec3::splat(s / 3.0)).collect();
+        let kept = select_top_k(&w, &e, 2, FADE_BAND);
+        let x = 0.1 / 0.5f32;
+        let fade = x * x * (3.0 - 2.0 * x);
+        assert!((kept[1].x / kept[0].x - fade * 2.1 / 8.0).abs() < 1e-5, "{kept:?}");
+        assert!((total(&kept) - total(&w)).abs() < 1e-5 * total(&w));
+    }
+
+    #[test]
+    fn exits_are_one_per_run() {
+        let x = check_exits(1000, 10, 7);
+        assert_eq!(x.len(), 10);
+        for (i, &k) in x.iter().enumerate() {
+            assert!((i * 100..(i + 1) * 100).contains(&k), "{x:?}");
+        }
+        assert_eq!(x, check_exits(1000, 10, 7));
+        assert_ne!(x, check_exits(1000, 10, 8));
+        assert_eq!(check_exits(3, 8, 0), vec![0, 1, 2]);
+        assert!(check_exits(0, 8, 0).is_empty());
+    }
+}
