@@ -158,11 +158,16 @@ pub struct BakeParams {
     /// ([`crate::PROBE_CELLS`] is the command line's default).
     pub probes: Option<u32>,
     /// Exit points of the accuracy check after the panes (0: none; a shard never checks).
+    /// Not in the archive's `params`: the check changes no pane, and its own record (the
+    /// metadata's `accuracy`) says how large it was, so a merge of shards is the single bake's
+    /// archive whatever the shards were told.
+    #[serde(skip)]
     pub accuracy_points: u32,
-    /// Reference paths per checked exit point and light.
+    /// Reference paths per checked exit point and light (not in `params`, as above).
+    #[serde(skip)]
     pub accuracy_paths: u32,
-    /// What [`CostModel`] expects these parameters to cost, seconds (without the emitter, sky and
-    /// probe steps).
+    /// What [`CostModel`] expects these parameters to cost, seconds (without the emitter, sky,
+    /// probe and accuracy-check steps).
     pub estimated_seconds: f64,
     /// One line per automatic choice.
     pub reasons: Vec<String>,
@@ -561,8 +566,9 @@ impl BakeParams {
         if self.paths_per_entry == 0 {
             invalid!("--paths-per-entry must be at least 1");
         }
-        if self.accuracy_paths == 0 {
-            invalid!("--accuracy-paths must be at least 1");
+        if self.accuracy_paths < 2 {
+            // One pass gives the reference no variance to remove from the estimate.
+            invalid!("--accuracy-paths must be at least 2");
         }
         if self.sky_paths == Some(0) {
             invalid!("--sky-paths must be at least 1");

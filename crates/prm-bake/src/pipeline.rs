@@ -636,9 +636,22 @@ pub fn bake(job: &BakeJob<'_>, renderer: Renderer<'_>, progress: &mut dyn Progre
             image[dst as usize] = image[src as usize];
         }
         if !checked_exits.is_empty() {
-            checked_panes.push(checked_exits.iter().map(|&i| pane[i]).collect());
-            // The cluster table's energy: the sum of the pane's texels, gutters included.
-            pane_energy.push(image.iter().map(|t| Vec3::from_array(*t)).sum());
+            // What the player reads: the stored RGB9E5 texels, and the cluster table's energy,
+            // their sum in f64 with the gutters included (as the writer computes it).
+            let stored = |v: [f32; 3]| prm_format::decode_rgb9e5(prm_format::encode_rgb9e5(v));
+            checked_panes.push(
+                checked_exits
+                    .iter()
+                    .map(|&i| Vec3::from_array(stored(pane[i].to_array())))
+                    .collect(),
+            );
+            let mut energy = [0f64; 3];
+            for t in &image {
+                for (e, v) in energy.iter_mut().zip(stored(*t)) {
+                    *e += f64::from(v);
+                }
+            }
+            pane_energy.push(Vec3::from_array(energy.map(|e| e as f32)));
         }
         writer.add_pane(&image).map_err(|source| BakeError::Archive {
             what: "writing a pane".to_string(),
@@ -823,10 +836,12 @@ pub fn bake(job: &BakeJob<'_>, renderer: Renderer<'_>, progress: &mut dyn Progre
             progress.phase_advance(done)
         })
         .map_err(trace("checking the bake's accuracy"))?;
-        let detail = if accuracy.lights.is_empty() {
-            "no free place for a test light: no estimate".to_string()
-        } else {
-            accuracy_line(&accuracy)
+        // A NaN in a pane or the reference must not cost the whole bake: no estimate then.
+        let valid = accuracy.validate();
+        let detail = match &valid {
+            _ if accuracy.lights.is_empty() => "no free place for a test light: no estimate".to_string(),
+            Err(e) => format!("no estimate: {e}"),
+            Ok(()) => accuracy_line(&accuracy),
         };
         finish_phase(
             &mut timings,
@@ -836,7 +851,7 @@ pub fn bake(job: &BakeJob<'_>, renderer: Renderer<'_>, progress: &mut dyn Progre
             t,
             &detail,
         );
-        (!accuracy.lights.is_empty()).then_some(accuracy)
+        (!accuracy.lights.is_empty() && valid.is_ok()).then_some(accuracy)
     };
     writer.metadata_mut().accuracy = accuracy.clone();
 

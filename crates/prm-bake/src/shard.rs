@@ -197,6 +197,8 @@ pub fn merge(parts: &[PathBuf], output: &Path) -> Result<Merged, BakeError> {
     let (first_path, _, first) = &opened[0];
     let mut metadata = first.metadata().clone();
     metadata.params.remove("shard");
+    // A shard never checks its accuracy; the merged archive was not checked as one either.
+    metadata.accuracy = None;
     let part_dir = std::fs::canonicalize(first_path)
         .ok()
         .and_then(|p| p.parent().map(Path::to_path_buf))

@@ -347,6 +347,7 @@ fn limits_are_refused_up_front() {
     let cases = [
         (plan(&["--entries", "16777217", "--clusters", "64"]), "--entries"),
         (plan(&["--top-k", "0"]), "--top-k"),
+        (plan(&["--accuracy-paths", "1"]), "--accuracy-paths"),
         (plan(&["--clusters", "2000000", "--entries", "4000000"]), "--clusters"),
         (reference(&["--spp", "0"]), "--spp"),
         (reference(&["--size", "16384x16384"]), "--size"),
@@ -698,8 +699,9 @@ fn the_accuracy_check_sees_a_worse_bake() {
 
 /// `--shard I/N` on two processes at once, then `merge`: exactly the bytes of the single bake
 /// (probes included: each part has its own clusters' transfer), whatever order the parts come
-/// in; and the merge refuses what does not make one bake. A shard never checks its accuracy, so
-/// the single bake is made without the check to compare.
+/// in; and the merge refuses what does not make one bake. A shard never checks its accuracy
+/// (whatever `--accuracy-points` says) and a merge writes no estimate, so the merge is the single
+/// bake made with `--accuracy-points 0`.
 #[test]
 fn shards_merge_into_the_single_bake_byte_for_byte() {
     let dir = temp_dir("shards");
@@ -713,7 +715,7 @@ fn shards_merge_into_the_single_bake_byte_for_byte() {
         &["--quiet", "--probes", "32", "--accuracy-points", "0"],
     );
     assert!(Archive::open(&single).unwrap().probes().is_some());
-    let shard = |i| ["--quiet", "--probes", "32", "--accuracy-points", "0", "--shard", i];
+    let shard = |i| ["--quiet", "--probes", "32", "--shard", i];
     let (args0, args1) = (shard("0/2"), shard("1/2"));
     let (part0, part1) = std::thread::scope(|s| {
         let a = s.spawn(|| bake(&parts_dir, "part0", 1, "cpu", &args0).0);

@@ -87,8 +87,8 @@ pub struct Accuracy {
 pub struct LightAccuracy {
     /// Where the point light was.
     pub position: [f32; 3],
-    /// The error with the reference's own noise removed in quadrature,
-    /// `√max(0, measured² − reference_noise²)`.
+    /// The error with the reference's own noise `Σ var` removed from both sums,
+    /// `√(max(0, Σ|PRM − ref|² − Σ var) / (Σ|ref|² − Σ var))` (formats/prm.md §3.1).
     pub error: f64,
     /// The error as measured, the reference's noise included.
     pub measured: f64,
@@ -133,7 +133,9 @@ impl Accuracy {
         mean(self.lights.iter().map(|l| l.reference_noise))
     }
 
-    fn validate(&self) -> Result<(), String> {
+    /// Checks what §3.1 requires (every number finite, all but positions ≥ 0); a reader refuses
+    /// an archive whose estimate breaks it, so a writer should drop such an estimate.
+    pub fn validate(&self) -> Result<(), String> {
         for (i, l) in self.lights.iter().enumerate() {
             let values = [
                 l.error,

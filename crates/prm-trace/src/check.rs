@@ -16,9 +16,12 @@
 //! ray-cast against shadow-mapped entry irradiance within 0.1 points on every case.
 //!
 //! **The reference** is [`ReferenceTracer::indirect_at_exits`] with [`CheckParams::paths`] paths
-//! per point. Its own noise is measured from its passes and removed from the error in
-//! quadrature (`err² ≈ true² + noise²`, the eval's convention), so a cheap reference still gives
-//! an unbiased estimate of the squared error; what the noise costs is the estimate's spread.
+//! per point, its random streams keyed by the bake's seed, [`CHECK_STREAM`] and the light, apart
+//! from the walks' and the sky's. Its own noise `Σ var` (the variance of each point's mean, from
+//! its passes) is removed from both sums of the relative error: a noisy reference `r̂` has
+//! `E|p − r̂|² = |p − r|² + Σ var` and `E|r̂|² = |r|² + Σ var`, so
+//! `(Σ|p − r̂|² − Σ var) / (Σ|r̂|² − Σ var)` estimates the squared error without the noise's
+//! bias, and a cheap reference costs only the estimate's spread.
 //!
 //! **How much** ([`CheckParams::DEFAULT`], 1024 points × 64 paths × 3 lights). Measured with
 //! release binaries of default bakes, against the same check at 4096 points × 1024–4096 paths
@@ -137,8 +140,9 @@ pub fn check_exits(count: usize, sample: u32, seed: u64) -> Vec<usize> {
         .collect()
 }
 
-/// The random stream of [`check_exits`] (apart from every other use of the bake's seed).
-const CHECK_STREAM: u64 = 0x636865636b;
+/// The random streams of [`check_exits`] and of the check's reference (apart from every other
+/// use of the bake's seed).
+pub const CHECK_STREAM: u64 = 0x636865636b;
 
 /// The weights the run time blends, on the CPU (prm-runtime's rank and select passes): with
 /// `score_c = Σ_rgb weight_c · energy_c`, the `top_k` clusters of highest score are kept (ties
@@ -243,19 +247,32 @@ pub fn check_accuracy(
     params: &CheckParams,
     progress: &mut dyn FnMut(u64),
 ) -> Result<Accuracy, TraceError> {
-    if archive.panes.iter().any(|p| p.len() != exits.len()) || archive.panes.len() != archive.members.len() {
+    if archive.panes.iter().any(|p| p.len() != exits.len())
+        || archive.panes.len() != archive.members.len()
+        || archive.cluster_energy.len() != archive.members.len()
+    {
         return Err(TraceError::InvalidParameter(
-            "every pane needs one value per checked exit point".into(),
+            "every cluster needs a pane energy and one pane value per checked exit point".into(),
+        ));
+    }
+    let entries = archive.entries.len();
+    if archive.entry_energy.is_some_and(|e| e.len() != entries)
+        || archive.members.iter().flatten().any(|&k| k as usize >= entries)
+    {
+        return Err(TraceError::InvalidParameter(
+            "every cluster member needs an entry point (and its energy)".into(),
         ));
     }
     let d = scene.bounds().diagonal();
-    let reference = ReferenceParams {
-        seed: params.seed,
-        ..ReferenceParams::with_spp(params.paths)
-    };
     let mut done = 0u64;
     let mut out = Vec::with_capacity(lights.len());
-    for &position in lights {
+    let mut paths = 0;
+    for (i, &position) in lights.iter().enumerate() {
+        let reference = ReferenceParams {
+            seed: crate::rng::hash3(params.seed, CHECK_STREAM, i as u64),
+            ..ReferenceParams::with_spp(params.paths)
+        };
+        paths = reference.passes * reference.samples_per_pass;
         let light = Light::Point {
             position,
             intensity: Vec3::splat(d * d),
@@ -276,30 +293,38 @@ pub fn check_accuracy(
         let rel = |x: f64| if norm2 > 0.0 { (x / norm2).sqrt() } else { 0.0 };
         let measured = rel(err2(&played));
         let reference_noise = rel(noise2);
-        let corrected = |m: f64| (m * m - reference_noise * reference_noise).max(0.0).sqrt();
+        // Both sums without the reference's noise (see the module's *The reference*).
+        let corrected = |e2: f64| {
+            let n2 = norm2 - noise2;
+            if n2 > 0.0 {
+                ((e2 - noise2).max(0.0) / n2).sqrt()
+            } else {
+                0.0
+            }
+        };
         let sum_ref: f64 = r.mean.iter().map(|v| f64::from(v.element_sum())).sum();
         let sum_played: f64 = played.iter().map(|v| f64::from(v.element_sum())).sum();
-        let error = corrected(measured);
+        let error = corrected(err2(&played));
         out.push(LightAccuracy {
             position: position.to_array(),
             error,
             measured,
             reference_noise,
             energy: if sum_ref > 0.0 { sum_played / sum_ref } else { 0.0 },
-            error_all_clusters: corrected(rel(err2(&all))),
+            error_all_clusters: corrected(err2(&all)),
             standard_error: standard_error(&played, &r.mean, &r.variance, error),
         });
     }
     Ok(Accuracy {
         exit_points: exits.len() as u32,
-        paths: reference.passes * reference.samples_per_pass,
+        paths,
         top_k: archive.top_k as u32,
         lights: out,
     })
 }
 
 /// The standard error of `error`, the noise-corrected `√(Σ t_i / Σ q_i)` with per point
-/// `t_i = |played_i − ref_i|² − Σ_rgb var_i` and `q_i = |ref_i|²`, from the points' own spread
+/// `t_i = |played_i − ref_i|² − Σ_rgb var_i` and `q_i = |ref_i|² − Σ_rgb var_i`, from the points' own spread
 /// (the delta method on the ratio of the two sums, and `d√x = dx / (2√x)`). The points are a
 /// random sample of the exit points, so this is the spread of the estimate over draws of them
 /// and of the reference's paths.
@@ -314,7 +339,11 @@ fn standard_error(played: &[Vec3], reference: &[Vec3], variance: &[Vec3], error:
         .zip(variance)
         .map(|((a, b), v)| f64::from((*a - *b).length_squared()) - f64::from(v.element_sum()))
         .collect();
-    let q: Vec<f64> = reference.iter().map(|v| f64::from(v.length_squared())).collect();
+    let q: Vec<f64> = reference
+        .iter()
+        .zip(variance)
+        .map(|(v, var)| f64::from(v.length_squared()) - f64::from(var.element_sum()))
+        .collect();
     let nf = n as f64;
     let (mt, mq) = (t.iter().sum::<f64>() / nf, q.iter().sum::<f64>() / nf);
     if mq <= 0.0 {
