@@ -65,8 +65,9 @@ pub const PROBE_SKY_PATHS: u32 = 4096;
 
 /// Exit points of the bake's accuracy check by default (`--accuracy-points`), each traced with
 /// [`ACCURACY_PATHS`] reference paths for each of three test lights ([`prm_trace::check`]).
-/// Measured (see `prm_trace::check`): 2–3% of a default bake on the bundled Cornell box and 1% on
-/// chairs and CornellBox-Sphere, within one or two standard errors of a 4096-point measurement of the same archive.
+/// Measured (see `prm_trace::check`): 2–3% of a default bake on the bundled Cornell box and under
+/// 1% on chairs and CornellBox-Sphere, within one or two standard errors of a 4096-point
+/// measurement of the same archive.
 pub const ACCURACY_POINTS: u32 = prm_trace::CheckParams::DEFAULT.exit_points;
 
 /// Reference paths per checked exit point and light.

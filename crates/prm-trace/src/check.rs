@@ -24,15 +24,17 @@
 //! bias, and a cheap reference costs only the estimate's spread.
 //!
 //! **How much** ([`CheckParams::DEFAULT`], 1024 points × 64 paths × 3 lights). Measured with
-//! release binaries of default bakes, against the same check at 4096 points × 1024–4096 paths
-//! ("truth"): the bundled Cornell box 12.7 ± 0.4% true, four draws of the default (1000–1036
-//! points) 10.6–13.7% with a standard error of 1.3–2.1 points that matches their spread, in
-//! 0.10–0.15 s of a 4.3–5.9 s bake; chairs 23.3 ± 0.6% against 23.5% true (0.21 s of 27 s);
-//! CornellBox-Sphere 12.4 ± 0.7% against 12.6% (0.20 s of 20 s). Fewer points traced longer
-//! spread wider, since the error varies more between points than the reference's noise does:
-//! 256 × 256 gave 9.7–24.7% on the Cornell box (one light at 47.7%), 512 × 128 11.1–15.3%,
-//! 2048 × 32 9.7–13.3%. The error budget's even-stride measurement of the same bakes
-//! (`cargo xtask eval --budget`: 13.0%, 21.6%, 12.3%, with one light each) agrees.
+//! release binaries of default bakes, against the same check of the same archive at 4096
+//! points × 1024 paths ("truth"): the bundled Cornell box (glTF) 12.8 ± 0.4% true, four draws
+//! of the default (`--accuracy-points` 1000, 1012, 1024, 1036) 12.7–13.3% with a standard error
+//! of 1.3–1.6 points, in 0.07–0.08 s of a 2.8–3.7 s bake; chairs 23.0 ± 0.6% against 23.6%
+//! true (0.12 s of 17 s); CornellBox-Sphere 12.1 ± 0.7% against 12.6% (0.07 s of 12 s). Fewer
+//! points traced longer spread wider, since the error varies more between points than the
+//! reference's noise does (measured before the noise left the denominator too, which moves an
+//! estimate by about 3% of itself): 256 × 256 gave 9.7–24.7% on the Cornell box (one light at
+//! 47.7%), 512 × 128 11.1–15.3%, 1024 × 64 10.6–13.7%, 2048 × 32 9.7–13.3%. The error budget's
+//! even-stride measurement of the same bakes (`cargo xtask eval --budget`: 13.0%, 21.6%, 12.3%,
+//! with one light each) agrees.
 
 use glam::Vec3;
 use prm_format::{Accuracy, LightAccuracy};
@@ -128,7 +130,7 @@ fn nearest_surface(bvh: &Bvh, p: Vec3, tmax: f32) -> f32 {
 ///
 /// Exit points run in texel order, row by row, so an even stride samples the atlas along
 /// diagonal lines and a light's error along them: on our Cornell box, five strides near 256
-/// points gave 9.1–14.3% where the truth (2048 points × 4096 paths) is 11.7%.
+/// points gave 9.1–14.3% where 2048 points × 4096 paths gave 11.7% (one light).
 pub fn check_exits(count: usize, sample: u32, seed: u64) -> Vec<usize> {
     let s = (sample as usize).min(count);
     (0..s)
