@@ -1,16 +1,50 @@
-//! The bake's accuracy check models the player: `prm_trace::check::select_top_k`, fed the
-//! weights the run time's weights pass computed on lavapipe, gives the effective weights its rank
-//! and select passes chose, cluster for cluster, with the run time's default fade band.
+//! The bake's accuracy check models the player: `prm_trace::check`'s selections, fed the weights
+//! the run time's weights pass computed on lavapipe, give the effective weights its rank and
+//! select passes chose, cluster for cluster, with the run time's default fade band: with
+//! residual groups (the default; `select_with_residuals`, the groups' weights too) and without
+//! (`select_top_k`).
 
 use glam::Vec3;
 use prm_runtime::synthetic::{cornell_box_path, write_archive, SyntheticParams};
 use prm_runtime::{Runtime, RuntimeOptions, Shadows};
 use prm_scene::Light;
 use prm_tests::{gpu, temp_dir};
-use prm_trace::check::{select_top_k, FADE_BAND};
+use prm_trace::check::{select_top_k, select_with_residuals, FADE_BAND};
 
 /// Clusters kept, of the synthetic archive's 48.
 const TOP_K: u32 = 8;
+
+/// The energy of every residual group's summed pane as the run time stores it (RGB9E5).
+fn group_energies<R: std::io::Read + std::io::Seek>(
+    archive: &mut prm_format::Archive<R>,
+    of: &[u32],
+    groups: usize,
+) -> Vec<Vec3> {
+    let mut sums: Vec<Vec<[f32; 3]>> = Vec::new();
+    if groups == 0 {
+        return Vec::new();
+    }
+    for (c, &g) in of.iter().enumerate() {
+        let pane = archive.read_pane(c).unwrap();
+        if sums.is_empty() {
+            sums = vec![vec![[0.0; 3]; pane.len()]; groups];
+        }
+        for (s, v) in sums[g as usize].iter_mut().zip(&pane) {
+            (0..3).for_each(|k| s[k] += v[k]);
+        }
+    }
+    sums.iter()
+        .map(|sum| {
+            sum.iter()
+                .map(|t| {
+                    let v = prm_format::decode_rgb9e5(prm_format::encode_rgb9e5(*t));
+                    [0, 1, 2].map(|k| f64::from(v[k]))
+                })
+                .fold([0f64; 3], |a, b| [a[0] + b[0], a[1] + b[1], a[2] + b[2]])
+        })
+        .map(|e| Vec3::new(e[0] as f32, e[1] as f32, e[2] as f32))
+        .collect()
+}
 
 #[test]
 fn the_check_selects_the_clusters_the_player_selects() {
@@ -24,45 +58,74 @@ fn the_check_selects_the_clusters_the_player_selects() {
     let scene = prm_scene::load(&scene_path).unwrap();
     let out = temp_dir("check").join("cornell.prm");
     write_archive(&scene, &scene_path, &out, SyntheticParams::default()).unwrap();
-    let mut archive = prm_format::Archive::open(&out).unwrap();
-    let energy: Vec<Vec3> = archive.clusters().iter().map(|c| Vec3::from(c.energy)).collect();
-    assert!(energy.len() > TOP_K as usize);
-    let options = RuntimeOptions {
-        top_k: TOP_K,
-        ..RuntimeOptions::default()
-    };
-    let mut rt = Runtime::new(&ctx.device, &ctx.queue, &mut archive, &scene, options).unwrap();
-    let b = scene.bounds();
-    for f in [[0.5, 0.8, 0.5], [0.25, 0.4, 0.3], [0.75, 0.3, 0.7], [0.1, 0.9, 0.9]] {
-        let light = Light::Point {
-            position: b.min + b.extent() * Vec3::from_array(f),
-            intensity: Vec3::splat(0.3),
+    for residual_groups in [prm_format::RESIDUAL_GROUPS, 0] {
+        let mut archive = prm_format::Archive::open(&out).unwrap();
+        let energy: Vec<Vec3> = archive.clusters().iter().map(|c| Vec3::from(c.energy)).collect();
+        assert!(energy.len() > TOP_K as usize);
+        let of = prm_format::residual_groups(archive.clusters(), residual_groups);
+        let group_energy = group_energies(&mut archive, &of, residual_groups as usize);
+        let options = RuntimeOptions {
+            top_k: TOP_K,
+            residual_groups,
+            ..RuntimeOptions::default()
         };
-        rt.update(&[light]).unwrap();
-        let mut enc = ctx.device.create_command_encoder(&Default::default());
-        rt.encode(&mut enc, Shadows::Own, None);
-        ctx.queue.submit([enc.finish()]);
-        ctx.wait().unwrap();
-        let gpu = rt.read_weights().unwrap();
-        let weights: Vec<Vec3> = gpu.iter().map(|w| Vec3::from(w.weight)).collect();
-        let cpu = select_top_k(&weights, &energy, TOP_K as usize, FADE_BAND);
-        let peak = gpu.iter().flat_map(|w| w.effective).fold(0f32, f32::max);
-        assert!(peak > 0.0, "light {f:?} lights some cluster");
-        for (c, (g, e)) in gpu.iter().zip(&cpu).enumerate() {
-            let score = weights[c].dot(energy[c]);
+        let mut rt = Runtime::new(&ctx.device, &ctx.queue, &mut archive, &scene, options).unwrap();
+        assert_eq!(rt.group_count(), residual_groups);
+        let b = scene.bounds();
+        let mut lit_groups = 0;
+        for f in [[0.5, 0.8, 0.5], [0.25, 0.4, 0.3], [0.75, 0.3, 0.7], [0.1, 0.9, 0.9]] {
+            let light = Light::Point {
+                position: b.min + b.extent() * Vec3::from_array(f),
+                intensity: Vec3::splat(0.3),
+            };
+            rt.update(&[light]).unwrap();
+            let mut enc = ctx.device.create_command_encoder(&Default::default());
+            rt.encode(&mut enc, Shadows::Own, None);
+            ctx.queue.submit([enc.finish()]);
+            ctx.wait().unwrap();
+            let gpu = rt.read_weights().unwrap();
+            let gpu_groups = rt.read_group_weights().unwrap();
+            let weights: Vec<Vec3> = gpu.iter().map(|w| Vec3::from(w.weight)).collect();
+            let (cpu, cpu_groups) = if residual_groups > 0 {
+                select_with_residuals(&weights, &energy, TOP_K as usize, FADE_BAND, &of, &group_energy)
+            } else {
+                (select_top_k(&weights, &energy, TOP_K as usize, FADE_BAND), Vec::new())
+            };
+            let peak = gpu.iter().flat_map(|w| w.effective).fold(0f32, f32::max);
+            assert!(peak > 0.0, "light {f:?} lights some cluster");
+            for (c, (g, e)) in gpu.iter().zip(&cpu).enumerate() {
+                let score = weights[c].dot(energy[c]);
+                assert!(
+                    (g.score - score).abs() <= 1e-4 * score.abs().max(1e-30) + 1e-30,
+                    "light {f:?}, cluster {c}: GPU score {} against weight · energy {score}",
+                    g.score
+                );
+                let err = (Vec3::from(g.effective) - *e).abs().max_element();
+                assert!(
+                    err <= 1e-4 * peak,
+                    "groups {residual_groups}, light {f:?}, cluster {c} (rank {}): GPU effective weight {:?} \
+                     against the check's {e}",
+                    g.rank,
+                    g.effective
+                );
+            }
+            assert_eq!(gpu.iter().filter(|w| w.rank < TOP_K).count(), TOP_K as usize);
+            assert_eq!(gpu_groups.len(), cpu_groups.len());
+            let group_peak = cpu_groups.iter().map(|g| g.max_element()).fold(0f32, f32::max);
+            lit_groups += usize::from(group_peak > 0.0);
+            for (g, (a, b)) in gpu_groups.iter().zip(&cpu_groups).enumerate() {
+                let err = (Vec3::from(*a) - *b).abs().max_element();
+                assert!(
+                    err <= 1e-4 * group_peak,
+                    "light {f:?}, group {g}: GPU weight {a:?} against the check's {b}"
+                );
+            }
+        }
+        if residual_groups > 0 {
             assert!(
-                (g.score - score).abs() <= 1e-4 * score.abs().max(1e-30) + 1e-30,
-                "light {f:?}, cluster {c}: GPU score {} against weight · energy {score}",
-                g.score
-            );
-            let err = (Vec3::from(g.effective) - *e).abs().max_element();
-            assert!(
-                err <= 1e-4 * peak,
-                "light {f:?}, cluster {c} (rank {}): GPU effective weight {:?} against the check's {e}",
-                g.rank,
-                g.effective
+                lit_groups >= 2,
+                "the dropped clusters' light reaches the groups under most lights"
             );
         }
-        assert_eq!(gpu.iter().filter(|w| w.rank < TOP_K).count(), TOP_K as usize);
     }
 }

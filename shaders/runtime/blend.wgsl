@@ -1,5 +1,6 @@
 // prm-runtime blend pass: the indirect-irradiance lightmap, Σ over the kept clusters of
-// weight_eff × pane, per atlas texel, plus the traced indirect light of the emitters at their
+// weight_eff × pane and over the residual groups (when clusters were dropped) of their weight ×
+// summed pane, per atlas texel (select.wgsl), plus the traced indirect light of the emitters at their
 // scales and of the sky (baked.rs; a 1×1 texture, ignored, when neither has one); panes are layers of an
 // rgb9e5ufloat texture array.
 
@@ -16,7 +17,8 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         return;
     }
     let xy = vec2<i32>(gid.xy);
-    let kept = min(frame.cluster_count, frame.top_k);
+    let kept = min(frame.cluster_count, frame.top_k) +
+        select(0u, frame.group_count, frame.cluster_count > frame.top_k);
     var sum = vec3<f32>(0.0);
     for (var k = 0u; k < kept; k++) {
         let s = selected[k];

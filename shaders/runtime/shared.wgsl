@@ -21,6 +21,11 @@ struct Frame {
     normal_offset: f32,
     // Depth tolerance of a shadow lookup, in shadow texels.
     depth_bias: f32,
+    // Residual groups: group g's summed pane is layer cluster_count + g (select.wgsl).
+    group_count: u32,
+    _pad0: u32,
+    _pad1: u32,
+    _pad2: u32,
 };
 
 struct Light {
@@ -59,7 +64,8 @@ struct ShadowView {
 struct Cluster {
     first: u32,
     count: u32,
-    _pad0: u32,
+    // residual group (0 without groups)
+    group: u32,
     _pad1: u32,
     // pane energy (RGB)
     energy: vec3<f32>,

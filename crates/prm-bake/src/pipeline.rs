@@ -600,6 +600,8 @@ pub fn bake(job: &BakeJob<'_>, renderer: Renderer<'_>, progress: &mut dyn Progre
     };
 
     let (table_entries, table_clusters, atlas_section) = archive_tables(&atlas, &entries, &clustering);
+    // The player's residual groups, for the accuracy check (a function of the cluster table).
+    let residual_groups = prm_format::residual_groups(&table_clusters, prm_format::RESIDUAL_GROUPS);
     let out_dir = destination
         .parent()
         .filter(|d| !d.as_os_str().is_empty())
@@ -822,6 +824,7 @@ pub fn bake(job: &BakeJob<'_>, renderer: Renderer<'_>, progress: &mut dyn Progre
             cluster_energy: &pane_energy,
             panes: &checked_panes,
             top_k: params.top_k,
+            groups: &residual_groups,
             fade_band: prm_trace::check::FADE_BAND,
         };
         let exits: Vec<_> = checked_exits.iter().map(|&i| atlas.exits[i]).collect();

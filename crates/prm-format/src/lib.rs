@@ -17,6 +17,8 @@
 //!   in the spherical-harmonic basis [`sh_basis`], which [`sh_rotate_y`] turns about the vertical.
 //! * [`Probes`]: the optional probes section (1.4), irradiance probes on a grid in the scene's
 //!   empty space and every cluster's transfer to them, so the run-time weights light them too.
+//! * [`residual_groups`]: the clusters' spatial groups whose summed panes carry the light of the
+//!   clusters a run time drops from its top K.
 //! * [`encode_rgb9e5`] / [`decode_rgb9e5`] implement the texel encoding,
 //!   bit-exact with WebGPU's `rgb9e5ufloat`.
 #![warn(missing_docs)]
@@ -24,6 +26,7 @@
 mod emitters;
 mod error;
 mod filter;
+mod groups;
 mod layout;
 mod metadata;
 mod probes;
@@ -40,6 +43,7 @@ mod writer;
 pub use emitters::{EmitterGroup, EMITTER_NAME_BYTES};
 pub use error::{Error, Result};
 pub use filter::TileFilter;
+pub use groups::{residual_groups, RESIDUAL_GROUPS};
 pub use layout::{checksum, compression, kind, limits, MAGIC, VERSION_MAJOR, VERSION_MINOR};
 pub use metadata::{Accuracy, Generator, LightAccuracy, Metadata, Units};
 pub use probes::{

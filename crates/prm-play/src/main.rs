@@ -59,6 +59,10 @@ struct Args {
     /// Clusters kept per frame (default: the archive's params.top_k, else 32).
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..))]
     top_k: Option<u32>,
+    /// Residual groups: when the top K drops clusters, their light goes through this many
+    /// groups' summed panes (up to K + G panes a frame); 0 scales the kept clusters up instead.
+    #[arg(long, value_name = "G", default_value_t = prm_format::RESIDUAL_GROUPS)]
+    residual_groups: u32,
     /// Frames to render (headless: default 1). In a window: quit after this many presented
     /// frames (default: run until closed).
     #[arg(long)]
@@ -169,6 +173,7 @@ fn run() -> Result<()> {
         };
     let runtime = RuntimeOptions {
         top_k,
+        residual_groups: args.residual_groups,
         shadow_resolution: args.shadow_resolution,
         fade_band: args.fade_band,
         ..Default::default()
@@ -294,6 +299,7 @@ fn run() -> Result<()> {
             "size": [width, height],
             "mode": format!("{:?}", args.mode).to_lowercase(),
             "top_k": top_k,
+            "residual_groups": args.residual_groups,
             "clusters": renderer.cluster_count(),
             "frames": frames.iter().map(|f| serde_json::json!({
                 "cpu_ms": f.cpu_ms,

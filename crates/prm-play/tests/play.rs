@@ -337,13 +337,15 @@ fn cornell_box_matches_golden() {
     }
 }
 
-/// K < C: exactly the top K clusters contribute, ranks are a permutation, the kept clusters carry
-/// the expected energy (score) of all of them, faded ones less than the best one's share, and the
-/// lightmap is Σ effective weight × pane.
+/// K < C without residual groups: exactly the top K clusters contribute, ranks are a
+/// permutation, the kept clusters carry the expected energy (score) of all of them, faded ones
+/// less than the best one's share, and the lightmap is Σ effective weight × pane.
 #[test]
 fn top_k_keeps_the_strongest_clusters() {
     let k = 8;
-    let (mut r, scene) = renderer(small(k));
+    let mut options = small(k);
+    options.runtime.residual_groups = 0;
+    let (mut r, scene) = renderer(options);
     let lights = cornell_lights(&scene);
     r.render(&FrameInput {
         camera: prm_play::default_camera(&scene),
@@ -392,6 +394,74 @@ fn top_k_keeps_the_strongest_clusters() {
             }
         }
     }
+    let peak = cpu.iter().flatten().fold(0f32, |a, b| a.max(*b));
+    for (g, c) in gpu.iter().zip(&cpu) {
+        for ch in 0..3 {
+            assert!((g[ch] - c[ch]).abs() <= 0.01 * c[ch].abs().max(peak * 1e-4));
+        }
+    }
+}
+
+/// K < C with residual groups (the default): the top K keep their faded weights unscaled, the
+/// groups' weights carry the rest of every cluster's energy (score), and the lightmap is Σ
+/// effective weight × pane + Σ group weight × the group's summed pane.
+#[test]
+fn residual_groups_carry_the_dropped_clusters() {
+    let k = 8;
+    let (mut r, scene) = renderer(small(k));
+    let groups = r.runtime().group_count();
+    assert_eq!(groups, prm_format::RESIDUAL_GROUPS);
+    let lights = cornell_lights(&scene);
+    r.render(&FrameInput {
+        camera: prm_play::default_camera(&scene),
+        lights: &lights,
+        mode: Mode::Indirect,
+    })
+    .unwrap();
+    let w = r.read_weights().unwrap();
+    let gw = r.runtime().read_group_weights().unwrap();
+    assert_eq!(gw.len(), groups as usize);
+    let mut archive = Archive::open(cornell_archive()).unwrap();
+    let of = prm_format::residual_groups(archive.clusters(), groups);
+    let res = archive.atlas().resolution as usize;
+    let mut sums = vec![vec![[0f32; 3]; res * res]; groups as usize];
+    let mut cpu = vec![[0f32; 3]; res * res];
+    let (mut all, mut played) = (0f64, 0f64);
+    for (c, cw) in w.iter().enumerate() {
+        let pane = archive.read_pane(c).unwrap();
+        all += f64::from(cw.score);
+        for ch in 0..3 {
+            assert!(
+                cw.effective[ch] <= cw.weight[ch] * (1.0 + 1e-6),
+                "cluster {c}: not scaled up"
+            );
+            if cw.rank >= k {
+                assert_eq!(cw.effective[ch], 0.0);
+            }
+            played += f64::from(cw.effective[ch] * archive.clusters()[c].energy[ch]);
+        }
+        for ((acc, sum), t) in cpu.iter_mut().zip(sums[of[c] as usize].iter_mut()).zip(&pane) {
+            for ch in 0..3 {
+                acc[ch] += cw.effective[ch] * t[ch];
+                sum[ch] += t[ch];
+            }
+        }
+    }
+    assert!(
+        gw.iter().flatten().any(|&v| v > 0.0),
+        "the dropped clusters' light reaches a group"
+    );
+    for (g, sum) in sums.iter().enumerate() {
+        for (acc, t) in cpu.iter_mut().zip(sum) {
+            let stored = prm_format::decode_rgb9e5(prm_format::encode_rgb9e5(*t));
+            for ch in 0..3 {
+                acc[ch] += gw[g][ch] * stored[ch];
+                played += f64::from(gw[g][ch] * stored[ch]);
+            }
+        }
+    }
+    assert!((played / all - 1.0).abs() < 1e-3, "played energy {played} vs all {all}");
+    let gpu = r.read_lightmap().unwrap();
     let peak = cpu.iter().flatten().fold(0f32, |a, b| a.max(*b));
     for (g, c) in gpu.iter().zip(&cpu) {
         for ch in 0..3 {

@@ -4,8 +4,9 @@
 //! Per frame, all on the GPU: shadow maps of every light ([`shadow_views`]; or the caller's own,
 //! [`Shadows::External`]), the shadow-mapped irradiance of every entry point and each cluster's
 //! weight (`weights.wgsl`), the rank of every cluster by score (`rank.wgsl`), the top K with
-//! weights faded near the threshold (`select.wgsl`) and the blend of the kept panes into an
-//! `rgba32float` lightmap of indirect irradiance in W/m² (`blend.wgsl`). The caller samples it
+//! weights faded near the threshold and the residual groups that carry the dropped clusters'
+//! light (`select.wgsl`, [`prm_format::residual_groups`]) and the blend of the kept panes and
+//! the groups' summed panes into an `rgba32float` lightmap of indirect irradiance in W/m² (`blend.wgsl`). The caller samples it
 //! with the lightmap UVs [`Runtime::lightmap_uvs`] gives per triangle and shades as it likes:
 //! radiance = albedo/π × (direct + indirect irradiance). Its direct light can use the same
 //! shadow maps through [`LIGHTS_WGSL`] and [`Runtime::direct_light_bindings`]. Emissive surfaces
@@ -143,6 +144,8 @@ pub(crate) struct Buffers {
     threshold: wgpu::Buffer,
     selected: wgpu::Buffer,
     effective: wgpu::Buffer,
+    /// The energy of every residual group's summed pane (`vec4`, w unused).
+    group_energy: wgpu::Buffer,
 }
 
 /// The run time's GPU state for one archive and scene.
@@ -152,6 +155,8 @@ pub struct Runtime {
     options: RuntimeOptions,
     bounds: Aabb,
     cluster_count: u32,
+    /// Residual groups built at load (their summed panes follow the clusters' in the array).
+    group_count: u32,
     entry_count: u32,
     resolution: u32,
     vertex_count: u32,
@@ -212,6 +217,16 @@ impl Runtime {
                 max: max_layers,
             });
         }
+        // Residual groups, as many as asked for while their panes fit the array.
+        let group_count = options
+            .residual_groups
+            .min(cluster_count)
+            .min(max_layers - cluster_count);
+        let group_of = if group_count > 0 {
+            prm_format::residual_groups(archive.clusters(), group_count)
+        } else {
+            vec![0; cluster_count as usize]
+        };
         let scope = ErrorScopes::push(device);
         let positions: Vec<[f32; 3]> = scene
             .triangles
@@ -263,9 +278,11 @@ impl Runtime {
         let clusters: Vec<GpuCluster> = archive
             .clusters()
             .iter()
-            .map(|c| GpuCluster {
+            .zip(&group_of)
+            .map(|(c, &group)| GpuCluster {
                 first: c.first,
                 count: c.count,
+                group,
                 energy: c.energy,
                 ..Default::default()
             })
@@ -300,19 +317,32 @@ impl Runtime {
             weights: pipeline::storage(device, "prm weights", per_cluster, src),
             ranks: pipeline::storage(device, "prm ranks", cluster_count.max(1) as u64 * 4, src),
             threshold: pipeline::storage(device, "prm threshold", 16, src),
-            selected: pipeline::storage(device, "prm selected", per_cluster, src),
+            selected: pipeline::storage(
+                device,
+                "prm selected",
+                (cluster_count + group_count).max(1) as u64 * 16,
+                src,
+            ),
             effective: pipeline::storage(device, "prm effective", per_cluster, src),
+            group_energy: pipeline::storage(
+                device,
+                "prm group energy",
+                group_count.max(1) as u64 * 16,
+                wgpu::BufferUsages::COPY_DST,
+            ),
         };
 
-        // Panes: one rgb9e5ufloat layer each.
+        // Panes: one rgb9e5ufloat layer each, then the residual groups' summed panes.
         let res = atlas.resolution;
         let pane_texture = pipeline::texture(
             device,
             "prm panes",
-            [res, res, cluster_count.max(1)],
+            [res, res, (cluster_count + group_count).max(1)],
             wgpu::TextureFormat::Rgb9e5Ufloat,
             wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
         );
+        let texels = (res * res) as usize;
+        let mut sums = vec![vec![[0f32; 3]; texels]; group_count as usize];
         for p in 0..cluster_count {
             let words = archive
                 .read_pane_rgb9e5(p as usize)
@@ -321,6 +351,36 @@ impl Runtime {
                     source,
                 })?;
             pipeline::write_layer(queue, &pane_texture, p, bytemuck::cast_slice(&words), res * 4);
+            if let Some(sum) = sums.get_mut(group_of[p as usize] as usize) {
+                for (s, &w) in sum.iter_mut().zip(&words) {
+                    let v = prm_format::decode_rgb9e5(w);
+                    (0..3).for_each(|k| s[k] += v[k]);
+                }
+            }
+        }
+        let mut group_energy = Vec::with_capacity(sums.len());
+        let mut words = Vec::with_capacity(texels);
+        for (g, sum) in sums.iter().enumerate() {
+            words.clear();
+            prm_format::encode_rgb9e5_slice(sum, &mut words);
+            // The energy of the pane as stored, as the writer computes a cluster's.
+            let mut energy = [0f64; 3];
+            for &w in &words {
+                let v = prm_format::decode_rgb9e5(w);
+                (0..3).for_each(|k| energy[k] += f64::from(v[k]));
+            }
+            group_energy.push([energy[0] as f32, energy[1] as f32, energy[2] as f32, 0.0]);
+            pipeline::write_layer(
+                queue,
+                &pane_texture,
+                cluster_count + g as u32,
+                bytemuck::cast_slice(&words),
+                res * 4,
+            );
+        }
+        drop(sums);
+        if !group_energy.is_empty() {
+            queue.write_buffer(&buffers.group_energy, 0, bytemuck::cast_slice(&group_energy));
         }
         let panes = pipeline::array_view(&pane_texture);
         let lightmap = pipeline::texture(
@@ -347,6 +407,7 @@ impl Runtime {
             options,
             bounds: scene.bounds(),
             cluster_count,
+            group_count,
             entry_count,
             resolution: res,
             vertex_count,
@@ -394,6 +455,8 @@ impl Runtime {
             shadow_resolution: o.shadow_resolution as f32,
             normal_offset: o.normal_offset,
             depth_bias: o.depth_bias,
+            group_count: self.group_count,
+            ..Default::default()
         };
         self.queue
             .write_buffer(&self.buffers.frame, 0, bytemuck::bytes_of(&frame));
@@ -580,6 +643,12 @@ impl Runtime {
         self.cluster_count
     }
 
+    /// Residual groups built at load ([`RuntimeOptions::residual_groups`], at most one per
+    /// cluster and as many as the texture array holds beside the panes).
+    pub fn group_count(&self) -> u32 {
+        self.group_count
+    }
+
     /// Changes the number of clusters kept, from the next [`Runtime::update`] on.
     pub fn set_top_k(&mut self, k: u32) {
         self.options.top_k = k.max(1);
@@ -617,6 +686,18 @@ impl Runtime {
             (0..3).for_each(|k| t[k] += e[k]);
         }
         Ok(irradiance)
+    }
+
+    /// Reads the last frame's residual group weights back, one per group: each group's summed
+    /// pane was blended with it (all 0 when the top K dropped no cluster).
+    pub fn read_group_weights(&self) -> Result<Vec<[f32; 3]>, RuntimeError> {
+        let (c, k, g) = (self.cluster_count, self.options.top_k.max(1), self.group_count);
+        if g == 0 || c <= k {
+            return Ok(vec![[0.0; 3]; g as usize]);
+        }
+        let bytes = readback::read_buffer(&self.device, &self.queue, &self.buffers.selected, u64::from(k + g) * 16)?;
+        let selected: &[GpuSelected] = bytemuck::cast_slice(&bytes);
+        Ok(selected[k as usize..].iter().map(|s| s.weight).collect())
     }
 
     /// Reads the last frame's cluster weights, scores, ranks and effective weights back.

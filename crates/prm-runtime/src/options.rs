@@ -70,6 +70,13 @@ pub enum RuntimeError {
 pub struct RuntimeOptions {
     /// Clusters kept per frame.
     pub top_k: u32,
+    /// Residual groups ([`prm_format::residual_groups`], at most one per cluster): when the top
+    /// K drops clusters, their light (and the faded share of the kept ones) is blended through
+    /// each group's summed pane, so a frame blends up to K + this many panes. 0: no groups, the
+    /// kept clusters are scaled up to the dropped ones' energy instead (the paper's top K with
+    /// its energy kept). Default [`prm_format::RESIDUAL_GROUPS`]: on chairs (240 clusters,
+    /// K = 32) 12.3% from the reference against 23.7% with scaling.
+    pub residual_groups: u32,
     /// Shadow-map side in texels (every view).
     pub shadow_resolution: u32,
     /// Fade band: kept clusters whose score is within `band × threshold` above the threshold
@@ -129,6 +136,7 @@ impl Default for RuntimeOptions {
     fn default() -> Self {
         RuntimeOptions {
             top_k: RuntimeOptions::DEFAULT_TOP_K,
+            residual_groups: prm_format::RESIDUAL_GROUPS,
             shadow_resolution: 512,
             fade_band: 0.25,
             normal_offset: 1.5,

@@ -52,6 +52,14 @@ pub struct GpuFrame {
     pub normal_offset: f32,
     /// Depth bias of shadow lookups, in shadow texels.
     pub depth_bias: f32,
+    /// Residual groups; their summed panes are layers `cluster_count + g` (see `select.wgsl`).
+    pub group_count: u32,
+    /// Padding.
+    pub _pad0: u32,
+    /// Padding.
+    pub _pad1: u32,
+    /// Padding.
+    pub _pad2: u32,
 }
 
 /// The probe grid; `ProbeGrid` in the shaders.
@@ -122,8 +130,8 @@ pub struct GpuCluster {
     pub first: u32,
     /// Entry count.
     pub count: u32,
-    /// Padding.
-    pub _pad0: u32,
+    /// Residual group ([`prm_format::residual_groups`]; 0 without groups).
+    pub group: u32,
     /// Padding.
     pub _pad1: u32,
     /// Pane energy (RGB).
@@ -206,7 +214,11 @@ mod tests {
                 fade_band,
                 shadow_resolution,
                 normal_offset,
-                depth_bias
+                depth_bias,
+                group_count,
+                _pad0,
+                _pad1,
+                _pad2
             ]
         )
         .unwrap();
@@ -218,7 +230,7 @@ mod tests {
         )
         .unwrap();
         wgsl_layout!(s, GpuView, "ShadowView", [view_proj, texel, near, far, orthographic]).unwrap();
-        wgsl_layout!(s, GpuCluster, "Cluster", [first, count, _pad0, _pad1, energy, _pad2]).unwrap();
+        wgsl_layout!(s, GpuCluster, "Cluster", [first, count, group, _pad1, energy, _pad2]).unwrap();
         wgsl_layout!(
             s,
             GpuEntry,

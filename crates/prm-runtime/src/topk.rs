@@ -2,9 +2,10 @@
 //! buffers: rank (`shaders/runtime/rank.wgsl`), every cluster's rank by score and the score of
 //! the first cluster dropped (rank K) as the fade threshold; select
 //! (`shaders/runtime/select.wgsl`), the top K clusters with their weights faded near the
-//! threshold and scaled to keep the dropped clusters' energy, written by rank for the blend;
-//! blend (`shaders/runtime/blend.wgsl`), the indirect-irradiance lightmap, Σ over the kept
-//! clusters of effective weight × pane. Rank and select run one invocation per cluster, blend
+//! threshold, written by rank for the blend, then the residual groups' weights that carry the
+//! dropped clusters' light (or, without groups, the kept weights scaled to keep it); blend
+//! (`shaders/runtime/blend.wgsl`), the indirect-irradiance lightmap, Σ over the kept clusters
+//! and the residual groups of effective weight × pane. Rank and select run one invocation per cluster, blend
 //! one per atlas texel.
 
 use prm_gpu_kit::{ComputePass, PassTimer};
@@ -37,7 +38,12 @@ impl TopKPasses {
             b.ranks.as_entire_binding(),
             b.threshold.as_entire_binding(),
         ];
-        let selected = [b.selected.as_entire_binding(), b.effective.as_entire_binding()];
+        let selected = [
+            b.selected.as_entire_binding(),
+            b.effective.as_entire_binding(),
+            b.clusters.as_entire_binding(),
+            b.group_energy.as_entire_binding(),
+        ];
         TopKPasses {
             rank: pass("rank", include_str!("../../../shaders/runtime/rank.wgsl"), &ranked),
             select: pass(

@@ -10,8 +10,11 @@
 //!
 //! **The archive's side** ([`check_accuracy`]): each entry's direct irradiance ray-cast with the
 //! run time's disk bound ([`entry_irradiance`]), each cluster weighed by its members' pane
-//! energy ([`energy_weight`]), the top K kept, faded and rescaled like prm-runtime's rank and
-//! select passes ([`select_top_k`]), and the panes summed at the sampled exit points. The run
+//! energy ([`energy_weight`]), the top K kept and faded like prm-runtime's rank and select
+//! passes, the rest of the light carried by the residual groups' summed panes
+//! ([`select_with_residuals`], [`prm_format::residual_groups`]; or the kept ones scaled up,
+//! [`select_top_k`], for a player without groups), and the panes summed at the sampled exit
+//! points. The run
 //! time's shadow maps are not modelled: the error budget (`cargo xtask eval --budget`) measured
 //! ray-cast against shadow-mapped entry irradiance within 0.1 points on every case.
 //!
@@ -146,42 +149,73 @@ pub fn check_exits(count: usize, sample: u32, seed: u64) -> Vec<usize> {
 /// use of the bake's seed).
 pub const CHECK_STREAM: u64 = 0x636865636b;
 
-/// The weights the run time blends, on the CPU (prm-runtime's rank and select passes): with
-/// `score_c = Σ_rgb weight_c · energy_c`, the `top_k` clusters of highest score are kept (ties
-/// to the lower index), each faded by `smoothstep(t, t·(1 + fade_band), score)` where `t` is
-/// the score of the first one dropped, and all kept weights scaled by `Σ_all score / Σ_kept
-/// score · fade`; the others get 0. With `top_k ≥` the cluster count the weights are returned
-/// as they are.
-pub fn select_top_k(weights: &[Vec3], cluster_energy: &[Vec3], top_k: usize, fade_band: f32) -> Vec<Vec3> {
+/// The run time's fade of every cluster (prm-runtime's rank pass and the select pass's fade):
+/// with `score_c = Σ_rgb weight_c · energy_c`, the `top_k` clusters of highest score (ties to
+/// the lower index) get `smoothstep(t, t·(1 + fade_band), score)` where `t` is the score of the
+/// first one dropped, the others 0. `None` when `top_k ≥` the cluster count (nothing dropped).
+fn fades(weights: &[Vec3], cluster_energy: &[Vec3], top_k: usize, fade_band: f32) -> Option<(Vec<f32>, Vec<f32>)> {
     let n = weights.len();
     if top_k >= n {
-        return weights.to_vec();
+        return None;
     }
     let score: Vec<f32> = weights.iter().zip(cluster_energy).map(|(w, e)| w.dot(*e)).collect();
     let mut order: Vec<usize> = (0..n).collect();
     order.sort_by(|&a, &b| score[b].total_cmp(&score[a]).then(a.cmp(&b)));
     let t = score[order[top_k]];
     let width = t * fade_band;
-    let fade = |s: f32| {
-        if width <= 0.0 {
-            if s > t {
-                1.0
-            } else {
-                0.0
-            }
+    let mut fade = vec![0f32; n];
+    for &c in &order[..top_k] {
+        fade[c] = if width <= 0.0 {
+            f32::from(score[c] > t)
         } else {
-            let x = ((s - t) / width).clamp(0.0, 1.0);
+            let x = ((score[c] - t) / width).clamp(0.0, 1.0);
             x * x * (3.0 - 2.0 * x)
-        }
+        };
+    }
+    Some((score, fade))
+}
+
+/// The weights the run time blends without residual groups, on the CPU (prm-runtime's rank
+/// and select passes with `residual_groups: 0`): the top K faded ([`fades`]), and all kept
+/// weights scaled by `Σ_all score / Σ_kept score · fade`; the others get 0. With `top_k ≥` the
+/// cluster count the weights are returned as they are.
+pub fn select_top_k(weights: &[Vec3], cluster_energy: &[Vec3], top_k: usize, fade_band: f32) -> Vec<Vec3> {
+    let Some((score, fade)) = fades(weights, cluster_energy, top_k, fade_band) else {
+        return weights.to_vec();
     };
     let all: f32 = score.iter().sum();
-    let kept: f32 = order[..top_k].iter().map(|&c| score[c] * fade(score[c])).sum();
+    let kept: f32 = score.iter().zip(&fade).map(|(s, f)| s * f).sum();
     let factor = if kept > 0.0 { all / kept } else { 1.0 };
-    let mut out = vec![Vec3::ZERO; n];
-    for &c in &order[..top_k] {
-        out[c] = weights[c] * (fade(score[c]) * factor);
+    weights.iter().zip(&fade).map(|(w, f)| *w * (f * factor)).collect()
+}
+
+/// The weights the run time blends with residual groups (prm-runtime's select pass with
+/// `group_of`, from [`prm_format::residual_groups`]): the top K faded ([`fades`]) and not
+/// scaled, and for every group `g` the weight of its summed pane, `Σ_{c∈g} w_c ⊙ e_c ⊙ (1 −
+/// fade_c) / E_g` per channel (0 where `E_g`, the group pane's energy, is 0). Returns the
+/// clusters' weights and the groups'; with `top_k ≥` the cluster count, the weights as they
+/// are and no group light.
+pub fn select_with_residuals(
+    weights: &[Vec3],
+    cluster_energy: &[Vec3],
+    top_k: usize,
+    fade_band: f32,
+    group_of: &[u32],
+    group_energy: &[Vec3],
+) -> (Vec<Vec3>, Vec<Vec3>) {
+    let Some((_, fade)) = fades(weights, cluster_energy, top_k, fade_band) else {
+        return (weights.to_vec(), vec![Vec3::ZERO; group_energy.len()]);
+    };
+    let mut left = vec![Vec3::ZERO; group_energy.len()];
+    for (c, (w, f)) in weights.iter().zip(&fade).enumerate() {
+        left[group_of[c] as usize] += *w * cluster_energy[c] * (1.0 - f);
     }
-    out
+    let groups = left
+        .iter()
+        .zip(group_energy)
+        .map(|(l, e)| Vec3::select(e.cmpgt(Vec3::ZERO), *l / *e, Vec3::ZERO))
+        .collect();
+    (weights.iter().zip(&fade).map(|(w, f)| *w * *f).collect(), groups)
 }
 
 /// What an archive holds, at the checked exit points.
@@ -200,6 +234,9 @@ pub struct CheckedArchive<'a> {
     pub panes: &'a [Vec<Vec3>],
     /// Clusters the player blends.
     pub top_k: usize,
+    /// The residual group of every cluster ([`prm_format::residual_groups`]), or empty for a
+    /// player without residual groups.
+    pub groups: &'a [u32],
     /// The player's fade band ([`FADE_BAND`]).
     pub fade_band: f32,
 }
@@ -221,11 +258,10 @@ pub fn played_indirect(bvh: &Bvh, archive: &CheckedArchive<'_>, light: Light) ->
         .iter()
         .map(|m| energy_weight(m.iter().map(|&k| k as usize), &e, energy))
         .collect();
-    let kept = select_top_k(&weights, archive.cluster_energy, archive.top_k, archive.fade_band);
     let points = archive.panes.first().map_or(0, Vec::len);
-    let blend = |w: &[Vec3]| {
+    let blend = |w: &[Vec3], panes: &[Vec<Vec3>]| {
         let mut out = vec![Vec3::ZERO; points];
-        for (wc, pane) in w.iter().zip(archive.panes) {
+        for (wc, pane) in w.iter().zip(panes) {
             if *wc != Vec3::ZERO {
                 for (o, v) in out.iter_mut().zip(pane) {
                     *o += *wc * *v;
@@ -234,7 +270,37 @@ pub fn played_indirect(bvh: &Bvh, archive: &CheckedArchive<'_>, light: Light) ->
         }
         out
     };
-    (blend(&kept), blend(&weights))
+    let played = if archive.groups.is_empty() {
+        blend(
+            &select_top_k(&weights, archive.cluster_energy, archive.top_k, archive.fade_band),
+            archive.panes,
+        )
+    } else {
+        // The groups' summed panes and their energies.
+        let count = archive.groups.iter().max().map_or(0, |g| *g as usize + 1);
+        let mut sums = vec![vec![Vec3::ZERO; points]; count];
+        let mut energy = vec![Vec3::ZERO; count];
+        for ((pane, e), &g) in archive.panes.iter().zip(archive.cluster_energy).zip(archive.groups) {
+            energy[g as usize] += *e;
+            for (s, v) in sums[g as usize].iter_mut().zip(pane) {
+                *s += *v;
+            }
+        }
+        let (kept, residual) = select_with_residuals(
+            &weights,
+            archive.cluster_energy,
+            archive.top_k,
+            archive.fade_band,
+            archive.groups,
+            &energy,
+        );
+        let mut out = blend(&kept, archive.panes);
+        for (o, r) in out.iter_mut().zip(blend(&residual, &sums)) {
+            *o += r;
+        }
+        out
+    };
+    (played, blend(&weights, archive.panes))
 }
 
 /// Compares the archive's indirect light with the reference's at `exits` for a point light at
@@ -252,6 +318,7 @@ pub fn check_accuracy(
     if archive.panes.iter().any(|p| p.len() != exits.len())
         || archive.panes.len() != archive.members.len()
         || archive.cluster_energy.len() != archive.members.len()
+        || !(archive.groups.is_empty() || archive.groups.len() == archive.members.len())
     {
         return Err(TraceError::InvalidParameter(
             "every cluster needs a pane energy and one pane value per checked exit point".into(),
@@ -394,6 +461,35 @@ mod tests {
         let fade = x * x * (3.0 - 2.0 * x);
         assert!((kept[1].x / kept[0].x - fade * 2.1 / 8.0).abs() < 1e-5, "{kept:?}");
         assert!((total(&kept) - total(&w)).abs() < 1e-5 * total(&w));
+    }
+
+    #[test]
+    fn residual_groups_carry_what_the_selection_drops() {
+        // Scores 8, 4, 2, 1 (unit energies): K = 2 keeps the first two unfaded and unscaled;
+        // group 0 = {0, 2}, group 1 = {1, 3}, each group's pane energy 2.
+        let w: Vec<Vec3> = [8.0f32, 4.0, 2.0, 1.0].iter().map(|s| Vec3::splat(s / 3.0)).collect();
+        let e = vec![Vec3::ONE; 4];
+        let (kept, groups) = select_with_residuals(&w, &e, 2, FADE_BAND, &[0, 1, 0, 1], &[Vec3::splat(2.0); 2]);
+        assert_eq!(&kept[..2], &w[..2]);
+        assert_eq!(&kept[2..], &[Vec3::ZERO; 2]);
+        assert!((groups[0] - w[2] / 2.0).abs().max_element() < 1e-6, "{groups:?}");
+        assert!((groups[1] - w[3] / 2.0).abs().max_element() < 1e-6, "{groups:?}");
+        // The total light is kept: Σ kept · e + Σ groups · E = Σ w · e.
+        let total = |w: &[Vec3], e: &[Vec3]| w.iter().zip(e).map(|(a, b)| a.dot(*b)).sum::<f32>();
+        let all = total(&w, &e);
+        let played = total(&kept, &e) + total(&groups, &[Vec3::splat(2.0); 2]);
+        assert!((played - all).abs() < 1e-5 * all);
+        // A faded cluster hands the faded share to its group: scores 8, 2.1, 2, 1.
+        let w: Vec<Vec3> = [8.0f32, 2.1, 2.0, 1.0].iter().map(|s| Vec3::splat(s / 3.0)).collect();
+        let (kept, groups) = select_with_residuals(&w, &e, 2, FADE_BAND, &[0, 1, 0, 1], &[Vec3::splat(2.0); 2]);
+        let x = 0.1 / 0.5f32;
+        let fade = x * x * (3.0 - 2.0 * x);
+        assert!((kept[1] - w[1] * fade).abs().max_element() < 1e-6);
+        assert!((groups[1] - (w[1] * (1.0 - fade) + w[3]) / 2.0).abs().max_element() < 1e-6);
+        // K covers everything: the weights as they are, no group light.
+        let (kept, groups) = select_with_residuals(&w, &e, 4, FADE_BAND, &[0, 1, 0, 1], &[Vec3::splat(2.0); 2]);
+        assert_eq!(kept, w);
+        assert_eq!(groups, vec![Vec3::ZERO; 2]);
     }
 
     #[test]
