@@ -538,17 +538,17 @@ fn moving_light_does_not_flicker_or_pop() {
                 energy(&frames[0]),
                 energy(&frames[steps])
             );
-            // Measured: clustered 1.0-1.3x the reference's mean change, unclustered 1.0x; the
-            // largest step at most 1.6x the reference's largest (no popping).
-            // Measured (K = 16 and 8 of 64, 32 of 512; seeds 0 and 2): mean 1.0-1.4x the
-            // reference's change, largest 2.0-3.9x its largest. Before the select pass kept the
-            // dropped clusters' energy (seed 0): K = 8 1.6x and 7.8x, K = 16 1.2x and 4.6x.
+            // Measured with the residual groups (4; seed 2): mean 0.77-0.90x the reference's
+            // change, largest 1.20-2.31x its largest (K = 8 of 64 the most). With the kept
+            // clusters scaled up to the dropped ones' energy instead (seeds 0 and 2): mean
+            // 1.0-1.4x, largest 2.0-3.9x; dropping that energy (seed 0): K = 8 1.6x and 7.8x,
+            // K = 16 1.2x and 4.6x.
             assert!(
-                mean < 1.6 * reference,
+                mean < 1.15 * reference,
                 "{name} K={k}: mean change {mean:.4} vs {reference:.4}"
             );
             assert!(
-                max < 5.0 * reference_max,
+                max < 3.0 * reference_max,
                 "{name} K={k}: largest change {max:.4} vs {reference_max:.4}"
             );
         }

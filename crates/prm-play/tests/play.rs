@@ -337,6 +337,17 @@ fn cornell_box_matches_golden() {
     }
 }
 
+/// One indirect-light frame under [`cornell_lights`], from the default camera.
+fn render_indirect(r: &mut Renderer, scene: &Scene) {
+    let lights = cornell_lights(scene);
+    r.render(&FrameInput {
+        camera: prm_play::default_camera(scene),
+        lights: &lights,
+        mode: Mode::Indirect,
+    })
+    .unwrap();
+}
+
 /// K < C without residual groups: exactly the top K clusters contribute, ranks are a
 /// permutation, the kept clusters carry the expected energy (score) of all of them, faded ones
 /// less than the best one's share, and the lightmap is Σ effective weight × pane.
@@ -346,13 +357,7 @@ fn top_k_keeps_the_strongest_clusters() {
     let mut options = small(k);
     options.runtime.residual_groups = 0;
     let (mut r, scene) = renderer(options);
-    let lights = cornell_lights(&scene);
-    r.render(&FrameInput {
-        camera: prm_play::default_camera(&scene),
-        lights: &lights,
-        mode: Mode::Indirect,
-    })
-    .unwrap();
+    render_indirect(&mut r, &scene);
     let w = r.read_weights().unwrap();
     let mut ranks: Vec<u32> = w.iter().map(|c| c.rank).collect();
     ranks.sort();
@@ -411,13 +416,7 @@ fn residual_groups_carry_the_dropped_clusters() {
     let (mut r, scene) = renderer(small(k));
     let groups = r.runtime().group_count();
     assert_eq!(groups, prm_format::RESIDUAL_GROUPS);
-    let lights = cornell_lights(&scene);
-    r.render(&FrameInput {
-        camera: prm_play::default_camera(&scene),
-        lights: &lights,
-        mode: Mode::Indirect,
-    })
-    .unwrap();
+    render_indirect(&mut r, &scene);
     let w = r.read_weights().unwrap();
     let gw = r.runtime().read_group_weights().unwrap();
     assert_eq!(gw.len(), groups as usize);

@@ -24,7 +24,7 @@
 
 use glam::Vec3;
 use prm_scene::{Atlas, AtlasParams, Light, Sizing};
-use prm_trace::check::{check_exits, check_lights, select_top_k, FADE_BAND};
+use prm_trace::check::{check_exits, check_lights, select_top_k, select_with_residuals, FADE_BAND};
 use prm_trace::{Bvh, BvhParams, Lighting, ReferenceParams, ReferenceTracer};
 use std::path::Path;
 
@@ -43,47 +43,6 @@ fn error(test: &[Vec3], mean: &[Vec3], variance: &[Vec3]) -> (f64, f64) {
         sr += f64::from(r.element_sum());
     }
     (((e2 - v).max(0.0) / (n2 - v)).sqrt(), st / sr)
-}
-
-/// Top `k` by score, faded as the run time fades, not scaled; plus per group the residual
-/// energy carried by the group's sum pane. Returns (cluster weights, group weights).
-fn residual(
-    weights: &[Vec3],
-    energy: &[Vec3],
-    k: usize,
-    group_of: &[usize],
-    group_energy: &[Vec3],
-) -> (Vec<Vec3>, Vec<Vec3>) {
-    let n = weights.len();
-    let score: Vec<f32> = weights.iter().zip(energy).map(|(w, e)| w.dot(*e)).collect();
-    let mut order: Vec<usize> = (0..n).collect();
-    order.sort_by(|&a, &b| score[b].total_cmp(&score[a]).then(a.cmp(&b)));
-    let mut kept = vec![Vec3::ZERO; n];
-    let mut fade = vec![0f32; n];
-    if k >= n {
-        return (weights.to_vec(), vec![Vec3::ZERO; group_energy.len()]);
-    }
-    let t = score[order[k]];
-    let width = t * FADE_BAND;
-    for &c in &order[..k] {
-        fade[c] = if width <= 0.0 {
-            f32::from(score[c] > t)
-        } else {
-            let x = ((score[c] - t) / width).clamp(0.0, 1.0);
-            x * x * (3.0 - 2.0 * x)
-        };
-        kept[c] = weights[c] * fade[c];
-    }
-    let mut left = vec![Vec3::ZERO; group_energy.len()];
-    for c in 0..n {
-        left[group_of[c]] += weights[c] * energy[c] * (1.0 - fade[c]);
-    }
-    let alpha = left
-        .iter()
-        .zip(group_energy)
-        .map(|(l, e)| Vec3::select(e.cmpgt(Vec3::ZERO), *l / *e, Vec3::ZERO))
-        .collect();
-    (kept, alpha)
 }
 
 fn main() {
@@ -118,11 +77,11 @@ fn main() {
         })
         .collect();
     let sizes: &[usize] = if groups > 1 { &[1, groups] } else { &[1] };
-    let group_sets: Vec<(usize, Vec<usize>)> = sizes
+    let group_sets: Vec<(usize, Vec<u32>)> = sizes
         .iter()
         .map(|&g| {
             let of = prm_format::residual_groups(&clusters, g as u32);
-            (g, of.into_iter().map(|x| x as usize).collect())
+            (g, of)
         })
         .collect();
     let area: f32 = scene.triangles.iter().map(|t| t.area()).sum();
@@ -190,12 +149,12 @@ fn main() {
             let mut sums = vec![vec![Vec3::ZERO; exits.len()]; *g];
             let mut genergy = vec![Vec3::ZERO; *g];
             for (c, p) in panes.iter().enumerate() {
-                genergy[of[c]] += energy[c];
-                for (s, v) in sums[of[c]].iter_mut().zip(p) {
+                genergy[of[c] as usize] += energy[c];
+                for (s, v) in sums[of[c] as usize].iter_mut().zip(p) {
                     *s += *v;
                 }
             }
-            let (kept, alpha) = residual(&weights, &energy, k, of, &genergy);
+            let (kept, alpha) = select_with_residuals(&weights, &energy, k, FADE_BAND, of, &genergy);
             let extra: Vec<(Vec3, &Vec<Vec3>)> = alpha.iter().copied().zip(sums.iter()).collect();
             rows.push((format!("{k} + {g} residual"), blend(&kept, &extra)));
         }

@@ -28,10 +28,11 @@
 //!
 //! **How much** ([`CheckParams::DEFAULT`], 1024 points × 64 paths × 3 lights). Measured with
 //! release binaries of default bakes, against the same check of the same archive at 4096
-//! points × 1024 paths ("truth"): the bundled Cornell box (glTF) 12.8 ± 0.4% true, four draws
-//! of the default (`--accuracy-points` 1000, 1012, 1024, 1036) 12.7–13.3% with a standard error
-//! of 1.3–1.6 points, in 0.07–0.08 s of a 2.8–3.7 s bake; chairs 23.0 ± 0.6% against 23.6%
-//! true (0.12 s of 17 s); CornellBox-Sphere 12.1 ± 0.7% against 12.6% (0.07 s of 12 s). Fewer
+//! points × 1024 paths ("truth"), with the run time's residual groups: the bundled Cornell box
+//! (glTF) 12.1 ± 0.4% true, four draws of the default (`--accuracy-points` 1000, 1012, 1024,
+//! 1036) 12.1–12.8% with a standard error of 1.3–1.6 points, in 0.07–0.08 s of a 2.9–3.3 s
+//! bake; chairs 13.0 ± 0.9% against 12.6% true (0.13 s of 17.5 s); CornellBox-Sphere 11.4 ±
+//! 0.8% against 11.7% (0.08 s of 11 s). Fewer
 //! points traced longer spread wider, since the error varies more between points than the
 //! reference's noise does (measured before the noise left the denominator too, which moves an
 //! estimate by about 3% of itself): 256 × 256 gave 9.7–24.7% on the Cornell box (one light at
