@@ -604,7 +604,7 @@ class Reader:
             return float(v)
         if not isinstance(a, dict) or not isinstance(a.get("lights"), list):
             raise InvalidArchive("metadata: accuracy must be an object with a lights array")
-        for k in ("exit_points", "paths", "top_k"):
+        for k in ("exit_points", "paths", "top_k", "residual_groups"):
             if isinstance(a.get(k), bool) or not isinstance(a.get(k), int) or not 0 <= a[k] < 2**32:
                 raise InvalidArchive(f"metadata: accuracy {k} must be an integer in 0 .. 2^32-1")
         lights = []
@@ -620,7 +620,8 @@ class Reader:
         n = len(lights)
         mean = lambda k: sum(l[k] for l in lights) / n if n else 0.0
         se = (sum(l["standard_error"] ** 2 for l in lights) ** 0.5) / n if n else 0.0
-        return dict(exit_points=a["exit_points"], paths=a["paths"], top_k=a["top_k"], lights=lights,
+        return dict(exit_points=a["exit_points"], paths=a["paths"], top_k=a["top_k"],
+                    residual_groups=a["residual_groups"], lights=lights,
                     mean_error=mean("error"), mean_error_all_clusters=mean("error_all_clusters"),
                     mean_energy=mean("energy"), mean_standard_error=se)
 

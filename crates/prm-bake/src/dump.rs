@@ -176,6 +176,7 @@ pub fn summary_json<R: Read + Seek>(archive: &Archive<R>, file: &Path, report: O
             "exit_points": a.exit_points,
             "paths": a.paths,
             "top_k": a.top_k,
+            "residual_groups": a.residual_groups,
             "mean_error": a.mean_error(),
             "mean_error_all_clusters": a.mean_error_all_clusters(),
             "mean_energy": a.mean_energy(),
@@ -678,6 +679,7 @@ mod tests {
                 exit_points: 256,
                 paths: 256,
                 top_k: 32,
+                residual_groups: 4,
                 lights: vec![light],
             }),
         );

@@ -35,7 +35,8 @@ pub fn residual_groups(clusters: &[Cluster], groups: u32) -> Vec<u32> {
         return vec![0; n];
     }
     let p: Vec<[f64; 3]> = clusters.iter().map(|c| c.centroid.map(f64::from)).collect();
-    let d2 = |a: &[f64; 3], b: &[f64; 3]| (0..3).map(|k| (a[k] - b[k]).powi(2)).sum::<f64>();
+    // Plain products, not `powi`: the groups must be the same bits on every platform.
+    let d2 = |a: &[f64; 3], b: &[f64; 3]| (0..3).map(|k| (a[k] - b[k]) * (a[k] - b[k])).sum::<f64>();
     let mut starts = vec![0usize];
     let mut chosen = vec![false; n];
     chosen[0] = true;

@@ -75,8 +75,11 @@ pub struct Accuracy {
     pub exit_points: u32,
     /// Reference paths per exit point and light.
     pub paths: u32,
-    /// Clusters blended per frame in the estimate (the archive's `top_k`).
+    /// Clusters kept per frame in the estimate (the archive's `top_k`).
     pub top_k: u32,
+    /// Residual groups whose summed panes carried the dropped clusters' light in the estimate
+    /// ([`crate::residual_groups`]; 0: the kept clusters were scaled up instead).
+    pub residual_groups: u32,
     /// One record per test light.
     pub lights: Vec<LightAccuracy>,
 }
@@ -247,6 +250,7 @@ mod tests {
             exit_points: 256,
             paths: 256,
             top_k: 32,
+            residual_groups: 4,
             lights: vec![light(0.1), light(0.2)],
         });
         let s = serde_json::to_string(&m).unwrap();

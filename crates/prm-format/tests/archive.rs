@@ -780,6 +780,7 @@ fn python_reader_check(path: &Path, filter: TileFilter) -> bool {
         exit_points: 1024,
         paths: 64,
         top_k: 4,
+        residual_groups: 2,
         lights: vec![prm_format::LightAccuracy {
             position: [0.25, 1.5, -0.5],
             error: 0.125,
@@ -839,6 +840,7 @@ fn python_reader_check(path: &Path, filter: TileFilter) -> bool {
     let ja = &j["accuracy"];
     assert_eq!(ja["exit_points"], 1024);
     assert_eq!(ja["top_k"], 4);
+    assert_eq!(ja["residual_groups"], 2);
     assert_eq!(ja["mean_error"], 0.125);
     let l = &ja["lights"][0];
     assert_eq!(l["position"], serde_json::json!([0.25, 1.5, -0.5]));

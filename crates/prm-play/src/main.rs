@@ -299,7 +299,7 @@ fn run() -> Result<()> {
             "size": [width, height],
             "mode": format!("{:?}", args.mode).to_lowercase(),
             "top_k": top_k,
-            "residual_groups": args.residual_groups,
+            "residual_groups": renderer.runtime().group_count(),
             "clusters": renderer.cluster_count(),
             "frames": frames.iter().map(|f| serde_json::json!({
                 "cpu_ms": f.cpu_ms,

@@ -157,6 +157,8 @@ pub struct Runtime {
     cluster_count: u32,
     /// Residual groups built at load (their summed panes follow the clusters' in the array).
     group_count: u32,
+    /// The top K of the frame constants last uploaded (`update`), which the passes ran with.
+    frame_top_k: u32,
     entry_count: u32,
     resolution: u32,
     vertex_count: u32,
@@ -341,29 +343,36 @@ impl Runtime {
             wgpu::TextureFormat::Rgb9e5Ufloat,
             wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
         );
+        // Group by group (the groups partition the clusters), so one sum is held at a time.
         let texels = (res * res) as usize;
-        let mut sums = vec![vec![[0f32; 3]; texels]; group_count as usize];
-        for p in 0..cluster_count {
-            let words = archive
+        let mut order: Vec<u32> = (0..cluster_count).collect();
+        order.sort_by_key(|&c| group_of[c as usize]);
+        let mut sum = vec![[0f32; 3]; if group_count > 0 { texels } else { 0 }];
+        let mut group_energy = Vec::with_capacity(group_count as usize);
+        let mut words = Vec::with_capacity(texels);
+        for (i, &p) in order.iter().enumerate() {
+            let pane = archive
                 .read_pane_rgb9e5(p as usize)
                 .map_err(|source| RuntimeError::Pane {
                     pane: p as usize,
                     source,
                 })?;
-            pipeline::write_layer(queue, &pane_texture, p, bytemuck::cast_slice(&words), res * 4);
-            if let Some(sum) = sums.get_mut(group_of[p as usize] as usize) {
-                for (s, &w) in sum.iter_mut().zip(&words) {
-                    let v = prm_format::decode_rgb9e5(w);
-                    (0..3).for_each(|k| s[k] += v[k]);
-                }
+            pipeline::write_layer(queue, &pane_texture, p, bytemuck::cast_slice(&pane), res * 4);
+            if group_count == 0 {
+                continue;
             }
-        }
-        let mut group_energy = Vec::with_capacity(sums.len());
-        let mut words = Vec::with_capacity(texels);
-        for (g, sum) in sums.iter().enumerate() {
+            for (s, &w) in sum.iter_mut().zip(&pane) {
+                let v = prm_format::decode_rgb9e5(w);
+                (0..3).for_each(|k| s[k] += v[k]);
+            }
+            let g = group_of[p as usize];
+            if order.get(i + 1).is_some_and(|&next| group_of[next as usize] == g) {
+                continue;
+            }
+            // The group's last member: store its summed pane and the energy of the pane as
+            // stored (as the writer computes a cluster's).
             words.clear();
-            prm_format::encode_rgb9e5_slice(sum, &mut words);
-            // The energy of the pane as stored, as the writer computes a cluster's.
+            prm_format::encode_rgb9e5_slice(&sum, &mut words);
             let mut energy = [0f64; 3];
             for &w in &words {
                 let v = prm_format::decode_rgb9e5(w);
@@ -373,12 +382,13 @@ impl Runtime {
             pipeline::write_layer(
                 queue,
                 &pane_texture,
-                cluster_count + g as u32,
+                cluster_count + g,
                 bytemuck::cast_slice(&words),
                 res * 4,
             );
+            sum.fill([0.0; 3]);
         }
-        drop(sums);
+        drop(sum);
         if !group_energy.is_empty() {
             queue.write_buffer(&buffers.group_energy, 0, bytemuck::cast_slice(&group_energy));
         }
@@ -401,6 +411,7 @@ impl Runtime {
             None => None,
         };
         scope.pop("runtime setup")?;
+        let frame_top_k = options.top_k.max(1);
         Ok(Runtime {
             device: device.clone(),
             queue: queue.clone(),
@@ -408,6 +419,7 @@ impl Runtime {
             bounds: scene.bounds(),
             cluster_count,
             group_count,
+            frame_top_k,
             entry_count,
             resolution: res,
             vertex_count,
@@ -458,6 +470,7 @@ impl Runtime {
             group_count: self.group_count,
             ..Default::default()
         };
+        self.frame_top_k = frame.top_k;
         self.queue
             .write_buffer(&self.buffers.frame, 0, bytemuck::bytes_of(&frame));
         if !gpu_lights.is_empty() {
@@ -691,7 +704,7 @@ impl Runtime {
     /// Reads the last frame's residual group weights back, one per group: each group's summed
     /// pane was blended with it (all 0 when the top K dropped no cluster).
     pub fn read_group_weights(&self) -> Result<Vec<[f32; 3]>, RuntimeError> {
-        let (c, k, g) = (self.cluster_count, self.options.top_k.max(1), self.group_count);
+        let (c, k, g) = (self.cluster_count, self.frame_top_k, self.group_count);
         if g == 0 || c <= k {
             return Ok(vec![[0.0; 3]; g as usize]);
         }
