@@ -37,8 +37,8 @@
 //! reference's noise does (measured before the noise left the denominator too, which moves an
 //! estimate by about 3% of itself): 256 × 256 gave 9.7–24.7% on the Cornell box (one light at
 //! 47.7%), 512 × 128 11.1–15.3%, 1024 × 64 10.6–13.7%, 2048 × 32 9.7–13.3%. The error budget's
-//! even-stride measurement of the same bakes (`cargo xtask eval --budget`: 13.0%, 21.6%, 12.3%,
-//! with one light each) agrees.
+//! even-stride measurement of the same bakes as played on the GPU (`cargo xtask eval --budget`:
+//! 12.6%, 11.2%, 11.0%, with one light each) agrees.
 
 use glam::Vec3;
 use prm_format::{Accuracy, LightAccuracy};
