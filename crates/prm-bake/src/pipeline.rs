@@ -638,28 +638,17 @@ pub fn bake(job: &BakeJob<'_>, renderer: Renderer<'_>, progress: &mut dyn Progre
         for &(dst, src) in &atlas.dilation {
             image[dst as usize] = image[src as usize];
         }
-        if !checked_exits.is_empty() {
-            // What the player reads: the stored RGB9E5 texels, and the cluster table's energy,
-            // their sum in f64 with the gutters included (as the writer computes it).
-            let stored = |v: [f32; 3]| prm_format::decode_rgb9e5(prm_format::encode_rgb9e5(v));
-            checked_panes.push(
-                checked_exits
-                    .iter()
-                    .map(|&i| Vec3::from_array(stored(pane[i].to_array())))
-                    .collect(),
-            );
-            let mut energy = [0f64; 3];
-            for t in &image {
-                for (e, v) in energy.iter_mut().zip(stored(*t)) {
-                    *e += f64::from(v);
-                }
-            }
-            pane_energy.push(Vec3::from_array(energy.map(|e| e as f32)));
-        }
         writer.add_pane(&image).map_err(|source| BakeError::Archive {
             what: "writing a pane".to_string(),
             source,
         })?;
+        if !checked_exits.is_empty() {
+            // What the player reads: the stored RGB9E5 texels, and the cluster table's energy.
+            let stored = |v: Vec3| Vec3::from(prm_format::decode_rgb9e5(prm_format::encode_rgb9e5(v.to_array())));
+            checked_panes.push(checked_exits.iter().map(|&i| stored(pane[i])).collect());
+            let done = writer.clusters().len() - writer.panes_remaining();
+            pane_energy.push(Vec3::from(writer.clusters()[done - 1].energy));
+        }
         write_s += t.elapsed().as_secs_f64();
         Ok(())
     };

@@ -515,6 +515,12 @@ impl ArchiveWriter {
         self.clusters.len() - self.panes_done
     }
 
+    /// The cluster table as it will be written: the energy and peak of every pane added so far
+    /// are filled in (of the decoded texels, as the spec prescribes), the rest still 0.
+    pub fn clusters(&self) -> &[Cluster] {
+        &self.clusters
+    }
+
     /// The metadata to be written, e.g. to record timings measured while
     /// panes are being added.
     pub fn metadata_mut(&mut self) -> &mut Metadata {
