@@ -18,7 +18,7 @@
 
 use std::time::{Duration, Instant};
 
-use glam::{Vec3, Vec3A};
+use glam::{UVec2, Vec3, Vec3A};
 use obvhs::bvh2::builder::build_bvh2_from_tris;
 use obvhs::bvh2::Bvh2;
 use obvhs::cwbvh::builder::build_cwbvh_from_tris;
@@ -210,6 +210,24 @@ impl Bvh {
     /// Closest hit of the ray `origin + t·dir` (`dir` unit), `t < tmax`, ignoring triangle `ignore`
     /// (pass `u32::MAX` to ignore none).
     pub fn closest_hit(&self, origin: Vec3, dir: Vec3, tmax: f32, ignore: u32) -> Option<Hit> {
+        #[cfg(target_arch = "x86_64")]
+        if crate::isa::avx2() {
+            // SAFETY: `isa::avx2` checked that the CPU has every feature the variant is built for.
+            return unsafe { self.closest_hit_avx2(origin, dir, tmax, ignore) };
+        }
+        self.closest_hit_inline(origin, dir, tmax, ignore)
+    }
+
+    /// [`Bvh::closest_hit`] built for AVX2 and FMA ([`crate::isa`]).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma,bmi1,bmi2,lzcnt")]
+    fn closest_hit_avx2(&self, origin: Vec3, dir: Vec3, tmax: f32, ignore: u32) -> Option<Hit> {
+        self.closest_hit_inline(origin, dir, tmax, ignore)
+    }
+
+    /// The body of [`Bvh::closest_hit`], inlined into each instruction-set variant.
+    #[inline(always)]
+    fn closest_hit_inline(&self, origin: Vec3, dir: Vec3, tmax: f32, ignore: u32) -> Option<Hit> {
         let o = origin * self.scale;
         let ray = Ray::new(o.into(), dir.into(), 0.0, tmax * self.scale);
         let mut hit = RayHit::none();
@@ -221,7 +239,7 @@ impl Bvh {
             }
         };
         let found = match &self.accel {
-            Accel::Cw(b) => b.ray_traverse(ray, &mut hit, f),
+            Accel::Cw(b) => cw_closest(b, ray, &mut hit, f),
             Accel::Two(b) => b.ray_traverse(ray, &mut hit, f),
         };
         if !found {
@@ -263,6 +281,40 @@ impl Bvh {
         ignore: [u32; 2],
         cache: &mut u32,
     ) -> bool {
+        #[cfg(target_arch = "x86_64")]
+        if crate::isa::avx2() {
+            // SAFETY: `isa::avx2` checked that the CPU has every feature the variant is built for.
+            return unsafe { self.occluded_cached_avx2(origin, dir, tmin, tmax, ignore, cache) };
+        }
+        self.occluded_cached_inline(origin, dir, tmin, tmax, ignore, cache)
+    }
+
+    /// [`Bvh::occluded_cached`] built for AVX2 and FMA ([`crate::isa`]).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma,bmi1,bmi2,lzcnt")]
+    fn occluded_cached_avx2(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        tmin: f32,
+        tmax: f32,
+        ignore: [u32; 2],
+        cache: &mut u32,
+    ) -> bool {
+        self.occluded_cached_inline(origin, dir, tmin, tmax, ignore, cache)
+    }
+
+    /// The body of [`Bvh::occluded_cached`], inlined into each instruction-set variant.
+    #[inline(always)]
+    fn occluded_cached_inline(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        tmin: f32,
+        tmax: f32,
+        ignore: [u32; 2],
+        cache: &mut u32,
+    ) -> bool {
         let ray = Ray::new(
             (origin * self.scale).into(),
             dir.into(),
@@ -289,7 +341,7 @@ impl Bvh {
             t
         };
         let miss = match &self.accel {
-            Accel::Cw(b) => b.ray_traverse_miss(ray, f),
+            Accel::Cw(b) => cw_miss(b, ray, f),
             Accel::Two(b) => b.ray_traverse_miss(ray, f),
         };
         if !miss {
@@ -319,6 +371,43 @@ impl Bvh {
         }
         !self.occluded_cached(o, v / len, self.epsilon.min(0.5 * len), len, [ta, tb], cache)
     }
+}
+
+/// `CwBvh::ray_traverse` written with obvhs's `traverse!` macro, so that the traversal is
+/// expanded (and compiled) inside each instruction-set variant of the query ([`crate::isa`]):
+/// obvhs's own method is a separate function built for the baseline, which the AVX2 variant
+/// would call.
+#[inline(always)]
+fn cw_closest(b: &CwBvh, ray: Ray, hit: &mut RayHit, mut f: impl FnMut(&Ray, usize) -> f32) -> bool {
+    let mut r = ray;
+    let mut state = b.new_traversal(ray.direction);
+    let mut node;
+    obvhs::traverse!(b, node, state, node.intersect_ray(&r, state.oct_inv4), {
+        let t = f(&r, state.primitive_id as usize);
+        if t < r.tmax {
+            hit.primitive_id = state.primitive_id;
+            hit.t = t;
+            r.tmax = t;
+        }
+    });
+    hit.t < ray.tmax
+}
+
+/// `CwBvh::ray_traverse_miss` the same way as [`cw_closest`]: true if nothing blocks `ray`.
+#[inline(always)]
+fn cw_miss(b: &CwBvh, ray: Ray, mut f: impl FnMut(&Ray, usize) -> f32) -> bool {
+    let mut state = b.new_traversal(ray.direction);
+    let mut node;
+    let mut miss = true;
+    'outer: {
+        obvhs::traverse!(b, node, state, node.intersect_ray(&ray, state.oct_inv4), {
+            if f(&ray, state.primitive_id as usize) < ray.tmax {
+                miss = false;
+                break 'outer;
+            }
+        });
+    }
+    miss
 }
 
 /// An empty occluder cache ([`Bvh::occluded_cached`]).
@@ -399,6 +488,47 @@ mod tests {
             ],
             vec![Material::diffuse("m", Vec3::splat(0.5))],
         )
+    }
+
+    /// The AVX2 variants of the queries give the portable ones' answers, bit for bit
+    /// ([`crate::isa`]), on random rays through the bundled Cornell box.
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn instruction_set_variants_agree() {
+        if !crate::isa::avx2() {
+            assert!(
+                std::env::var_os("CI").is_none(),
+                "CI machines have AVX2: the variant went untested"
+            );
+            eprintln!("this CPU has no AVX2: only the portable variant runs");
+            return;
+        }
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/cornell-box/cornell-box.obj");
+        let scene = prm_scene::load(&path).unwrap();
+        let bvh = Bvh::build(&scene, &BvhParams::DEFAULT).unwrap();
+        let b = scene.bounds();
+        let mut rng = crate::Rng::new(7, 0, 0);
+        let (mut hits, mut blocked) = (0, 0);
+        for _ in 0..20_000 {
+            let o = b.min + (b.max - b.min) * Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32());
+            let d = (Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) - 0.5).normalize_or(Vec3::X);
+            let tmax = rng.next_f32() * b.diagonal();
+            let portable = bvh.closest_hit_inline(o, d, f32::INFINITY, u32::MAX);
+            // SAFETY: `isa::avx2` said the CPU runs the variant.
+            let avx2 = unsafe { bvh.closest_hit_avx2(o, d, f32::INFINITY, u32::MAX) };
+            assert_eq!(portable, avx2);
+            hits += usize::from(portable.is_some());
+            let (mut c1, mut c2) = (NO_OCCLUDER, NO_OCCLUDER);
+            let portable = bvh.occluded_cached_inline(o, d, 0.0, tmax, [u32::MAX; 2], &mut c1);
+            // SAFETY: as above.
+            let avx2 = unsafe { bvh.occluded_cached_avx2(o, d, 0.0, tmax, [u32::MAX; 2], &mut c2) };
+            assert_eq!((portable, c1), (avx2, c2));
+            blocked += usize::from(portable);
+        }
+        assert!(
+            hits > 10_000 && blocked > 1_000 && blocked < 19_000,
+            "{hits} hits, {blocked} blocked"
+        );
     }
 
     #[test]

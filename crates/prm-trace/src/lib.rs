@@ -21,6 +21,7 @@ pub mod cluster;
 pub mod direct;
 pub mod emitters;
 mod error;
+mod isa;
 pub mod pane;
 pub mod probes;
 pub mod reference;

@@ -195,7 +195,7 @@ impl<'a> Kernel<'a> {
 
     /// The unoccluded irradiance factor `cos θ_x cos θ_v b(r²)/π` of block `b`'s VPLs at `x`
     /// (zero where either side faces away), and the mask of the non-zero ones.
-    #[inline]
+    #[inline(always)]
     fn block_factors(&self, b: usize, x: Vec3, n: Vec3, g: &mut [f32; BLOCK]) -> u64 {
         fn block(c: &[f32], b: usize) -> &[f32; BLOCK] {
             c[b * BLOCK..(b + 1) * BLOCK].try_into().expect("whole blocks")
@@ -233,6 +233,44 @@ impl<'a> Kernel<'a> {
     /// through it in a fixed order, so the answers do not depend on which other VPLs are summed.
     #[allow(clippy::too_many_arguments)]
     fn sum_exit(
+        &self,
+        x: &ExitPoint,
+        corners: Option<(&[u64], &[u64])>,
+        bits: Option<(&mut [u64], &mut [u64])>,
+        acc: &mut [Vec3],
+        entry_energy: &mut [Vec3],
+        cache: &mut [u32],
+        rays: &mut u64,
+    ) {
+        #[cfg(target_arch = "x86_64")]
+        if crate::isa::avx2() {
+            // SAFETY: `isa::avx2` checked that the CPU has every feature the variant is built for.
+            return unsafe { self.sum_exit_avx2(x, corners, bits, acc, entry_energy, cache, rays) };
+        }
+        self.sum_exit_inline(x, corners, bits, acc, entry_energy, cache, rays)
+    }
+
+    /// [`Kernel::sum_exit`] built for AVX2 and FMA ([`crate::isa`]).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma,bmi1,bmi2,lzcnt")]
+    #[allow(clippy::too_many_arguments)]
+    fn sum_exit_avx2(
+        &self,
+        x: &ExitPoint,
+        corners: Option<(&[u64], &[u64])>,
+        bits: Option<(&mut [u64], &mut [u64])>,
+        acc: &mut [Vec3],
+        entry_energy: &mut [Vec3],
+        cache: &mut [u32],
+        rays: &mut u64,
+    ) {
+        self.sum_exit_inline(x, corners, bits, acc, entry_energy, cache, rays)
+    }
+
+    /// The body of [`Kernel::sum_exit`], inlined into each instruction-set variant.
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    fn sum_exit_inline(
         &self,
         x: &ExitPoint,
         corners: Option<(&[u64], &[u64])>,
@@ -674,4 +712,53 @@ pub fn evaluate_atlas_panes(
         on_progress(done);
     }
     Ok(panes)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{sample_surface, trace_walks, BvhParams, ClusterParams, EntryParams, WalkParams};
+    use prm_scene::{AtlasParams, Sizing};
+
+    /// The AVX2 variant of the kernel gives the portable one's sums, bit for bit
+    /// ([`crate::isa`]), at every exit point of the bundled Cornell box.
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn instruction_set_variants_agree() {
+        if !crate::isa::avx2() {
+            assert!(
+                std::env::var_os("CI").is_none(),
+                "CI machines have AVX2: the variant went untested"
+            );
+            eprintln!("this CPU has no AVX2: only the portable variant runs");
+            return;
+        }
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/cornell-box/cornell-box.obj");
+        let scene = prm_scene::load(&path).unwrap();
+        let atlas = Atlas::build(&scene, &AtlasParams::with_sizing(Sizing::Resolution(32))).unwrap();
+        let bvh = Bvh::build(&scene, &BvhParams::DEFAULT).unwrap();
+        let entries = sample_surface(&scene, &EntryParams { count: 128, seed: 5 }).unwrap();
+        let walks = trace_walks(&scene, &bvh, &entries, &WalkParams::PREVIEW).unwrap();
+        let clustering =
+            Clustering::kmeans(&entries, scene.bounds().diagonal(), &ClusterParams::with_clusters(8)).unwrap();
+        let kernel = Kernel::new(&bvh, &walks, &clustering, VplBound::DEFAULT).unwrap();
+        let run = |avx2: bool| {
+            let mut acc = vec![Vec3::ZERO; atlas.exits.len() * kernel.clusters];
+            let mut energy = vec![Vec3::ZERO; kernel.entries];
+            let mut cache = kernel.occluder_cache();
+            let mut rays = 0;
+            for (x, acc) in atlas.exits.iter().zip(acc.chunks_mut(kernel.clusters)) {
+                if avx2 {
+                    // SAFETY: `isa::avx2` said the CPU runs the variant.
+                    unsafe { kernel.sum_exit_avx2(x, None, None, acc, &mut energy, &mut cache, &mut rays) };
+                } else {
+                    kernel.sum_exit_inline(x, None, None, acc, &mut energy, &mut cache, &mut rays);
+                }
+            }
+            (acc, energy, rays)
+        };
+        let portable = run(false);
+        assert!(portable.2 > 0 && portable.0.iter().any(|v| v.x > 0.0));
+        assert!(portable == run(true), "the variants' sums differ");
+    }
 }
