@@ -14,6 +14,8 @@ use std::collections::BTreeMap;
 use std::path::Path;
 use std::time::Instant;
 
+use rayon::prelude::*;
+
 use crate::archive::{archive_tables, metadata, MadeDirs};
 use crate::params::{AtlasSize, BakeConfig, BakeParams, CostModel};
 use crate::shard::Shard;
@@ -626,11 +628,9 @@ pub fn bake(job: &BakeJob<'_>, renderer: Renderer<'_>, progress: &mut dyn Progre
     let mut checked_panes: Vec<Vec<Vec3>> = Vec::new();
     let mut pane_energy: Vec<Vec3> = Vec::new();
 
-    // Panes: render (GPU or CPU), fill the atlas image, dilate into the gutters, write.
+    // Panes: render (GPU or CPU), fill the atlas image, dilate into the gutters, encode, write.
     let mut write_s = 0.0;
-    let mut image = vec![[0f32; 3]; (atlas.resolution * atlas.resolution) as usize];
-    let mut emit = |pane: &[Vec3], writer: &mut ArchiveWriter| -> Result<(), BakeError> {
-        let t = Instant::now();
+    let pane_image = |pane: &[Vec3], image: &mut [[f32; 3]]| {
         image.fill([0.0; 3]);
         for (e, v) in atlas.exits.iter().zip(pane) {
             image[e.texel as usize] = v.to_array();
@@ -638,7 +638,15 @@ pub fn bake(job: &BakeJob<'_>, renderer: Renderer<'_>, progress: &mut dyn Progre
         for &(dst, src) in &atlas.dilation {
             image[dst as usize] = image[src as usize];
         }
-        writer.add_pane(&image).map_err(|source| BakeError::Archive {
+    };
+    let encoding = |source| BakeError::Archive {
+        what: "encoding a pane".to_string(),
+        source,
+    };
+    let texels = (atlas.resolution * atlas.resolution) as usize;
+    // Appends an encoded pane, and keeps what the accuracy check reads of it.
+    let mut add = |pane: &[Vec3], encoded: prm_format::EncodedPane, writer: &mut ArchiveWriter| {
+        writer.add_encoded_pane(encoded).map_err(|source| BakeError::Archive {
             what: "writing a pane".to_string(),
             source,
         })?;
@@ -649,8 +657,7 @@ pub fn bake(job: &BakeJob<'_>, renderer: Renderer<'_>, progress: &mut dyn Progre
             let done = writer.clusters().len() - writer.panes_remaining();
             pane_energy.push(Vec3::from(writer.clusters()[done - 1].energy));
         }
-        write_s += t.elapsed().as_secs_f64();
-        Ok(())
+        Ok::<(), BakeError>(())
     };
     if let Some(sky) = sky {
         writer.set_sky(sky).map_err(|source| BakeError::Archive {
@@ -674,6 +681,16 @@ pub fn bake(job: &BakeJob<'_>, renderer: Renderer<'_>, progress: &mut dyn Progre
     let phase_started;
     match renderer {
         Renderer::Gpu(ctx) => {
+            let mut encoder = writer.pane_encoder().map_err(encoding)?;
+            let mut image = vec![[0f32; 3]; texels];
+            let mut emit = |pane: &[Vec3], writer: &mut ArchiveWriter| {
+                let t = Instant::now();
+                pane_image(pane, &mut image);
+                let encoded = encoder.encode(&image).map_err(encoding)?;
+                add(pane, encoded, writer)?;
+                write_s += t.elapsed().as_secs_f64();
+                Ok::<(), BakeError>(())
+            };
             let rp = PaneRenderParams {
                 bound: params.bound(),
                 face_resolution: params.face_resolution,
@@ -761,9 +778,36 @@ pub fn bake(job: &BakeJob<'_>, renderer: Renderer<'_>, progress: &mut dyn Progre
                 100.0 * panes.rays as f64 / (vpls.vpls.len() as f64 * atlas.exits.len() as f64).max(1.0),
                 lattice.step
             ));
-            for c in 0..panes.clusters {
-                emit(panes.pane(c), &mut writer)?;
+            // Every pane is at hand: encode a batch on every thread, then append it in order.
+            let t = Instant::now();
+            let threads = rayon::current_num_threads();
+            let mut workers = (0..threads)
+                .map(|_| Ok((writer.pane_encoder()?, vec![[0f32; 3]; texels])))
+                .collect::<Result<Vec<_>, prm_format::Error>>()
+                .map_err(encoding)?;
+            let batch = 4 * threads;
+            for first in (0..panes.clusters).step_by(batch) {
+                let last = (first + batch).min(panes.clusters);
+                let per_worker = (last - first).div_ceil(threads);
+                let encoded = workers
+                    .par_iter_mut()
+                    .enumerate()
+                    .map(|(w, (encoder, image))| {
+                        let lo = (first + w * per_worker).min(last);
+                        (lo..(lo + per_worker).min(last))
+                            .map(|c| {
+                                pane_image(panes.pane(c), image);
+                                encoder.encode(image)
+                            })
+                            .collect::<Result<Vec<_>, _>>()
+                    })
+                    .collect::<Result<Vec<_>, _>>()
+                    .map_err(encoding)?;
+                for (c, e) in (first..last).zip(encoded.into_iter().flatten()) {
+                    add(panes.pane(c), e, &mut writer)?;
+                }
             }
+            write_s += t.elapsed().as_secs_f64();
         }
     }
     // The entries' pane energies in sampling order, for the accuracy check.

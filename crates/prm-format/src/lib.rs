@@ -24,6 +24,7 @@
 #![warn(missing_docs)]
 
 mod emitters;
+mod encode;
 mod error;
 mod filter;
 mod groups;
@@ -41,6 +42,7 @@ mod splitmix;
 mod writer;
 
 pub use emitters::{EmitterGroup, EMITTER_NAME_BYTES};
+pub use encode::{EncodedPane, PaneEncoder};
 pub use error::{Error, Result};
 pub use filter::TileFilter;
 pub use groups::{residual_groups, RESIDUAL_GROUPS};

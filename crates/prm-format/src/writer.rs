@@ -39,6 +39,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 use xxhash_rust::xxh3::Xxh3Default;
 
+use crate::encode::{EncodedPane, PaneEncoder};
 use crate::error::{Error, Result};
 use crate::filter::TileFilter;
 use crate::layout::{
@@ -46,7 +47,7 @@ use crate::layout::{
     TEXEL_FORMAT_RGB9E5, TILE_RECORD_SIZE, VERSION_MAJOR,
 };
 use crate::metadata::Metadata;
-use crate::rgb9e5::{decode_rgb9e5, encode_rgb9e5, RGB9E5_MAX_RELATIVE_ERROR, RGB9E5_NAME};
+use crate::rgb9e5::{RGB9E5_MAX_RELATIVE_ERROR, RGB9E5_NAME};
 use crate::sections::{
     encode_clusters, encode_entries, encode_entry_energy, validate_entries_clusters, AtlasSection, Cluster, Entry,
 };
@@ -372,9 +373,8 @@ pub struct ArchiveWriter {
     tiles: Vec<TileRecord>,
     panes_done: usize,
     poisoned: bool,
-    tile_texels: Vec<[f32; 3]>,
-    tile_words: Vec<u32>,
-    tile_bytes: Vec<u8>,
+    /// Encodes the panes given to [`ArchiveWriter::add_pane`].
+    encoder: PaneEncoder,
 }
 
 impl ArchiveWriter {
@@ -443,8 +443,13 @@ impl ArchiveWriter {
         };
 
         let tiles_per_side = atlas.tiles_per_side();
-        let tile_texels = atlas.tile_size as usize * atlas.tile_size as usize;
         let tile_count = clusters.len() * tiles_per_side as usize * tiles_per_side as usize;
+        let encoder = PaneEncoder::new(
+            atlas.resolution,
+            atlas.tile_size,
+            options.tile_filter,
+            options.zstd_level,
+        )?;
         let mut w = ArchiveWriter {
             given,
             dest,
@@ -468,9 +473,7 @@ impl ArchiveWriter {
             tiles: Vec::with_capacity(tile_count),
             panes_done: 0,
             poisoned: false,
-            tile_texels: vec![[0.0; 3]; tile_texels],
-            tile_words: Vec::with_capacity(tile_texels),
-            tile_bytes: Vec::with_capacity(tile_texels * 4),
+            encoder,
         };
         // Placeholder header, rewritten by `finish`.
         w.write_all(&[0u8; HEADER_SIZE])?;
@@ -595,10 +598,36 @@ impl ArchiveWriter {
     /// tile order with a zeroed buffer of `tile_size²` RGB texels (row-major
     /// within the tile) to fill: texel `(i, j)` of tile `(tile_x, tile_y)` is
     /// atlas texel `(tile_x·tile_size + i, tile_y·tile_size + j)`.
-    pub fn add_pane_with<F>(&mut self, mut fill: F) -> Result<()>
+    pub fn add_pane_with<F>(&mut self, fill: F) -> Result<()>
     where
         F: FnMut(u32, u32, &mut [[f32; 3]]),
     {
+        self.check_usable()?;
+        let pane = self.encoder.encode_with(fill)?;
+        self.add_encoded_pane(pane)
+    }
+
+    /// Adds the next pane from a full `resolution²` row-major RGB image.
+    pub fn add_pane(&mut self, texels: &[[f32; 3]]) -> Result<()> {
+        self.check_usable()?;
+        let pane = self.encoder.encode(texels)?;
+        self.add_encoded_pane(pane)
+    }
+
+    /// An encoder for this archive's panes, to encode them on other threads
+    /// (module `encode`) and add them with [`ArchiveWriter::add_encoded_pane`].
+    pub fn pane_encoder(&self) -> Result<PaneEncoder> {
+        PaneEncoder::new(
+            self.resolution,
+            self.tile_size,
+            self.options.tile_filter,
+            self.options.zstd_level,
+        )
+    }
+
+    /// Adds the next pane, encoded by [`ArchiveWriter::pane_encoder`]'s encoder (or another of
+    /// the same atlas layout and options): the same bytes as [`ArchiveWriter::add_pane`].
+    pub fn add_encoded_pane(&mut self, pane: EncodedPane) -> Result<()> {
         self.check_usable()?;
         if self.panes_done >= self.clusters.len() {
             return Err(Error::InvalidInput(format!(
@@ -606,75 +635,40 @@ impl ArchiveWriter {
                 self.clusters.len()
             )));
         }
+        let per_side = self.tiles_per_side as usize;
+        if (pane.resolution, pane.tile_size) != (self.resolution, self.tile_size)
+            || pane.tiles.len() != per_side * per_side
+        {
+            return Err(Error::InvalidInput(format!(
+                "pane encoded for {}² texels in {}² tiles, the archive has {}² in {}²",
+                pane.resolution, pane.tile_size, self.resolution, self.tile_size
+            )));
+        }
         // Any failure below leaves a partial pane in the file.
         self.poisoned = true;
-        let mut energy = [0f64; 3];
-        let mut peak = [0f32; 3];
-        for ty in 0..self.tiles_per_side {
-            for tx in 0..self.tiles_per_side {
-                let mut texels = std::mem::take(&mut self.tile_texels);
-                texels.fill([0.0; 3]);
-                fill(tx, ty, &mut texels);
-                let result = self.write_tile(&texels, &mut energy, &mut peak);
-                self.tile_texels = texels;
-                let record = result?;
-                self.tiles.push(record);
-            }
+        for compressed in &pane.tiles {
+            let record = if compressed.is_empty() {
+                TileRecord::default()
+            } else {
+                let size = u32::try_from(compressed.len())
+                    .map_err(|_| Error::InvalidInput("compressed tile exceeds 4 GiB".into()))?;
+                let record = TileRecord {
+                    offset: self.pos - self.panes_offset,
+                    size,
+                    reserved: 0,
+                    checksum: checksum(compressed),
+                };
+                self.write_all(compressed)?;
+                record
+            };
+            self.tiles.push(record);
         }
         let cluster = &mut self.clusters[self.panes_done];
-        cluster.energy = energy.map(|e| e as f32);
-        cluster.peak = peak;
+        cluster.energy = pane.energy();
+        cluster.peak = pane.peak;
         self.panes_done += 1;
         self.poisoned = false;
         Ok(())
-    }
-
-    /// Adds the next pane from a full `resolution²` row-major RGB image.
-    pub fn add_pane(&mut self, texels: &[[f32; 3]]) -> Result<()> {
-        let res = self.resolution as usize;
-        if texels.len() != res * res {
-            return Err(Error::InvalidInput(format!(
-                "pane has {} texels, resolution {res} needs {}",
-                texels.len(),
-                res * res
-            )));
-        }
-        let t = self.tile_size as usize;
-        self.add_pane_with(|tx, ty, tile| {
-            for j in 0..t {
-                let row = (ty as usize * t + j) * res + tx as usize * t;
-                tile[j * t..(j + 1) * t].copy_from_slice(&texels[row..row + t]);
-            }
-        })
-    }
-
-    /// Encodes, compresses and writes one tile; accumulates energy and peak
-    /// of the decoded texels in the order the spec prescribes.
-    fn write_tile(&mut self, texels: &[[f32; 3]], energy: &mut [f64; 3], peak: &mut [f32; 3]) -> Result<TileRecord> {
-        self.tile_words.clear();
-        self.tile_words.extend(texels.iter().map(|&t| encode_rgb9e5(t)));
-        if self.tile_words.iter().all(|&w| w == 0) {
-            return Ok(TileRecord::default());
-        }
-        for &w in &self.tile_words {
-            let d = decode_rgb9e5(w);
-            for c in 0..3 {
-                energy[c] += f64::from(d[c]);
-                peak[c] = peak[c].max(d[c]);
-            }
-        }
-        self.options.tile_filter.apply(&self.tile_words, &mut self.tile_bytes);
-        let compressed = self.compressor.compress(&self.tile_bytes)?;
-        let size =
-            u32::try_from(compressed.len()).map_err(|_| Error::InvalidInput("compressed tile exceeds 4 GiB".into()))?;
-        let record = TileRecord {
-            offset: self.pos - self.panes_offset,
-            size,
-            reserved: 0,
-            checksum: checksum(&compressed),
-        };
-        self.write_all(&compressed)?;
-        Ok(record)
     }
 
     /// Writes the remaining sections, the section table and the header,

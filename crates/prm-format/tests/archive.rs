@@ -427,6 +427,50 @@ fn tile_callback_and_full_pane_agree() {
     assert_eq!(b.metadata.timings["compress"], 0.125);
 }
 
+/// Panes encoded on other threads and appended in order give the same bytes as `add_pane`; a
+/// pane encoded for another layout is refused and leaves the writer usable.
+#[test]
+fn panes_encoded_apart_write_the_same_bytes() {
+    let s = scene(16, 4, 3, 5);
+    let (dir, a_path) = written("encoded-apart", "direct.prm", &s);
+    let b_path = dir.join("apart.prm");
+    let mut w = start_writer(&b_path, &s).unwrap();
+    let encoder = std::sync::Mutex::new(w.pane_encoder().unwrap());
+    let encoded: Vec<_> = std::thread::scope(|scope| {
+        let jobs: Vec<_> = s
+            .panes
+            .iter()
+            .map(|p| scope.spawn(|| encoder.lock().unwrap().encode(p).unwrap()))
+            .collect();
+        jobs.into_iter().map(|j| j.join().unwrap()).collect()
+    });
+    let other = scene(32, 4, 1, 5);
+    let mut wrong = ArchiveWriter::create(
+        &dir.join("other.prm"),
+        other.metadata.clone(),
+        &other.atlas,
+        &other.entries,
+        &other.clusters,
+    )
+    .unwrap()
+    .pane_encoder()
+    .unwrap();
+    let err = w.add_encoded_pane(wrong.encode(&other.panes[0]).unwrap()).unwrap_err();
+    assert!(err.to_string().contains("32²"), "{err}");
+    assert!(
+        matches!(wrong.encode(&s.panes[0]), Err(Error::InvalidInput(_))),
+        "wrong size"
+    );
+    for e in encoded {
+        let energy = e.energy();
+        w.add_encoded_pane(e).unwrap();
+        let done = w.clusters().len() - w.panes_remaining();
+        assert_eq!(w.clusters()[done - 1].energy, energy);
+    }
+    w.finish().unwrap();
+    assert_eq!(std::fs::read(&a_path).unwrap(), std::fs::read(&b_path).unwrap());
+}
+
 #[test]
 fn uncompressed_sections_round_trip() {
     let (bytes, s) = small_archive("uncompressed", UNCOMPRESSED);
