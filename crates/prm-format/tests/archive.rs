@@ -446,7 +446,7 @@ fn panes_encoded_apart_write_the_same_bytes() {
     });
     let other = scene(32, 4, 1, 5);
     let mut wrong = ArchiveWriter::create(
-        &dir.join("other.prm"),
+        dir.join("other.prm"),
         other.metadata.clone(),
         &other.atlas,
         &other.entries,
