@@ -271,14 +271,16 @@ impl CostModel {
         vpls_per_second: 1.0e6,
     });
 
-    /// `--backend cpu` (shared visibility), fitted to the pane rendering time per pair of three
-    /// bakes (`cargo xtask bench-bake`, quiet machine): the Cornell box's default (30 triangles,
-    /// 8.3 ns per pair), chairs with the paper preset (2,910, 26.4 ns) and Sibenik at 5120
-    /// entries (75,277, 53.5 ns). The per-pair cost grows as T^0.25 between the first two and
-    /// T^0.22 between the last two; T^0.24 with 3.7 ns fits all three within 6 %. (Before the
-    /// lattice was anchored per chart: 11.7, 33.3 and 80.5 ns, 4.8 ns × T^0.25.)
+    /// `--backend cpu` (shared visibility), fitted to the pane rendering time per pair of four
+    /// bakes (`cargo xtask bench-bake`, quiet machine, AVX2 variants): the Cornell box's default
+    /// (30 triangles, 4.7 ns per pair), chairs with the paper preset (2,910, 15.8 ns) and
+    /// Sibenik at 5120 and 2048 entries (75,277, 29.6 and 34.4 ns). The per-pair cost grows as
+    /// T^0.26 between the first two and T^0.22 between chairs and Sibenik; T^0.24 with 2.2 ns
+    /// fits all within 8 %. (Before the AVX2 variants: 8.3, 26.4 and 53.5 ns, 3.7 ns × T^0.24,
+    /// measured on a busier machine; before the lattice was anchored per chart: 11.7, 33.3 and
+    /// 80.5 ns.)
     pub const CPU: CostModel = CostModel::Cpu(CpuCost {
-        pair_seconds: 3.7e-9,
+        pair_seconds: 2.2e-9,
         triangle_exponent: 0.24,
         vpls_per_second: 1.0e6,
     });
@@ -350,7 +352,14 @@ impl BakeParams {
     /// - atlas: the atlas's own automatic size (about 12 texels per triangle, 256 to 4096 a side),
     ///   shrunk until 128 panes fit the run-time memory budget;
     /// - entries: 4 per chart (charts are the scene's distinct flat pieces), 1024 to 16384, a
-    ///   multiple of 256;
+    ///   multiple of 256, and no more than 16 per cluster the bake can have (`--clusters`, or
+    ///   the most the memory and archive budgets allow at that atlas; not below 1024). Where the
+    ///   budgets cap the clusters, more entry points only crowd them: Sibenik (704², 135
+    ///   clusters at most) estimated its own error (`--accuracy-points`, three lights) at
+    ///   83/49/41 % with 2048 entries (128 clusters, 4 walks each, 62 s), 91/52/44 % with 4096,
+    ///   81/50/41 % with 8192 and 80/50/42 % with 16384 (1 walk, 198 s), standard errors
+    ///   2–7 points: the same, for three times the time, since pane rendering follows the VPL
+    ///   count, which the entry points' own VPLs raise;
     /// - walks per entry: enough for about 8192 walks in all, 1 to 16;
     /// - then, while `cost` expects the bake to take longer than the time budget,
     ///   fewer walks, fewer entries (down to 1024) or a smaller atlas (down to 128²), whichever is
@@ -402,15 +411,33 @@ impl BakeParams {
                 AtlasSize::Resolution(r)
             }
         };
+        let texels = |atlas: AtlasSize| match atlas {
+            AtlasSize::Resolution(r) => (r as f64).powi(2),
+            AtlasSize::TexelSize(s) => scene.area() / (s as f64).powi(2) * 2.0,
+        };
+        // The most panes of `texels_per_pane` that the memory and archive budgets allow.
+        let by_memory = |texels_per_pane: f64| (memory_budget_mib * 1024.0 * 1024.0 / (4.0 * texels_per_pane)) as usize;
+        let by_archive =
+            |texels_per_pane: f64| (archive_budget_mib * 1024.0 * 1024.0 / (1.5 * texels_per_pane)) as usize;
+        let clusters_allowed =
+            |texels_per_pane: f64| by_memory(texels_per_pane).min(by_archive(texels_per_pane)).max(1);
         let mut auto_entries = false;
         let mut entries = match (config.entries, &fixed) {
             (Some(n), _) => n,
             (None, Some(v)) => v.entries,
             (None, None) => {
                 let charts = probe()?.stats.charts as usize;
-                let n = (4 * charts).div_ceil(256).clamp(4, 64) * 256;
+                let by_charts = (4 * charts).div_ceil(256).clamp(4, 64) * 256;
+                // No more than 16 entry points per cluster the bake can have (module docs).
+                let clusters = config.clusters.unwrap_or_else(|| clusters_allowed(texels(atlas)));
+                let n = by_charts.min((16 * clusters / 256 * 256).max(1024));
                 reasons.push(format!(
-                    "{n} entry points: 4 per chart of the scene's {charts} charts, 1024..16384"
+                    "{n} entry points: 4 per chart of the scene's {charts} charts, 1024..16384{}",
+                    if n < by_charts {
+                        format!(", at most 16 for each of the {clusters} clusters the budgets allow")
+                    } else {
+                        String::new()
+                    }
                 ));
                 auto_entries = true;
                 n
@@ -437,10 +464,6 @@ impl BakeParams {
             None => 0.5,
         };
         let triangles = scene.triangles.len() as f64;
-        let texels = |atlas: AtlasSize| match atlas {
-            AtlasSize::Resolution(r) => (r as f64).powi(2),
-            AtlasSize::TexelSize(s) => scene.area() / (s as f64).powi(2) * 2.0,
-        };
         let estimate = |entries: usize, paths: u32, atlas: AtlasSize| {
             cost.bake_seconds(entries, paths, bounces_per_walk, utilization * texels(atlas), triangles)
         };
@@ -492,9 +515,8 @@ impl BakeParams {
             (None, Some(v)) => v.clusters.min(entries),
             (None, None) => {
                 let wanted = (entries / 16).clamp(32, 1024).min(entries);
-                let by_memory = (memory_budget_mib * 1024.0 * 1024.0 / (4.0 * texels_per_pane)) as usize;
-                let by_archive = (archive_budget_mib * 1024.0 * 1024.0 / (1.5 * texels_per_pane)) as usize;
-                let c = wanted.min(by_memory).min(by_archive).max(1);
+                let (by_memory, by_archive) = (by_memory(texels_per_pane), by_archive(texels_per_pane));
+                let c = wanted.min(clusters_allowed(texels_per_pane));
                 reasons.push(format!(
                     "{c} clusters: entries/16 = {wanted}, memory budget allows {by_memory}, archive budget {by_archive}"
                 ));

@@ -142,3 +142,31 @@ fn impossible_parameters_are_refused() {
         assert!(e.contains(needle), "{e}");
     }
 }
+
+/// Automatic entry points stop at 16 per cluster the bake can have: chairs' 913 charts want
+/// 3840, 100 clusters take 1536 (16 × 100, a multiple of 256), and a memory budget that allows
+/// fewer clusters lowers them too, never below 1024.
+#[test]
+fn automatic_entries_follow_the_clusters() {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/chairs/chairs.obj");
+    let scene = prm_scene::load(&p).unwrap();
+    let free = resolve(&BakeConfig::default(), &scene, probe(&scene)).unwrap();
+    assert_eq!((free.entries, free.clusters), (3840, 240));
+    let given = BakeConfig {
+        clusters: Some(100),
+        ..Default::default()
+    };
+    let p = resolve(&given, &scene, probe(&scene)).unwrap();
+    assert_eq!((p.entries, p.clusters), (1536, 100));
+    assert!(p
+        .reasons
+        .iter()
+        .any(|r| r.contains("at most 16 for each of the 100 clusters")));
+    let tight = BakeConfig {
+        memory_budget_mib: Some(8.0),
+        ..Default::default()
+    };
+    let q = resolve(&tight, &scene, probe(&scene)).unwrap();
+    assert!(q.entries < free.entries && q.entries >= 1024, "{q:?}");
+    assert!(q.entries / 16 <= q.clusters + 16, "{q:?}");
+}
