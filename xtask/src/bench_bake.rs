@@ -5,8 +5,7 @@
 //! own total time (scene load to archive written), its pane rendering time, the shadow rays and
 //! the peak resident memory. Sibenik is baked twice: at the sizes the default chose before the
 //! cost model knew the CPU renderer (the like-for-like comparison with the earlier 245 s), and
-//! at today's default, which the faster renderer lets grow to 16384 entries within the 600 s
-//! time budget. `--compare` bakes each case again with `--backend vulkan` (lavapipe
+//! at today's default (2048 entries, 16 for each of the 128 clusters its memory budget allows). `--compare` bakes each case again with `--backend vulkan` (lavapipe
 //! on machines without a GPU, the default renderer before) and prints the ratio within the same
 //! run, which is what to quote on a shared, noisy machine. Not a test: nothing is asserted.
 

@@ -276,7 +276,7 @@ impl CostModel {
     /// (30 triangles, 4.7 ns per pair), chairs with the paper preset (2,910, 15.8 ns) and
     /// Sibenik at 5120 and 2048 entries (75,277, 29.6 and 34.4 ns). The per-pair cost grows as
     /// T^0.26 between the first two and T^0.22 between chairs and Sibenik; T^0.24 with 2.2 ns
-    /// fits all within 8 %. (Before the AVX2 variants: 8.3, 26.4 and 53.5 ns, 3.7 ns × T^0.24,
+    /// fits all within 10 %. (Before the AVX2 variants: 8.3, 26.4 and 53.5 ns, 3.7 ns × T^0.24,
     /// measured on a busier machine; before the lattice was anchored per chart: 11.7, 33.3 and
     /// 80.5 ns.)
     pub const CPU: CostModel = CostModel::Cpu(CpuCost {
@@ -429,12 +429,15 @@ impl BakeParams {
                 let charts = probe()?.stats.charts as usize;
                 let by_charts = (4 * charts).div_ceil(256).clamp(4, 64) * 256;
                 // No more than 16 entry points per cluster the bake can have (module docs).
-                let clusters = config.clusters.unwrap_or_else(|| clusters_allowed(texels(atlas)));
-                let n = by_charts.min((16 * clusters / 256 * 256).max(1024));
+                let (clusters, which) = match config.clusters {
+                    Some(c) => (c, "given"),
+                    None => (clusters_allowed(texels(atlas)), "the budgets allow"),
+                };
+                let n = by_charts.min((clusters.saturating_mul(16) / 256 * 256).max(1024));
                 reasons.push(format!(
                     "{n} entry points: 4 per chart of the scene's {charts} charts, 1024..16384{}",
                     if n < by_charts {
-                        format!(", at most 16 for each of the {clusters} clusters the budgets allow")
+                        format!(", at most 16 for each of the {clusters} clusters {which}")
                     } else {
                         String::new()
                     }

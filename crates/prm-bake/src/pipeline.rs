@@ -780,7 +780,8 @@ pub fn bake(job: &BakeJob<'_>, renderer: Renderer<'_>, progress: &mut dyn Progre
             ));
             // Every pane is at hand: encode a batch on every thread, then append it in order.
             let t = Instant::now();
-            let threads = rayon::current_num_threads();
+            // One image per worker: no more workers than panes (a 4096² image is 192 MiB).
+            let threads = rayon::current_num_threads().min(panes.clusters).max(1);
             let mut workers = (0..threads)
                 .map(|_| Ok((writer.pane_encoder()?, vec![[0f32; 3]; texels])))
                 .collect::<Result<Vec<_>, prm_format::Error>>()

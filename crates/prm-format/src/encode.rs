@@ -16,6 +16,8 @@ use crate::rgb9e5::{decode_rgb9e5, encode_rgb9e5};
 pub struct EncodedPane {
     pub(crate) resolution: u32,
     pub(crate) tile_size: u32,
+    pub(crate) filter: TileFilter,
+    pub(crate) zstd_level: i32,
     /// Compressed tiles in row-major tile order; empty for a tile whose texels all encode to 0
     /// (stored as a zero record, formats/prm.md §6).
     pub(crate) tiles: Vec<Vec<u8>>,
@@ -35,6 +37,7 @@ pub struct PaneEncoder {
     resolution: u32,
     tile_size: u32,
     filter: TileFilter,
+    zstd_level: i32,
     compressor: zstd::bulk::Compressor<'static>,
     texels: Vec<[f32; 3]>,
     words: Vec<u32>,
@@ -48,6 +51,7 @@ impl PaneEncoder {
             resolution,
             tile_size,
             filter,
+            zstd_level,
             compressor: zstd::bulk::Compressor::new(zstd_level)?,
             texels: vec![[0.0; 3]; n],
             words: Vec::with_capacity(n),
@@ -65,6 +69,8 @@ impl PaneEncoder {
         let mut pane = EncodedPane {
             resolution: self.resolution,
             tile_size: self.tile_size,
+            filter: self.filter,
+            zstd_level: self.zstd_level,
             tiles: Vec::with_capacity((per_side * per_side) as usize),
             energy: [0.0; 3],
             peak: [0.0; 3],

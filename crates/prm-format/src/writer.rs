@@ -602,14 +602,14 @@ impl ArchiveWriter {
     where
         F: FnMut(u32, u32, &mut [[f32; 3]]),
     {
-        self.check_usable()?;
+        self.check_pane_wanted()?;
         let pane = self.encoder.encode_with(fill)?;
         self.add_encoded_pane(pane)
     }
 
     /// Adds the next pane from a full `resolution²` row-major RGB image.
     pub fn add_pane(&mut self, texels: &[[f32; 3]]) -> Result<()> {
-        self.check_usable()?;
+        self.check_pane_wanted()?;
         let pane = self.encoder.encode(texels)?;
         self.add_encoded_pane(pane)
     }
@@ -628,13 +628,7 @@ impl ArchiveWriter {
     /// Adds the next pane, encoded by [`ArchiveWriter::pane_encoder`]'s encoder (or another of
     /// the same atlas layout and options): the same bytes as [`ArchiveWriter::add_pane`].
     pub fn add_encoded_pane(&mut self, pane: EncodedPane) -> Result<()> {
-        self.check_usable()?;
-        if self.panes_done >= self.clusters.len() {
-            return Err(Error::InvalidInput(format!(
-                "all {} panes have already been added",
-                self.clusters.len()
-            )));
-        }
+        self.check_pane_wanted()?;
         let per_side = self.tiles_per_side as usize;
         if (pane.resolution, pane.tile_size) != (self.resolution, self.tile_size)
             || pane.tiles.len() != per_side * per_side
@@ -642,6 +636,17 @@ impl ArchiveWriter {
             return Err(Error::InvalidInput(format!(
                 "pane encoded for {}² texels in {}² tiles, the archive has {}² in {}²",
                 pane.resolution, pane.tile_size, self.resolution, self.tile_size
+            )));
+        }
+        // The header names one filter for every tile: a tile filtered otherwise would decode
+        // to other texels under valid checksums.
+        if (pane.filter, pane.zstd_level) != (self.options.tile_filter, self.options.zstd_level) {
+            return Err(Error::InvalidInput(format!(
+                "pane encoded with the {} filter at zstd level {}, the archive uses {} at {}",
+                pane.filter.name(),
+                pane.zstd_level,
+                self.options.tile_filter.name(),
+                self.options.zstd_level
             )));
         }
         // Any failure below leaves a partial pane in the file.
@@ -668,6 +673,18 @@ impl ArchiveWriter {
         cluster.peak = pane.peak;
         self.panes_done += 1;
         self.poisoned = false;
+        Ok(())
+    }
+
+    /// [`ArchiveWriter::check_usable`], and a pane is still to come.
+    fn check_pane_wanted(&self) -> Result<()> {
+        self.check_usable()?;
+        if self.panes_done >= self.clusters.len() {
+            return Err(Error::InvalidInput(format!(
+                "all {} panes have already been added",
+                self.clusters.len()
+            )));
+        }
         Ok(())
     }
 

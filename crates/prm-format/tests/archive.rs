@@ -461,6 +461,25 @@ fn panes_encoded_apart_write_the_same_bytes() {
         matches!(wrong.encode(&s.panes[0]), Err(Error::InvalidInput(_))),
         "wrong size"
     );
+    let unfiltered = WriterOptions {
+        tile_filter: TileFilter::None,
+        ..WriterOptions::default()
+    };
+    let mut other_filter = ArchiveWriter::create_with_options(
+        dir.join("unfiltered.prm"),
+        s.metadata.clone(),
+        &s.atlas,
+        &s.entries,
+        &s.clusters,
+        unfiltered,
+    )
+    .unwrap()
+    .pane_encoder()
+    .unwrap();
+    let err = w
+        .add_encoded_pane(other_filter.encode(&s.panes[0]).unwrap())
+        .unwrap_err();
+    assert!(err.to_string().contains("filter"), "{err}");
     for e in encoded {
         let energy = e.energy();
         w.add_encoded_pane(e).unwrap();

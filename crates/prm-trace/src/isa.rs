@@ -1,6 +1,7 @@
 //! Run-time choice of the instruction set for the hot loops: AVX2 and FMA where the CPU has them.
 //!
-//! Ray traversal (obvhs, inlined into [`crate::Bvh`]'s queries) and the pane kernel's unoccluded
+//! Ray traversal of the default wide BVH (obvhs's `traverse!`, expanded in [`crate::Bvh`]'s
+//! queries; the BVH2 layout calls obvhs's own functions, built for the baseline) and the pane kernel's unoccluded
 //! term are compiled twice: for the portable x86-64 baseline (SSE2) and, behind
 //! `#[target_feature]`, for x86-64-v3 (AVX2, FMA, BMI1/2, LZCNT). Every call picks the second
 //! where [`avx2`] says the CPU runs it, so one binary runs everywhere and is fast where it can

@@ -161,7 +161,7 @@ fn automatic_entries_follow_the_clusters() {
     assert!(p
         .reasons
         .iter()
-        .any(|r| r.contains("at most 16 for each of the 100 clusters")));
+        .any(|r| r.contains("at most 16 for each of the 100 clusters given")));
     let tight = BakeConfig {
         memory_budget_mib: Some(8.0),
         ..Default::default()
