@@ -427,20 +427,9 @@ impl BakeParams {
             (None, Some(v)) => v.entries,
             (None, None) => {
                 let charts = probe()?.stats.charts as usize;
-                let by_charts = (4 * charts).div_ceil(256).clamp(4, 64) * 256;
-                // No more than 16 entry points per cluster the bake can have (module docs).
-                let (clusters, which) = match config.clusters {
-                    Some(c) => (c, "given"),
-                    None => (clusters_allowed(texels(atlas)), "the budgets allow"),
-                };
-                let n = by_charts.min((clusters.saturating_mul(16) / 256 * 256).max(1024));
+                let n = (4 * charts).div_ceil(256).clamp(4, 64) * 256;
                 reasons.push(format!(
-                    "{n} entry points: 4 per chart of the scene's {charts} charts, 1024..16384{}",
-                    if n < by_charts {
-                        format!(", at most 16 for each of the {clusters} clusters {which}")
-                    } else {
-                        String::new()
-                    }
+                    "{n} entry points: 4 per chart of the scene's {charts} charts, 1024..16384"
                 ));
                 auto_entries = true;
                 n
@@ -510,6 +499,32 @@ impl BakeParams {
                     AtlasSize::TexelSize(_) => String::new(),
                 }
             ));
+        }
+
+        // No more than 16 entry points per cluster the bake can have, at the atlas the budget
+        // left (module docs); the walks per entry rise again towards 8192 walks in all, as far
+        // as the time budget allows.
+        if auto_entries {
+            let (clusters, which) = match config.clusters {
+                Some(c) => (c, "given"),
+                None => (clusters_allowed(texels(atlas)), "the budgets allow"),
+            };
+            let cap = (clusters.saturating_mul(16) / 256 * 256).max(1024);
+            if entries > cap {
+                entries = cap;
+                if auto_paths {
+                    let wanted = 8192usize.div_ceil(entries).clamp(1, 16) as u32;
+                    while paths_per_entry < wanted && estimate(entries, paths_per_entry + 1, atlas) <= time_budget_s {
+                        paths_per_entry += 1;
+                    }
+                }
+                estimated_seconds = estimate(entries, paths_per_entry, atlas);
+                reasons.push(format!(
+                    "{entries} entry points, {paths_per_entry} walk{} each: at most 16 for each of the {clusters} \
+                     clusters {which}",
+                    plural(paths_per_entry as usize)
+                ));
+            }
         }
 
         let texels_per_pane = texels(atlas);

@@ -495,16 +495,9 @@ mod tests {
     #[cfg(target_arch = "x86_64")]
     #[test]
     fn instruction_set_variants_agree() {
-        if !crate::isa::avx2() {
-            assert!(
-                std::env::var_os("CI").is_none(),
-                "CI machines have AVX2: the variant went untested"
-            );
-            eprintln!("this CPU has no AVX2: only the portable variant runs");
+        let Some(scene) = crate::isa::variant_test_scene() else {
             return;
-        }
-        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/cornell-box/cornell-box.obj");
-        let scene = prm_scene::load(&path).unwrap();
+        };
         for params in [BvhParams::DEFAULT, BvhParams::BVH2] {
             let bvh = Bvh::build(&scene, &params).unwrap();
             let b = scene.bounds();

@@ -35,3 +35,19 @@ pub(crate) fn avx2() -> bool {
         false
     }
 }
+
+/// For the tests that compare the variants: the bundled Cornell box, or `None` on a CPU without
+/// AVX2 (only the portable variant runs there), which fails under CI, whose machines have it.
+#[cfg(test)]
+pub(crate) fn variant_test_scene() -> Option<prm_scene::Scene> {
+    if !avx2() {
+        assert!(
+            std::env::var_os("CI").is_none(),
+            "CI machines have AVX2: the variants went untested"
+        );
+        eprintln!("this CPU has no AVX2: only the portable variant runs");
+        return None;
+    }
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/cornell-box/cornell-box.obj");
+    Some(prm_scene::load(&path).unwrap())
+}
