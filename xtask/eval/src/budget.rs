@@ -352,17 +352,21 @@ pub fn run(bin: &Path, cache: &Path, root: &Path) -> Result<String> {
                 auto.top_k,
             ));
         }
-        if auto.entries <= 2048 {
+        // One pane per entry point must fit the player's texture layers and prm-bake's default
+        // run-time memory budget (256 MiB of RGB9E5 panes).
+        let pane_mib = f64::from(auto.resolution).powi(2) * 4.0 / (1024.0 * 1024.0);
+        let unclustered_fits = auto.entries <= 2048 && f64::from(auto.entries) * pane_mib <= 256.0;
+        if unclustered_fits {
             stages.push(("unclustered, K = all", unclustered.args(), None, auto.entries));
         } else {
             println!(
-                "budget:   unclustered skipped: {} entries > 2048 texture layers",
-                auto.entries
+                "budget:   unclustered skipped: {} panes of {}² (at most 2048 texture layers and 256 MiB)",
+                auto.entries, auto.resolution
             );
         }
         stages.push(("no VPL bound", auto.args(), Some("vpl_disk_scale = 0.0\n"), auto.top_k));
         stages.push(("4× walks", walks.args(), None, auto.top_k));
-        if auto.entries <= 2048 {
+        if unclustered_fits {
             let mut ideal = Params {
                 clusters: auto.entries,
                 top_k: auto.entries,
