@@ -317,6 +317,11 @@ impl CostModel {
     }
 }
 
+/// The automatic walks per entry point: enough for about 8192 walks in all, 1 to 16.
+fn auto_walks_per_entry(entries: usize) -> u32 {
+    8192usize.div_ceil(entries.max(1)).clamp(1, 16) as u32
+}
+
 /// "s" unless `n` is one.
 pub fn plural(n: usize) -> &'static str {
     if n == 1 {
@@ -444,7 +449,7 @@ impl BakeParams {
             (Some(m), _) => m,
             (None, Some(v)) => v.paths,
             (None, None) => {
-                let m = 8192usize.div_ceil(entries.max(1)).clamp(1, 16) as u32;
+                let m = auto_walks_per_entry(entries);
                 reasons.push(format!(
                     "{m} walk{} per entry point: about 8192 walks in all",
                     plural(m as usize)
@@ -517,7 +522,7 @@ impl BakeParams {
             if entries > cap {
                 entries = cap;
                 if auto_paths {
-                    let wanted = 8192usize.div_ceil(entries).clamp(1, 16) as u32;
+                    let wanted = auto_walks_per_entry(entries);
                     while paths_per_entry < wanted && estimate(entries, paths_per_entry + 1, atlas) <= time_budget_s {
                         paths_per_entry += 1;
                     }
