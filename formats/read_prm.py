@@ -23,10 +23,13 @@ import sys
 
 MAGIC = b"\x89PRM\r\n\x1a\n"
 SUPPORTED_MAJOR = 1
-SUPPORTED_MINOR = 5
+SUPPORTED_MINOR = 6
 KINDS = {1: "metadata", 2: "atlas", 3: "entries", 4: "clusters", 5: "panes", 6: "entry_energy",
-         7: "emitters", 8: "sky", 9: "probes"}
-OPTIONAL = {6, 7, 8, 9}
+         7: "emitters", 8: "sky", 9: "probes", 10: "probe_rays"}
+OPTIONAL = {6, 7, 8, 9, 10}
+RAY_SKY = 0xFFFFFFFF
+RAY_BLOCKED = 0xFFFFFFFE
+MAX_PROBE_RAYS = 1 << 16
 MAX_PROBES = 1 << 16
 MAX_PROBE_CELLS = 1 << 24
 SH_COEFFS = 9
@@ -298,8 +301,8 @@ class Reader:
                 raise InvalidArchive("overlapping sections")
         by_kind = {}
         # Kind 7 is the emitters section from 1.2 on, kind 8 the sky from 1.3 on, kind 9 the
-        # probes from 1.4 on; before, they were unassigned.
-        since = {7: 2, 8: 3, 9: 4}
+        # probes from 1.4 on, kind 10 the probe rays from 1.6 on; before, they were unassigned.
+        since = {7: 2, 8: 3, 9: 4, 10: 6}
         known = {k: v for k, v in KINDS.items() if minor >= since.get(k, 0)}
         for s in sections:
             if s["kind"] in known:
@@ -354,7 +357,39 @@ class Reader:
         self.probes = None
         if 9 in by_kind:
             self.parse_probes(by_kind[9])
+        self.probe_rays = None
+        if 10 in by_kind:
+            if self.probes is None:
+                raise InvalidArchive("probe_rays: no probes section")
+            self.parse_probe_rays(by_kind[10])
         self.parse_panes(by_kind[5])
+
+    def parse_probe_rays(self, s):
+        # 1.6: 32-byte header (probes N, rays per probe M, gather points G, flags = 0, atlas
+        # resolution, 3 reserved), G records (texel u32, position, normal, albedo 3 f32 each),
+        # then N x M hits (u32): a gather point, RAY_SKY or RAY_BLOCKED.
+        n_probes = len(self.probes["cells"])
+        texels = self.resolution * self.resolution
+        raw = self.load(s, 32 + 40 * texels + 4 * n_probes * MAX_PROBE_RAYS)
+        if len(raw) < 32:
+            raise InvalidArchive("probe_rays: shorter than its header")
+        n, m, g, flags, res, r0, r1, r2 = struct.unpack_from("<8I", raw, 0)
+        if flags or (self.strict and (r0 or r1 or r2)):
+            raise InvalidArchive("probe_rays: unknown flags or a non-zero reserved field")
+        if n != n_probes or res != self.resolution or not 1 <= m <= MAX_PROBE_RAYS or g > texels:
+            raise InvalidArchive("probe_rays: probe count, resolution, ray count or point count out of range")
+        if len(raw) != 32 + 40 * g + 4 * n * m:
+            raise InvalidArchive("probe_rays: raw size differs from what the header gives")
+        points = []
+        for i in range(g):
+            rec = struct.unpack_from("<I9f", raw, 32 + 40 * i)
+            if rec[0] >= texels or any(v != v or abs(v) == float("inf") for v in rec[1:]) or min(rec[7:]) < 0:
+                raise InvalidArchive("probe_rays: gather point outside the atlas or not finite")
+            points.append(dict(texel=rec[0], position=list(rec[1:4]), normal=list(rec[4:7]), albedo=list(rec[7:10])))
+        hits = list(struct.unpack_from(f"<{n * m}I", raw, 32 + 40 * g))
+        if any(h >= g and h not in (RAY_SKY, RAY_BLOCKED) for h in hits):
+            raise InvalidArchive("probe_rays: a ray ends at a gather point that does not exist")
+        self.probe_rays = dict(rays_per_probe=m, points=points, hits=hits)
 
     def parse_probes(self, s):
         # 1.4: 48-byte header (probes N, clusters C, coefficient count = 9, flags (bit 0: sky),
@@ -641,6 +676,7 @@ class Reader:
             emitters=self.emitters,
             sky=self.sky,
             probes=self.probes,
+            probe_rays=self.probe_rays,
             accuracy=self.accuracy,
             clusters=self.clusters,
             tile_filter=self.tile_filter,

@@ -113,3 +113,22 @@ struct ProbeGrid {
     dims: vec3<u32>,
     count: u32,
 };
+
+// Where probe rays end (`prm_format::GatherPoint`): a covered lightmap texel (index y·R + x) and
+// its exit point's position, normal and albedo.
+struct GatherPoint {
+    position: vec3<f32>,
+    texel: u32,
+    normal: vec3<f32>,
+    _pad0: u32,
+    albedo: vec3<f32>,
+    _pad1: u32,
+};
+
+// The counts of the probe rays (formats/prm.md §5.5).
+struct ProbeRays {
+    probes: u32,
+    rays_per_probe: u32,
+    points: u32,
+    _pad0: u32,
+};

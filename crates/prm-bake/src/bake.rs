@@ -99,6 +99,11 @@ pub struct BakeArgs {
     /// same panes' clusters so the run-time weights light it (`prm-play --probe-sphere`).
     #[arg(long, value_name = "CELLS", num_args = 0..=1, default_missing_value = "512")]
     pub probes: Option<u32>,
+    /// Rays per probe that find the surfaces the player gathers the probes' light from, each
+    /// frame, through the lightmap (default 1024; 0: none, the probes are lit through the panes'
+    /// VPLs instead, as archives before format 1.6 are).
+    #[arg(long, value_name = "RAYS", requires = "probes")]
+    pub probe_rays: Option<u32>,
     /// After the panes, estimate the archive's accuracy: its indirect light against a
     /// reference path tracer at N exit points (default 1024) for three point lights placed in
     /// the scene, printed, recorded in the archive and shown by `dump`. 0 skips it. About 1-3%
@@ -150,6 +155,7 @@ impl BakeArgs {
             time_budget_s: self.time_budget,
             sky_paths: self.sky.then(|| self.sky_paths.unwrap_or(prm_bake::SKY_PATHS)),
             probes: self.probes,
+            probe_rays: self.probe_rays,
             accuracy_points: self.accuracy_points,
             accuracy_paths: self.accuracy_paths,
             ..Default::default()

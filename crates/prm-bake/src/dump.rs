@@ -171,6 +171,16 @@ pub fn summary_json<R: Read + Seek>(archive: &Archive<R>, file: &Path, report: O
             "coefficients": prm_format::SH_COEFFS,
             "unit_weight_mean_irradiance": probe_mean_irradiance(p),
             "sky": p.sky.is_some(),
+            "rays": archive.probe_rays().map(|r| {
+                let [texels, sky, blocked] = ray_shares(r);
+                json!({
+                    "rays_per_probe": r.rays_per_probe,
+                    "gather_points": r.points.len(),
+                    "to_texels": texels,
+                    "to_sky": sky,
+                    "blocked": blocked,
+                })
+            }),
         })),
         "accuracy": meta.accuracy.as_ref().map(|a| json!({
             "exit_points": a.exit_points,
@@ -321,6 +331,18 @@ pub fn write_summary<W: Write, R: Read + Seek>(
                 ""
             }
         )?;
+        if let Some(r) = archive.probe_rays() {
+            let [texels, sky, blocked] = ray_shares(r);
+            writeln!(
+                out,
+                "probe rays   {} per probe, ending at {} texels: {:.1}% reach a texel, {:.1}% the sky, {:.1}% nothing; the player gathers the probes' light along them",
+                r.rays_per_probe,
+                r.points.len(),
+                100.0 * texels,
+                100.0 * sky,
+                100.0 * blocked
+            )?;
+        }
     }
     writeln!(out, "clusters     {} (one pane each)", archive.clusters().len())?;
     match &meta.accuracy {
@@ -507,6 +529,14 @@ fn write_exr_files<R: Read + Seek>(archive: &mut Archive<R>, dir: &Path) -> Resu
 }
 
 /// Per-channel sum of RGB values (f64 accumulation).
+/// The shares of the probe rays that reach a texel, the sky and nothing.
+fn ray_shares(r: &prm_format::ProbeRays) -> [f64; 3] {
+    let n = r.hits.len().max(1) as f64;
+    let count = |code: u32| r.hits.iter().filter(|&&h| h == code).count() as f64 / n;
+    let (sky, blocked) = (count(prm_format::RAY_SKY), count(prm_format::RAY_BLOCKED));
+    [1.0 - sky - blocked, sky, blocked]
+}
+
 /// A probe's indirect irradiance with every cluster's weight 1, averaged over the probes and
 /// the six axis normals: a scale to compare bakes by.
 fn probe_mean_irradiance(p: &prm_format::Probes) -> [f64; 3] {

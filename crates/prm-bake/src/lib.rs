@@ -52,7 +52,8 @@ mod sink;
 pub use error::BakeError;
 pub use params::{AtlasSize, BakeConfig, BakeParams, CostModel, Preset};
 pub use pipeline::{
-    accuracy_line, bake, BakeJob, Baked, Plan, Renderer, ACCURACY_PATHS, ACCURACY_POINTS, PROBE_CELLS, SKY_PATHS,
+    accuracy_line, bake, BakeJob, Baked, Plan, Renderer, ACCURACY_PATHS, ACCURACY_POINTS, PROBE_CELLS, PROBE_RAYS,
+    SKY_PATHS,
 };
 pub use shard::{merge, Merged, Shard};
 pub use sink::{NoProgress, Phase, ProgressSink};

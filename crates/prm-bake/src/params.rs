@@ -71,6 +71,9 @@ pub struct BakeConfig {
     pub sky_paths: Option<u32>,
     /// Place irradiance probes on a grid of at most this many cells (unset: no probes).
     pub probes: Option<u32>,
+    /// Rays per probe that find the surfaces the run time gathers the probes' light from
+    /// (0: none, the probes are lit through the panes; default [`crate::PROBE_RAYS`]).
+    pub probe_rays: Option<u32>,
     /// Exit points of the bake's accuracy check (0: no check; default
     /// [`crate::ACCURACY_POINTS`]).
     pub accuracy_points: Option<u32>,
@@ -109,6 +112,7 @@ impl BakeConfig {
             time_budget_s: over.time_budget_s.or(self.time_budget_s),
             sky_paths: over.sky_paths.or(self.sky_paths),
             probes: over.probes.or(self.probes),
+            probe_rays: over.probe_rays.or(self.probe_rays),
             accuracy_points: over.accuracy_points.or(self.accuracy_points),
             accuracy_paths: over.accuracy_paths.or(self.accuracy_paths),
         }
@@ -157,6 +161,8 @@ pub struct BakeParams {
     /// Most grid cells of the irradiance probes, when the archive holds them
     /// ([`crate::PROBE_CELLS`] is the command line's default).
     pub probes: Option<u32>,
+    /// Rays per probe of the probe rays section (0: none).
+    pub probe_rays: u32,
     /// Exit points of the accuracy check after the panes (0: none; a shard never checks).
     /// Not in the archive's `params`: the check changes no pane, and its own record (the
     /// metadata's `accuracy`) says how large it was, so a merge of shards is the single bake's
@@ -571,6 +577,7 @@ impl BakeParams {
             time_budget_s,
             sky_paths: config.sky_paths,
             probes: config.probes,
+            probe_rays: config.probe_rays.unwrap_or(crate::PROBE_RAYS),
             accuracy_points: config.accuracy_points.unwrap_or(crate::ACCURACY_POINTS),
             accuracy_paths: config.accuracy_paths.unwrap_or(crate::ACCURACY_PATHS),
             estimated_seconds,
@@ -626,6 +633,13 @@ impl BakeParams {
             if p == 0 || p > prm_format::MAX_PROBES {
                 invalid!("--probes {p} is outside 1..={} grid cells", prm_format::MAX_PROBES);
             }
+        }
+        if self.probe_rays > prm_format::MAX_PROBE_RAYS {
+            invalid!(
+                "--probe-rays {} is more than {} rays per probe",
+                self.probe_rays,
+                prm_format::MAX_PROBE_RAYS
+            );
         }
         if let AtlasSize::Resolution(r) = self.atlas {
             if !(8..=8192).contains(&r) {

@@ -275,6 +275,15 @@ pub fn merge(parts: &[PathBuf], output: &Path) -> Result<Merged, BakeError> {
             what: "recording the probes".to_string(),
             source,
         })?;
+        // Their rays: every shard traces the same ones.
+        if let Some(rays) = first.probe_rays() {
+            writer
+                .set_probe_rays(rays.clone())
+                .map_err(|source| BakeError::Archive {
+                    what: "recording the probe rays".to_string(),
+                    source,
+                })?;
+        }
     }
     for c in 0..clusters.len() {
         let (p, _, a) = &mut opened[owner(c)];

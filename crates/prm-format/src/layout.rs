@@ -13,8 +13,8 @@ pub const VERSION_MAJOR: u16 = 1;
 /// Highest minor version this library writes (and knows); a reader accepts every minor. The
 /// writer writes the lowest minor whose features an archive uses: 1.1 adds the entry energy
 /// section, 1.2 the emitters section, 1.3 the sky section, 1.4 the probes section, 1.5 the
-/// metadata's `accuracy` key.
-pub const VERSION_MINOR: u16 = 5;
+/// metadata's `accuracy` key, 1.6 the probe rays section.
+pub const VERSION_MINOR: u16 = 6;
 
 /// Size of the fixed file header.
 pub const HEADER_SIZE: usize = 64;
@@ -56,6 +56,9 @@ pub mod kind {
     /// Irradiance probes and every cluster's spherical-harmonic transfer to them (since 1.4,
     /// optional).
     pub const PROBES: u32 = 9;
+    /// Where every probe's rays meet the scene, to gather its light from the surfaces (since
+    /// 1.6, optional; only beside the probes section).
+    pub const PROBE_RAYS: u32 = 10;
     /// First kind reserved for private extensions (never assigned by the spec).
     pub const PRIVATE_FIRST: u32 = 0x8000_0000;
 
@@ -71,6 +74,7 @@ pub mod kind {
             EMITTERS => Some("emitters"),
             SKY => Some("sky"),
             PROBES => Some("probes"),
+            PROBE_RAYS => Some("probe_rays"),
             _ => None,
         }
     }

@@ -17,6 +17,8 @@
 //!   in the spherical-harmonic basis [`sh_basis`], which [`sh_rotate_y`] turns about the vertical.
 //! * [`Probes`]: the optional probes section (1.4), irradiance probes on a grid in the scene's
 //!   empty space and every cluster's transfer to them, so the run-time weights light them too.
+//! * [`ProbeRays`]: the optional probe rays section (1.6), where each probe's rays meet the
+//!   scene, so a run time gathers the probes' light from the surfaces' radiance instead.
 //! * [`residual_groups`]: the clusters' spatial groups whose summed panes carry the light of the
 //!   clusters a run time drops from its top K.
 //! * [`encode_rgb9e5`] / [`decode_rgb9e5`] implement the texel encoding,
@@ -30,6 +32,7 @@ mod filter;
 mod groups;
 mod layout;
 mod metadata;
+mod probe_rays;
 mod probes;
 mod reader;
 mod rgb9e5;
@@ -48,6 +51,9 @@ pub use filter::TileFilter;
 pub use groups::{residual_groups, RESIDUAL_GROUPS};
 pub use layout::{checksum, compression, kind, limits, MAGIC, VERSION_MAJOR, VERSION_MINOR};
 pub use metadata::{Accuracy, Generator, LightAccuracy, Metadata, Units};
+pub use probe_rays::{
+    probe_ray_direction, GatherPoint, ProbeRays, MAX_PROBE_RAYS, RAY_BLOCKED, RAY_SKY, SH_COSINE_LOBE,
+};
 pub use probes::{
     sh_irradiance, sky_irradiance_sh, ProbeGrid, ProbeSkyTransfer, Probes, AXIS_NORMALS, MAX_PROBES, MAX_PROBE_CELLS,
 };

@@ -101,6 +101,7 @@ pub struct Archive<R> {
     emitters: Vec<EmitterGroup>,
     sky: Option<SkyTransfer>,
     probes: Option<Probes>,
+    probe_rays: Option<crate::ProbeRays>,
     clusters: Vec<Cluster>,
     tiles: Vec<TileRecord>,
     panes_offset: u64,
@@ -266,6 +267,14 @@ impl<R: Read + Seek> Archive<R> {
         let probes_rec = probe_recs.next().cloned();
         if probe_recs.next().is_some() {
             return Err(Error::inconsistent("probes section appears more than once"));
+        }
+        // Kind 10 is the probe rays section from 1.6 on, likewise.
+        let mut ray_recs = records
+            .iter()
+            .filter(|r| r.kind == kind::PROBE_RAYS && header.minor >= 6);
+        let rays_rec = ray_recs.next().cloned();
+        if ray_recs.next().is_some() {
+            return Err(Error::inconsistent("probe_rays section appears more than once"));
         }
 
         // Every section's raw size is checked against what the counts read so
@@ -446,6 +455,14 @@ impl<R: Read + Seek> Archive<R> {
             None => None,
             Some(rec) => Some(read_probes(&mut src, rec, strict, clusters.len())?),
         };
+        // Probe rays (1.6, optional, only beside the probes): sizes fixed by its header.
+        let probe_rays = match (&rays_rec, &probes) {
+            (None, _) => None,
+            (Some(_), None) => {
+                return Err(Error::inconsistent("probe_rays section without a probes section"));
+            }
+            (Some(rec), Some(p)) => Some(read_probe_rays(&mut src, rec, strict, p.len(), atlas.resolution)?),
+        };
 
         let info = ArchiveInfo {
             major: header.major,
@@ -480,6 +497,7 @@ impl<R: Read + Seek> Archive<R> {
             emitters,
             sky,
             probes,
+            probe_rays,
             clusters,
             tiles,
             panes_offset: panes_rec.offset,
@@ -522,6 +540,12 @@ impl<R: Read + Seek> Archive<R> {
     /// placed them.
     pub fn probes(&self) -> Option<&Probes> {
         self.probes.as_ref()
+    }
+
+    /// Where every probe's rays meet the scene (formats/prm.md §5.5), when the bake traced
+    /// them (1.6): a run time gathers the probes' light from the surfaces with them.
+    pub fn probe_rays(&self) -> Option<&crate::ProbeRays> {
+        self.probe_rays.as_ref()
     }
 
     /// Every entry's pane energy (RGB, the sum over the atlas of the indirect irradiance its
@@ -1057,6 +1081,56 @@ fn read_atlas<R: Read + Seek>(src: &mut R, rec: &SectionRecord, strict: bool) ->
     };
     atlas.validate().map_err(Error::inconsistent)?;
     Ok(atlas)
+}
+
+/// Reads the probe rays section: its 32-byte header first, whose counts fix the raw size,
+/// checked before the rest is decompressed.
+fn read_probe_rays<R: Read + Seek>(
+    src: &mut R,
+    rec: &SectionRecord,
+    strict: bool,
+    probes: usize,
+    resolution: u32,
+) -> Result<crate::ProbeRays> {
+    use crate::probe_rays::{self, GATHER_POINT_SIZE, PROBE_RAYS_HEADER_SIZE};
+    let section = open_section(src, rec)?;
+    if section.record.raw_size < PROBE_RAYS_HEADER_SIZE as u64 {
+        return Err(Error::inconsistent(format!(
+            "probe_rays section has {} raw bytes, less than its {PROBE_RAYS_HEADER_SIZE}-byte header",
+            section.record.raw_size
+        )));
+    }
+    let mut raw = section.raw()?;
+    let mut head = [0u8; PROBE_RAYS_HEADER_SIZE];
+    raw.read_exact(&mut head)?;
+    let h = probe_rays::decode_header(&head, strict).map_err(Error::inconsistent)?;
+    if h.probes as usize != probes || h.resolution != resolution {
+        return Err(Error::inconsistent(format!(
+            "probe_rays section is for {} probes on a {}² atlas, the archive has {probes} on {resolution}²",
+            h.probes, h.resolution
+        )));
+    }
+    if u64::from(h.points) > u64::from(resolution) * u64::from(resolution) {
+        return Err(Error::inconsistent(format!(
+            "probe_rays section has {} gather points, more than the atlas's texels",
+            h.points
+        )));
+    }
+    let m = u64::from(h.rays_per_probe);
+    let expected = probe_rays::raw_size_for(probes as u64, m, u64::from(h.points)).unwrap_or(u64::MAX);
+    section.expect_raw_size(expected, || {
+        format!("{probes} probes × {m} rays, {} gather points", h.points)
+    })?;
+    let points = raw.records(h.points as usize, GATHER_POINT_SIZE, probe_rays::decode_points)?;
+    let hits = raw.records(probes * m as usize, 4, probe_rays::decode_hits)?;
+    raw.finish()?;
+    let out = crate::ProbeRays {
+        rays_per_probe: h.rays_per_probe,
+        points,
+        hits,
+    };
+    probe_rays::validate(&out, probes, resolution).map_err(Error::inconsistent)?;
+    Ok(out)
 }
 
 /// Reads the probes section: its 48-byte header first, whose probe count and the archive's

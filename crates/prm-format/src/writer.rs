@@ -362,6 +362,7 @@ pub struct ArchiveWriter {
     emitters: Option<Vec<crate::EmitterGroup>>,
     sky: Option<crate::SkyTransfer>,
     probes: Option<crate::Probes>,
+    probe_rays: Option<crate::ProbeRays>,
     custom: Vec<(u32, Vec<u8>)>,
     records: Vec<SectionRecord>,
     resolution: u32,
@@ -463,6 +464,7 @@ impl ArchiveWriter {
             emitters: None,
             sky: None,
             probes: None,
+            probe_rays: None,
             custom: Vec::new(),
             records: Vec::new(),
             resolution: atlas.resolution,
@@ -577,6 +579,19 @@ impl ArchiveWriter {
     pub fn set_probes(&mut self, probes: crate::Probes) -> Result<()> {
         crate::probes::validate(&probes, self.clusters.len()).map_err(Error::InvalidInput)?;
         self.probes = Some(probes);
+        Ok(())
+    }
+
+    /// Records where every probe's rays meet the scene (formats/prm.md §5.5), after
+    /// [`ArchiveWriter::set_probes`]: one ray set per probe, gather points on texels of this
+    /// atlas. An archive with them is 1.6.
+    pub fn set_probe_rays(&mut self, rays: crate::ProbeRays) -> Result<()> {
+        let probes = self.probes.as_ref().map_or(0, |p| p.len());
+        if probes == 0 {
+            return Err(Error::InvalidInput("probe rays need the probes: set them first".into()));
+        }
+        crate::probe_rays::validate(&rays, probes, self.resolution).map_err(Error::InvalidInput)?;
+        self.probe_rays = Some(rays);
         Ok(())
     }
 
@@ -773,6 +788,10 @@ impl ArchiveWriter {
         }
         if self.metadata.accuracy.is_some() {
             minor = 5;
+        }
+        if let Some(rays) = self.probe_rays.take() {
+            self.write_section(kind::PROBE_RAYS, &crate::probe_rays::encode(&rays, self.resolution))?;
+            minor = 6;
         }
         for (k, data) in std::mem::take(&mut self.custom) {
             self.write_section(k, &data)?;

@@ -865,6 +865,8 @@ fn python_reader_check(path: &Path, filter: TileFilter) -> bool {
     w.set_sky(sky.clone()).unwrap();
     let probes = probe_set(&s);
     w.set_probes(probes.clone()).unwrap();
+    let rays = probe_ray_set(&s);
+    w.set_probe_rays(rays.clone()).unwrap();
     for p in &s.panes {
         w.add_pane(p).unwrap();
     }
@@ -898,7 +900,7 @@ fn python_reader_check(path: &Path, filter: TileFilter) -> bool {
     );
     let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     let mut a = Archive::open(path).unwrap();
-    assert_eq!(j["version"], "1.5");
+    assert_eq!(j["version"], "1.6");
     assert_eq!(j["checksums_verified"], true);
     let ja = &j["accuracy"];
     assert_eq!(ja["exit_points"], 1024);
@@ -921,7 +923,7 @@ fn python_reader_check(path: &Path, filter: TileFilter) -> bool {
     assert_eq!(j["resolution"], 16);
     assert_eq!(j["tile_size"], 8);
     assert_eq!(j["covered_texels"], a.atlas().covered_texels());
-    assert_eq!(j["sections"].as_array().unwrap().len(), 10);
+    assert_eq!(j["sections"].as_array().unwrap().len(), 11);
     let je = j["emitters"].as_array().unwrap();
     assert_eq!(je.len(), groups.len());
     let f3 = |v: &serde_json::Value| [0, 1, 2].map(|k| v[k].as_f64().unwrap() as f32);
@@ -983,6 +985,25 @@ fn python_reader_check(path: &Path, filter: TileFilter) -> bool {
     };
     assert_eq!(a.probes(), Some(&back));
     assert_eq!(a.probes(), Some(&probes));
+    let jr = &j["probe_rays"];
+    let back = ProbeRays {
+        rays_per_probe: u(&jr["rays_per_probe"]),
+        points: jr["points"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|g| GatherPoint {
+                texel: u(&g["texel"]),
+                position: f3(&g["position"]),
+                normal: f3(&g["normal"]),
+                albedo: f3(&g["albedo"]),
+            })
+            .collect(),
+        hits: jr["hits"].as_array().unwrap().iter().map(u).collect(),
+    };
+    assert_eq!(a.probe_rays(), Some(&back));
+    assert_eq!(a.probe_rays(), Some(&rays));
+    assert_eq!(a.info().minor, 6);
     let je: Vec<[f32; 3]> = j["entry_energy"]
         .as_array()
         .unwrap()
@@ -1867,6 +1888,75 @@ fn probe_set(s: &Scene) -> Probes {
         transfer,
         sky: Some(sky),
     }
+}
+
+fn probe_ray_set(s: &Scene) -> ProbeRays {
+    let r = s.atlas.resolution;
+    let points = (0..3)
+        .map(|i| GatherPoint {
+            texel: (i * 7) % (r * r),
+            position: [i as f32, 0.5, -0.25],
+            normal: [0.0, 0.0, 1.0],
+            albedo: [0.5, 0.75, 0.25 * i as f32],
+        })
+        .collect();
+    let hits = (0..5 * 4u32)
+        .map(|i| match i % 5 {
+            3 => prm_format::RAY_SKY,
+            4 => prm_format::RAY_BLOCKED,
+            k => k,
+        })
+        .collect();
+    ProbeRays {
+        rays_per_probe: 4,
+        points,
+        hits,
+    }
+}
+
+/// The probe rays section needs the probes, round-trips exactly and makes the archive 1.6; the
+/// reader refuses a section for another probe count, and one beside no probes section.
+#[test]
+fn probe_rays_round_trip_and_need_the_probes() {
+    let dir = test_dir("probe-rays");
+    let s = scene(16, 8, 4, 29);
+    let rays = probe_ray_set(&s);
+    let path = dir.join("rays.prm");
+    let mut w = ArchiveWriter::create(&path, s.metadata.clone(), &s.atlas, &s.entries, &s.clusters).unwrap();
+    assert!(w.set_probe_rays(rays.clone()).is_err(), "rays before the probes");
+    w.set_probes(probe_set(&s)).unwrap();
+    let mut wrong = rays.clone();
+    wrong.hits.pop();
+    assert!(w.set_probe_rays(wrong).is_err(), "one ray short");
+    w.set_probe_rays(rays.clone()).unwrap();
+    for p in &s.panes {
+        w.add_pane(p).unwrap();
+    }
+    w.finish().unwrap();
+    let mut a = Archive::open(&path).unwrap();
+    assert_eq!(a.info().minor, 6);
+    assert_eq!(a.probe_rays(), Some(&rays));
+    a.verify().unwrap();
+
+    // The same section in an archive without probes: a private section renumbered to kind 10.
+    let plain = dir.join("no-probes.prm");
+    let mut w = ArchiveWriter::create(&plain, s.metadata.clone(), &s.atlas, &s.entries, &s.clusters).unwrap();
+    w.add_custom_section(kind::PRIVATE_FIRST + 10, vec![0; 64]).unwrap();
+    for p in &s.panes {
+        w.add_pane(p).unwrap();
+    }
+    w.finish().unwrap();
+    let mut bytes = std::fs::read(&plain).unwrap();
+    let table = u64_at(&bytes, 16).unwrap() as usize;
+    let i = sections(&bytes)
+        .iter()
+        .position(|s| s.kind == kind::PRIVATE_FIRST + 10)
+        .unwrap();
+    bytes[table + 48 * i..table + 48 * i + 4].copy_from_slice(&kind::PROBE_RAYS.to_le_bytes());
+    put_u16(&mut bytes, 10, 6);
+    resign(&mut bytes);
+    let e = Archive::from_bytes(&bytes).err().unwrap().to_string();
+    assert!(e.contains("without a probes section"), "{e}");
 }
 
 /// The probes section round-trips exactly (its values are exact in f16 here) and makes the

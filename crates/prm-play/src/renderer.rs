@@ -18,7 +18,16 @@ use crate::PlayError;
 pub use prm_runtime::MAX_LIGHTS;
 
 /// Names of the timed passes, in frame order: the run time's, then the shading.
-pub const PASS_NAMES: [&str; 7] = ["shadow", "weights", "rank", "select", "blend", "probes", "shade"];
+pub const PASS_NAMES: [&str; 8] = [
+    "shadow",
+    "weights",
+    "rank",
+    "select",
+    "blend",
+    "probe radiance",
+    "probes",
+    "shade",
+];
 
 /// What a frame shows; the codes are `MODE_*` in `shade.wgsl`.
 #[repr(u32)]

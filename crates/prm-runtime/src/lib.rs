@@ -13,9 +13,10 @@
 //! baked into the archive are scaled with [`Runtime::set_emitter_scales`], and the sky, when the
 //! archive holds its transfer, is set with [`Runtime::set_sky`]; their direct light is
 //! [`Runtime::emitter_lightmap`], their indirect light is in the lightmap. When the archive
-//! holds probes, every frame also sums their irradiance coefficients under the same cluster
-//! weights (`probes.wgsl`), and [`Runtime::probes`] gives shaders the volume to light moving
-//! objects from with [`PROBES_WGSL`].
+//! holds probes, every frame also gathers their irradiance coefficients along their rays from
+//! the surfaces' radiance of the frame (`probe_radiance.wgsl`, `probe_rays.wgsl`; archives
+//! before 1.6: summed under the same cluster weights, `probes.wgsl`), and [`Runtime::probes`]
+//! gives shaders the volume to light moving objects from with [`PROBES_WGSL`].
 //!
 //! Every resource lives on the device given to [`Runtime::new`]; nothing is global.
 //!
@@ -47,6 +48,7 @@ mod baked;
 mod irradiance;
 mod lights;
 mod options;
+mod probe_rays;
 mod probes;
 mod shadow;
 mod shared;
@@ -61,12 +63,12 @@ use prm_scene::{Aabb, Light, Scene};
 pub use baked::EmitterInfo;
 pub use irradiance::DILATE_STEPS;
 pub use lights::{look_to, orthographic, perspective, shadow_views, SPOT_SINGLE_VIEW_MAX_DEG};
-pub use options::{archive_top_k, RuntimeError, RuntimeOptions, MAX_SHADOW_RESOLUTION};
+pub use options::{archive_top_k, ProbeLight, RuntimeError, RuntimeOptions, MAX_SHADOW_RESOLUTION};
 pub use probes::ProbeVolume;
 pub use shadow::SHADOW_FORMAT;
 pub use shared::{
-    GpuCluster, GpuEffective, GpuEntry, GpuFrame, GpuLight, GpuProbeGrid, GpuSelected, GpuView, GpuWeight, LightKind,
-    LIGHTS_WGSL, PROBES_WGSL, SHARED_WGSL,
+    GpuCluster, GpuEffective, GpuEntry, GpuFrame, GpuGatherPoint, GpuLight, GpuProbeGrid, GpuProbeRays, GpuSelected,
+    GpuView, GpuWeight, LightKind, LIGHTS_WGSL, PROBES_WGSL, SHARED_WGSL,
 };
 
 use shadow::{ShadowMaps, ShadowPass};
@@ -76,7 +78,15 @@ use weights::WeightsPass;
 /// Most lights a frame may have.
 pub const MAX_LIGHTS: usize = 256;
 /// Names of the timed passes in frame order, for a [`PassTimer`] handed to [`Runtime::encode`].
-pub const PASS_NAMES: [&str; 6] = ["shadow", "weights", "rank", "select", "blend", "probes"];
+pub const PASS_NAMES: [&str; 7] = [
+    "shadow",
+    "weights",
+    "rank",
+    "select",
+    "blend",
+    "probe radiance",
+    "probes",
+];
 /// Format of the lightmap [`Runtime::lightmap`] (not filterable everywhere: sample it with
 /// `textureLoad` and filter by hand, as `prm-play`'s shading does).
 pub const LIGHTMAP_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
@@ -407,7 +417,17 @@ impl Runtime {
         let weights = WeightsPass::new(device, &buffers, &maps.array);
         let topk = TopKPasses::new(device, &buffers, &panes, &lightmap_view, &emitters.indirect_view);
         let probes = match archive.probes() {
-            Some(p) => Some(probes::ProbesPass::new(device, &buffers, p)?),
+            Some(p) => Some(probes::ProbesPass::new(
+                device,
+                &buffers,
+                p,
+                archive.probe_rays().filter(|_| options.probe_light == ProbeLight::Rays),
+                probes::RayInputs {
+                    shadow_maps: &maps.array,
+                    lightmap: &lightmap_view,
+                    baked_direct: &emitters.view,
+                },
+            )?),
             None => None,
         };
         scope.pop("runtime setup")?;
@@ -455,6 +475,9 @@ impl Runtime {
             self.maps = ShadowMaps::new(&self.device, self.options.shadow_resolution, capacity);
             self.shadow.rebind(&self.device, &self.maps);
             self.weights.rebind(&self.device, &self.buffers, &self.maps.array);
+            if let Some(p) = &mut self.probes {
+                p.rebind(&self.device, &self.buffers, &self.maps.array);
+            }
         }
         self.view_count = views.len() as u32;
         let o = &self.options;
@@ -519,15 +542,19 @@ impl Runtime {
         );
         self.topk.encode(encoder, self.cluster_count, self.resolution, timer);
         if let Some(p) = &self.probes {
-            p.encode(encoder, timer);
+            p.encode(&self.device, encoder, &self.buffers, external, timer);
         }
     }
 
     /// The probe volume, when the archive holds probes: bindings for [`PROBES_WGSL`], whose
-    /// coefficients every [`Runtime::encode`] sums under the frame's weights of all clusters (the
-    /// lights' indirect light through the panes), plus the sky's light, direct and bounced,
-    /// when the archive holds its transfer to the probes (the emitters' traced light does not
-    /// reach the probes).
+    /// coefficients every [`Runtime::encode`] fills. When the archive holds the probes' rays
+    /// (format 1.6; [`Runtime::probes_gather_rays`]) they are gathered along them from the
+    /// radiance of the surfaces the rays reach: the lights' direct light through the shadow
+    /// maps, the lightmap's indirect light and the emitters' and sky's baked direct light, plus
+    /// the sky seen directly. Without rays they are summed under the frame's weights of all
+    /// clusters (the lights' indirect light through the panes), plus the sky's light, direct and
+    /// bounced, when the archive holds its transfer to the probes (the emitters' light does not
+    /// reach them then).
     pub fn probes(&self) -> Option<ProbeVolume<'_>> {
         self.probes.as_ref().map(|p| ProbeVolume {
             grid: &p.grid,
@@ -535,6 +562,24 @@ impl Runtime {
             coefficients: &p.coefficients,
             positions: &p.positions,
         })
+    }
+
+    /// Whether the probes are gathered along their rays (archives of format 1.6 baked with
+    /// them) rather than summed through the panes.
+    pub fn probes_gather_rays(&self) -> bool {
+        self.probes.as_ref().is_some_and(|p| p.has_rays())
+    }
+
+    /// Reads back the radiance (RGB, W/m²/sr) the last frame gave every gather point of the
+    /// probe rays ([`prm_format::ProbeRays::points`]; empty without rays), waiting for the
+    /// device.
+    pub fn read_probe_radiance(&self) -> Result<Vec<[f32; 3]>, RuntimeError> {
+        let Some(buffer) = self.probes.as_ref().and_then(|p| p.ray_radiance()) else {
+            return Ok(Vec::new());
+        };
+        let bytes = readback::read_buffer(&self.device, &self.queue, buffer, buffer.size())?;
+        let v: &[[f32; 4]] = bytemuck::cast_slice(&bytes);
+        Ok(v.iter().map(|c| [c[0], c[1], c[2]]).collect())
     }
 
     /// Reads the last frame's probe coefficients back (nine RGB per probe; empty without

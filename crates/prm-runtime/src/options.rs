@@ -65,6 +65,18 @@ pub enum RuntimeError {
     },
 }
 
+/// How the run time lights the probes of an archive that has them.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum ProbeLight {
+    /// Along the probes' rays, from the surfaces' light of the frame, when the archive holds
+    /// them (format 1.6); through the panes otherwise.
+    #[default]
+    Rays,
+    /// Through the panes: the clusters' transfer under the frame's weights (what archives
+    /// before 1.6 hold), for comparison.
+    Panes,
+}
+
 /// Run-time settings.
 #[derive(Clone, Debug, PartialEq)]
 pub struct RuntimeOptions {
@@ -86,6 +98,8 @@ pub struct RuntimeOptions {
     pub normal_offset: f32,
     /// Depth tolerance of a shadow lookup, in shadow texels (world size at the point).
     pub depth_bias: f32,
+    /// How the probes are lit ([`ProbeLight::Rays`] by default).
+    pub probe_light: ProbeLight,
 }
 
 impl RuntimeOptions {
@@ -141,6 +155,7 @@ impl Default for RuntimeOptions {
             fade_band: 0.25,
             normal_offset: 1.5,
             depth_bias: 1.5,
+            probe_light: ProbeLight::default(),
         }
     }
 }

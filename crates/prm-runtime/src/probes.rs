@@ -1,13 +1,38 @@
 //! The probes pass (`shaders/runtime/probes.wgsl`): every probe's irradiance coefficients under
 //! this frame's cluster weights, Σ_c weight_c ⊙ transfer[c][probe] over all clusters (not the
 //! blend's top K, see the shader), one invocation per probe and coefficient, after the weights;
-//! plus the sky's part, summed on the CPU when the sky changes ([`ProbesPass::write_sky`]); and
-//! the probe volume it fills, which shaders sample with [`crate::PROBES_WGSL`].
+//! or, when the archive holds the probes' rays (format 1.6), the probe rays passes
+//! ([`crate::probe_rays`]) after the blend, which gather them from the surfaces' light of the
+//! frame; plus the sky's part, summed on the CPU when the sky changes
+//! ([`ProbesPass::write_sky`]); and the probe volume it fills, which shaders sample with
+//! [`crate::PROBES_WGSL`].
+//!
+//! Why the rays (`cargo xtask eval --probes`; README, *Probes*): through the panes a probe
+//! sees the direct light only at the entry points, point-sampled, which put the default
+//! Cornell box's probes 27% from the reference; gathered from the surfaces they see it at
+//! every texel.
 
-use prm_format::{sky_irradiance_sh, ProbeSkyTransfer, Probes, SH_COEFFS};
+use prm_format::{sky_irradiance_sh, ProbeRays, ProbeSkyTransfer, Probes, SH_COEFFS};
 use prm_gpu_kit::{pipeline, ComputePass, PassTimer};
 
+use crate::probe_rays::ProbeRaysPass;
 use crate::{Buffers, GpuProbeGrid, RuntimeError};
+
+/// How the probes are lit.
+enum Light {
+    /// Σ over clusters of the weights times the archive's transfer.
+    Panes(ComputePass),
+    /// Gathered along the archive's rays.
+    Rays(Box<ProbeRaysPass>),
+}
+
+/// The views the probe rays read: the shadow maps, the indirect lightmap and the baked direct
+/// lightmap of emitters and sky.
+pub(crate) struct RayInputs<'a> {
+    pub shadow_maps: &'a wgpu::TextureView,
+    pub lightmap: &'a wgpu::TextureView,
+    pub baked_direct: &'a wgpu::TextureView,
+}
 
 /// What a shader needs to light moving objects from the probes with [`crate::PROBES_WGSL`]:
 /// bind `grid` as `var<uniform> probe_grid: ProbeGrid`, `cells` as
@@ -38,7 +63,7 @@ impl<'a> ProbeVolume<'a> {
 
 /// Sums the probes' coefficients.
 pub(crate) struct ProbesPass {
-    pass: ComputePass,
+    light: Light,
     pub grid: wgpu::Buffer,
     pub cells: wgpu::Buffer,
     pub coefficients: wgpu::Buffer,
@@ -52,14 +77,20 @@ pub(crate) struct ProbesPass {
 }
 
 impl ProbesPass {
-    /// Uploads the archive's probes and their transfer; refused when the transfer exceeds the
-    /// device's storage binding size.
-    pub fn new(device: &wgpu::Device, b: &Buffers, probes: &Probes) -> Result<ProbesPass, RuntimeError> {
+    /// Uploads the archive's probes and their rays, or without rays their transfer; refused
+    /// when the transfer exceeds the device's storage binding size.
+    pub fn new(
+        device: &wgpu::Device,
+        b: &Buffers,
+        probes: &Probes,
+        rays: Option<&ProbeRays>,
+        inputs: RayInputs,
+    ) -> Result<ProbesPass, RuntimeError> {
         // Cluster-major arrays of nine RGB triples: the f32 layout the shader reads, as is.
         let transfer: &[u8] = bytemuck::cast_slice(&probes.transfer);
         let bytes = transfer.len() as u64;
         let max = device.limits().max_storage_buffer_binding_size;
-        if bytes > max {
+        if rays.is_none() && bytes > max {
             return Err(RuntimeError::Probes(format!(
                 "{} probes × {} clusters take {:.1} MiB of transfer, over the device's {:.1} MiB storage binding",
                 probes.len(),
@@ -87,7 +118,6 @@ impl ProbesPass {
             cell_probe[c as usize] = p as i32;
         }
         let cells = pipeline::buffer_init(device, "prm probe cells", bytemuck::cast_slice(&cell_probe), st);
-        let transfer = pipeline::buffer_init(device, "prm probe transfer", transfer, st);
         let coefficients = pipeline::storage(
             device,
             "prm probe coefficients",
@@ -100,28 +130,69 @@ impl ProbesPass {
             (probes.len() * SH_COEFFS * 16) as u64,
             wgpu::BufferUsages::empty(),
         );
-        let pass = ComputePass::new(
-            device,
-            "probes",
-            &[crate::SHARED_WGSL, include_str!("../../../shaders/runtime/probes.wgsl")],
-            &[
-                b.frame.as_entire_binding(),
-                b.weights.as_entire_binding(),
-                grid.as_entire_binding(),
-                transfer.as_entire_binding(),
-                coefficients.as_entire_binding(),
-                sky.as_entire_binding(),
-            ],
-        );
+        let (light, sky_transfer) = match rays {
+            Some(rays) => {
+                let pass = ProbeRaysPass::new(
+                    device,
+                    b,
+                    rays,
+                    inputs.shadow_maps,
+                    inputs.lightmap,
+                    inputs.baked_direct,
+                    &coefficients,
+                    &sky,
+                );
+                // The sky's direct light along the rays that leave the scene; its light on the
+                // surfaces comes with their radiance.
+                (Light::Rays(Box::new(pass)), Some(rays.sky_transfer()))
+            }
+            None => {
+                let transfer = pipeline::buffer_init(device, "prm probe transfer", transfer, st);
+                let pass = ComputePass::new(
+                    device,
+                    "probes",
+                    &[crate::SHARED_WGSL, include_str!("../../../shaders/runtime/probes.wgsl")],
+                    &[
+                        b.frame.as_entire_binding(),
+                        b.weights.as_entire_binding(),
+                        grid.as_entire_binding(),
+                        transfer.as_entire_binding(),
+                        coefficients.as_entire_binding(),
+                        sky.as_entire_binding(),
+                    ],
+                );
+                (Light::Panes(pass), probes.sky.clone())
+            }
+        };
         Ok(ProbesPass {
-            pass,
+            light,
             grid,
             cells,
             coefficients,
             sky,
             positions: probes.positions.clone(),
-            sky_transfer: probes.sky.clone(),
+            sky_transfer,
         })
+    }
+
+    /// Whether the probes are gathered along their rays (else through the panes).
+    pub fn has_rays(&self) -> bool {
+        matches!(self.light, Light::Rays(_))
+    }
+
+    /// The gather points' radiance buffer, when the probes have rays.
+    pub fn ray_radiance(&self) -> Option<&wgpu::Buffer> {
+        match &self.light {
+            Light::Rays(r) => Some(r.radiance()),
+            Light::Panes(_) => None,
+        }
+    }
+
+    /// Binds the probe rays to other (larger) shadow maps.
+    pub fn rebind(&mut self, device: &wgpu::Device, b: &Buffers, shadow_maps: &wgpu::TextureView) {
+        if let Light::Rays(r) = &mut self.light {
+            r.rebind(device, b, shadow_maps);
+        }
     }
 
     /// Uploads the sky's part of the probes' coefficients under the sky `coeffs` (zeros when
@@ -138,9 +209,23 @@ impl ProbesPass {
         queue.write_buffer(&self.sky, 0, bytemuck::cast_slice(&v));
     }
 
-    /// One invocation per probe and coefficient (workgroups of 64).
-    pub fn encode(&self, encoder: &mut wgpu::CommandEncoder, timer: Option<&PassTimer>) {
-        let slots = (self.positions.len() * SH_COEFFS) as u32;
-        self.pass.encode(encoder, [slots.div_ceil(64), 1, 1], timer);
+    /// Through the panes one invocation per probe and coefficient (workgroups of 64), after
+    /// the weights; along the rays the probe rays passes, after the blend, reading `external`
+    /// shadow maps for this frame if given.
+    pub fn encode(
+        &self,
+        device: &wgpu::Device,
+        encoder: &mut wgpu::CommandEncoder,
+        b: &Buffers,
+        external: Option<&wgpu::TextureView>,
+        timer: Option<&PassTimer>,
+    ) {
+        match &self.light {
+            Light::Panes(pass) => {
+                let slots = (self.positions.len() * SH_COEFFS) as u32;
+                pass.encode(encoder, [slots.div_ceil(64), 1, 1], timer);
+            }
+            Light::Rays(rays) => rays.encode(device, encoder, b, external, timer),
+        }
     }
 }

@@ -76,6 +76,39 @@ pub struct GpuProbeGrid {
     pub count: u32,
 }
 
+/// Where probe rays end: a covered lightmap texel's exit point; `GatherPoint` in the shaders
+/// ([`prm_format::GatherPoint`]).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct GpuGatherPoint {
+    /// World position.
+    pub position: [f32; 3],
+    /// Texel index `y·R + x`.
+    pub texel: u32,
+    /// Unit normal.
+    pub normal: [f32; 3],
+    /// Padding.
+    pub _pad0: u32,
+    /// Albedo.
+    pub albedo: [f32; 3],
+    /// Padding.
+    pub _pad1: u32,
+}
+
+/// The counts of the probe rays; `ProbeRays` in the shaders.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct GpuProbeRays {
+    /// Probes.
+    pub probes: u32,
+    /// Rays per probe.
+    pub rays_per_probe: u32,
+    /// Gather points.
+    pub points: u32,
+    /// Padding.
+    pub _pad0: u32,
+}
+
 /// A light; `Light` in the shaders.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
@@ -242,6 +275,14 @@ mod tests {
         wgsl_layout!(s, GpuEffective, "Effective", [weight, rank]).unwrap();
         wgsl_layout!(s, GpuSelected, "Selected", [weight, cluster]).unwrap();
         wgsl_layout!(s, GpuProbeGrid, "ProbeGrid", [origin, spacing, dims, count]).unwrap();
+        wgsl_layout!(
+            s,
+            GpuGatherPoint,
+            "GatherPoint",
+            [position, texel, normal, _pad0, albedo, _pad1]
+        )
+        .unwrap();
+        wgsl_layout!(s, GpuProbeRays, "ProbeRays", [probes, rays_per_probe, points, _pad0]).unwrap();
     }
 
     #[test]

@@ -39,7 +39,7 @@ pub use emitters::{EmitterGroup, Emitters, Receiver};
 pub use error::TraceError;
 pub use pane::{evaluate_atlas_panes, evaluate_panes, Lattice, PaneParams, Panes};
 pub use prm_scene::{parse_camera, parse_light, parse_size, SpecError, ENTRY_DISK};
-pub use probes::{place_probes, probe_transfer, ProbeLayout};
+pub use probes::{place_probes, probe_rays, probe_transfer, ProbeLayout};
 pub use reference::{Estimate, ImageMode, Lighting, ReferenceParams, ReferenceTracer, SKY_DIRECT_SAMPLES};
 pub use rng::Rng;
 pub use sampling::{cosine_hemisphere, sample_surface, sobol2, EntryParams, SurfaceSample};

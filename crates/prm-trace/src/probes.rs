@@ -37,8 +37,12 @@
 //! a surface beside it agree.
 
 use glam::Vec3;
-use prm_format::{sh_basis, ProbeGrid, ProbeSkyTransfer, SH_COEFFS};
+use prm_format::{
+    probe_ray_direction, sh_basis, GatherPoint, ProbeGrid, ProbeRays, ProbeSkyTransfer, RAY_BLOCKED, RAY_SKY,
+    SH_COEFFS, SH_COSINE_LOBE,
+};
 use prm_scene::Scene;
+use prm_scene::{Atlas, EMPTY_TEXEL};
 use rayon::prelude::*;
 
 use crate::bvh::Bvh;
@@ -57,14 +61,6 @@ pub const INSIDE_BACK_FRACTION: f32 = 0.25;
 pub const PROGRESS_CHUNK: usize = 32;
 /// Growth of the spacing per step while the grid has more cells than the budget.
 const SPACING_STEP: f32 = 1.02;
-/// Clamped-cosine convolution of orders 0, 1, 2 (Ramamoorthi and Hanrahan's `Â_l`).
-const COSINE_LOBE: [f32; 3] = [
-    std::f32::consts::PI,
-    2.0 * std::f32::consts::PI / 3.0,
-    std::f32::consts::PI / 4.0,
-];
-/// The order of each of the nine coefficients.
-const ORDER: [usize; SH_COEFFS] = [0, 1, 1, 1, 2, 2, 2, 2, 2];
 
 /// One probe's nine irradiance coefficients (RGB).
 pub type ProbeCoefficients = [[f32; 3]; SH_COEFFS];
@@ -201,7 +197,7 @@ pub fn probe_transfer(
             let y = sh_basis(w.to_array());
             let slot = &mut acc[clustering.of_entry[v.entry as usize] as usize];
             for i in 0..SH_COEFFS {
-                let f = COSINE_LOBE[ORDER[i]] * y[i];
+                let f = SH_COSINE_LOBE[i] * y[i];
                 for k in 0..3 {
                     slot[i][k] += e[k] * f;
                 }
@@ -277,7 +273,7 @@ pub fn sky_transfer_at_probes(
                             let yi = sh_basis(first.to_array());
                             let yk = sh_basis(dir.to_array());
                             for i in 0..SH_COEFFS {
-                                let wi = 4.0 * std::f32::consts::PI * COSINE_LOBE[ORDER[i]] * yi[i];
+                                let wi = 4.0 * std::f32::consts::PI * SH_COSINE_LOBE[i] * yi[i];
                                 for k in 0..SH_COEFFS {
                                     m[i][k] += throughput * (wi * yk[k]);
                                 }
@@ -294,6 +290,106 @@ pub fn sky_transfer_at_probes(
         .iter()
         .map(|m| std::array::from_fn(|i| std::array::from_fn(|k| (m[i][k] / n).to_array())))
         .collect())
+}
+
+/// Where every probe's [`probe_ray_direction`] rays meet the scene (format 1.6's probe rays):
+/// the covered texel of the front face they hit, [`RAY_SKY`] when they leave the scene, or
+/// [`RAY_BLOCKED`] at a back face. A hit on a texel no exit covers takes the texel its gutter
+/// copies, else the nearest exit of the same chart within two texels. Gather points are the
+/// exits the rays reach, in exit order.
+pub fn probe_rays(bvh: &Bvh, atlas: &Atlas, positions: &[Vec3], rays_per_probe: u32) -> ProbeRays {
+    let m = rays_per_probe;
+    let res = atlas.resolution as i64;
+    let dirs: Vec<Vec3> = (0..m).map(|d| Vec3::from(probe_ray_direction(d, m))).collect();
+    let gutter: std::collections::HashMap<u32, u32> = atlas.dilation.iter().copied().collect();
+    let exit_at = |tri: u32, b1: f32, b2: f32| -> u32 {
+        let uv = atlas.uvs[tri as usize];
+        let p = uv[0] * (1.0 - b1 - b2) + uv[1] * b1 + uv[2] * b2;
+        let (x, y) = (
+            ((p.x * res as f32) as i64).clamp(0, res - 1),
+            ((p.y * res as f32) as i64).clamp(0, res - 1),
+        );
+        let texel = (y * res + x) as u32;
+        let own = atlas.texel_exit[texel as usize];
+        if own != EMPTY_TEXEL {
+            return own;
+        }
+        if let Some(&src) = gutter.get(&texel) {
+            let e = atlas.texel_exit[src as usize];
+            if e != EMPTY_TEXEL {
+                return e;
+            }
+        }
+        let chart = atlas.chart_of_triangle[tri as usize];
+        let mut best = (i64::MAX, EMPTY_TEXEL);
+        for dy in -2..=2i64 {
+            for dx in -2..=2i64 {
+                let (nx, ny) = (x + dx, y + dy);
+                if nx < 0 || ny < 0 || nx >= res || ny >= res {
+                    continue;
+                }
+                let e = atlas.texel_exit[(ny * res + nx) as usize];
+                let d = dx * dx + dy * dy;
+                if e != EMPTY_TEXEL
+                    && d < best.0
+                    && atlas.chart_of_triangle[atlas.exits[e as usize].triangle as usize] == chart
+                {
+                    best = (d, e);
+                }
+            }
+        }
+        best.1
+    };
+    let per_probe: Vec<Vec<u32>> = positions
+        .par_iter()
+        .map(|&p| {
+            dirs.iter()
+                .map(|&d| match bvh.closest_hit(p, d, f32::INFINITY, u32::MAX) {
+                    None => RAY_SKY,
+                    Some(h) if !h.front => RAY_BLOCKED,
+                    // No exit near the hit (EMPTY_TEXEL is RAY_SKY's value): it sends nothing.
+                    Some(h) => match exit_at(h.triangle, h.b1, h.b2) {
+                        EMPTY_TEXEL => RAY_BLOCKED,
+                        e => e,
+                    },
+                })
+                .collect()
+        })
+        .collect();
+    // Exits reached, in exit order, and each one's gather point index.
+    let mut index = vec![EMPTY_TEXEL; atlas.exits.len()];
+    for &e in per_probe.iter().flatten() {
+        if (e as usize) < index.len() {
+            index[e as usize] = 0;
+        }
+    }
+    let mut points = Vec::new();
+    for (e, slot) in index.iter_mut().enumerate() {
+        if *slot == 0 {
+            *slot = points.len() as u32;
+            let x = &atlas.exits[e];
+            points.push(GatherPoint {
+                texel: x.texel,
+                position: x.position.to_array(),
+                normal: x.normal.to_array(),
+                albedo: x.albedo.to_array(),
+            });
+        }
+    }
+    let hits = per_probe
+        .into_iter()
+        .flatten()
+        .map(|e| match e {
+            RAY_SKY => RAY_SKY,
+            e if (e as usize) < index.len() => index[e as usize],
+            _ => RAY_BLOCKED,
+        })
+        .collect();
+    ProbeRays {
+        rays_per_probe: m,
+        points,
+        hits,
+    }
 }
 
 #[cfg(test)]
@@ -375,7 +471,7 @@ mod tests {
         }
         for i in 0..SH_COEFFS {
             let d = t[0][i][i][0];
-            assert!((d / COSINE_LOBE[ORDER[i]] - 1.0).abs() < 0.1, "diagonal {i}: {d}");
+            assert!((d / SH_COSINE_LOBE[i] - 1.0).abs() < 0.1, "diagonal {i}: {d}");
         }
     }
 

@@ -170,16 +170,26 @@ pub fn renderer(
     scene_path: &std::path::Path,
     top_k: u32,
 ) -> Result<(Renderer, prm_scene::Scene)> {
+    let runtime = prm_play::RuntimeOptions {
+        top_k,
+        ..Default::default()
+    };
+    renderer_with(archive, scene_path, runtime)
+}
+
+/// [`renderer`] with these run-time options.
+pub fn renderer_with(
+    archive: &std::path::Path,
+    scene_path: &std::path::Path,
+    runtime: prm_play::RuntimeOptions,
+) -> Result<(Renderer, prm_scene::Scene)> {
     let (mut a, scene) =
         prm_play::open(archive, Some(scene_path)).with_context(|| format!("opening {}", archive.display()))?;
     let ctx = prm_play::open_vulkan().context("opening a Vulkan device (lavapipe is enough)")?;
     let opts = PlayOptions {
         width: FRAME_SIZE.0,
         height: FRAME_SIZE.1,
-        runtime: prm_play::RuntimeOptions {
-            top_k,
-            ..Default::default()
-        },
+        runtime,
         ..PlayOptions::default()
     };
     let mut r = Renderer::new(ctx, &scene, &mut a, opts).context("creating the renderer")?;

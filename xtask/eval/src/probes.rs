@@ -41,6 +41,10 @@ fn sum(v: &[Vec3]) -> f64 {
 /// the bounds (none: a uniform blue sky, no light).
 type Case = (&'static str, &'static str, &'static [&'static str], Option<[f32; 3]>);
 
+/// Rays per probe the cases bake with: the bake's default (`prm_bake::PROBE_RAYS`, which this
+/// package does not link), given explicitly so that bakes cached before format 1.6 are not taken.
+const PROBE_RAYS: &str = "1024";
+
 /// Runs the probe cases; returns the Markdown table.
 pub fn run(bake_bin: &Path, cache: &Path, root: &Path) -> Result<String> {
     let cases: [Case; 4] = [
@@ -70,7 +74,7 @@ pub fn run(bake_bin: &Path, cache: &Path, root: &Path) -> Result<String> {
         ),
     ];
     let mut md = String::from(
-        "| case | probes | error | energy | shape | reference noise | probes bake s | frame ms: with probes / without |\n| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n",
+        "| case | probes | error along the rays | energy | shape | error through the panes (energy) | reference noise | probes bake s | frame ms: with probes / without |\n| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n",
     );
     for (name, scene_rel, extra, frac) in cases {
         let scene_path = root.join(scene_rel);
@@ -81,10 +85,12 @@ pub fn run(bake_bin: &Path, cache: &Path, root: &Path) -> Result<String> {
             Default::default(),
             64,
         );
-        let args: Vec<String> = std::iter::once("--probes")
+        let args: Vec<String> = ["--probes", "--probe-rays", PROBE_RAYS]
+            .into_iter()
             .chain(extra.iter().copied())
             .map(String::from)
             .collect();
+        let plain_args: Vec<String> = extra.iter().map(|a| a.to_string()).collect();
         let baked = plan::bake(bake_bin, cache, &spec, &args, None, false)?;
         let probe_s = baked.report["timings"]["probes"].as_f64().unwrap_or(f64::NAN);
         let archive = prm_format::Archive::open(&baked.archive)
@@ -111,16 +117,33 @@ pub fn run(bake_bin: &Path, cache: &Path, root: &Path) -> Result<String> {
             lights: &lights,
             mode: Mode::Gi,
         };
+        let read = |r: &prm_play::Renderer| -> Result<Vec<Vec3>> {
+            Ok(r.runtime()
+                .read_probes()?
+                .iter()
+                .flat_map(|c| NORMALS.map(|n| Vec3::from(prm_format::sh_irradiance(c, n)).max(Vec3::ZERO)))
+                .collect())
+        };
         r.render(&input)?;
-        let played: Vec<Vec3> = r
-            .runtime()
-            .read_probes()?
-            .iter()
-            .flat_map(|c| NORMALS.map(|n| Vec3::from(prm_format::sh_irradiance(c, n)).max(Vec3::ZERO)))
-            .collect();
+        let played = read(&r)?;
+        // The same archive with the probes lit through the panes, as before format 1.6.
+        let panes_played = {
+            let options = prm_play::RuntimeOptions {
+                top_k: 32,
+                probe_light: prm_play::ProbeLight::Panes,
+                ..Default::default()
+            };
+            let (mut p, _) = crate::measure::renderer_with(&baked.archive, &scene_path, options)?;
+            if let Some(s) = &sky {
+                p.set_sky(s)?;
+            }
+            p.render(&input)?;
+            read(&p)?
+        };
+        let rays = r.runtime().probes_gather_rays();
         // Frame cost: the same bake without probes (the same archive but for the section),
         // timed alternately with this one.
-        let plain = plan::bake(bake_bin, cache, &spec, &args[1..], None, false)?;
+        let plain = plan::bake(bake_bin, cache, &spec, &plain_args, None, false)?;
         let (mut without, _) = crate::measure::renderer(&plain.archive, &scene_path, 32)?;
         if let Some(s) = &sky {
             without.set_sky(s)?;
@@ -166,25 +189,30 @@ pub fn run(bake_bin: &Path, cache: &Path, root: &Path) -> Result<String> {
         let (r1, r2) = (reference(41)?, reference(43)?);
         let error = rel(&played, &r1);
         let energy = sum(&played) / sum(&r1);
+        let panes_error = rel(&panes_played, &r1);
+        let panes_energy = sum(&panes_played) / sum(&r1);
         let dot: f64 = played.iter().zip(&r1).map(|(a, b)| a.dot(*b) as f64).sum();
         let tt: f64 = played.iter().map(|a| a.length_squared() as f64).sum();
         let scale = (dot / tt.max(1e-30)) as f32;
         let scaled: Vec<Vec3> = played.iter().map(|a| *a * scale).collect();
         let shape = rel(&scaled, &r1);
         let noise = rel(&r2, &r1) / 2f64.sqrt();
+        anyhow::ensure!(rays, "{name}: the bake traced no probe rays");
         println!(
-            "probes: {name}: {} probes, error {:.2}%, energy {energy:.3}, shape {:.2}%, reference noise {:.2}%",
+            "probes: {name}: {} probes, along the rays error {:.2}%, energy {energy:.3}, shape {:.2}%; through the panes {:.2}% ({panes_energy:.3}); reference noise {:.2}%",
             probes.len(),
             100.0 * error,
             100.0 * shape,
+            100.0 * panes_error,
             100.0 * noise
         );
         writeln!(
             md,
-            "| {name} | {} | {:.1}% | {energy:.3} | {:.1}% | {:.1}% | {probe_s:.2} | {with_ms:.1} / {without_ms:.1} |",
+            "| {name} | {} | **{:.1}%** | {energy:.3} | {:.1}% | {:.1}% ({panes_energy:.3}) | {:.1}% | {probe_s:.2} | {with_ms:.1} / {without_ms:.1} |",
             probes.len(),
             100.0 * error,
             100.0 * shape,
+            100.0 * panes_error,
             100.0 * noise
         )?;
     }

@@ -1,0 +1,194 @@
+//! The probe rays passes (`shaders/runtime/probe_radiance.wgsl`, `probe_rays.wgsl`), for archives
+//! whose probes carry their rays (format 1.6): first the radiance every gather point sends this
+//! frame (its direct light through the shadow maps, the lightmap's indirect light and the baked
+//! direct lightmap of emitters and sky, times albedo/π), then every probe's irradiance
+//! coefficients summed along its rays. The probes so see the surfaces' light of the frame, as
+//! the lightmap holds it, instead of the panes' VPLs, which sample the direct light at the
+//! entry points only (issue #11).
+
+use prm_format::{probe_ray_direction, sh_basis, ProbeRays, SH_COEFFS, SH_COSINE_LOBE};
+use prm_gpu_kit::{pipeline, ComputePass, PassTimer};
+
+use crate::{Buffers, GpuGatherPoint, GpuProbeRays};
+
+/// The two passes and the buffers they own.
+pub(crate) struct ProbeRaysPass {
+    radiance_pass: ComputePass,
+    sum: ComputePass,
+    points: wgpu::Buffer,
+    radiance: wgpu::Buffer,
+    lightmap: wgpu::TextureView,
+    baked_direct: wgpu::TextureView,
+    point_count: u32,
+    probe_count: u32,
+}
+
+/// The radiance pass's bindings, in the order of `probe_radiance.wgsl`.
+fn radiance_resources<'a>(
+    b: &'a Buffers,
+    shadow_maps: &'a wgpu::TextureView,
+    points: &'a wgpu::Buffer,
+    lightmap: &'a wgpu::TextureView,
+    baked_direct: &'a wgpu::TextureView,
+    radiance: &'a wgpu::Buffer,
+) -> [wgpu::BindingResource<'a>; 8] {
+    [
+        b.frame.as_entire_binding(),
+        b.lights.as_entire_binding(),
+        b.views.as_entire_binding(),
+        wgpu::BindingResource::TextureView(shadow_maps),
+        points.as_entire_binding(),
+        wgpu::BindingResource::TextureView(lightmap),
+        wgpu::BindingResource::TextureView(baked_direct),
+        radiance.as_entire_binding(),
+    ]
+}
+
+impl ProbeRaysPass {
+    /// Uploads the rays; the sum writes `coefficients` and adds `sky` (both nine `vec4` per
+    /// probe). `lightmap` is the run time's indirect lightmap, `baked_direct` the emitters' and
+    /// sky's direct lightmap.
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(
+        device: &wgpu::Device,
+        b: &Buffers,
+        rays: &ProbeRays,
+        shadow_maps: &wgpu::TextureView,
+        lightmap: &wgpu::TextureView,
+        baked_direct: &wgpu::TextureView,
+        coefficients: &wgpu::Buffer,
+        sky: &wgpu::Buffer,
+    ) -> ProbeRaysPass {
+        let st = wgpu::BufferUsages::STORAGE;
+        let gpu_points: Vec<GpuGatherPoint> = rays
+            .points
+            .iter()
+            .map(|g| GpuGatherPoint {
+                position: g.position,
+                texel: g.texel,
+                normal: g.normal,
+                albedo: g.albedo,
+                ..Default::default()
+            })
+            .collect();
+        // Never empty: a binding of zero bytes is invalid.
+        let gpu_points = if gpu_points.is_empty() {
+            vec![GpuGatherPoint::default()]
+        } else {
+            gpu_points
+        };
+        let points = pipeline::buffer_init(device, "prm gather points", bytemuck::cast_slice(&gpu_points), st);
+        let radiance = pipeline::storage(
+            device,
+            "prm gather radiance",
+            gpu_points.len() as u64 * 16,
+            wgpu::BufferUsages::COPY_SRC,
+        );
+        let m = rays.rays_per_probe;
+        let solid = 4.0 * std::f32::consts::PI / m as f32;
+        let basis: Vec<f32> = (0..m)
+            .flat_map(|d| {
+                let y = sh_basis(probe_ray_direction(d, m));
+                (0..SH_COEFFS).map(move |i| y[i] * SH_COSINE_LOBE[i] * solid)
+            })
+            .collect();
+        let basis = pipeline::buffer_init(device, "prm probe ray basis", bytemuck::cast_slice(&basis), st);
+        let hits = pipeline::buffer_init(device, "prm probe ray hits", bytemuck::cast_slice(&rays.hits), st);
+        let info = GpuProbeRays {
+            probes: rays.probes() as u32,
+            rays_per_probe: m,
+            points: rays.points.len() as u32,
+            ..Default::default()
+        };
+        let info = pipeline::buffer_init(
+            device,
+            "prm probe rays",
+            bytemuck::bytes_of(&info),
+            wgpu::BufferUsages::UNIFORM,
+        );
+        let sum = ComputePass::new(
+            device,
+            "probes",
+            &[
+                crate::SHARED_WGSL,
+                include_str!("../../../shaders/runtime/probe_rays.wgsl"),
+            ],
+            &[
+                info.as_entire_binding(),
+                basis.as_entire_binding(),
+                hits.as_entire_binding(),
+                radiance.as_entire_binding(),
+                coefficients.as_entire_binding(),
+                sky.as_entire_binding(),
+            ],
+        );
+        let parts = [
+            crate::SHARED_WGSL,
+            crate::LIGHTS_WGSL,
+            include_str!("../../../shaders/runtime/probe_radiance.wgsl"),
+        ];
+        let radiance_pass = ComputePass::new(
+            device,
+            "probe radiance",
+            &parts,
+            &radiance_resources(b, shadow_maps, &points, lightmap, baked_direct, &radiance),
+        );
+        ProbeRaysPass {
+            radiance_pass,
+            sum,
+            points,
+            radiance,
+            lightmap: lightmap.clone(),
+            baked_direct: baked_direct.clone(),
+            point_count: rays.points.len() as u32,
+            probe_count: rays.probes() as u32,
+        }
+    }
+
+    /// Binds the radiance pass to other (larger) shadow maps.
+    pub fn rebind(&mut self, device: &wgpu::Device, b: &Buffers, shadow_maps: &wgpu::TextureView) {
+        let r = radiance_resources(
+            b,
+            shadow_maps,
+            &self.points,
+            &self.lightmap,
+            &self.baked_direct,
+            &self.radiance,
+        );
+        self.radiance_pass.rebind(device, &r);
+    }
+
+    /// The radiance pass (one invocation per gather point, reading `external` shadow maps for
+    /// this frame if given), then the sum (one per probe).
+    pub fn encode(
+        &self,
+        device: &wgpu::Device,
+        encoder: &mut wgpu::CommandEncoder,
+        b: &Buffers,
+        external: Option<&wgpu::TextureView>,
+        timer: Option<&PassTimer>,
+    ) {
+        let groups = [self.point_count.div_ceil(64).max(1), 1, 1];
+        match external {
+            Some(maps) => {
+                let r = radiance_resources(
+                    b,
+                    maps,
+                    &self.points,
+                    &self.lightmap,
+                    &self.baked_direct,
+                    &self.radiance,
+                );
+                let group = self.radiance_pass.group(device, &r);
+                self.radiance_pass.encode_with(encoder, &group, groups, timer);
+            }
+            None => self.radiance_pass.encode(encoder, groups, timer),
+        }
+        self.sum.encode(encoder, [self.probe_count.div_ceil(64), 1, 1], timer);
+    }
+
+    /// The radiance buffer (one `vec4` per gather point, `w` unused), for tests.
+    pub fn radiance(&self) -> &wgpu::Buffer {
+        &self.radiance
+    }
+}
