@@ -337,8 +337,9 @@ fn file_stamp(path: &Path) -> String {
 /// native CPU evaluator when the only adapter is a software rasterizer. 3: its shared-visibility
 /// lattice is anchored per chart. 4: emissive materials are baked (format 1.2 emitters section). 5: `--sky`
 /// bakes the sky's transfer (f16), its indirect part smoothed over 3 × 3 texels. 7: automatic entry
-/// points stop at 16 per cluster the budgets allow, and the bake times of the AVX2 variants.
-const BAKE_EPOCH: u32 = 7;
+/// points stop at 16 per cluster the budgets allow, and the bake times of the AVX2 variants. 8: twice
+/// the automatic entry points (32 per cluster) where nothing cuts them; probe rays (format 1.6).
+const BAKE_EPOCH: u32 = 8;
 
 /// Runs `prm-bake bake` for `spec` (extra arguments `extra`), or reuses the cached result under
 /// `cache` keyed by [`BAKE_EPOCH`], the scene file, the arguments and the config.
