@@ -366,11 +366,13 @@ class Reader:
 
     def parse_probe_rays(self, s):
         # 1.6: 32-byte header (probes N, rays per probe M, gather points G, flags = 0, atlas
-        # resolution, 3 reserved), G records (texel u32, position, normal, albedo 3 f32 each),
-        # then N x M hits (u32): a gather point, RAY_SKY or RAY_BLOCKED.
+        # resolution, 3 reserved), G records (texel u32, position, normal, albedo, emission
+        # 3 f32 each, emitter group u32), then N x M hits (u32): a gather point, RAY_SKY or
+        # RAY_BLOCKED.
         n_probes = len(self.probes["cells"])
         texels = self.resolution * self.resolution
-        raw = self.load(s, 32 + 40 * texels + 4 * n_probes * MAX_PROBE_RAYS)
+        groups = len(self.emitters or [])
+        raw = self.load(s, 32 + 56 * texels + 4 * n_probes * MAX_PROBE_RAYS)
         if len(raw) < 32:
             raise InvalidArchive("probe_rays: shorter than its header")
         n, m, g, flags, res, r0, r1, r2 = struct.unpack_from("<8I", raw, 0)
@@ -378,15 +380,18 @@ class Reader:
             raise InvalidArchive("probe_rays: unknown flags or a non-zero reserved field")
         if n != n_probes or res != self.resolution or not 1 <= m <= MAX_PROBE_RAYS or g > texels:
             raise InvalidArchive("probe_rays: probe count, resolution, ray count or point count out of range")
-        if len(raw) != 32 + 40 * g + 4 * n * m:
+        if len(raw) != 32 + 56 * g + 4 * n * m:
             raise InvalidArchive("probe_rays: raw size differs from what the header gives")
         points = []
         for i in range(g):
-            rec = struct.unpack_from("<I9f", raw, 32 + 40 * i)
-            if rec[0] >= texels or any(v != v or abs(v) == float("inf") for v in rec[1:]) or min(rec[7:]) < 0:
+            rec = struct.unpack_from("<I12fI", raw, 32 + 56 * i)
+            if rec[0] >= texels or any(v != v or abs(v) == float("inf") for v in rec[1:13]) or min(rec[7:13]) < 0:
                 raise InvalidArchive("probe_rays: gather point outside the atlas or not finite")
-            points.append(dict(texel=rec[0], position=list(rec[1:4]), normal=list(rec[4:7]), albedo=list(rec[7:10])))
-        hits = list(struct.unpack_from(f"<{n * m}I", raw, 32 + 40 * g))
+            if rec[13] != 0xFFFFFFFF and rec[13] >= groups:
+                raise InvalidArchive("probe_rays: gather point of an emitter group that does not exist")
+            points.append(dict(texel=rec[0], position=list(rec[1:4]), normal=list(rec[4:7]), albedo=list(rec[7:10]),
+                               emission=list(rec[10:13]), emitter=rec[13]))
+        hits = list(struct.unpack_from(f"<{n * m}I", raw, 32 + 56 * g))
         if any(h >= g and h not in (RAY_SKY, RAY_BLOCKED) for h in hits):
             raise InvalidArchive("probe_rays: a ray ends at a gather point that does not exist")
         self.probe_rays = dict(rays_per_probe=m, points=points, hits=hits)

@@ -1,8 +1,8 @@
 // prm-runtime probe radiance pass: the radiance every gather point (a lightmap texel probe rays end at,
 // formats/prm.md §5.5) sends this frame, albedo/π × its irradiance: the lights' direct light
 // through the shadow maps, the indirect lightmap the blend just wrote and the emitters' and
-// sky's baked direct lightmap. One invocation per gather point; comes after shared.wgsl and
-// lights.wgsl.
+// sky's baked direct lightmap; plus, on an emissive surface, its emission times its group's
+// scale. One invocation per gather point; comes after shared.wgsl and lights.wgsl.
 
 @group(0) @binding(0) var<uniform> frame: Frame;
 @group(0) @binding(1) var<storage, read> lights: array<Light>;
@@ -13,6 +13,8 @@
 // 1×1 and black without emitters or sky.
 @group(0) @binding(6) var baked_direct: texture_2d<f32>;
 @group(0) @binding(7) var<storage, read_write> radiance: array<vec4<f32>>;
+// Every emitter group's scale (rgb), at least one entry.
+@group(0) @binding(8) var<storage, read> scales: array<vec4<f32>>;
 
 const INV_PI: f32 = 0.31830988;
 
@@ -29,5 +31,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     if textureDimensions(baked_direct).x == side {
         e += textureLoad(baked_direct, texel, 0).rgb;
     }
-    radiance[i] = vec4<f32>(g.albedo * INV_PI * e, 0.0);
+    var l = g.albedo * INV_PI * e;
+    if g.emitter != NO_EMITTER && g.emitter < arrayLength(&scales) {
+        l += g.emission * scales[g.emitter].rgb;
+    }
+    radiance[i] = vec4<f32>(l, 0.0);
 }

@@ -115,15 +115,20 @@ struct ProbeGrid {
 };
 
 // Where probe rays end (`prm_format::GatherPoint`): a covered lightmap texel (index y·R + x) and
-// its exit point's position, normal and albedo.
+// its exit point's position, normal and albedo; on an emissive surface its emitter group (else
+// NO_EMITTER) and emitted radiance at scale 1.
 struct GatherPoint {
     position: vec3<f32>,
     texel: u32,
     normal: vec3<f32>,
     _pad0: u32,
     albedo: vec3<f32>,
+    emitter: u32,
+    emission: vec3<f32>,
     _pad1: u32,
 };
+
+const NO_EMITTER: u32 = 0xFFFFFFFFu;
 
 // The counts of the probe rays (formats/prm.md §5.5).
 struct ProbeRays {

@@ -855,7 +855,7 @@ pub fn bake(job: &BakeJob<'_>, renderer: Renderer<'_>, progress: &mut dyn Progre
             source,
         })?;
         if params.probe_rays > 0 {
-            let rays = prm_trace::probe_rays(&bvh, &atlas, &positions, params.probe_rays);
+            let rays = prm_trace::probe_rays(scene, &bvh, &atlas, &positions, params.probe_rays);
             detail += &format!(
                 "; {} rays each, reaching {} texels",
                 params.probe_rays,

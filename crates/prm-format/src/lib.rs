@@ -52,7 +52,7 @@ pub use groups::{residual_groups, RESIDUAL_GROUPS};
 pub use layout::{checksum, compression, kind, limits, MAGIC, VERSION_MAJOR, VERSION_MINOR};
 pub use metadata::{Accuracy, Generator, LightAccuracy, Metadata, Units};
 pub use probe_rays::{
-    probe_ray_direction, GatherPoint, ProbeRays, MAX_PROBE_RAYS, RAY_BLOCKED, RAY_SKY, SH_COSINE_LOBE,
+    probe_ray_direction, GatherPoint, ProbeRays, MAX_PROBE_RAYS, NO_EMITTER, RAY_BLOCKED, RAY_SKY, SH_COSINE_LOBE,
 };
 pub use probes::{
     sh_irradiance, sky_irradiance_sh, ProbeGrid, ProbeSkyTransfer, Probes, AXIS_NORMALS, MAX_PROBES, MAX_PROBE_CELLS,

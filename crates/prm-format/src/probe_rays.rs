@@ -5,18 +5,20 @@
 //!
 //! Direction `d` of `M` ([`probe_ray_direction`]) is the `d`-th point of a spherical Fibonacci
 //! set about +Y, the polar axis of [`crate::sh_basis`]. A ray ends at a *gather point* (a
-//! covered lightmap texel: its index `y·R + x`, the exit point's position, normal and albedo),
+//! covered lightmap texel: its index `y·R + x`, the exit point's position, normal, albedo and,
+//! on an emissive surface, its emitted radiance and emitter group),
 //! at the sky ([`RAY_SKY`]: it left the scene), or nowhere ([`RAY_BLOCKED`]: it met a back face or
 //! a surface without a texel, which sends no light, as in the reference tracer). With `L_g` the
-//! radiance a gather point sends (`albedo/π × irradiance`), probe `p`'s irradiance coefficients
+//! radiance a gather point sends (`albedo/π × irradiance` plus its emission times its group's
+//! scale), probe `p`'s irradiance coefficients
 //! are `c_i = Â_i · 4π/M · Σ_d Y_i(ω_d) · L(hit[p][d])` ([`ProbeRays::irradiance_sh`], `Â` the
 //! clamped-cosine factors [`SH_COSINE_LOBE`]), and the sky's direct light reaches the probe
 //! along the rays marked [`RAY_SKY`] ([`ProbeRays::sky_transfer`]).
 //!
 //! Layout (formats/prm.md §5.5), little-endian: a 32-byte header (probe count `N`, rays per
 //! probe `M`, gather point count `G`, flags = 0, the atlas resolution `R`, three reserved
-//! `u32` = 0), `G` gather point records of 40 bytes (texel `u32`, position, normal and albedo
-//! `[f32; 3]` each), then `N × M` hits (`u32`), probe by probe.
+//! `u32` = 0), `G` gather point records of 56 bytes (texel `u32`, position, normal, albedo and
+//! emission `[f32; 3]` each, emitter group `u32`), then `N × M` hits (`u32`), probe by probe.
 
 use crate::layout::{Cursor, PutLe};
 use crate::probes::ProbeSkyTransfer;
@@ -25,7 +27,9 @@ use crate::sh::{sh_basis, SH_COEFFS};
 /// Size of the section's fixed header.
 pub const PROBE_RAYS_HEADER_SIZE: usize = 32;
 /// Bytes of one gather point record.
-pub(crate) const GATHER_POINT_SIZE: usize = 40;
+pub(crate) const GATHER_POINT_SIZE: usize = 56;
+/// A gather point's `emitter` when its surface emits nothing.
+pub const NO_EMITTER: u32 = u32::MAX;
 /// A ray that left the scene: it sees the sky.
 pub const RAY_SKY: u32 = u32::MAX;
 /// A ray that met a back face or a surface without a texel: it sees nothing.
@@ -52,6 +56,11 @@ pub struct GatherPoint {
     pub normal: [f32; 3],
     /// The exit point's albedo (RGB, 0 to 1).
     pub albedo: [f32; 3],
+    /// The radiance its surface emits at scale 1 (RGB, W/m²/sr; zero when it emits nothing).
+    pub emission: [f32; 3],
+    /// The emitter group (index into the emitters section) whose run-time scale multiplies
+    /// `emission`, or [`NO_EMITTER`].
+    pub emitter: u32,
 }
 
 /// Every probe's rays: `hits[p * M + d]` is where direction `d` from probe `p` ends.
@@ -140,8 +149,8 @@ pub(crate) fn raw_size_for(n: u64, m: u64, g: u64) -> Option<u64> {
         .checked_add(PROBE_RAYS_HEADER_SIZE as u64)
 }
 
-/// Checks `rays` against the archive's probe count and atlas resolution.
-pub(crate) fn validate(rays: &ProbeRays, probes: usize, resolution: u32) -> Result<(), String> {
+/// Checks `rays` against the archive's probe count, atlas resolution and emitter groups.
+pub(crate) fn validate(rays: &ProbeRays, probes: usize, resolution: u32, groups: usize) -> Result<(), String> {
     let m = rays.rays_per_probe;
     if m == 0 || m > MAX_PROBE_RAYS {
         return Err(format!("{m} rays per probe, not between 1 and {MAX_PROBE_RAYS}"));
@@ -162,11 +171,17 @@ pub(crate) fn validate(rays: &ProbeRays, probes: usize, resolution: u32) -> Resu
     }
     for (i, g) in rays.points.iter().enumerate() {
         let finite = g.position.iter().chain(&g.normal).all(|v| v.is_finite());
-        let albedo = g.albedo.iter().all(|v| v.is_finite() && *v >= 0.0);
+        let albedo = g.albedo.iter().chain(&g.emission).all(|v| v.is_finite() && *v >= 0.0);
         if u64::from(g.texel) >= texels || !finite || !albedo {
             return Err(format!(
-                "gather point {i} has texel {} of {texels}, or a position, normal or albedo that is not finite (albedo ≥ 0)",
+                "gather point {i} has texel {} of {texels}, or a position, normal, albedo or emission that is not finite (albedo and emission ≥ 0)",
                 g.texel
+            ));
+        }
+        if g.emitter != NO_EMITTER && g.emitter as usize >= groups {
+            return Err(format!(
+                "gather point {i} belongs to emitter group {} of {groups}",
+                g.emitter
             ));
         }
     }
@@ -205,9 +220,10 @@ pub(crate) fn encode(rays: &ProbeRays, resolution: u32) -> Vec<u8> {
     }
     for g in &rays.points {
         b.put_u32(g.texel);
-        for v in g.position.iter().chain(&g.normal).chain(&g.albedo) {
+        for v in g.position.iter().chain(&g.normal).chain(&g.albedo).chain(&g.emission) {
             b.put_f32(*v);
         }
+        b.put_u32(g.emitter);
     }
     for h in &rays.hits {
         b.put_u32(*h);
@@ -261,6 +277,8 @@ pub(crate) fn decode_points(raw: &[u8]) -> Result<Vec<GatherPoint>, String> {
                 position: c.vec3().map_err(err)?,
                 normal: c.vec3().map_err(err)?,
                 albedo: c.vec3().map_err(err)?,
+                emission: c.vec3().map_err(err)?,
+                emitter: c.u32().map_err(err)?,
             })
         })
         .collect()
@@ -284,10 +302,15 @@ mod tests {
             position: [t as f32, 0.5, -1.0],
             normal: [0.0, 1.0, 0.0],
             albedo: [0.5, 0.25, 1.0],
+            emission: [0.0; 3],
+            emitter: NO_EMITTER,
         };
+        let mut lamp = point(9);
+        lamp.emission = [4.0, 3.0, 2.0];
+        lamp.emitter = 1;
         ProbeRays {
             rays_per_probe: 4,
-            points: vec![point(3), point(9)],
+            points: vec![point(3), lamp],
             hits: vec![0, 1, RAY_SKY, RAY_BLOCKED, 1, 1, 1, 0],
         }
     }
@@ -295,7 +318,7 @@ mod tests {
     #[test]
     fn round_trip_through_the_encoding() {
         let r = rays();
-        validate(&r, 2, 4).unwrap();
+        validate(&r, 2, 4, 2).unwrap();
         let raw = encode(&r, 4);
         assert_eq!(raw.len() as u64, raw_size_for(2, 4, 2).unwrap());
         let h = decode_header(&raw[..PROBE_RAYS_HEADER_SIZE], true).unwrap();
@@ -319,17 +342,21 @@ mod tests {
 
     #[test]
     fn rejects_what_the_layout_cannot_hold() {
-        assert!(validate(&rays(), 3, 4).is_err(), "probe count");
-        assert!(validate(&rays(), 2, 3).is_err(), "texel 9 outside a 3² atlas");
+        assert!(validate(&rays(), 3, 4, 2).is_err(), "probe count");
+        assert!(validate(&rays(), 2, 3, 2).is_err(), "texel 9 outside a 3² atlas");
+        assert!(validate(&rays(), 2, 4, 1).is_err(), "emitter group 1 of 1");
         let mut r = rays();
         r.hits[1] = 2;
-        assert!(validate(&r, 2, 4).is_err(), "gather point 2 of 2");
+        assert!(validate(&r, 2, 4, 2).is_err(), "gather point 2 of 2");
         let mut r = rays();
         r.points[0].albedo[1] = -0.1;
-        assert!(validate(&r, 2, 4).is_err(), "negative albedo");
+        assert!(validate(&r, 2, 4, 2).is_err(), "negative albedo");
+        let mut r = rays();
+        r.points[1].emission[2] = f32::INFINITY;
+        assert!(validate(&r, 2, 4, 2).is_err(), "infinite emission");
         let mut r = rays();
         r.points[1].position[0] = f32::NAN;
-        assert!(validate(&r, 2, 4).is_err(), "NaN position");
+        assert!(validate(&r, 2, 4, 2).is_err(), "NaN position");
         let mut head = encode(&rays(), 4)[..PROBE_RAYS_HEADER_SIZE].to_vec();
         head[4..8].copy_from_slice(&0u32.to_le_bytes());
         assert!(decode_header(&head, true).is_err(), "zero rays per probe");
@@ -366,6 +393,8 @@ mod tests {
                 position: [0.0; 3],
                 normal: [0.0, 1.0, 0.0],
                 albedo: [1.0; 3],
+                emission: [0.0; 3],
+                emitter: NO_EMITTER,
             }],
             hits: vec![0; m as usize],
         };

@@ -461,7 +461,14 @@ impl<R: Read + Seek> Archive<R> {
             (Some(_), None) => {
                 return Err(Error::inconsistent("probe_rays section without a probes section"));
             }
-            (Some(rec), Some(p)) => Some(read_probe_rays(&mut src, rec, strict, p.len(), atlas.resolution)?),
+            (Some(rec), Some(p)) => Some(read_probe_rays(
+                &mut src,
+                rec,
+                strict,
+                p.len(),
+                atlas.resolution,
+                emitters.len(),
+            )?),
         };
 
         let info = ArchiveInfo {
@@ -1091,6 +1098,7 @@ fn read_probe_rays<R: Read + Seek>(
     strict: bool,
     probes: usize,
     resolution: u32,
+    groups: usize,
 ) -> Result<crate::ProbeRays> {
     use crate::probe_rays::{self, GATHER_POINT_SIZE, PROBE_RAYS_HEADER_SIZE};
     let section = open_section(src, rec)?;
@@ -1129,7 +1137,7 @@ fn read_probe_rays<R: Read + Seek>(
         points,
         hits,
     };
-    probe_rays::validate(&out, probes, resolution).map_err(Error::inconsistent)?;
+    probe_rays::validate(&out, probes, resolution, groups).map_err(Error::inconsistent)?;
     Ok(out)
 }
 

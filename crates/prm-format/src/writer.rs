@@ -583,14 +583,16 @@ impl ArchiveWriter {
     }
 
     /// Records where every probe's rays meet the scene (formats/prm.md §5.5), after
-    /// [`ArchiveWriter::set_probes`]: one ray set per probe, gather points on texels of this
-    /// atlas. An archive with them is 1.6.
+    /// [`ArchiveWriter::set_probes`] (and [`ArchiveWriter::set_emitters`] when gather points
+    /// name emitter groups): one ray set per probe, gather points on texels of this atlas. An
+    /// archive with them is 1.6.
     pub fn set_probe_rays(&mut self, rays: crate::ProbeRays) -> Result<()> {
         let probes = self.probes.as_ref().map_or(0, |p| p.len());
         if probes == 0 {
             return Err(Error::InvalidInput("probe rays need the probes: set them first".into()));
         }
-        crate::probe_rays::validate(&rays, probes, self.resolution).map_err(Error::InvalidInput)?;
+        let groups = self.emitters.as_ref().map_or(0, |g| g.len());
+        crate::probe_rays::validate(&rays, probes, self.resolution, groups).map_err(Error::InvalidInput)?;
         self.probe_rays = Some(rays);
         Ok(())
     }

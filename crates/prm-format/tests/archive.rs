@@ -997,6 +997,8 @@ fn python_reader_check(path: &Path, filter: TileFilter) -> bool {
                 position: f3(&g["position"]),
                 normal: f3(&g["normal"]),
                 albedo: f3(&g["albedo"]),
+                emission: f3(&g["emission"]),
+                emitter: u(&g["emitter"]),
             })
             .collect(),
         hits: jr["hits"].as_array().unwrap().iter().map(u).collect(),
@@ -1898,6 +1900,9 @@ fn probe_ray_set(s: &Scene) -> ProbeRays {
             position: [i as f32, 0.5, -0.25],
             normal: [0.0, 0.0, 1.0],
             albedo: [0.5, 0.75, 0.25 * i as f32],
+            emission: [i as f32, 0.0, 0.5],
+            // The test scene's two emitter groups, and none.
+            emitter: if i < 2 { i } else { NO_EMITTER },
         })
         .collect();
     let hits = (0..5 * 4u32)
@@ -1925,6 +1930,11 @@ fn probe_rays_round_trip_and_need_the_probes() {
     let mut w = ArchiveWriter::create(&path, s.metadata.clone(), &s.atlas, &s.entries, &s.clusters).unwrap();
     assert!(w.set_probe_rays(rays.clone()).is_err(), "rays before the probes");
     w.set_probes(probe_set(&s)).unwrap();
+    assert!(
+        w.set_probe_rays(rays.clone()).is_err(),
+        "gather points of emitter groups the archive does not have"
+    );
+    w.set_emitters(emitter_groups(&s, 2)).unwrap();
     let mut wrong = rays.clone();
     wrong.hits.pop();
     assert!(w.set_probe_rays(wrong).is_err(), "one ray short");

@@ -426,6 +426,7 @@ impl Runtime {
                     shadow_maps: &maps.array,
                     lightmap: &lightmap_view,
                     baked_direct: &emitters.view,
+                    groups: emitters.scales.len(),
                 },
             )?),
             None => None,
@@ -551,10 +552,10 @@ impl Runtime {
     /// (format 1.6; [`Runtime::probes_gather_rays`]) they are gathered along them from the
     /// radiance of the surfaces the rays reach: the lights' direct light through the shadow
     /// maps, the lightmap's indirect light and the emitters' and sky's baked direct light, plus
-    /// the sky seen directly. Without rays they are summed under the frame's weights of all
-    /// clusters (the lights' indirect light through the panes), plus the sky's light, direct and
-    /// bounced, when the archive holds its transfer to the probes (the emitters' light does not
-    /// reach them then).
+    /// emissive surfaces (times their group's scale) and the sky seen directly. Without rays
+    /// they are summed under the frame's weights of all clusters (the lights' indirect light
+    /// through the panes), plus the sky's light, direct and bounced, when the archive holds its
+    /// transfer to the probes (the emitters' light does not reach them then).
     pub fn probes(&self) -> Option<ProbeVolume<'_>> {
         self.probes.as_ref().map(|p| ProbeVolume {
             grid: &p.grid,
@@ -652,6 +653,9 @@ impl Runtime {
         self.emitters.check(scales)?;
         self.emitters.scales = scales.to_vec();
         self.emitters.apply(&self.queue, &mut self.entries);
+        if let Some(p) = &self.probes {
+            p.write_scales(&self.queue, scales);
+        }
         self.queue
             .write_buffer(&self.buffers.entries, 0, bytemuck::cast_slice(&self.entries));
         Ok(())

@@ -1,7 +1,8 @@
 //! The probe rays passes (`shaders/runtime/probe_radiance.wgsl`, `probe_rays.wgsl`), for archives
 //! whose probes carry their rays (format 1.6): first the radiance every gather point sends this
 //! frame (its direct light through the shadow maps, the lightmap's indirect light and the baked
-//! direct lightmap of emitters and sky, times albedo/π), then every probe's irradiance
+//! direct lightmap of emitters and sky, times albedo/π, plus on emissive surfaces their
+//! emission times their group's scale), then every probe's irradiance
 //! coefficients summed along its rays. The probes so see the surfaces' light of the frame, as
 //! the lightmap holds it, instead of the panes' VPLs, which sample the direct light at the
 //! entry points only (issue #11).
@@ -17,6 +18,8 @@ pub(crate) struct ProbeRaysPass {
     sum: ComputePass,
     points: wgpu::Buffer,
     radiance: wgpu::Buffer,
+    /// Every emitter group's scale (`vec4`, at least one).
+    scales: wgpu::Buffer,
     lightmap: wgpu::TextureView,
     baked_direct: wgpu::TextureView,
     point_count: u32,
@@ -31,7 +34,8 @@ fn radiance_resources<'a>(
     lightmap: &'a wgpu::TextureView,
     baked_direct: &'a wgpu::TextureView,
     radiance: &'a wgpu::Buffer,
-) -> [wgpu::BindingResource<'a>; 8] {
+    scales: &'a wgpu::Buffer,
+) -> [wgpu::BindingResource<'a>; 9] {
     [
         b.frame.as_entire_binding(),
         b.lights.as_entire_binding(),
@@ -41,13 +45,15 @@ fn radiance_resources<'a>(
         wgpu::BindingResource::TextureView(lightmap),
         wgpu::BindingResource::TextureView(baked_direct),
         radiance.as_entire_binding(),
+        scales.as_entire_binding(),
     ]
 }
 
 impl ProbeRaysPass {
     /// Uploads the rays; the sum writes `coefficients` and adds `sky` (both nine `vec4` per
     /// probe). `lightmap` is the run time's indirect lightmap, `baked_direct` the emitters' and
-    /// sky's direct lightmap.
+    /// sky's direct lightmap; `groups` the archive's emitter groups, each at scale 1 until
+    /// [`ProbeRaysPass::write_scales`].
     #[allow(clippy::too_many_arguments)]
     pub fn new(
         device: &wgpu::Device,
@@ -58,6 +64,7 @@ impl ProbeRaysPass {
         baked_direct: &wgpu::TextureView,
         coefficients: &wgpu::Buffer,
         sky: &wgpu::Buffer,
+        groups: usize,
     ) -> ProbeRaysPass {
         let st = wgpu::BufferUsages::STORAGE;
         let gpu_points: Vec<GpuGatherPoint> = rays
@@ -68,6 +75,8 @@ impl ProbeRaysPass {
                 texel: g.texel,
                 normal: g.normal,
                 albedo: g.albedo,
+                emitter: g.emitter,
+                emission: g.emission,
                 ..Default::default()
             })
             .collect();
@@ -83,6 +92,13 @@ impl ProbeRaysPass {
             "prm gather radiance",
             gpu_points.len() as u64 * 16,
             wgpu::BufferUsages::COPY_SRC,
+        );
+        let ones = vec![[1.0f32; 4]; groups.max(1)];
+        let scales = pipeline::buffer_init(
+            device,
+            "prm gather emitter scales",
+            bytemuck::cast_slice(&ones),
+            st | wgpu::BufferUsages::COPY_DST,
         );
         let m = rays.rays_per_probe;
         let solid = 4.0 * std::f32::consts::PI / m as f32;
@@ -131,13 +147,14 @@ impl ProbeRaysPass {
             device,
             "probe radiance",
             &parts,
-            &radiance_resources(b, shadow_maps, &points, lightmap, baked_direct, &radiance),
+            &radiance_resources(b, shadow_maps, &points, lightmap, baked_direct, &radiance, &scales),
         );
         ProbeRaysPass {
             radiance_pass,
             sum,
             points,
             radiance,
+            scales,
             lightmap: lightmap.clone(),
             baked_direct: baked_direct.clone(),
             point_count: rays.points.len() as u32,
@@ -154,6 +171,7 @@ impl ProbeRaysPass {
             &self.lightmap,
             &self.baked_direct,
             &self.radiance,
+            &self.scales,
         );
         self.radiance_pass.rebind(device, &r);
     }
@@ -178,6 +196,7 @@ impl ProbeRaysPass {
                     &self.lightmap,
                     &self.baked_direct,
                     &self.radiance,
+                    &self.scales,
                 );
                 let group = self.radiance_pass.group(device, &r);
                 self.radiance_pass.encode_with(encoder, &group, groups, timer);
@@ -185,6 +204,15 @@ impl ProbeRaysPass {
             None => self.radiance_pass.encode(encoder, groups, timer),
         }
         self.sum.encode(encoder, [self.probe_count.div_ceil(64), 1, 1], timer);
+    }
+
+    /// Uploads the emitter groups' scales (one RGB each, the archive's order).
+    pub fn write_scales(&self, queue: &wgpu::Queue, scales: &[[f32; 3]]) {
+        if scales.is_empty() {
+            return;
+        }
+        let v: Vec<[f32; 4]> = scales.iter().map(|s| [s[0], s[1], s[2], 0.0]).collect();
+        queue.write_buffer(&self.scales, 0, bytemuck::cast_slice(&v));
     }
 
     /// The radiance buffer (one `vec4` per gather point, `w` unused), for tests.

@@ -32,6 +32,8 @@ pub(crate) struct RayInputs<'a> {
     pub shadow_maps: &'a wgpu::TextureView,
     pub lightmap: &'a wgpu::TextureView,
     pub baked_direct: &'a wgpu::TextureView,
+    /// The archive's emitter groups.
+    pub groups: usize,
 }
 
 /// What a shader needs to light moving objects from the probes with [`crate::PROBES_WGSL`]:
@@ -141,6 +143,7 @@ impl ProbesPass {
                     inputs.baked_direct,
                     &coefficients,
                     &sky,
+                    inputs.groups,
                 );
                 // The sky's direct light along the rays that leave the scene; its light on the
                 // surfaces comes with their radiance.
@@ -185,6 +188,13 @@ impl ProbesPass {
         match &self.light {
             Light::Rays(r) => Some(r.radiance()),
             Light::Panes(_) => None,
+        }
+    }
+
+    /// Uploads the emitter groups' scales, which the probe rays' emissive gather points take.
+    pub fn write_scales(&self, queue: &wgpu::Queue, scales: &[[f32; 3]]) {
+        if let Light::Rays(r) = &self.light {
+            r.write_scales(queue, scales);
         }
     }
 

@@ -91,6 +91,10 @@ pub struct GpuGatherPoint {
     pub _pad0: u32,
     /// Albedo.
     pub albedo: [f32; 3],
+    /// Emitter group whose scale multiplies `emission` ([`prm_format::NO_EMITTER`]: none).
+    pub emitter: u32,
+    /// Emitted radiance at scale 1.
+    pub emission: [f32; 3],
     /// Padding.
     pub _pad1: u32,
 }
@@ -279,7 +283,7 @@ mod tests {
             s,
             GpuGatherPoint,
             "GatherPoint",
-            [position, texel, normal, _pad0, albedo, _pad1]
+            [position, texel, normal, _pad0, albedo, emitter, emission, _pad1]
         )
         .unwrap();
         wgsl_layout!(s, GpuProbeRays, "ProbeRays", [probes, rays_per_probe, points, _pad0]).unwrap();

@@ -38,8 +38,8 @@
 
 use glam::Vec3;
 use prm_format::{
-    probe_ray_direction, sh_basis, GatherPoint, ProbeGrid, ProbeRays, ProbeSkyTransfer, RAY_BLOCKED, RAY_SKY,
-    SH_COEFFS, SH_COSINE_LOBE,
+    probe_ray_direction, sh_basis, GatherPoint, ProbeGrid, ProbeRays, ProbeSkyTransfer, NO_EMITTER, RAY_BLOCKED,
+    RAY_SKY, SH_COEFFS, SH_COSINE_LOBE,
 };
 use prm_scene::Scene;
 use prm_scene::{Atlas, EMPTY_TEXEL};
@@ -296,8 +296,10 @@ pub fn sky_transfer_at_probes(
 /// the covered texel of the front face they hit, [`RAY_SKY`] when they leave the scene, or
 /// [`RAY_BLOCKED`] at a back face. A hit on a texel no exit covers takes the texel its gutter
 /// copies, else the nearest exit of the same chart within two texels. Gather points are the
-/// exits the rays reach, in exit order.
-pub fn probe_rays(bvh: &Bvh, atlas: &Atlas, positions: &[Vec3], rays_per_probe: u32) -> ProbeRays {
+/// exits the rays reach, in exit order; on an emissive material's triangle they carry its
+/// radiance and its group in [`crate::Emitters::from_scene`]'s order (the archive's).
+pub fn probe_rays(scene: &Scene, bvh: &Bvh, atlas: &Atlas, positions: &[Vec3], rays_per_probe: u32) -> ProbeRays {
+    let emitters = crate::Emitters::from_scene(scene);
     let m = rays_per_probe;
     let res = atlas.resolution as i64;
     let dirs: Vec<Vec3> = (0..m).map(|d| Vec3::from(probe_ray_direction(d, m))).collect();
@@ -368,11 +370,15 @@ pub fn probe_rays(bvh: &Bvh, atlas: &Atlas, positions: &[Vec3], rays_per_probe: 
         if *slot == 0 {
             *slot = points.len() as u32;
             let x = &atlas.exits[e];
+            let material = scene.triangles[x.triangle as usize].material;
+            let group = emitters.groups.iter().position(|g| g.material == material);
             points.push(GatherPoint {
                 texel: x.texel,
                 position: x.position.to_array(),
                 normal: x.normal.to_array(),
                 albedo: x.albedo.to_array(),
+                emission: group.map_or([0.0; 3], |g| emitters.groups[g].radiance.to_array()),
+                emitter: group.map_or(NO_EMITTER, |g| g as u32),
             });
         }
     }

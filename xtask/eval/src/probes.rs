@@ -3,8 +3,9 @@
 //! bake, and what the probes cost the bake and a frame.
 //!
 //! Each case is baked with `prm-bake bake SCENE --probes` (the default 512-cell budget), played
-//! for one frame with one point light (or, for the courtyard, a uniform sky and no light; its
-//! reference then adds the sky's direct light) in-process (`prm_play::Renderer`, the run time's probes
+//! for one frame with one point light (or, for the courtyard, a uniform sky and no light, and
+//! for McGuire's CornellBox-Original its own lamp and no light; their references then add the
+//! sky's or the lamp's direct light) in-process (`prm_play::Renderer`, the run time's probes
 //! pass), and each probe's irradiance is taken at the six axis normals from its coefficients
 //! (negative values clamped, as `probe_volume.wgsl` does). The reference is
 //! `prm_trace::ReferenceTracer::indirect_at_points` at the same points and normals, twice with
@@ -37,9 +38,21 @@ fn sum(v: &[Vec3]) -> f64 {
     v.iter().map(|x| x.element_sum() as f64).sum()
 }
 
-/// A case: name, scene, extra bake arguments, and the point light's position as a fraction of
-/// the bounds (none: a uniform blue sky, no light).
-type Case = (&'static str, &'static str, &'static [&'static str], Option<[f32; 3]>);
+/// How a case is lit.
+#[derive(Clone, Copy)]
+enum Lit {
+    /// One point light at this fraction of the bounds.
+    Point([f32; 3]),
+    /// A uniform blue sky, no light (the reference adds the sky's direct light, which the
+    /// probes hold).
+    Sky,
+    /// The scene's own emissive surfaces at scale 1, no light (the reference adds their direct
+    /// light, which the probes hold).
+    Lamps,
+}
+
+/// A case: name, scene (from the repository's root), extra bake arguments, lighting.
+type Case = (&'static str, &'static str, &'static [&'static str], Lit);
 
 /// Rays per probe the cases bake with: the bake's default (`prm_bake::PROBE_RAYS`, which this
 /// package does not link), given explicitly so that bakes cached before format 1.6 are not taken.
@@ -47,37 +60,47 @@ const PROBE_RAYS: &str = "1024";
 
 /// Runs the probe cases; returns the Markdown table.
 pub fn run(bake_bin: &Path, cache: &Path, root: &Path) -> Result<String> {
-    let cases: [Case; 4] = [
+    let cases: [Case; 5] = [
         (
             "Cornell box, default bake",
             "scenes/cornell-box/cornell-box.obj",
             &[],
-            Some([0.36, 0.82, 0.54]),
+            Lit::Point([0.36, 0.82, 0.54]),
         ),
         (
             "Cornell box, 8192 entries, 256 clusters",
             "scenes/cornell-box/cornell-box.obj",
             &["--entries", "8192", "--clusters", "256"],
-            Some([0.36, 0.82, 0.54]),
+            Lit::Point([0.36, 0.82, 0.54]),
         ),
         (
             "two rooms, default bake",
             "scenes/two-rooms/two-rooms.obj",
             &[],
-            Some([0.25, 0.8, 0.5]),
+            Lit::Point([0.25, 0.8, 0.5]),
+        ),
+        (
+            "CornellBox-Original, default bake, its own lamp",
+            "../shared/scenes/cornell-box/CornellBox-Original.obj",
+            &[],
+            Lit::Lamps,
         ),
         (
             "courtyard, default bake --sky, blue sky",
             "scenes/courtyard/courtyard.obj",
             &["--sky"],
-            None,
+            Lit::Sky,
         ),
     ];
     let mut md = String::from(
         "| case | probes | error along the rays | energy | shape | error through the panes (energy) | reference noise | probes bake s | frame ms: with probes / without |\n| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n",
     );
-    for (name, scene_rel, extra, frac) in cases {
+    for (name, scene_rel, extra, lit) in cases {
         let scene_path = root.join(scene_rel);
+        if !scene_path.exists() {
+            println!("probes: {name}: skipped, {} is not there", scene_path.display());
+            continue;
+        }
         let spec = SceneSpec::new(
             &name.replace([' ', ','], "-"),
             scene_path.clone(),
@@ -98,19 +121,26 @@ pub fn run(bake_bin: &Path, cache: &Path, root: &Path) -> Result<String> {
         let probes = archive.probes().context("the bake placed no probes")?.clone();
         let (mut r, scene) = crate::measure::renderer(&baked.archive, &scene_path, 32)?;
         let b = scene.bounds();
-        let lights: Vec<Light> = frac
-            .map(|f| Light::Point {
+        let lights: Vec<Light> = match lit {
+            Lit::Point(f) => vec![Light::Point {
                 position: b.min + b.extent() * Vec3::from(f),
                 intensity: Vec3::splat(0.8 * b.diagonal() * b.diagonal()),
-            })
-            .into_iter()
-            .collect();
-        let sky = frac
-            .is_none()
-            .then(|| prm_scene::Sky::uniform(Vec3::new(0.4, 0.6, 1.0)));
-        if let Some(s) = &sky {
-            r.set_sky(s)?;
-        }
+            }],
+            Lit::Sky | Lit::Lamps => Vec::new(),
+        };
+        let sky = matches!(lit, Lit::Sky).then(|| prm_scene::Sky::uniform(Vec3::new(0.4, 0.6, 1.0)));
+        // `measure::renderer` turns the emitters off; the lamp case turns them on again.
+        let lamps = vec![[1.0f32; 3]; r.runtime().emitters().len()];
+        let light_up = |r: &mut prm_play::Renderer| -> Result<()> {
+            if let Some(s) = &sky {
+                r.set_sky(s)?;
+            }
+            if matches!(lit, Lit::Lamps) {
+                r.set_emitter_scales(&lamps)?;
+            }
+            Ok(())
+        };
+        light_up(&mut r)?;
         let camera = prm_play::default_camera(&scene);
         let input = FrameInput {
             camera,
@@ -134,9 +164,7 @@ pub fn run(bake_bin: &Path, cache: &Path, root: &Path) -> Result<String> {
                 ..Default::default()
             };
             let (mut p, _) = crate::measure::renderer_with(&baked.archive, &scene_path, options)?;
-            if let Some(s) = &sky {
-                p.set_sky(s)?;
-            }
+            light_up(&mut p)?;
             p.render(&input)?;
             read(&p)?
         };
@@ -145,9 +173,7 @@ pub fn run(bake_bin: &Path, cache: &Path, root: &Path) -> Result<String> {
         // timed alternately with this one.
         let plain = plan::bake(bake_bin, cache, &spec, &plain_args, None, false)?;
         let (mut without, _) = crate::measure::renderer(&plain.archive, &scene_path, 32)?;
-        if let Some(s) = &sky {
-            without.set_sky(s)?;
-        }
+        light_up(&mut without)?;
         let (mut with_ms, mut without_ms) = (0.0, 0.0);
         for _ in 0..2 {
             for (renderer, total) in [(&mut r, &mut with_ms), (&mut without, &mut without_ms)] {
@@ -169,14 +195,33 @@ pub fn run(bake_bin: &Path, cache: &Path, root: &Path) -> Result<String> {
             .iter()
             .flat_map(|p| NORMALS.map(|n| (Vec3::from(*p), Vec3::from(n))))
             .collect();
+        let emitters = prm_trace::Emitters::from_scene(&scene);
         let mut tracer = ReferenceTracer::new(&scene, &bvh, Lighting::Lights(&lights));
         if let Some(s) = &sky {
             tracer = tracer.with_sky(s);
         }
-        // With a sky the probes hold its direct light too.
-        let direct = match &sky {
-            Some(_) => tracer.sky_direct_at_points(&points, SPP),
-            None => vec![Vec3::ZERO; points.len()],
+        if matches!(lit, Lit::Lamps) {
+            tracer = tracer.with_emitters(&emitters);
+        }
+        // With a sky or lamps the probes hold their direct light too.
+        let direct = match lit {
+            Lit::Sky => tracer.sky_direct_at_points(&points, SPP),
+            Lit::Lamps => {
+                let receivers: Vec<prm_trace::Receiver> = points
+                    .iter()
+                    .map(|&(position, n)| prm_trace::Receiver {
+                        position,
+                        ng: n,
+                        n,
+                        triangle: u32::MAX,
+                    })
+                    .collect();
+                let per_group = emitters.group_irradiance(&scene, &bvh, &receivers, SPP, 47);
+                (0..points.len())
+                    .map(|i| per_group.iter().map(|g| g[i]).sum())
+                    .collect()
+            }
+            Lit::Point(_) => vec![Vec3::ZERO; points.len()],
         };
         let reference = |seed| -> Result<Vec<Vec3>> {
             let params = ReferenceParams {
