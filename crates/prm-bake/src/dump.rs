@@ -528,7 +528,6 @@ fn write_exr_files<R: Read + Seek>(archive: &mut Archive<R>, dir: &Path) -> Resu
     Ok((n, names))
 }
 
-/// Per-channel sum of RGB values (f64 accumulation).
 /// The shares of the probe rays that reach a texel, the sky and nothing.
 fn ray_shares(r: &prm_format::ProbeRays) -> [f64; 3] {
     let n = r.hits.len().max(1) as f64;
@@ -567,6 +566,7 @@ fn uniform_sky_sums(s: &prm_format::SkyTransfer) -> ([f64; 3], [f64; 3]) {
     (rgb_sum(&d), rgb_sum(&i))
 }
 
+/// Per-channel sum of RGB values (f64 accumulation).
 fn rgb_sum(v: &[[f32; 3]]) -> [f64; 3] {
     v.iter()
         .fold([0.0; 3], |s, x| [0, 1, 2].map(|k| s[k] + f64::from(x[k])))

@@ -94,6 +94,9 @@ impl ProbeRays {
     /// `radiance[g]` (RGB, W/m²/sr) and the sky nothing.
     pub fn irradiance_sh(&self, radiance: &[[f32; 3]]) -> Vec<[[f32; 3]; SH_COEFFS]> {
         let m = self.rays_per_probe;
+        if m == 0 {
+            return Vec::new();
+        }
         let basis: Vec<[f32; SH_COEFFS]> = (0..m).map(|d| sh_basis(probe_ray_direction(d, m))).collect();
         let scale: [f32; SH_COEFFS] =
             std::array::from_fn(|i| SH_COSINE_LOBE[i] * 4.0 * std::f32::consts::PI / m as f32);
@@ -122,6 +125,9 @@ impl ProbeRays {
     /// Σ_{d to the sky} Y_i(ω_d) Y_k(ω_d)`, the same for the three channels.
     pub fn sky_transfer(&self) -> Vec<ProbeSkyTransfer> {
         let m = self.rays_per_probe;
+        if m == 0 {
+            return Vec::new();
+        }
         let basis: Vec<[f32; SH_COEFFS]> = (0..m).map(|d| sh_basis(probe_ray_direction(d, m))).collect();
         let solid = 4.0 * std::f32::consts::PI / m as f32;
         self.hits

@@ -561,6 +561,11 @@ impl ArchiveWriter {
     /// (row-major), all finite and non-negative. An archive with them is 1.2.
     pub fn set_emitters(&mut self, groups: Vec<crate::EmitterGroup>) -> Result<()> {
         crate::emitters::validate(&groups, self.entry_count, self.resolution).map_err(Error::InvalidInput)?;
+        if let Some(rays) = &self.probe_rays {
+            let probes = self.probes.as_ref().map_or(0, |p| p.len());
+            crate::probe_rays::validate(rays, probes, self.resolution, groups.len())
+                .map_err(|e| Error::InvalidInput(format!("the probe rays already set: {e}")))?;
+        }
         self.emitters = Some(groups);
         Ok(())
     }
@@ -578,6 +583,15 @@ impl ArchiveWriter {
     /// with them is 1.4.
     pub fn set_probes(&mut self, probes: crate::Probes) -> Result<()> {
         crate::probes::validate(&probes, self.clusters.len()).map_err(Error::InvalidInput)?;
+        if let Some(rays) = &self.probe_rays {
+            if rays.probes() != probes.len() {
+                return Err(Error::InvalidInput(format!(
+                    "the probe rays already set are for {} probes, not {}",
+                    rays.probes(),
+                    probes.len()
+                )));
+            }
+        }
         self.probes = Some(probes);
         Ok(())
     }

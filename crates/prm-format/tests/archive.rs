@@ -1939,6 +1939,19 @@ fn probe_rays_round_trip_and_need_the_probes() {
     wrong.hits.pop();
     assert!(w.set_probe_rays(wrong).is_err(), "one ray short");
     w.set_probe_rays(rays.clone()).unwrap();
+    let mut fewer = probe_set(&s);
+    fewer.cells.pop();
+    fewer.positions.pop();
+    fewer.transfer.truncate(fewer.cells.len() * s.clusters.len());
+    fewer.sky.as_mut().unwrap().pop();
+    assert!(
+        w.set_probes(fewer).is_err(),
+        "other probes than the rays were traced for"
+    );
+    assert!(
+        w.set_emitters(emitter_groups(&s, 1)).is_err(),
+        "fewer emitter groups than the rays name"
+    );
     for p in &s.panes {
         w.add_pane(p).unwrap();
     }

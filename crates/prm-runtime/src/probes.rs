@@ -134,6 +134,29 @@ impl ProbesPass {
         );
         let (light, sky_transfer) = match rays {
             Some(rays) => {
+                let limits = device.limits();
+                let points = rays.points.len() as u64;
+                let buffers = [
+                    ("ray hits", rays.hits.len() as u64 * 4),
+                    (
+                        "gather points",
+                        points * std::mem::size_of::<crate::GpuGatherPoint>() as u64,
+                    ),
+                ];
+                for (what, bytes) in buffers {
+                    if bytes > max {
+                        return Err(RuntimeError::Probes(format!(
+                            "the probes' {what} take {:.1} MiB, over the device's {:.1} MiB storage binding",
+                            bytes as f64 / (1 << 20) as f64,
+                            max as f64 / (1 << 20) as f64
+                        )));
+                    }
+                }
+                if points.div_ceil(64) > u64::from(limits.max_compute_workgroups_per_dimension) {
+                    return Err(RuntimeError::Probes(format!(
+                        "{points} gather points need more workgroups than the device dispatches at once"
+                    )));
+                }
                 let pass = ProbeRaysPass::new(
                     device,
                     b,

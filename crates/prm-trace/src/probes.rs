@@ -294,8 +294,9 @@ pub fn sky_transfer_at_probes(
 
 /// Where every probe's [`probe_ray_direction`] rays meet the scene (format 1.6's probe rays):
 /// the covered texel of the front face they hit, [`RAY_SKY`] when they leave the scene, or
-/// [`RAY_BLOCKED`] at a back face. A hit on a texel no exit covers takes the texel its gutter
-/// copies, else the nearest exit of the same chart within two texels. Gather points are the
+/// [`RAY_BLOCKED`] at a back face. A hit takes its texel's exit when that exit is on the hit's
+/// chart, else the exit its gutter texel copies (same chart), else the nearest exit of the
+/// same chart within two texels. Gather points are the
 /// exits the rays reach, in exit order; on an emissive material's triangle they carry its
 /// radiance and its group in [`crate::Emitters::from_scene`]'s order (the archive's).
 pub fn probe_rays(scene: &Scene, bvh: &Bvh, atlas: &Atlas, positions: &[Vec3], rays_per_probe: u32) -> ProbeRays {
@@ -312,17 +313,21 @@ pub fn probe_rays(scene: &Scene, bvh: &Bvh, atlas: &Atlas, positions: &[Vec3], r
             ((p.y * res as f32) as i64).clamp(0, res - 1),
         );
         let texel = (y * res + x) as u32;
+        // Only an exit of the hit's own chart stands for it: a shared or dilated texel may
+        // belong to a neighbouring surface (another normal, albedo or emission).
+        let chart = atlas.chart_of_triangle[tri as usize];
+        let of_chart =
+            |e: u32| e != EMPTY_TEXEL && atlas.chart_of_triangle[atlas.exits[e as usize].triangle as usize] == chart;
         let own = atlas.texel_exit[texel as usize];
-        if own != EMPTY_TEXEL {
+        if of_chart(own) {
             return own;
         }
         if let Some(&src) = gutter.get(&texel) {
             let e = atlas.texel_exit[src as usize];
-            if e != EMPTY_TEXEL {
+            if of_chart(e) {
                 return e;
             }
         }
-        let chart = atlas.chart_of_triangle[tri as usize];
         let mut best = (i64::MAX, EMPTY_TEXEL);
         for dy in -2..=2i64 {
             for dx in -2..=2i64 {
