@@ -343,6 +343,32 @@ impl Emitters {
             })
             .collect()
     }
+
+    /// The direct irradiance all groups, each at unit scale, give points of empty space, each
+    /// `(position, unit normal)` a surface element on no triangle (a probe's): the sum over
+    /// groups of [`Emitters::group_irradiance`].
+    pub fn direct_at_points(
+        &self,
+        scene: &Scene,
+        bvh: &Bvh,
+        points: &[(Vec3, Vec3)],
+        samples: u32,
+        seed: u64,
+    ) -> Vec<Vec3> {
+        let receivers: Vec<Receiver> = points
+            .iter()
+            .map(|&(position, n)| Receiver {
+                position,
+                ng: n,
+                n,
+                triangle: u32::MAX,
+            })
+            .collect();
+        let per_group = self.group_irradiance(scene, bvh, &receivers, samples, seed);
+        (0..points.len())
+            .map(|i| per_group.iter().map(|g| g[i]).sum())
+            .collect()
+    }
 }
 
 /// A surface point that receives the emitters' light ([`Emitters::group_irradiance`]).

@@ -206,21 +206,7 @@ pub fn run(bake_bin: &Path, cache: &Path, root: &Path) -> Result<String> {
         // With a sky or lamps the probes hold their direct light too.
         let direct = match lit {
             Lit::Sky => tracer.sky_direct_at_points(&points, SPP),
-            Lit::Lamps => {
-                let receivers: Vec<prm_trace::Receiver> = points
-                    .iter()
-                    .map(|&(position, n)| prm_trace::Receiver {
-                        position,
-                        ng: n,
-                        n,
-                        triangle: u32::MAX,
-                    })
-                    .collect();
-                let per_group = emitters.group_irradiance(&scene, &bvh, &receivers, SPP, 47);
-                (0..points.len())
-                    .map(|i| per_group.iter().map(|g| g[i]).sum())
-                    .collect()
-            }
+            Lit::Lamps => emitters.direct_at_points(&scene, &bvh, &points, SPP, 47),
             Lit::Point(_) => vec![Vec3::ZERO; points.len()],
         };
         let reference = |seed| -> Result<Vec<Vec3>> {
