@@ -18,16 +18,10 @@ use crate::PlayError;
 pub use prm_runtime::MAX_LIGHTS;
 
 /// Names of the timed passes, in frame order: the run time's, then the shading.
-pub const PASS_NAMES: [&str; 8] = [
-    "shadow",
-    "weights",
-    "rank",
-    "select",
-    "blend",
-    "probe radiance",
-    "probes",
-    "shade",
-];
+pub const PASS_NAMES: [&str; 8] = {
+    let r = prm_runtime::PASS_NAMES;
+    [r[0], r[1], r[2], r[3], r[4], r[5], r[6], "shade"]
+};
 
 /// What a frame shows; the codes are `MODE_*` in `shade.wgsl`.
 #[repr(u32)]

@@ -80,7 +80,7 @@ pub(crate) struct ProbesPass {
 
 impl ProbesPass {
     /// Uploads the archive's probes and their rays, or without rays their transfer; refused
-    /// when the transfer exceeds the device's storage binding size.
+    /// when the transfer or the rays exceed the device's storage binding size or dispatch.
     pub fn new(
         device: &wgpu::Device,
         b: &Buffers,
