@@ -575,10 +575,13 @@ impl Runtime {
     /// probe rays ([`prm_format::ProbeRays::points`]; empty without rays), waiting for the
     /// device.
     pub fn read_probe_radiance(&self) -> Result<Vec<[f32; 3]>, RuntimeError> {
-        let Some(buffer) = self.probes.as_ref().and_then(|p| p.ray_radiance()) else {
+        let Some((buffer, points)) = self.probes.as_ref().and_then(|p| p.ray_radiance()) else {
             return Ok(Vec::new());
         };
-        let bytes = readback::read_buffer(&self.device, &self.queue, buffer, buffer.size())?;
+        if points == 0 {
+            return Ok(Vec::new());
+        }
+        let bytes = readback::read_buffer(&self.device, &self.queue, buffer, u64::from(points) * 16)?;
         let v: &[[f32; 4]] = bytemuck::cast_slice(&bytes);
         Ok(v.iter().map(|c| [c[0], c[1], c[2]]).collect())
     }

@@ -16,37 +16,36 @@ use crate::{Buffers, GpuGatherPoint, GpuProbeRays};
 pub(crate) struct ProbeRaysPass {
     radiance_pass: ComputePass,
     sum: ComputePass,
-    points: wgpu::Buffer,
-    radiance: wgpu::Buffer,
-    /// Every emitter group's scale (`vec4`, at least one).
-    scales: wgpu::Buffer,
-    lightmap: wgpu::TextureView,
-    baked_direct: wgpu::TextureView,
+    inputs: RadianceBindings,
     point_count: u32,
     probe_count: u32,
 }
 
-/// The radiance pass's bindings, in the order of `probe_radiance.wgsl`.
-fn radiance_resources<'a>(
-    b: &'a Buffers,
-    shadow_maps: &'a wgpu::TextureView,
-    points: &'a wgpu::Buffer,
-    lightmap: &'a wgpu::TextureView,
-    baked_direct: &'a wgpu::TextureView,
-    radiance: &'a wgpu::Buffer,
-    scales: &'a wgpu::Buffer,
-) -> [wgpu::BindingResource<'a>; 9] {
-    [
-        b.frame.as_entire_binding(),
-        b.lights.as_entire_binding(),
-        b.views.as_entire_binding(),
-        wgpu::BindingResource::TextureView(shadow_maps),
-        points.as_entire_binding(),
-        wgpu::BindingResource::TextureView(lightmap),
-        wgpu::BindingResource::TextureView(baked_direct),
-        radiance.as_entire_binding(),
-        scales.as_entire_binding(),
-    ]
+/// The radiance pass's own bindings; the shadow maps and the frame's buffers come per bind group.
+struct RadianceBindings {
+    points: wgpu::Buffer,
+    lightmap: wgpu::TextureView,
+    baked_direct: wgpu::TextureView,
+    radiance: wgpu::Buffer,
+    /// Every emitter group's scale (`vec4`, at least one).
+    scales: wgpu::Buffer,
+}
+
+impl RadianceBindings {
+    /// The radiance pass's bindings, in the order of `probe_radiance.wgsl`.
+    fn resources<'a>(&'a self, b: &'a Buffers, shadow_maps: &'a wgpu::TextureView) -> [wgpu::BindingResource<'a>; 9] {
+        [
+            b.frame.as_entire_binding(),
+            b.lights.as_entire_binding(),
+            b.views.as_entire_binding(),
+            wgpu::BindingResource::TextureView(shadow_maps),
+            self.points.as_entire_binding(),
+            wgpu::BindingResource::TextureView(&self.lightmap),
+            wgpu::BindingResource::TextureView(&self.baked_direct),
+            self.radiance.as_entire_binding(),
+            self.scales.as_entire_binding(),
+        ]
+    }
 }
 
 impl ProbeRaysPass {
@@ -143,20 +142,18 @@ impl ProbeRaysPass {
             crate::LIGHTS_WGSL,
             include_str!("../../../shaders/runtime/probe_radiance.wgsl"),
         ];
-        let radiance_pass = ComputePass::new(
-            device,
-            "probe radiance",
-            &parts,
-            &radiance_resources(b, shadow_maps, &points, lightmap, baked_direct, &radiance, &scales),
-        );
+        let inputs = RadianceBindings {
+            points,
+            lightmap: lightmap.clone(),
+            baked_direct: baked_direct.clone(),
+            radiance,
+            scales,
+        };
+        let radiance_pass = ComputePass::new(device, "probe radiance", &parts, &inputs.resources(b, shadow_maps));
         ProbeRaysPass {
             radiance_pass,
             sum,
-            points,
-            radiance,
-            scales,
-            lightmap: lightmap.clone(),
-            baked_direct: baked_direct.clone(),
+            inputs,
             point_count: rays.points.len() as u32,
             probe_count: rays.probes() as u32,
         }
@@ -164,16 +161,8 @@ impl ProbeRaysPass {
 
     /// Binds the radiance pass to other (larger) shadow maps.
     pub fn rebind(&mut self, device: &wgpu::Device, b: &Buffers, shadow_maps: &wgpu::TextureView) {
-        let r = radiance_resources(
-            b,
-            shadow_maps,
-            &self.points,
-            &self.lightmap,
-            &self.baked_direct,
-            &self.radiance,
-            &self.scales,
-        );
-        self.radiance_pass.rebind(device, &r);
+        self.radiance_pass
+            .rebind(device, &self.inputs.resources(b, shadow_maps));
     }
 
     /// The radiance pass (one invocation per gather point, reading `external` shadow maps for
@@ -189,16 +178,7 @@ impl ProbeRaysPass {
         let groups = [self.point_count.div_ceil(64).max(1), 1, 1];
         match external {
             Some(maps) => {
-                let r = radiance_resources(
-                    b,
-                    maps,
-                    &self.points,
-                    &self.lightmap,
-                    &self.baked_direct,
-                    &self.radiance,
-                    &self.scales,
-                );
-                let group = self.radiance_pass.group(device, &r);
+                let group = self.radiance_pass.group(device, &self.inputs.resources(b, maps));
                 self.radiance_pass.encode_with(encoder, &group, groups, timer);
             }
             None => self.radiance_pass.encode(encoder, groups, timer),
@@ -212,11 +192,12 @@ impl ProbeRaysPass {
             return;
         }
         let v: Vec<[f32; 4]> = scales.iter().map(|s| [s[0], s[1], s[2], 0.0]).collect();
-        queue.write_buffer(&self.scales, 0, bytemuck::cast_slice(&v));
+        queue.write_buffer(&self.inputs.scales, 0, bytemuck::cast_slice(&v));
     }
 
-    /// The radiance buffer (one `vec4` per gather point, `w` unused), for tests.
-    pub fn radiance(&self) -> &wgpu::Buffer {
-        &self.radiance
+    /// The radiance buffer (one `vec4` per gather point, `w` unused, then a placeholder when
+    /// there are none) and the gather point count, for tests.
+    pub fn radiance(&self) -> (&wgpu::Buffer, u32) {
+        (&self.inputs.radiance, self.point_count)
     }
 }

@@ -206,8 +206,8 @@ impl ProbesPass {
         matches!(self.light, Light::Rays(_))
     }
 
-    /// The gather points' radiance buffer, when the probes have rays.
-    pub fn ray_radiance(&self) -> Option<&wgpu::Buffer> {
+    /// The gather points' radiance buffer and their count, when the probes have rays.
+    pub fn ray_radiance(&self) -> Option<(&wgpu::Buffer, u32)> {
         match &self.light {
             Light::Rays(r) => Some(r.radiance()),
             Light::Panes(_) => None,

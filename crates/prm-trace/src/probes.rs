@@ -305,7 +305,7 @@ pub fn probe_rays(scene: &Scene, bvh: &Bvh, atlas: &Atlas, positions: &[Vec3], r
     let res = atlas.resolution as i64;
     let dirs: Vec<Vec3> = (0..m).map(|d| Vec3::from(probe_ray_direction(d, m))).collect();
     let gutter: std::collections::HashMap<u32, u32> = atlas.dilation.iter().copied().collect();
-    let exit_at = |tri: u32, b1: f32, b2: f32| -> u32 {
+    let exit_at = |tri: u32, b1: f32, b2: f32| -> Option<u32> {
         let uv = atlas.uvs[tri as usize];
         let p = uv[0] * (1.0 - b1 - b2) + uv[1] * b1 + uv[2] * b2;
         let (x, y) = (
@@ -320,15 +320,15 @@ pub fn probe_rays(scene: &Scene, bvh: &Bvh, atlas: &Atlas, positions: &[Vec3], r
             |e: u32| e != EMPTY_TEXEL && atlas.chart_of_triangle[atlas.exits[e as usize].triangle as usize] == chart;
         let own = atlas.texel_exit[texel as usize];
         if of_chart(own) {
-            return own;
+            return Some(own);
         }
         if let Some(&src) = gutter.get(&texel) {
             let e = atlas.texel_exit[src as usize];
             if of_chart(e) {
-                return e;
+                return Some(e);
             }
         }
-        let mut best = (i64::MAX, EMPTY_TEXEL);
+        let mut best: Option<(i64, u32)> = None;
         for dy in -2..=2i64 {
             for dx in -2..=2i64 {
                 let (nx, ny) = (x + dx, y + dy);
@@ -337,15 +337,12 @@ pub fn probe_rays(scene: &Scene, bvh: &Bvh, atlas: &Atlas, positions: &[Vec3], r
                 }
                 let e = atlas.texel_exit[(ny * res + nx) as usize];
                 let d = dx * dx + dy * dy;
-                if e != EMPTY_TEXEL
-                    && d < best.0
-                    && atlas.chart_of_triangle[atlas.exits[e as usize].triangle as usize] == chart
-                {
-                    best = (d, e);
+                if of_chart(e) && best.is_none_or(|(bd, _)| d < bd) {
+                    best = Some((d, e));
                 }
             }
         }
-        best.1
+        best.map(|(_, e)| e)
     };
     let per_probe: Vec<Vec<u32>> = positions
         .par_iter()
@@ -354,47 +351,40 @@ pub fn probe_rays(scene: &Scene, bvh: &Bvh, atlas: &Atlas, positions: &[Vec3], r
                 .map(|&d| match bvh.closest_hit(p, d, f32::INFINITY, u32::MAX) {
                     None => RAY_SKY,
                     Some(h) if !h.front => RAY_BLOCKED,
-                    // No exit near the hit (EMPTY_TEXEL is RAY_SKY's value): it sends nothing.
-                    Some(h) => match exit_at(h.triangle, h.b1, h.b2) {
-                        EMPTY_TEXEL => RAY_BLOCKED,
-                        e => e,
-                    },
+                    // No exit near the hit: it sends nothing.
+                    Some(h) => exit_at(h.triangle, h.b1, h.b2).unwrap_or(RAY_BLOCKED),
                 })
                 .collect()
         })
         .collect();
     // Exits reached, in exit order, and each one's gather point index.
-    let mut index = vec![EMPTY_TEXEL; atlas.exits.len()];
+    let mut reached = vec![false; atlas.exits.len()];
     for &e in per_probe.iter().flatten() {
-        if (e as usize) < index.len() {
-            index[e as usize] = 0;
+        if let Some(r) = reached.get_mut(e as usize) {
+            *r = true;
         }
     }
+    let mut index = vec![RAY_BLOCKED; atlas.exits.len()];
     let mut points = Vec::new();
-    for (e, slot) in index.iter_mut().enumerate() {
-        if *slot == 0 {
-            *slot = points.len() as u32;
-            let x = &atlas.exits[e];
-            let material = scene.triangles[x.triangle as usize].material;
-            let group = emitters.groups.iter().position(|g| g.material == material);
-            points.push(GatherPoint {
-                texel: x.texel,
-                position: x.position.to_array(),
-                normal: x.normal.to_array(),
-                albedo: x.albedo.to_array(),
-                emission: group.map_or([0.0; 3], |g| emitters.groups[g].radiance.to_array()),
-                emitter: group.map_or(NO_EMITTER, |g| g as u32),
-            });
-        }
+    for (e, _) in reached.iter().enumerate().filter(|(_, &r)| r) {
+        index[e] = points.len() as u32;
+        let x = &atlas.exits[e];
+        let material = scene.triangles[x.triangle as usize].material;
+        let group = emitters.groups.iter().position(|g| g.material == material);
+        points.push(GatherPoint {
+            texel: x.texel,
+            position: x.position.to_array(),
+            normal: x.normal.to_array(),
+            albedo: x.albedo.to_array(),
+            emission: group.map_or([0.0; 3], |g| emitters.groups[g].radiance.to_array()),
+            emitter: group.map_or(NO_EMITTER, |g| g as u32),
+        });
     }
+    // Exits become their gather point; the two codes lie beyond every exit and stay.
     let hits = per_probe
         .into_iter()
         .flatten()
-        .map(|e| match e {
-            RAY_SKY => RAY_SKY,
-            e if (e as usize) < index.len() => index[e as usize],
-            _ => RAY_BLOCKED,
-        })
+        .map(|e| index.get(e as usize).copied().unwrap_or(e))
         .collect();
     ProbeRays {
         rays_per_probe: m,
