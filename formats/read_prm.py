@@ -25,11 +25,13 @@ MAGIC = b"\x89PRM\r\n\x1a\n"
 SUPPORTED_MAJOR = 1
 SUPPORTED_MINOR = 6
 KINDS = {1: "metadata", 2: "atlas", 3: "entries", 4: "clusters", 5: "panes", 6: "entry_energy",
-         7: "emitters", 8: "sky", 9: "probes", 10: "probe_rays"}
+         7: "emitters", 8: "sky", 9: "probes", 10: "probe_rays",
+         11: "near_field"}
 OPTIONAL = {6, 7, 8, 9, 10}
 RAY_SKY = 0xFFFFFFFF
 RAY_BLOCKED = 0xFFFFFFFE
 MAX_PROBE_RAYS = 1 << 16
+MAX_NEAR_RAYS = 1 << 16
 MAX_PROBES = 1 << 16
 MAX_PROBE_CELLS = 1 << 24
 SH_COEFFS = 9
@@ -362,7 +364,57 @@ class Reader:
             if self.probes is None:
                 raise InvalidArchive("probe_rays: no probes section")
             self.parse_probe_rays(by_kind[10])
+        self.near_field = None
+        if 11 in by_kind:
+            self.parse_near_field(by_kind[11])
         self.parse_panes(by_kind[5])
+
+    def parse_near_field(self, s):
+        # 1.7: 32-byte header (exits E, rays per exit M, gather points G, flags = 0, atlas
+        # resolution, hits H, disk R^2 f32, reserved), G gather point records as in probe_rays,
+        # E exit records (texel u32, end of its hits u32), then H hits (gather point u32, r^2 f32).
+        texels = self.resolution * self.resolution
+        groups = len(self.emitters or [])
+        raw = self.load(s, 32 + (56 + 8) * texels + 8 * texels * MAX_NEAR_RAYS)
+        if len(raw) < 32:
+            raise InvalidArchive("near_field: shorter than its header")
+        e, m, g, flags, res, h = struct.unpack_from("<6I", raw, 0)
+        disk, reserved = struct.unpack_from("<fI", raw, 24)
+        if flags or (self.strict and reserved):
+            raise InvalidArchive("near_field: unknown flags or a non-zero reserved field")
+        if res != self.resolution or not 1 <= m <= MAX_NEAR_RAYS or g > texels or e > texels or h > e * m:
+            raise InvalidArchive("near_field: resolution, ray, point, exit or hit count out of range")
+        if not (disk > 0 and disk != float("inf")):
+            raise InvalidArchive("near_field: disk not finite and positive")
+        if len(raw) != 32 + 56 * g + 8 * e + 8 * h:
+            raise InvalidArchive("near_field: raw size differs from what the header gives")
+        points = []
+        for i in range(g):
+            rec = struct.unpack_from("<I12fI", raw, 32 + 56 * i)
+            if rec[0] >= texels or any(v != v or abs(v) == float("inf") for v in rec[1:13]) or min(rec[7:13]) < 0:
+                raise InvalidArchive("near_field: gather point outside the atlas or not finite")
+            if rec[13] != 0xFFFFFFFF and rec[13] >= groups:
+                raise InvalidArchive("near_field: gather point of an emitter group that does not exist")
+            points.append(dict(texel=rec[0], position=list(rec[1:4]), normal=list(rec[4:7]), albedo=list(rec[7:10]),
+                               emission=list(rec[10:13]), emitter=rec[13]))
+        at = 32 + 56 * g
+        exits, last, end = [], -1, 0
+        for i in range(e):
+            texel, stop = struct.unpack_from("<2I", raw, at + 8 * i)
+            if texel >= texels or texel <= last or stop <= end or stop > h:
+                raise InvalidArchive("near_field: exit records out of order or outside the hits")
+            exits.append(dict(texel=texel, end=stop))
+            last, end = texel, stop
+        if end != h:
+            raise InvalidArchive("near_field: the exits do not cover the hits")
+        at += 8 * e
+        hits = []
+        for i in range(h):
+            point, r2 = struct.unpack_from("<If", raw, at + 8 * i)
+            if point >= g or r2 != r2 or r2 < 0 or r2 == float("inf"):
+                raise InvalidArchive("near_field: a hit at a gather point that does not exist or not finite")
+            hits.append(dict(point=point, distance2=r2))
+        self.near_field = dict(rays_per_exit=m, disk=disk, points=points, exits=exits, hits=hits)
 
     def parse_probe_rays(self, s):
         # 1.6: 32-byte header (probes N, rays per probe M, gather points G, flags = 0, atlas
@@ -682,6 +734,7 @@ class Reader:
             sky=self.sky,
             probes=self.probes,
             probe_rays=self.probe_rays,
+            near_field=self.near_field,
             accuracy=self.accuracy,
             clusters=self.clusters,
             tile_filter=self.tile_filter,

@@ -1,7 +1,8 @@
 // prm-runtime blend pass: the indirect-irradiance lightmap, Σ over the kept clusters of
 // weight_eff × pane and over the residual groups (when clusters were dropped) of their weight ×
 // summed pane, per atlas texel (select.wgsl), plus the traced indirect light of the emitters at their
-// scales and of the sky (baked.rs; a 1×1 texture, ignored, when neither has one); panes are layers of an
+// scales and of the sky (baked.rs; a 1×1 texture, ignored, when neither has one), plus the near field
+// (near_field.wgsl, likewise); panes are layers of an
 // rgb9e5ufloat texture array.
 
 @group(0) @binding(0) var<uniform> frame: Frame;
@@ -9,6 +10,8 @@
 @group(0) @binding(2) var panes: texture_2d_array<f32>;
 @group(0) @binding(3) var lightmap: texture_storage_2d<rgba32float, write>;
 @group(0) @binding(4) var emitted: texture_2d<f32>;
+// The near field's lightmap (near_field.wgsl); 1×1, ignored, without one.
+@group(0) @binding(5) var near_map: texture_2d<f32>;
 
 @compute @workgroup_size(8, 8)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
@@ -26,6 +29,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     if all(textureDimensions(emitted) == size) {
         sum += textureLoad(emitted, xy, 0).rgb;
+    }
+    if all(textureDimensions(near_map) == size) {
+        sum += textureLoad(near_map, xy, 0).rgb;
     }
     textureStore(lightmap, xy, vec4<f32>(sum, 1.0));
 }

@@ -137,3 +137,23 @@ struct ProbeRays {
     points: u32,
     _pad0: u32,
 };
+
+// An exit point with near hits (formats/prm.md §5.6): its texel and one past its last hit.
+struct NearExit {
+    texel: u32,
+    end: u32,
+};
+
+// A near ray's end: a gather point and its squared distance from the exit point.
+struct NearHit {
+    point: u32,
+    distance2: f32,
+};
+
+// The near field's constants: counts, the depth-0 VPLs' disk R² and π/M.
+struct NearField {
+    exits: u32,
+    points: u32,
+    disk: f32,
+    scale: f32,
+};

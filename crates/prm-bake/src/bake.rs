@@ -104,6 +104,11 @@ pub struct BakeArgs {
     /// VPLs instead, as archives before format 1.6 are).
     #[arg(long, value_name = "RAYS", requires = "probes")]
     pub probe_rays: Option<u32>,
+    /// Cosine rays per exit point that find the surfaces close enough for the VPL bound to
+    /// have removed their light (default 64; 0: none). The player gathers it back each frame
+    /// from their direct light, mostly at inner edges and contacts (format 1.7).
+    #[arg(long, value_name = "RAYS")]
+    pub near_rays: Option<u32>,
     /// After the panes, estimate the archive's accuracy: its indirect light against a
     /// reference path tracer at N exit points (default 1024) for three point lights placed in
     /// the scene, printed, recorded in the archive and shown by `dump`. 0 skips it. About 1-3%
@@ -156,6 +161,7 @@ impl BakeArgs {
             sky_paths: self.sky.then(|| self.sky_paths.unwrap_or(prm_bake::SKY_PATHS)),
             probes: self.probes,
             probe_rays: self.probe_rays,
+            near_rays: self.near_rays,
             accuracy_points: self.accuracy_points,
             accuracy_paths: self.accuracy_paths,
             ..Default::default()
@@ -390,12 +396,15 @@ fn print_summary(r: &Report) {
         ("emitters", "emitters"),
         ("sky", "sky"),
         ("pane rendering", "pane_rendering"),
+        ("near field", "near_field"),
         ("probes", "probes"),
         ("accuracy check", "accuracy_check"),
         ("compression + write", "compression_write"),
         ("total", "total"),
     ] {
-        if matches!(key, "emitters" | "sky" | "probes" | "accuracy_check") && !r.timings.contains_key(key) {
+        if matches!(key, "emitters" | "sky" | "near_field" | "probes" | "accuracy_check")
+            && !r.timings.contains_key(key)
+        {
             continue;
         }
         println!("  {name:<20} {:>9.3} s", r.timings.get(key).copied().unwrap_or(0.0));

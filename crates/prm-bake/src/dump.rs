@@ -182,6 +182,13 @@ pub fn summary_json<R: Read + Seek>(archive: &Archive<R>, file: &Path, report: O
                 })
             }),
         })),
+        "near_field": archive.near_field().map(|n| json!({
+            "rays_per_exit": n.rays_per_exit,
+            "disk_radius": n.disk.sqrt(),
+            "exit_points": n.exits.len(),
+            "gather_points": n.points.len(),
+            "hits": n.hits.len(),
+        })),
         "accuracy": meta.accuracy.as_ref().map(|a| json!({
             "exit_points": a.exit_points,
             "paths": a.paths,
@@ -343,6 +350,17 @@ pub fn write_summary<W: Write, R: Read + Seek>(
                 100.0 * blocked
             )?;
         }
+    }
+    if let Some(n) = archive.near_field() {
+        writeln!(
+            out,
+            "near field   {} exit points keep {} of their {} rays each (VPL disk radius {:.4}), ending at {} texels; the player gathers back there what the VPL bound removes",
+            n.exits.len(),
+            n.hits.len(),
+            n.rays_per_exit,
+            n.disk.sqrt(),
+            n.points.len()
+        )?;
     }
     writeln!(out, "clusters     {} (one pane each)", archive.clusters().len())?;
     match &meta.accuracy {

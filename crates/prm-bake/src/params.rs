@@ -74,6 +74,9 @@ pub struct BakeConfig {
     /// Rays per probe that find the surfaces the run time gathers the probes' light from
     /// (0: none, the probes are lit through the panes; default [`crate::PROBE_RAYS`]).
     pub probe_rays: Option<u32>,
+    /// Near rays per exit point that gather back what the VPL bound removes (0: none;
+    /// default [`prm_trace::NEAR_RAYS`]).
+    pub near_rays: Option<u32>,
     /// Exit points of the bake's accuracy check (0: no check; default
     /// [`crate::ACCURACY_POINTS`]).
     pub accuracy_points: Option<u32>,
@@ -113,6 +116,7 @@ impl BakeConfig {
             sky_paths: over.sky_paths.or(self.sky_paths),
             probes: over.probes.or(self.probes),
             probe_rays: over.probe_rays.or(self.probe_rays),
+            near_rays: over.near_rays.or(self.near_rays),
             accuracy_points: over.accuracy_points.or(self.accuracy_points),
             accuracy_paths: over.accuracy_paths.or(self.accuracy_paths),
         }
@@ -163,6 +167,8 @@ pub struct BakeParams {
     pub probes: Option<u32>,
     /// Rays per probe of the probe rays section (0: none).
     pub probe_rays: u32,
+    /// Near rays per exit point of the near field section (0: none).
+    pub near_rays: u32,
     /// Exit points of the accuracy check after the panes (0: none; a shard never checks).
     /// Not in the archive's `params`: the check changes no pane, and its own record (the
     /// metadata's `accuracy`) says how large it was, so a merge of shards is the single bake's
@@ -605,6 +611,7 @@ impl BakeParams {
             sky_paths: config.sky_paths,
             probes: config.probes,
             probe_rays: config.probe_rays.unwrap_or(crate::PROBE_RAYS),
+            near_rays: config.near_rays.unwrap_or(prm_trace::NEAR_RAYS),
             accuracy_points: config.accuracy_points.unwrap_or(crate::ACCURACY_POINTS),
             accuracy_paths: config.accuracy_paths.unwrap_or(crate::ACCURACY_PATHS),
             estimated_seconds,
@@ -666,6 +673,13 @@ impl BakeParams {
                 "--probe-rays {} is more than {} rays per probe",
                 self.probe_rays,
                 prm_format::MAX_PROBE_RAYS
+            );
+        }
+        if self.near_rays > prm_format::MAX_NEAR_RAYS {
+            invalid!(
+                "--near-rays {} is more than {} rays per exit point",
+                self.near_rays,
+                prm_format::MAX_NEAR_RAYS
             );
         }
         if let AtlasSize::Resolution(r) = self.atlas {

@@ -846,6 +846,35 @@ pub fn bake(job: &BakeJob<'_>, renderer: Renderer<'_>, progress: &mut dyn Progre
     );
     timings.insert("pane_rendering".to_string(), render_s);
 
+    // The near field: what the VPL disk bound removes next to the exit points.
+    let near = match entries.first() {
+        Some(e) if params.near_rays > 0 && params.vpl_disk_scale > 0.0 => {
+            let t = Instant::now();
+            progress.phase_start(Phase::NearField, 1);
+            let disk = prm_trace::near_disk(e.weight, params.vpl_disk_scale);
+            let near = prm_trace::near_field(scene, &bvh, &atlas, params.near_rays, disk, params.seed);
+            let terms = prm_trace::near_terms(
+                &near,
+                &checked_exits.iter().map(|&i| atlas.exits[i].texel).collect::<Vec<_>>(),
+            );
+            let detail = format!(
+                "{} of {} exit points keep {} of their {} rays each, {} gather points",
+                near.exits.len(),
+                atlas.exits.len(),
+                near.hits.len(),
+                params.near_rays,
+                near.points.len(),
+            );
+            finish_phase(&mut timings, progress, Phase::NearField, "near_field", t, &detail);
+            writer.set_near_field(near).map_err(|source| BakeError::Archive {
+                what: "recording the near field".to_string(),
+                source,
+            })?;
+            terms
+        }
+        _ => Vec::new(),
+    };
+
     if let Some(cells) = params.probes {
         let t = Instant::now();
         let (probes, mut detail) = probe_section(scene, &bvh, &vpls, &clustering, cells, params, progress)?;
@@ -882,6 +911,7 @@ pub fn bake(job: &BakeJob<'_>, renderer: Renderer<'_>, progress: &mut dyn Progre
             top_k: params.top_k,
             groups: &residual_groups,
             fade_band: prm_trace::check::FADE_BAND,
+            near: &near,
         };
         let exits: Vec<_> = checked_exits.iter().map(|&i| atlas.exits[i]).collect();
         let check = prm_trace::CheckParams {

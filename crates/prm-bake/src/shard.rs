@@ -254,6 +254,15 @@ pub fn merge(parts: &[PathBuf], output: &Path) -> Result<Merged, BakeError> {
         })?;
     }
     // Probes: every shard places the same ones; each cluster's transfer from its owner.
+    // The near field: every shard traces the same rays.
+    if let Some(near) = first.near_field() {
+        writer
+            .set_near_field(near.clone())
+            .map_err(|source| BakeError::Archive {
+                what: "recording the near field".to_string(),
+                source,
+            })?;
+    }
     if let Some(probes) = first.probes() {
         let n = probes.len();
         let mut merged = probes.clone();

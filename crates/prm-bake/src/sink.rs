@@ -22,6 +22,9 @@ pub enum Phase {
     Sky,
     /// Rendering the panes (GPU or CPU) and writing them to the archive.
     PaneRendering,
+    /// The near rays from the exit points that gather back what the VPL bound removes
+    /// (`near_rays` > 0 only).
+    NearField,
     /// The clusters' transfer to the irradiance probes (bakes with `--probes` only).
     Probes,
     /// The bake's estimate of its own accuracy against the reference tracer
@@ -40,6 +43,7 @@ impl Phase {
             Phase::Emitters => "emitters",
             Phase::Sky => "sky",
             Phase::PaneRendering => "pane rendering",
+            Phase::NearField => "near field",
             Phase::Probes => "probes",
             Phase::AccuracyCheck => "accuracy check",
         }

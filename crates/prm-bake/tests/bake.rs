@@ -215,9 +215,10 @@ fn bake_writes_a_valid_archive_and_report() {
     assert_eq!(json["clusters"], 16);
     eprintln!("report timings: {timings:?}");
     // The accuracy check: three test lights free in the box, a plausible estimate, the same in
-    // the report and the archive (which it makes format 1.5).
+    // the report and the archive (1.5; the near field makes it 1.7).
     let accuracy = meta.accuracy.as_ref().expect("the bake estimates its accuracy");
-    assert_eq!(archive.info().minor, 5);
+    assert_eq!(archive.info().minor, 7);
+    assert!(archive.near_field().is_some());
     assert_eq!(accuracy.lights.len(), 3, "{accuracy:?}");
     assert_eq!(accuracy.exit_points, prm_bake::ACCURACY_POINTS);
     assert_eq!(accuracy.top_k, meta.params["top_k"].as_u64().unwrap() as u32);
@@ -508,7 +509,11 @@ fn dump_summarises_verifies_and_rejects_damage() {
     let path = archive.to_str().unwrap();
     let r = run(&["dump", path]);
     assert!(r.status.success(), "{}", describe(&r));
-    assert!(!r.stdout.is_empty());
+    assert!(
+        String::from_utf8_lossy(&r.stdout).contains("near field"),
+        "{}",
+        describe(&r)
+    );
 
     let r = run(&["dump", path, "--json"]);
     assert!(r.status.success(), "{}", describe(&r));
@@ -527,6 +532,12 @@ fn dump_summarises_verifies_and_rejects_damage() {
     assert_eq!(json["entries"], 256);
     assert_eq!(json["clusters"], 16);
     assert_eq!(json["resolution"], 64);
+    assert_eq!(json["near_field"]["rays_per_exit"], prm_trace::NEAR_RAYS);
+    assert!(
+        json["near_field"]["hits"].as_u64().unwrap() > 0,
+        "{}",
+        json["near_field"]
+    );
 
     let r = run(&["dump", path, "--verify"]);
     assert!(r.status.success(), "{}", describe(&r));
@@ -669,7 +680,8 @@ fn destinations_are_checked_before_work_and_symlinks_written_through() {
 
 /// The accuracy check sees what a bake gets wrong: the same panes blended with K = 1 of 16
 /// clusters are estimated worse than with all of them, and their K = all estimate is the same
-/// number. `--accuracy-points 0` skips it: the archive is then of minor 1 (entry energies, nothing later).
+/// number. `--accuracy-points 0` skips it, `--near-rays 0` the near field: the archive is then
+/// of minor 1 (entry energies, nothing later).
 #[test]
 fn the_accuracy_check_sees_a_worse_bake() {
     let dir = temp_dir("accuracy");
@@ -691,7 +703,13 @@ fn the_accuracy_check_sees_a_worse_bake() {
         one.mean_error() > all.mean_error() + 2.0 * one.mean_standard_error(),
         "K = 1: {one:?}\nK = all: {all:?}"
     );
-    let (path, _, _) = bake(&dir, "none", 3, "cpu", &["--quiet", "--accuracy-points", "0"]);
+    let (path, _, _) = bake(
+        &dir,
+        "none",
+        3,
+        "cpu",
+        &["--quiet", "--accuracy-points", "0", "--near-rays", "0"],
+    );
     let a = Archive::open(&path).unwrap();
     assert!(a.metadata().accuracy.is_none());
     assert_eq!(a.info().minor, 1);

@@ -92,6 +92,7 @@ fn a_cpu_bake_reports_its_phases_and_writes_the_planned_archive() {
             Phase::LightTracing,
             Phase::Clustering,
             Phase::PaneRendering,
+            Phase::NearField,
             Phase::AccuracyCheck
         ]
     );

@@ -13,8 +13,8 @@ pub const VERSION_MAJOR: u16 = 1;
 /// Highest minor version this library writes (and knows); a reader accepts every minor. The
 /// writer writes the lowest minor whose features an archive uses: 1.1 adds the entry energy
 /// section, 1.2 the emitters section, 1.3 the sky section, 1.4 the probes section, 1.5 the
-/// metadata's `accuracy` key, 1.6 the probe rays section.
-pub const VERSION_MINOR: u16 = 6;
+/// metadata's `accuracy` key, 1.6 the probe rays section, 1.7 the near field section.
+pub const VERSION_MINOR: u16 = 7;
 
 /// Size of the fixed file header.
 pub const HEADER_SIZE: usize = 64;
@@ -59,6 +59,9 @@ pub mod kind {
     /// Where every probe's rays meet the scene, to gather its light from the surfaces (since
     /// 1.6, optional; only beside the probes section).
     pub const PROBE_RAYS: u32 = 10;
+    /// Where every exit point's near rays end, to gather back what the VPL bound removes
+    /// (since 1.7, optional).
+    pub const NEAR_FIELD: u32 = 11;
     /// First kind reserved for private extensions (never assigned by the spec).
     pub const PRIVATE_FIRST: u32 = 0x8000_0000;
 
@@ -75,6 +78,7 @@ pub mod kind {
             SKY => Some("sky"),
             PROBES => Some("probes"),
             PROBE_RAYS => Some("probe_rays"),
+            NEAR_FIELD => Some("near_field"),
             _ => None,
         }
     }

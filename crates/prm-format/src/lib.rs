@@ -19,6 +19,8 @@
 //!   empty space and every cluster's transfer to them, so the run-time weights light them too.
 //! * [`ProbeRays`]: the optional probe rays section (1.6), where each probe's rays meet the
 //!   scene, so a run time gathers the probes' light from the surfaces' radiance instead.
+//! * [`NearField`]: the optional near field section (1.7), where short cosine rays from the
+//!   exit points end, so a run time gathers back the light the panes' VPL bound removes.
 //! * [`residual_groups`]: the clusters' spatial groups whose summed panes carry the light of the
 //!   clusters a run time drops from its top K.
 //! * [`encode_rgb9e5`] / [`decode_rgb9e5`] implement the texel encoding,
@@ -32,6 +34,7 @@ mod filter;
 mod groups;
 mod layout;
 mod metadata;
+mod near_field;
 mod probe_rays;
 mod probes;
 mod reader;
@@ -51,6 +54,7 @@ pub use filter::TileFilter;
 pub use groups::{residual_groups, RESIDUAL_GROUPS};
 pub use layout::{checksum, compression, kind, limits, MAGIC, VERSION_MAJOR, VERSION_MINOR};
 pub use metadata::{Accuracy, Generator, LightAccuracy, Metadata, Units};
+pub use near_field::{NearExit, NearField, NearHit, MAX_NEAR_RAYS, MIN_WEIGHT as NEAR_MIN_WEIGHT};
 pub use probe_rays::{
     probe_ray_direction, GatherPoint, ProbeRays, MAX_PROBE_RAYS, NO_EMITTER, RAY_BLOCKED, RAY_SKY, SH_COSINE_LOBE,
 };

@@ -169,13 +169,32 @@ pub(crate) fn validate(rays: &ProbeRays, probes: usize, resolution: u32, groups:
         ));
     }
     let texels = u64::from(resolution) * u64::from(resolution);
-    if rays.points.len() as u64 > texels {
+    validate_points(&rays.points, texels, groups)?;
+    let g = rays.points.len() as u32;
+    if let Some(i) = rays
+        .hits
+        .iter()
+        .position(|&h| h >= g && h != RAY_SKY && h != RAY_BLOCKED)
+    {
         return Err(format!(
-            "{} gather points, more than the {texels} texels of the atlas",
-            rays.points.len()
+            "probe {} ray {} ends at gather point {}, of {g}",
+            i / m as usize,
+            i % m as usize,
+            rays.hits[i]
         ));
     }
-    for (i, g) in rays.points.iter().enumerate() {
+    Ok(())
+}
+
+/// Checks gather points against an atlas of `texels` and the emitter groups.
+pub(crate) fn validate_points(points: &[GatherPoint], texels: u64, groups: usize) -> Result<(), String> {
+    if points.len() as u64 > texels {
+        return Err(format!(
+            "{} gather points, more than the {texels} texels of the atlas",
+            points.len()
+        ));
+    }
+    for (i, g) in points.iter().enumerate() {
         let finite = g.position.iter().chain(&g.normal).all(|v| v.is_finite());
         let albedo = g.albedo.iter().chain(&g.emission).all(|v| v.is_finite() && *v >= 0.0);
         if u64::from(g.texel) >= texels || !finite || !albedo {
@@ -190,19 +209,6 @@ pub(crate) fn validate(rays: &ProbeRays, probes: usize, resolution: u32, groups:
                 g.emitter
             ));
         }
-    }
-    let g = rays.points.len() as u32;
-    if let Some(i) = rays
-        .hits
-        .iter()
-        .position(|&h| h >= g && h != RAY_SKY && h != RAY_BLOCKED)
-    {
-        return Err(format!(
-            "probe {} ray {} ends at gather point {}, of {g}",
-            i / m as usize,
-            i % m as usize,
-            rays.hits[i]
-        ));
     }
     Ok(())
 }
@@ -224,17 +230,22 @@ pub(crate) fn encode(rays: &ProbeRays, resolution: u32) -> Vec<u8> {
     ] {
         b.put_u32(v);
     }
-    for g in &rays.points {
+    encode_points(&rays.points, &mut b);
+    for h in &rays.hits {
+        b.put_u32(*h);
+    }
+    b
+}
+
+/// Appends gather point records.
+pub(crate) fn encode_points(points: &[GatherPoint], b: &mut Vec<u8>) {
+    for g in points {
         b.put_u32(g.texel);
         for v in g.position.iter().chain(&g.normal).chain(&g.albedo).chain(&g.emission) {
             b.put_f32(*v);
         }
         b.put_u32(g.emitter);
     }
-    for h in &rays.hits {
-        b.put_u32(*h);
-    }
-    b
 }
 
 /// What the header gives: probes, rays per probe, gather points and the atlas resolution.

@@ -102,6 +102,7 @@ pub struct Archive<R> {
     sky: Option<SkyTransfer>,
     probes: Option<Probes>,
     probe_rays: Option<crate::ProbeRays>,
+    near_field: Option<crate::NearField>,
     clusters: Vec<Cluster>,
     tiles: Vec<TileRecord>,
     panes_offset: u64,
@@ -275,6 +276,14 @@ impl<R: Read + Seek> Archive<R> {
         let rays_rec = ray_recs.next().cloned();
         if ray_recs.next().is_some() {
             return Err(Error::inconsistent("probe_rays section appears more than once"));
+        }
+        // Kind 11 is the near field section from 1.7 on, likewise.
+        let mut near_recs = records
+            .iter()
+            .filter(|r| r.kind == kind::NEAR_FIELD && header.minor >= 7);
+        let near_rec = near_recs.next().cloned();
+        if near_recs.next().is_some() {
+            return Err(Error::inconsistent("near_field section appears more than once"));
         }
 
         // Every section's raw size is checked against what the counts read so
@@ -470,6 +479,17 @@ impl<R: Read + Seek> Archive<R> {
                 emitters.len(),
             )?),
         };
+        // Near field (1.7, optional): sizes fixed by its header and the atlas.
+        let near_field = match &near_rec {
+            None => None,
+            Some(rec) => Some(read_near_field(
+                &mut src,
+                rec,
+                strict,
+                atlas.resolution,
+                emitters.len(),
+            )?),
+        };
 
         let info = ArchiveInfo {
             major: header.major,
@@ -505,6 +525,7 @@ impl<R: Read + Seek> Archive<R> {
             sky,
             probes,
             probe_rays,
+            near_field,
             clusters,
             tiles,
             panes_offset: panes_rec.offset,
@@ -553,6 +574,12 @@ impl<R: Read + Seek> Archive<R> {
     /// them (1.6): a run time gathers the probes' light from the surfaces with them.
     pub fn probe_rays(&self) -> Option<&crate::ProbeRays> {
         self.probe_rays.as_ref()
+    }
+
+    /// Where every exit point's near rays end (formats/prm.md §5.6), when the bake traced them
+    /// (1.7): a run time gathers back with them what the panes' VPL bound removes.
+    pub fn near_field(&self) -> Option<&crate::NearField> {
+        self.near_field.as_ref()
     }
 
     /// Every entry's pane energy (RGB, the sum over the atlas of the indirect irradiance its
@@ -1138,6 +1165,60 @@ fn read_probe_rays<R: Read + Seek>(
         hits,
     };
     probe_rays::validate(&out, probes, resolution, groups).map_err(Error::inconsistent)?;
+    Ok(out)
+}
+
+/// Reads the near field section: its 32-byte header first, whose counts (each bounded by the
+/// atlas's texels and the rays per exit) fix the raw size, checked before the rest is
+/// decompressed.
+fn read_near_field<R: Read + Seek>(
+    src: &mut R,
+    rec: &SectionRecord,
+    strict: bool,
+    resolution: u32,
+    groups: usize,
+) -> Result<crate::NearField> {
+    use crate::near_field::{self, NEAR_EXIT_SIZE, NEAR_FIELD_HEADER_SIZE, NEAR_HIT_SIZE};
+    use crate::probe_rays::{self, GATHER_POINT_SIZE};
+    let section = open_section(src, rec)?;
+    if section.record.raw_size < NEAR_FIELD_HEADER_SIZE as u64 {
+        return Err(Error::inconsistent(format!(
+            "near_field section has {} raw bytes, less than its {NEAR_FIELD_HEADER_SIZE}-byte header",
+            section.record.raw_size
+        )));
+    }
+    let mut raw = section.raw()?;
+    let mut head = [0u8; NEAR_FIELD_HEADER_SIZE];
+    raw.read_exact(&mut head)?;
+    let h = near_field::decode_header(&head, strict).map_err(Error::inconsistent)?;
+    let texels = u64::from(resolution) * u64::from(resolution);
+    if h.resolution != resolution
+        || u64::from(h.points) > texels
+        || u64::from(h.exits) > texels
+        || u64::from(h.hits) > u64::from(h.exits) * u64::from(h.rays_per_exit)
+    {
+        return Err(Error::inconsistent(format!(
+            "near_field section is for a {}² atlas ({resolution}² here) with {} gather points, {} exits and {} hits of {} rays each",
+            h.resolution, h.points, h.exits, h.hits, h.rays_per_exit
+        )));
+    }
+    let expected =
+        near_field::raw_size_for(u64::from(h.exits), u64::from(h.points), u64::from(h.hits)).unwrap_or(u64::MAX);
+    section.expect_raw_size(expected, || {
+        format!("{} gather points, {} exits, {} hits", h.points, h.exits, h.hits)
+    })?;
+    let points = raw.records(h.points as usize, GATHER_POINT_SIZE, probe_rays::decode_points)?;
+    let exits = raw.records(h.exits as usize, NEAR_EXIT_SIZE, near_field::decode_exits)?;
+    let hits = raw.records(h.hits as usize, NEAR_HIT_SIZE, near_field::decode_hits)?;
+    raw.finish()?;
+    let out = crate::NearField {
+        rays_per_exit: h.rays_per_exit,
+        disk: h.disk,
+        points,
+        exits,
+        hits,
+    };
+    near_field::validate(&out, resolution, groups).map_err(Error::inconsistent)?;
     Ok(out)
 }
 

@@ -363,6 +363,7 @@ pub struct ArchiveWriter {
     sky: Option<crate::SkyTransfer>,
     probes: Option<crate::Probes>,
     probe_rays: Option<crate::ProbeRays>,
+    near_field: Option<crate::NearField>,
     custom: Vec<(u32, Vec<u8>)>,
     records: Vec<SectionRecord>,
     resolution: u32,
@@ -465,6 +466,7 @@ impl ArchiveWriter {
             sky: None,
             probes: None,
             probe_rays: None,
+            near_field: None,
             custom: Vec::new(),
             records: Vec::new(),
             resolution: atlas.resolution,
@@ -566,6 +568,10 @@ impl ArchiveWriter {
             crate::probe_rays::validate(rays, probes, self.resolution, groups.len())
                 .map_err(|e| Error::InvalidInput(format!("the probe rays already set: {e}")))?;
         }
+        if let Some(near) = &self.near_field {
+            crate::near_field::validate(near, self.resolution, groups.len())
+                .map_err(|e| Error::InvalidInput(format!("the near field already set: {e}")))?;
+        }
         self.emitters = Some(groups);
         Ok(())
     }
@@ -608,6 +614,16 @@ impl ArchiveWriter {
         let groups = self.emitters.as_ref().map_or(0, |g| g.len());
         crate::probe_rays::validate(&rays, probes, self.resolution, groups).map_err(Error::InvalidInput)?;
         self.probe_rays = Some(rays);
+        Ok(())
+    }
+
+    /// Records where every exit point's near rays end (formats/prm.md §5.6), after
+    /// [`ArchiveWriter::set_emitters`] when gather points name emitter groups: exits and gather
+    /// points on texels of this atlas. An archive with it is 1.7.
+    pub fn set_near_field(&mut self, near: crate::NearField) -> Result<()> {
+        let groups = self.emitters.as_ref().map_or(0, |g| g.len());
+        crate::near_field::validate(&near, self.resolution, groups).map_err(Error::InvalidInput)?;
+        self.near_field = Some(near);
         Ok(())
     }
 
@@ -808,6 +824,10 @@ impl ArchiveWriter {
         if let Some(rays) = self.probe_rays.take() {
             self.write_section(kind::PROBE_RAYS, &crate::probe_rays::encode(&rays, self.resolution))?;
             minor = 6;
+        }
+        if let Some(near) = self.near_field.take() {
+            self.write_section(kind::NEAR_FIELD, &crate::near_field::encode(&near, self.resolution))?;
+            minor = 7;
         }
         for (k, data) in std::mem::take(&mut self.custom) {
             self.write_section(k, &data)?;

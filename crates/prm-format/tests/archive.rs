@@ -867,6 +867,8 @@ fn python_reader_check(path: &Path, filter: TileFilter) -> bool {
     w.set_probes(probes.clone()).unwrap();
     let rays = probe_ray_set(&s);
     w.set_probe_rays(rays.clone()).unwrap();
+    let near = near_set(&s);
+    w.set_near_field(near.clone()).unwrap();
     for p in &s.panes {
         w.add_pane(p).unwrap();
     }
@@ -900,7 +902,7 @@ fn python_reader_check(path: &Path, filter: TileFilter) -> bool {
     );
     let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     let mut a = Archive::open(path).unwrap();
-    assert_eq!(j["version"], "1.6");
+    assert_eq!(j["version"], "1.7");
     assert_eq!(j["checksums_verified"], true);
     let ja = &j["accuracy"];
     assert_eq!(ja["exit_points"], 1024);
@@ -923,7 +925,7 @@ fn python_reader_check(path: &Path, filter: TileFilter) -> bool {
     assert_eq!(j["resolution"], 16);
     assert_eq!(j["tile_size"], 8);
     assert_eq!(j["covered_texels"], a.atlas().covered_texels());
-    assert_eq!(j["sections"].as_array().unwrap().len(), 11);
+    assert_eq!(j["sections"].as_array().unwrap().len(), 12);
     let je = j["emitters"].as_array().unwrap();
     assert_eq!(je.len(), groups.len());
     let f3 = |v: &serde_json::Value| [0, 1, 2].map(|k| v[k].as_f64().unwrap() as f32);
@@ -1005,7 +1007,45 @@ fn python_reader_check(path: &Path, filter: TileFilter) -> bool {
     };
     assert_eq!(a.probe_rays(), Some(&back));
     assert_eq!(a.probe_rays(), Some(&rays));
-    assert_eq!(a.info().minor, 6);
+    let jn = &j["near_field"];
+    let back = NearField {
+        rays_per_exit: u(&jn["rays_per_exit"]),
+        disk: jn["disk"].as_f64().unwrap() as f32,
+        points: jn["points"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|g| GatherPoint {
+                texel: u(&g["texel"]),
+                position: f3(&g["position"]),
+                normal: f3(&g["normal"]),
+                albedo: f3(&g["albedo"]),
+                emission: f3(&g["emission"]),
+                emitter: u(&g["emitter"]),
+            })
+            .collect(),
+        exits: jn["exits"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|x| NearExit {
+                texel: u(&x["texel"]),
+                end: u(&x["end"]),
+            })
+            .collect(),
+        hits: jn["hits"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|h| NearHit {
+                point: u(&h["point"]),
+                distance2: h["distance2"].as_f64().unwrap() as f32,
+            })
+            .collect(),
+    };
+    assert_eq!(a.near_field(), Some(&back));
+    assert_eq!(a.near_field(), Some(&near));
+    assert_eq!(a.info().minor, 7);
     let je: Vec<[f32; 3]> = j["entry_energy"]
         .as_array()
         .unwrap()
@@ -1776,7 +1816,7 @@ fn emitters_round_trip_and_hostile_headers_are_refused() {
     let n = s.entries.len() as u32;
     for (head, what) in [
         (header(2, n + 1, 16), "entries"),
-        (header(2, n, 32), "resolution"),
+        (header(2, n, 32), "32² atlas"),
         (header(limits::MAX_EMITTER_GROUPS + 1, n, 16), "emitter groups"),
     ] {
         let raw = 64u64 << 20;
@@ -1846,7 +1886,7 @@ fn sky_round_trip_and_hostile_headers_are_refused() {
         }
         d
     };
-    for (head, what) in [(header(32, 9), "resolution"), (header(16, 16), "coefficients")] {
+    for (head, what) in [(header(32, 9), "32² atlas"), (header(16, 16), "coefficients")] {
         let raw = 64u64 << 20;
         let mut data = head.clone();
         data.resize(raw as usize, 0);
@@ -1916,6 +1956,30 @@ fn probe_ray_set(s: &Scene) -> ProbeRays {
         rays_per_probe: 4,
         points,
         hits,
+    }
+}
+
+fn near_set(s: &Scene) -> NearField {
+    let points = probe_ray_set(s).points;
+    NearField {
+        rays_per_exit: 8,
+        disk: 0.03125,
+        points,
+        exits: vec![NearExit { texel: 1, end: 2 }, NearExit { texel: 4, end: 3 }],
+        hits: vec![
+            NearHit {
+                point: 2,
+                distance2: 0.0,
+            },
+            NearHit {
+                point: 0,
+                distance2: 0.125,
+            },
+            NearHit {
+                point: 1,
+                distance2: 0.5,
+            },
+        ],
     }
 }
 
@@ -2029,6 +2093,68 @@ fn probes_round_trip_and_hostile_headers_are_refused() {
         data.resize(raw as usize, 0);
         let stream = zstd::bulk::compress(&data, 3).unwrap();
         let m = replace_section(&bytes, kind::PROBES, &stream, compression::ZSTD, raw);
+        assert_refused_in_bounded_memory(&m, what);
+    }
+}
+
+/// The near field round-trips exactly and makes the archive 1.7; the writer refuses gather
+/// points of emitter groups the archive lacks; headers whose counts the atlas cannot hold are
+/// refused before the rest is decompressed.
+#[test]
+fn near_field_round_trips_and_hostile_headers_are_refused() {
+    let dir = test_dir("near-field");
+    let s = scene(16, 8, 4, 31);
+    let near = near_set(&s);
+    let path = dir.join("near.prm");
+    let mut w = ArchiveWriter::create(&path, s.metadata.clone(), &s.atlas, &s.entries, &s.clusters).unwrap();
+    assert!(
+        w.set_near_field(near.clone()).is_err(),
+        "gather points of emitter groups the archive does not have"
+    );
+    w.set_emitters(emitter_groups(&s, 2)).unwrap();
+    let mut wrong = near.clone();
+    wrong.exits[1].end = 2;
+    assert!(w.set_near_field(wrong).is_err(), "an exit without hits");
+    w.set_near_field(near.clone()).unwrap();
+    assert!(
+        w.set_emitters(emitter_groups(&s, 1)).is_err(),
+        "fewer emitter groups than the near field names"
+    );
+    for p in &s.panes {
+        w.add_pane(p).unwrap();
+    }
+    w.finish().unwrap();
+    let bytes = std::fs::read(&path).unwrap();
+    let mut a = Archive::from_bytes(&bytes).unwrap();
+    assert_eq!(a.info().minor, 7);
+    assert_eq!(a.near_field(), Some(&near));
+    a.verify().unwrap();
+
+    let texels = 16u32 * 16;
+    let header = |e: u32, m: u32, g: u32, res: u32, h: u32| {
+        let mut d = Vec::new();
+        for v in [e, m, g, 0, res, h] {
+            d.extend_from_slice(&v.to_le_bytes());
+        }
+        d.extend_from_slice(&0.03125f32.to_le_bytes());
+        d.extend_from_slice(&0u32.to_le_bytes());
+        d
+    };
+    for (head, what) in [
+        (header(2, 8, 3, 32, 3), "32² atlas"),
+        (header(texels + 1, 8, 3, 16, 3), "257 exits"),
+        (header(2, 8, texels + 1, 16, 3), "257 gather points"),
+        (header(2, 8, 3, 16, 17), "17 hits"),
+        (
+            header(texels, MAX_NEAR_RAYS, texels, 16, texels * MAX_NEAR_RAYS),
+            "16777216 hits",
+        ),
+    ] {
+        let raw = 64u64 << 20;
+        let mut data = head.clone();
+        data.resize(raw as usize, 0);
+        let stream = zstd::bulk::compress(&data, 3).unwrap();
+        let m = replace_section(&bytes, kind::NEAR_FIELD, &stream, compression::ZSTD, raw);
         assert_refused_in_bounded_memory(&m, what);
     }
 }

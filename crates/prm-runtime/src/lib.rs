@@ -3,7 +3,9 @@
 //!
 //! Per frame, all on the GPU: shadow maps of every light ([`shadow_views`]; or the caller's own,
 //! [`Shadows::External`]), the shadow-mapped irradiance of every entry point and each cluster's
-//! weight (`weights.wgsl`), the rank of every cluster by score (`rank.wgsl`), the top K with
+//! weight (`weights.wgsl`), when the archive holds the near field (format 1.7) the light the
+//! panes' VPL bound removes next to other surfaces, gathered from the direct light of the
+//! texels there (`near_radiance.wgsl`, `near_field.wgsl`), the rank of every cluster by score (`rank.wgsl`), the top K with
 //! weights faded near the threshold and the residual groups that carry the dropped clusters'
 //! light (`select.wgsl`, [`prm_format::residual_groups`]) and the blend of the kept panes and
 //! the groups' summed panes into an `rgba32float` lightmap of indirect irradiance in W/m² (`blend.wgsl`). The caller samples it
@@ -47,6 +49,7 @@
 mod baked;
 mod irradiance;
 mod lights;
+mod near_field;
 mod options;
 mod probe_rays;
 mod probes;
@@ -63,12 +66,12 @@ use prm_scene::{Aabb, Light, Scene};
 pub use baked::EmitterInfo;
 pub use irradiance::DILATE_STEPS;
 pub use lights::{look_to, orthographic, perspective, shadow_views, SPOT_SINGLE_VIEW_MAX_DEG};
-pub use options::{archive_top_k, ProbeLight, RuntimeError, RuntimeOptions, MAX_SHADOW_RESOLUTION};
+pub use options::{archive_top_k, NearLight, ProbeLight, RuntimeError, RuntimeOptions, MAX_SHADOW_RESOLUTION};
 pub use probes::ProbeVolume;
 pub use shadow::SHADOW_FORMAT;
 pub use shared::{
-    GpuCluster, GpuEffective, GpuEntry, GpuFrame, GpuGatherPoint, GpuLight, GpuProbeGrid, GpuProbeRays, GpuSelected,
-    GpuView, GpuWeight, LightKind, LIGHTS_WGSL, PROBES_WGSL, SHARED_WGSL,
+    GpuCluster, GpuEffective, GpuEntry, GpuFrame, GpuGatherPoint, GpuLight, GpuNearExit, GpuNearField, GpuNearHit,
+    GpuProbeGrid, GpuProbeRays, GpuSelected, GpuView, GpuWeight, LightKind, LIGHTS_WGSL, PROBES_WGSL, SHARED_WGSL,
 };
 
 use shadow::{ShadowMaps, ShadowPass};
@@ -78,9 +81,11 @@ use weights::WeightsPass;
 /// Most lights a frame may have.
 pub const MAX_LIGHTS: usize = 256;
 /// Names of the timed passes in frame order, for a [`PassTimer`] handed to [`Runtime::encode`].
-pub const PASS_NAMES: [&str; 7] = [
+pub const PASS_NAMES: [&str; 9] = [
     "shadow",
     "weights",
+    "near radiance",
+    "near field",
     "rank",
     "select",
     "blend",
@@ -191,6 +196,8 @@ pub struct Runtime {
     entries: Vec<GpuEntry>,
     emitters: baked::BakedLights,
     probes: Option<probes::ProbesPass>,
+    /// The near field's passes, when the archive holds it and the options gather it.
+    near: Option<near_field::NearFieldPass>,
 }
 
 impl Runtime {
@@ -415,7 +422,47 @@ impl Runtime {
         let maps = ShadowMaps::new(device, options.shadow_resolution, 1);
         let shadow = ShadowPass::new(device, &maps);
         let weights = WeightsPass::new(device, &buffers, &maps.array);
-        let topk = TopKPasses::new(device, &buffers, &panes, &lightmap_view, &emitters.indirect_view);
+        // The near field's lightmap, added by the blend: 1×1 and unused without one.
+        let near_field = archive.near_field().filter(|_| options.near_light == NearLight::Gather);
+        let near_map = pipeline::texture(
+            device,
+            "prm near lightmap",
+            if near_field.is_some() { [res, res, 1] } else { [1, 1, 1] },
+            LIGHTMAP_FORMAT,
+            wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::TEXTURE_BINDING,
+        );
+        let near_view = near_map.create_view(&Default::default());
+        let near = match near_field {
+            Some(n) => {
+                let max = device.limits().max_storage_buffer_binding_size;
+                let bytes = (n.hits.len() as u64 * 8).max(n.points.len() as u64 * 48);
+                if bytes > max {
+                    return Err(RuntimeError::NearField(format!(
+                        "{} near hits and {} gather points take {:.1} MiB, over the device's {:.1} MiB storage binding",
+                        n.hits.len(),
+                        n.points.len(),
+                        bytes as f64 / (1 << 20) as f64,
+                        max as f64 / (1 << 20) as f64
+                    )));
+                }
+                Some(near_field::NearFieldPass::new(
+                    device,
+                    &buffers,
+                    n,
+                    &maps.array,
+                    &near_view,
+                ))
+            }
+            None => None,
+        };
+        let topk = TopKPasses::new(
+            device,
+            &buffers,
+            &panes,
+            &lightmap_view,
+            &emitters.indirect_view,
+            &near_view,
+        );
         let probes = match archive.probes() {
             Some(p) => Some(probes::ProbesPass::new(
                 device,
@@ -459,6 +506,7 @@ impl Runtime {
             entries,
             emitters,
             probes,
+            near,
         })
     }
 
@@ -478,6 +526,9 @@ impl Runtime {
             self.weights.rebind(&self.device, &self.buffers, &self.maps.array);
             if let Some(p) = &mut self.probes {
                 p.rebind(&self.device, &self.buffers, &self.maps.array);
+            }
+            if let Some(n) = &mut self.near {
+                n.rebind(&self.device, &self.buffers, &self.maps.array);
             }
         }
         self.view_count = views.len() as u32;
@@ -541,6 +592,9 @@ impl Runtime {
             external,
             timer,
         );
+        if let Some(n) = &self.near {
+            n.encode(&self.device, encoder, &self.buffers, external, timer);
+        }
         self.topk.encode(encoder, self.cluster_count, self.resolution, timer);
         if let Some(p) = &self.probes {
             p.encode(&self.device, encoder, &self.buffers, external, timer);
@@ -576,6 +630,21 @@ impl Runtime {
     /// device.
     pub fn read_probe_radiance(&self) -> Result<Vec<[f32; 3]>, RuntimeError> {
         let Some((buffer, points)) = self.probes.as_ref().and_then(|p| p.ray_radiance()) else {
+            return Ok(Vec::new());
+        };
+        if points == 0 {
+            return Ok(Vec::new());
+        }
+        let bytes = readback::read_buffer(&self.device, &self.queue, buffer, u64::from(points) * 16)?;
+        let v: &[[f32; 4]] = bytemuck::cast_slice(&bytes);
+        Ok(v.iter().map(|c| [c[0], c[1], c[2]]).collect())
+    }
+
+    /// Reads back the radiance (RGB, W/m²/sr) the last frame's direct light gave every gather
+    /// point of the near field ([`prm_format::NearField::points`]; empty without it), waiting
+    /// for the device.
+    pub fn read_near_radiance(&self) -> Result<Vec<[f32; 3]>, RuntimeError> {
+        let Some((buffer, points)) = self.near.as_ref().map(|n| n.radiance()) else {
             return Ok(Vec::new());
         };
         if points == 0 {

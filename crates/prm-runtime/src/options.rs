@@ -52,6 +52,9 @@ pub enum RuntimeError {
     /// Sky coefficients the archive cannot take (no sky transfer) or not finite.
     #[error("sky: {0}")]
     Sky(String),
+    /// The archive's near field does not fit this device.
+    #[error("near field: {0}")]
+    NearField(String),
     /// The archive's probes do not fit this device.
     #[error("probes: {0}")]
     Probes(String),
@@ -77,6 +80,17 @@ pub enum ProbeLight {
     Panes,
 }
 
+/// Whether the run time gathers back what the panes' VPL bound removes, for an archive that
+/// holds the near field (format 1.7).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum NearLight {
+    /// Gathered each frame from the surfaces' direct light along the near rays.
+    #[default]
+    Gather,
+    /// Left out: the panes' light only, as archives before 1.7 play, for comparison.
+    Off,
+}
+
 /// Run-time settings.
 #[derive(Clone, Debug, PartialEq)]
 pub struct RuntimeOptions {
@@ -100,6 +114,8 @@ pub struct RuntimeOptions {
     pub depth_bias: f32,
     /// How the probes are lit ([`ProbeLight::Rays`] by default).
     pub probe_light: ProbeLight,
+    /// Whether the near field is gathered ([`NearLight::Gather`] by default).
+    pub near_light: NearLight,
 }
 
 impl RuntimeOptions {
@@ -156,6 +172,7 @@ impl Default for RuntimeOptions {
             normal_offset: 1.5,
             depth_bias: 1.5,
             probe_light: ProbeLight::default(),
+            near_light: NearLight::default(),
         }
     }
 }

@@ -113,6 +113,40 @@ pub struct GpuProbeRays {
     pub _pad0: u32,
 }
 
+/// An exit point with near hits (`prm_format::NearExit`); `NearExit` in the shaders.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct GpuNearExit {
+    /// Texel index `y·R + x`.
+    pub texel: u32,
+    /// One past its last hit.
+    pub end: u32,
+}
+
+/// A near ray's end (`prm_format::NearHit`); `NearHit` in the shaders.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct GpuNearHit {
+    /// Gather point index.
+    pub point: u32,
+    /// Squared distance from the exit point.
+    pub distance2: f32,
+}
+
+/// The near field's constants; `NearField` in the shaders.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct GpuNearField {
+    /// Exit points with near hits.
+    pub exits: u32,
+    /// Gather points.
+    pub points: u32,
+    /// The depth-0 VPLs' disk `R²`.
+    pub disk: f32,
+    /// `π / M`, `M` the rays per exit point.
+    pub scale: f32,
+}
+
 /// A light; `Light` in the shaders.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
@@ -287,6 +321,9 @@ mod tests {
         )
         .unwrap();
         wgsl_layout!(s, GpuProbeRays, "ProbeRays", [probes, rays_per_probe, points, _pad0]).unwrap();
+        wgsl_layout!(s, GpuNearExit, "NearExit", [texel, end]).unwrap();
+        wgsl_layout!(s, GpuNearHit, "NearHit", [point, distance2]).unwrap();
+        wgsl_layout!(s, GpuNearField, "NearField", [exits, points, disk, scale]).unwrap();
     }
 
     #[test]

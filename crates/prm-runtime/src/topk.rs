@@ -21,13 +21,15 @@ pub(crate) struct TopKPasses {
 
 impl TopKPasses {
     /// The passes on `b`, blending the pane array `panes` into `lightmap`, plus the emitters'
-    /// traced indirect lightmap `emitted` (used only when it has the lightmap's size).
+    /// traced indirect lightmap `emitted` and the near field's lightmap `near` (each used only
+    /// when it has the lightmap's size).
     pub fn new(
         device: &wgpu::Device,
         b: &Buffers,
         panes: &wgpu::TextureView,
         lightmap: &wgpu::TextureView,
         emitted: &wgpu::TextureView,
+        near: &wgpu::TextureView,
     ) -> TopKPasses {
         let pass = |name, wgsl, resources: &[wgpu::BindingResource]| {
             ComputePass::new(device, name, &[crate::SHARED_WGSL, wgsl], resources)
@@ -60,6 +62,7 @@ impl TopKPasses {
                     wgpu::BindingResource::TextureView(panes),
                     wgpu::BindingResource::TextureView(lightmap),
                     wgpu::BindingResource::TextureView(emitted),
+                    wgpu::BindingResource::TextureView(near),
                 ],
             ),
         }

@@ -242,6 +242,9 @@ pub struct CheckedArchive<'a> {
     pub groups: &'a [u32],
     /// The player's fade band ([`FADE_BAND`]).
     pub fade_band: f32,
+    /// Every checked exit point's near field ([`crate::near_terms`]), added to the panes' light
+    /// as the player adds it; empty without one.
+    pub near: &'a [Vec<crate::NearTerm>],
 }
 
 /// The archive's indirect light at `exits` (the checked exit points) under `light`, for the
@@ -303,7 +306,19 @@ pub fn played_indirect(bvh: &Bvh, archive: &CheckedArchive<'_>, light: Light) ->
         }
         out
     };
-    (played, blend(&weights, archive.panes))
+    let (mut played, mut all) = (played, blend(&weights, archive.panes));
+    for ((p, a), terms) in played.iter_mut().zip(&mut all).zip(archive.near) {
+        let near: Vec3 = terms
+            .iter()
+            .map(|t| {
+                let e = crate::direct_irradiance(bvh, &[light], t.position, t.normal, t.normal, u32::MAX);
+                t.albedo * e * t.factor
+            })
+            .sum();
+        *p += near;
+        *a += near;
+    }
+    (played, all)
 }
 
 /// Compares the archive's indirect light with the reference's at `exits` for a point light at
@@ -322,6 +337,7 @@ pub fn check_accuracy(
         || archive.panes.len() != archive.members.len()
         || archive.cluster_energy.len() != archive.members.len()
         || !(archive.groups.is_empty() || archive.groups.len() == archive.members.len())
+        || !(archive.near.is_empty() || archive.near.len() == exits.len())
     {
         return Err(TraceError::InvalidParameter(
             "every cluster needs a pane energy and one pane value per checked exit point".into(),

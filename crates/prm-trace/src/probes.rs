@@ -292,20 +292,28 @@ pub fn sky_transfer_at_probes(
         .collect())
 }
 
-/// Where every probe's [`probe_ray_direction`] rays meet the scene (format 1.6's probe rays):
-/// the covered texel of the front face they hit, [`RAY_SKY`] when they leave the scene, or
-/// [`RAY_BLOCKED`] at a back face. A hit takes its texel's exit when that exit is on the hit's
-/// chart, else the exit its gutter texel copies (same chart), else the nearest exit of the
-/// same chart within two texels. Gather points are the
-/// exits the rays reach, in exit order; on an emissive material's triangle they carry its
-/// radiance and its group in [`crate::Emitters::from_scene`]'s order (the archive's).
-pub fn probe_rays(scene: &Scene, bvh: &Bvh, atlas: &Atlas, positions: &[Vec3], rays_per_probe: u32) -> ProbeRays {
-    let emitters = crate::Emitters::from_scene(scene);
-    let m = rays_per_probe;
-    let res = atlas.resolution as i64;
-    let dirs: Vec<Vec3> = (0..m).map(|d| Vec3::from(probe_ray_direction(d, m))).collect();
-    let gutter: std::collections::HashMap<u32, u32> = atlas.dilation.iter().copied().collect();
-    let exit_at = |tri: u32, b1: f32, b2: f32| -> Option<u32> {
+/// Finds the exit point that stands for a ray's hit: the covered texel's exit when it lies on
+/// the hit's own chart, else its gutter source's, else the nearest exit of that chart within
+/// two texels. A shared or dilated texel may belong to a neighbouring surface (another
+/// normal, albedo or emission), so only exits of the hit's own chart count.
+pub struct HitTexels<'a> {
+    atlas: &'a Atlas,
+    gutter: std::collections::HashMap<u32, u32>,
+}
+
+impl<'a> HitTexels<'a> {
+    /// The lookup for `atlas`.
+    pub fn new(atlas: &'a Atlas) -> HitTexels<'a> {
+        HitTexels {
+            atlas,
+            gutter: atlas.dilation.iter().copied().collect(),
+        }
+    }
+
+    /// The exit (index into `atlas.exits`) for barycentrics `(b1, b2)` on triangle `tri`.
+    pub fn exit(&self, tri: u32, b1: f32, b2: f32) -> Option<u32> {
+        let atlas = self.atlas;
+        let res = atlas.resolution as i64;
         let uv = atlas.uvs[tri as usize];
         let p = uv[0] * (1.0 - b1 - b2) + uv[1] * b1 + uv[2] * b2;
         let (x, y) = (
@@ -313,8 +321,6 @@ pub fn probe_rays(scene: &Scene, bvh: &Bvh, atlas: &Atlas, positions: &[Vec3], r
             ((p.y * res as f32) as i64).clamp(0, res - 1),
         );
         let texel = (y * res + x) as u32;
-        // Only an exit of the hit's own chart stands for it: a shared or dilated texel may
-        // belong to a neighbouring surface (another normal, albedo or emission).
         let chart = atlas.chart_of_triangle[tri as usize];
         let of_chart =
             |e: u32| e != EMPTY_TEXEL && atlas.chart_of_triangle[atlas.exits[e as usize].triangle as usize] == chart;
@@ -322,7 +328,7 @@ pub fn probe_rays(scene: &Scene, bvh: &Bvh, atlas: &Atlas, positions: &[Vec3], r
         if of_chart(own) {
             return Some(own);
         }
-        if let Some(&src) = gutter.get(&texel) {
+        if let Some(&src) = self.gutter.get(&texel) {
             let e = atlas.texel_exit[src as usize];
             if of_chart(e) {
                 return Some(e);
@@ -343,30 +349,26 @@ pub fn probe_rays(scene: &Scene, bvh: &Bvh, atlas: &Atlas, positions: &[Vec3], r
             }
         }
         best.map(|(_, e)| e)
-    };
-    let per_probe: Vec<Vec<u32>> = positions
-        .par_iter()
-        .map(|&p| {
-            dirs.iter()
-                .map(|&d| match bvh.closest_hit(p, d, f32::INFINITY, u32::MAX) {
-                    None => RAY_SKY,
-                    Some(h) if !h.front => RAY_BLOCKED,
-                    // No exit near the hit: it sends nothing.
-                    Some(h) => exit_at(h.triangle, h.b1, h.b2).unwrap_or(RAY_BLOCKED),
-                })
-                .collect()
-        })
-        .collect();
-    // Exits reached, in exit order, and each one's gather point index.
-    let mut reached = vec![false; atlas.exits.len()];
-    for &e in per_probe.iter().flatten() {
-        if let Some(r) = reached.get_mut(e as usize) {
+    }
+}
+
+/// The gather points of the exits `reached` names (other values are skipped), in exit order,
+/// and every exit's gather point index (`RAY_BLOCKED` where none).
+pub(crate) fn gather_points(
+    scene: &Scene,
+    atlas: &Atlas,
+    emitters: &crate::Emitters,
+    reached: impl Iterator<Item = u32>,
+) -> (Vec<u32>, Vec<GatherPoint>) {
+    let mut seen = vec![false; atlas.exits.len()];
+    for e in reached {
+        if let Some(r) = seen.get_mut(e as usize) {
             *r = true;
         }
     }
     let mut index = vec![RAY_BLOCKED; atlas.exits.len()];
     let mut points = Vec::new();
-    for (e, _) in reached.iter().enumerate().filter(|(_, &r)| r) {
+    for (e, _) in seen.iter().enumerate().filter(|(_, &r)| r) {
         index[e] = points.len() as u32;
         let x = &atlas.exits[e];
         let material = scene.triangles[x.triangle as usize].material;
@@ -380,6 +382,35 @@ pub fn probe_rays(scene: &Scene, bvh: &Bvh, atlas: &Atlas, positions: &[Vec3], r
             emitter: group.map_or(NO_EMITTER, |g| g as u32),
         });
     }
+    (index, points)
+}
+
+/// Where every probe's [`probe_ray_direction`] rays meet the scene (format 1.6's probe rays):
+/// the covered texel of the front face they hit, [`RAY_SKY`] when they leave the scene, or
+/// [`RAY_BLOCKED`] at a back face. A hit takes its texel's exit when that exit is on the hit's
+/// chart, else the exit its gutter texel copies (same chart), else the nearest exit of the
+/// same chart within two texels. Gather points are the
+/// exits the rays reach, in exit order; on an emissive material's triangle they carry its
+/// radiance and its group in [`crate::Emitters::from_scene`]'s order (the archive's).
+pub fn probe_rays(scene: &Scene, bvh: &Bvh, atlas: &Atlas, positions: &[Vec3], rays_per_probe: u32) -> ProbeRays {
+    let emitters = crate::Emitters::from_scene(scene);
+    let m = rays_per_probe;
+    let dirs: Vec<Vec3> = (0..m).map(|d| Vec3::from(probe_ray_direction(d, m))).collect();
+    let texels = HitTexels::new(atlas);
+    let per_probe: Vec<Vec<u32>> = positions
+        .par_iter()
+        .map(|&p| {
+            dirs.iter()
+                .map(|&d| match bvh.closest_hit(p, d, f32::INFINITY, u32::MAX) {
+                    None => RAY_SKY,
+                    Some(h) if !h.front => RAY_BLOCKED,
+                    // No exit near the hit: it sends nothing.
+                    Some(h) => texels.exit(h.triangle, h.b1, h.b2).unwrap_or(RAY_BLOCKED),
+                })
+                .collect()
+        })
+        .collect();
+    let (index, points) = gather_points(scene, atlas, &emitters, per_probe.iter().flatten().copied());
     // Exits become their gather point; the two codes lie beyond every exit and stay.
     let hits = per_probe
         .into_iter()

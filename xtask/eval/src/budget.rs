@@ -12,7 +12,8 @@
 //! | --- | --- | --- |
 //! | as played | nothing | the player's lightmap (`prm_play::Renderer::read_lightmap`) |
 //! | K = all | no top-K truncation | the same archive played with K = every cluster |
-//! | ray-cast entry irradiance | exact visibility at the entry points instead of shadow maps | the archive's panes blended on the CPU, weights from `prm_trace::bounded_irradiance` (K = all) |
+//! | no near field | not an ideal: the panes alone, without the near field the player gathers back (format 1.7) | `prm_play::NearLight::Off` |
+//! | ray-cast entry irradiance | exact visibility at the entry points instead of shadow maps | the archive's panes blended on the CPU, weights from `prm_trace::bounded_irradiance` (K = all), plus the near field with ray-cast direct light |
 //! | no entry-point bound | the entry disk bound `ENTRY_DISK` off | as above with disk 0 |
 //! | exact-visibility panes | a shadow ray per exit point and VPL instead of shared ones | `--backend cpu-exact` |
 //! | depth-map panes | not an ideal: the GPU path's hemicube depth maps (lavapipe here; not on the large scene) | `--backend vulkan` |
@@ -241,6 +242,15 @@ fn cpu_blend(archive: &Path, tracer: &Tracer, light: Light, texels: &[u32], entr
             *o += w * Vec3::from_array(pane[t as usize]);
         }
     }
+    // The near field, as the player adds it, with ray-cast direct light.
+    if let Some(near) = a.near_field() {
+        for (o, terms) in out.iter_mut().zip(prm_trace::near_terms(near, texels)) {
+            for t in terms {
+                let e = prm_trace::direct_irradiance(&tracer.bvh, &lights, t.position, t.normal, t.normal, u32::MAX);
+                *o += t.albedo * e * t.factor;
+            }
+        }
+    }
     Ok(out)
 }
 
@@ -322,6 +332,26 @@ pub fn run(bin: &Path, cache: &Path, root: &Path) -> Result<String> {
         let auto_played = played_each(a, &spec.path, &[auto.top_k, auto.clusters], light, texels)?;
         row("(none: as played)", &auto_played[0], &base, t_auto);
         row("K = all", &auto_played[1], &base, t_auto);
+        if prm_format::Archive::open(a)?.near_field().is_some() {
+            let (mut r, scene) = crate::measure::renderer_with(
+                a,
+                &spec.path,
+                prm_play::RuntimeOptions {
+                    top_k: auto.top_k,
+                    near_light: prm_play::NearLight::Off,
+                    ..Default::default()
+                },
+            )?;
+            r.resize(64, 48);
+            r.render(&FrameInput {
+                camera: prm_play::default_camera(&scene),
+                lights: &[light],
+                mode: PlayMode::Gi,
+            })?;
+            let lm = r.read_lightmap()?;
+            let off: Vec<Vec3> = texels.iter().map(|&t| Vec3::from_array(lm[t as usize])).collect();
+            row("(not ideal) no near field, as played", &off, &base, t_auto);
+        }
         let exact = cpu_blend(a, &tracer, light, texels, prm_scene::ENTRY_DISK)?;
         row("ray-cast entry irradiance, K = all", &exact, &base, t_auto);
         let unbounded = cpu_blend(a, &tracer, light, texels, 0.0)?;

@@ -1,0 +1,371 @@
+//! The near field section (format 1.7): what the panes' VPL bound removes next to every exit
+//! point, as cosine rays that end close by, so that a run time gathers it back from the
+//! surfaces' radiance of the frame.
+//!
+//! A VPL standing for the area `a` reaches an exit point at distance `r` through `1/(r² + R²)`
+//! instead of `1/r²`, `R² = a/π` (prm-trace's `VplBound::Disk`). Over the VPLs this leaves out
+//! `∫ L(ω) · R²/(r² + R²) cos θ dω`: the near field's radiance, weighted towards the closest
+//! surfaces. The section gathers it back for the depth-0 VPLs (area `A/N`, disk `R²` =
+//! [`NearField::disk`]), which carry the direct light the entry points receive: with `M`
+//! cosine-distributed rays from the exit point, of which the ones ending at gather point `g`
+//! at squared distance `r²` are stored, the missing irradiance is
+//! `π/M · Σ D_g · R²/(r² + R²)` ([`NearField::irradiance`]), `D_g` the radiance the gather
+//! point sends from the lights' direct light, `albedo/π × irradiance` (emitters and the sky
+//! reach the lightmap traced, not through the VPLs, when the archive holds their indirect
+//! light). Rays whose weight would be under [`MIN_WEIGHT`] are not
+//! stored: they miss or end too far away to matter. The deeper VPLs' share (their disks are
+//! smaller, `A/(N·W)` for `W` walks per entry) is left out: gathered from the lightmap's
+//! indirect light it helped on the Cornell boxes and hurt on chairs (prm-trace's `near`
+//! module has the measurement).
+//!
+//! Layout (formats/prm.md §5.6), little-endian: a 32-byte header (exit count `E`, rays per exit
+//! `M`, gather point count `G`, flags = 0, the atlas resolution `R`, hit count `H`, `R²` as
+//! `f32`, a reserved `u32` = 0), `G` gather point records of 56 bytes (as the probe rays', §5.5), `E` exit
+//! records of 8 bytes (texel `u32`, the end of its hits `u32`: exit `i`'s hits are
+//! `[end[i−1], end[i])`), then `H` hits of 8 bytes (gather point `u32`, `r²` `f32`).
+
+use crate::layout::{Cursor, PutLe};
+use crate::probe_rays::{self, GatherPoint, GATHER_POINT_SIZE};
+
+/// Size of the section's fixed header.
+pub const NEAR_FIELD_HEADER_SIZE: usize = 32;
+/// Bytes of one exit record.
+pub(crate) const NEAR_EXIT_SIZE: usize = 8;
+/// Bytes of one hit record.
+pub(crate) const NEAR_HIT_SIZE: usize = 8;
+/// Most rays per exit point.
+pub const MAX_NEAR_RAYS: u32 = 1 << 16;
+/// The smallest depth-0 weight `R₀²/(r² + R₀²)` a stored hit has: farther hits are left out.
+pub const MIN_WEIGHT: f32 = 1.0 / 16.0;
+
+/// An exit point with near hits.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct NearExit {
+    /// Texel index `y·R + x` in the atlas.
+    pub texel: u32,
+    /// One past its last hit in [`NearField::hits`]; its first is the previous exit's `end`.
+    pub end: u32,
+}
+
+/// A near ray's end.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct NearHit {
+    /// Gather point index.
+    pub point: u32,
+    /// Squared distance from the exit point, scene units².
+    pub distance2: f32,
+}
+
+/// Every exit point's near rays.
+#[derive(Clone, Debug, PartialEq)]
+pub struct NearField {
+    /// Cosine-distributed rays traced per exit point, `M` (stored or not).
+    pub rays_per_exit: u32,
+    /// The depth-0 VPLs' disk, `R² = A/(N·π)` (scene units²).
+    pub disk: f32,
+    /// The surface points the rays end at.
+    pub points: Vec<GatherPoint>,
+    /// Exit points with at least one stored hit, in texel order.
+    pub exits: Vec<NearExit>,
+    /// Exit by exit, the stored hits.
+    pub hits: Vec<NearHit>,
+}
+
+impl NearField {
+    /// The weight `R²/(r² + R²)` of a hit at squared distance `r2`.
+    pub fn weight(&self, r2: f32) -> f32 {
+        self.disk / (r2 + self.disk)
+    }
+
+    /// Every exit's missing irradiance (in [`NearField::exits`] order) when gather point `g`
+    /// sends `direct[g]` from its direct light (radiance, RGB).
+    pub fn irradiance(&self, direct: &[[f32; 3]]) -> Vec<[f32; 3]> {
+        let scale = std::f32::consts::PI / self.rays_per_exit.max(1) as f32;
+        let mut start = 0usize;
+        self.exits
+            .iter()
+            .map(|x| {
+                let mut e = [0.0f32; 3];
+                for h in self.hits.get(start..x.end as usize).unwrap_or(&[]) {
+                    let w = self.weight(h.distance2);
+                    if let Some(d) = direct.get(h.point as usize) {
+                        (0..3).for_each(|k| e[k] += d[k] * w);
+                    }
+                }
+                start = x.end as usize;
+                e.map(|v| v * scale)
+            })
+            .collect()
+    }
+}
+
+/// Raw size of a section of `e` exits, `g` gather points and `h` hits; `None` on overflow.
+pub(crate) fn raw_size_for(e: u64, g: u64, h: u64) -> Option<u64> {
+    e.checked_mul(NEAR_EXIT_SIZE as u64)?
+        .checked_add(g.checked_mul(GATHER_POINT_SIZE as u64)?)?
+        .checked_add(h.checked_mul(NEAR_HIT_SIZE as u64)?)?
+        .checked_add(NEAR_FIELD_HEADER_SIZE as u64)
+}
+
+/// Checks `near` against the atlas resolution and the emitter groups.
+pub(crate) fn validate(near: &NearField, resolution: u32, groups: usize) -> Result<(), String> {
+    let m = near.rays_per_exit;
+    if m == 0 || m > MAX_NEAR_RAYS {
+        return Err(format!("{m} near rays per exit, not between 1 and {MAX_NEAR_RAYS}"));
+    }
+    if !(near.disk.is_finite() && near.disk > 0.0) {
+        return Err(format!("near field disk {}, not finite and positive", near.disk));
+    }
+    let texels = u64::from(resolution) * u64::from(resolution);
+    probe_rays::validate_points(&near.points, texels, groups)?;
+    let mut last: Option<u32> = None;
+    let mut end = 0u32;
+    for (i, x) in near.exits.iter().enumerate() {
+        if u64::from(x.texel) >= texels || last.is_some_and(|t| x.texel <= t) {
+            return Err(format!(
+                "near exit {i} has texel {} of {texels}, not after the previous one",
+                x.texel
+            ));
+        }
+        if x.end <= end || x.end as usize > near.hits.len() {
+            return Err(format!(
+                "near exit {i} ends its hits at {}, not after {end} and within {}",
+                x.end,
+                near.hits.len()
+            ));
+        }
+        last = Some(x.texel);
+        end = x.end;
+    }
+    if end as usize != near.hits.len() {
+        return Err(format!("{} near hits, the exits cover {end}", near.hits.len()));
+    }
+    let g = near.points.len() as u32;
+    if let Some(i) = near
+        .hits
+        .iter()
+        .position(|h| h.point >= g || !h.distance2.is_finite() || h.distance2 < 0.0)
+    {
+        return Err(format!(
+            "near hit {i} ends at gather point {} of {g} at squared distance {}",
+            near.hits[i].point, near.hits[i].distance2
+        ));
+    }
+    Ok(())
+}
+
+/// Encodes a validated near field for an atlas of `resolution`.
+pub(crate) fn encode(near: &NearField, resolution: u32) -> Vec<u8> {
+    let size = raw_size_for(
+        near.exits.len() as u64,
+        near.points.len() as u64,
+        near.hits.len() as u64,
+    )
+    .unwrap_or(0);
+    let mut b = Vec::with_capacity(size as usize);
+    for v in [
+        near.exits.len() as u32,
+        near.rays_per_exit,
+        near.points.len() as u32,
+        0,
+        resolution,
+        near.hits.len() as u32,
+    ] {
+        b.put_u32(v);
+    }
+    b.put_f32(near.disk);
+    b.put_u32(0);
+    probe_rays::encode_points(&near.points, &mut b);
+    for x in &near.exits {
+        b.put_u32(x.texel);
+        b.put_u32(x.end);
+    }
+    for h in &near.hits {
+        b.put_u32(h.point);
+        b.put_f32(h.distance2);
+    }
+    b
+}
+
+/// What the header gives.
+#[derive(Debug, PartialEq)]
+pub(crate) struct Header {
+    pub exits: u32,
+    pub rays_per_exit: u32,
+    pub points: u32,
+    pub resolution: u32,
+    pub hits: u32,
+    pub disk: f32,
+}
+
+/// Parses and checks the header's own fields; `strict` refuses a non-zero reserved field.
+pub(crate) fn decode_header(head: &[u8], strict: bool) -> Result<Header, String> {
+    let mut c = Cursor::new(head, "near field");
+    let mut v = [0u32; 6];
+    for x in &mut v {
+        *x = c.u32().map_err(|e| e.to_string())?;
+    }
+    let [exits, rays_per_exit, points, flags, resolution, hits] = v;
+    let disk = c.f32().map_err(|e| e.to_string())?;
+    let reserved = c.u32().map_err(|e| e.to_string())?;
+    if flags != 0 || (strict && reserved != 0) {
+        return Err(format!(
+            "near field section has unknown flags {flags:#x} or a non-zero reserved field"
+        ));
+    }
+    if rays_per_exit == 0 || rays_per_exit > MAX_NEAR_RAYS {
+        return Err(format!(
+            "near field section has {rays_per_exit} rays per exit, not between 1 and {MAX_NEAR_RAYS}"
+        ));
+    }
+    Ok(Header {
+        exits,
+        rays_per_exit,
+        points,
+        resolution,
+        hits,
+        disk,
+    })
+}
+
+/// Decodes whole exit records.
+pub(crate) fn decode_exits(raw: &[u8]) -> Result<Vec<NearExit>, String> {
+    Ok(raw
+        .chunks_exact(NEAR_EXIT_SIZE)
+        .map(|r| NearExit {
+            texel: u32::from_le_bytes([r[0], r[1], r[2], r[3]]),
+            end: u32::from_le_bytes([r[4], r[5], r[6], r[7]]),
+        })
+        .collect())
+}
+
+/// Decodes whole hit records.
+pub(crate) fn decode_hits(raw: &[u8]) -> Result<Vec<NearHit>, String> {
+    Ok(raw
+        .chunks_exact(NEAR_HIT_SIZE)
+        .map(|r| NearHit {
+            point: u32::from_le_bytes([r[0], r[1], r[2], r[3]]),
+            distance2: f32::from_le_bytes([r[4], r[5], r[6], r[7]]),
+        })
+        .collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::NO_EMITTER;
+
+    fn near() -> NearField {
+        let point = |t: u32| GatherPoint {
+            texel: t,
+            position: [t as f32, 0.5, -1.0],
+            normal: [0.0, 1.0, 0.0],
+            albedo: [0.5, 0.25, 1.0],
+            emission: [0.0; 3],
+            emitter: NO_EMITTER,
+        };
+        NearField {
+            rays_per_exit: 4,
+            disk: 0.01,
+            points: vec![point(3), point(9)],
+            exits: vec![NearExit { texel: 2, end: 2 }, NearExit { texel: 5, end: 3 }],
+            hits: vec![
+                NearHit {
+                    point: 0,
+                    distance2: 0.0,
+                },
+                NearHit {
+                    point: 1,
+                    distance2: 0.01,
+                },
+                NearHit {
+                    point: 0,
+                    distance2: 0.03,
+                },
+            ],
+        }
+    }
+
+    #[test]
+    fn round_trip_through_the_encoding() {
+        let n = near();
+        validate(&n, 4, 0).unwrap();
+        let raw = encode(&n, 4);
+        assert_eq!(raw.len() as u64, raw_size_for(2, 2, 3).unwrap());
+        let h = decode_header(&raw[..NEAR_FIELD_HEADER_SIZE], true).unwrap();
+        assert_eq!(
+            h,
+            Header {
+                exits: 2,
+                rays_per_exit: 4,
+                points: 2,
+                resolution: 4,
+                hits: 3,
+                disk: 0.01,
+            }
+        );
+        let a = NEAR_FIELD_HEADER_SIZE + 2 * GATHER_POINT_SIZE;
+        let b = a + 2 * NEAR_EXIT_SIZE;
+        let back = NearField {
+            rays_per_exit: 4,
+            disk: h.disk,
+            points: probe_rays::decode_points(&raw[NEAR_FIELD_HEADER_SIZE..a]).unwrap(),
+            exits: decode_exits(&raw[a..b]).unwrap(),
+            hits: decode_hits(&raw[b..]).unwrap(),
+        };
+        assert_eq!(back, n);
+    }
+
+    #[test]
+    fn the_irradiance_weighs_each_hit_by_its_distance() {
+        let n = near();
+        let direct = [[1.0, 0.0, 0.5], [2.0, 4.0, 0.0]];
+        let e = n.irradiance(&direct);
+        let s = std::f32::consts::PI / 4.0;
+        // Exit 0: a hit at distance 0 (weight 1) and one at r² = R² (½).
+        let want0 = [s * (1.0 + 2.0 * 0.5), s * 4.0 * 0.5, s * 0.5];
+        // Exit 1: r² = 3 R² (¼).
+        let want1 = [s * 0.25, 0.0, s * 0.5 * 0.25];
+        for (got, want) in e.iter().zip([want0, want1]) {
+            for k in 0..3 {
+                assert!((got[k] - want[k]).abs() < 1e-6, "{got:?} against {want:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn rejects_what_the_layout_cannot_hold() {
+        assert!(validate(&near(), 2, 0).is_err(), "texel 9 outside a 2² atlas");
+        let mut n = near();
+        n.exits[1].texel = 2;
+        assert!(validate(&n, 4, 0).is_err(), "texels out of order");
+        let mut n = near();
+        n.exits[1].end = 2;
+        assert!(validate(&n, 4, 0).is_err(), "an exit without hits");
+        let mut n = near();
+        n.exits[1].end = 4;
+        assert!(validate(&n, 4, 0).is_err(), "hits beyond the list");
+        let mut n = near();
+        n.hits.push(NearHit::default());
+        assert!(validate(&n, 4, 0).is_err(), "a hit no exit covers");
+        let mut n = near();
+        n.hits[2].point = 2;
+        assert!(validate(&n, 4, 0).is_err(), "gather point 2 of 2");
+        let mut n = near();
+        n.hits[0].distance2 = f32::NAN;
+        assert!(validate(&n, 4, 0).is_err(), "NaN distance");
+        let mut n = near();
+        n.disk = 0.0;
+        assert!(validate(&n, 4, 0).is_err(), "zero disk");
+        let mut n = near();
+        n.rays_per_exit = 0;
+        assert!(validate(&n, 4, 0).is_err(), "no rays");
+        let mut head = encode(&near(), 4)[..NEAR_FIELD_HEADER_SIZE].to_vec();
+        head[12..16].copy_from_slice(&1u32.to_le_bytes());
+        assert!(decode_header(&head, false).is_err(), "unknown flags");
+        let mut head = encode(&near(), 4)[..NEAR_FIELD_HEADER_SIZE].to_vec();
+        head[28..32].copy_from_slice(&1u32.to_le_bytes());
+        assert!(decode_header(&head, true).is_err(), "reserved field");
+        assert!(decode_header(&head, false).is_ok(), "reserved field, lenient");
+    }
+}

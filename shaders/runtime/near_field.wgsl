@@ -1,0 +1,31 @@
+// prm-runtime near field pass: every exit point's share of what the panes' VPL disk bound
+// removes (formats/prm.md §5.6), π/M × Σ over its near hits of R²/(r² + R²) × the radiance the
+// near radiance pass gave the gather point, written to its texel of the near lightmap the blend
+// adds. Texels without near hits are never written and stay zero. One invocation per exit point
+// with near hits.
+
+@group(0) @binding(0) var<uniform> near: NearField;
+@group(0) @binding(1) var<storage, read> exits: array<NearExit>;
+@group(0) @binding(2) var<storage, read> hits: array<NearHit>;
+@group(0) @binding(3) var<storage, read> radiance: array<vec4<f32>>;
+@group(0) @binding(4) var near_map: texture_storage_2d<rgba32float, write>;
+
+@compute @workgroup_size(64)
+fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let i = gid.x;
+    if i >= near.exits {
+        return;
+    }
+    let x = exits[i];
+    var start = 0u;
+    if i > 0u {
+        start = exits[i - 1u].end;
+    }
+    var e = vec3<f32>(0.0);
+    for (var h = start; h < x.end; h++) {
+        let hit = hits[h];
+        e += near.disk / (hit.distance2 + near.disk) * radiance[hit.point].rgb;
+    }
+    let side = textureDimensions(near_map).x;
+    textureStore(near_map, vec2<i32>(i32(x.texel % side), i32(x.texel / side)), vec4<f32>(e * near.scale, 0.0));
+}
