@@ -23,11 +23,11 @@ import sys
 
 MAGIC = b"\x89PRM\r\n\x1a\n"
 SUPPORTED_MAJOR = 1
-SUPPORTED_MINOR = 6
+SUPPORTED_MINOR = 7
 KINDS = {1: "metadata", 2: "atlas", 3: "entries", 4: "clusters", 5: "panes", 6: "entry_energy",
          7: "emitters", 8: "sky", 9: "probes", 10: "probe_rays",
          11: "near_field"}
-OPTIONAL = {6, 7, 8, 9, 10}
+OPTIONAL = {6, 7, 8, 9, 10, 11}
 RAY_SKY = 0xFFFFFFFF
 RAY_BLOCKED = 0xFFFFFFFE
 MAX_PROBE_RAYS = 1 << 16
@@ -303,8 +303,9 @@ class Reader:
                 raise InvalidArchive("overlapping sections")
         by_kind = {}
         # Kind 7 is the emitters section from 1.2 on, kind 8 the sky from 1.3 on, kind 9 the
-        # probes from 1.4 on, kind 10 the probe rays from 1.6 on; before, they were unassigned.
-        since = {7: 2, 8: 3, 9: 4, 10: 6}
+        # probes from 1.4 on, kind 10 the probe rays from 1.6 on, kind 11 the near field from 1.7
+        # on; before, they were unassigned.
+        since = {7: 2, 8: 3, 9: 4, 10: 6, 11: 7}
         known = {k: v for k, v in KINDS.items() if minor >= since.get(k, 0)}
         for s in sections:
             if s["kind"] in known:
@@ -401,7 +402,7 @@ class Reader:
         exits, last, end = [], -1, 0
         for i in range(e):
             texel, stop = struct.unpack_from("<2I", raw, at + 8 * i)
-            if texel >= texels or texel <= last or stop <= end or stop > h:
+            if texel >= texels or texel <= last or stop <= end or stop > h or stop - end > m:
                 raise InvalidArchive("near_field: exit records out of order or outside the hits")
             exits.append(dict(texel=texel, end=stop))
             last, end = texel, stop

@@ -354,7 +354,7 @@ pub fn write_summary<W: Write, R: Read + Seek>(
     if let Some(n) = archive.near_field() {
         writeln!(
             out,
-            "near field   {} exit points keep {} of their {} rays each (VPL disk radius {:.4}), ending at {} texels; the player gathers back there what the VPL bound removes",
+            "near field   {} texels keep {} rays in all ({} traced per exit point, VPL disk radius {:.4}), ending at {} texels; the player gathers back there what the VPL bound removes",
             n.exits.len(),
             n.hits.len(),
             n.rays_per_exit,

@@ -611,7 +611,12 @@ impl BakeParams {
             sky_paths: config.sky_paths,
             probes: config.probes,
             probe_rays: config.probe_rays.unwrap_or(crate::PROBE_RAYS),
-            near_rays: config.near_rays.unwrap_or(prm_trace::NEAR_RAYS),
+            // Without the VPL bound nothing is missing near the exit points.
+            near_rays: if config.vpl_disk_scale == Some(0.0) {
+                0
+            } else {
+                config.near_rays.unwrap_or(prm_trace::NEAR_RAYS)
+            },
             accuracy_points: config.accuracy_points.unwrap_or(crate::ACCURACY_POINTS),
             accuracy_paths: config.accuracy_paths.unwrap_or(crate::ACCURACY_PATHS),
             estimated_seconds,

@@ -267,7 +267,7 @@ pub struct Baked {
     /// Size of the archive written, bytes.
     pub archive_bytes: u64,
     /// Seconds per step: `atlas`, `bvh`, `light_tracing`, `clustering`, `emitters` (scenes with
-    /// emissive materials), `pane_rendering`, `accuracy_check`,
+    /// emissive materials), `pane_rendering`, `near_field` (with near rays), `accuracy_check`,
     /// `compression_write`, and on the GPU `pane_depth_maps` and `pane_gather`.
     pub timings: BTreeMap<String, f64>,
     /// The accuracy check's estimate, also recorded in the archive (`None`: not checked).
@@ -858,9 +858,8 @@ pub fn bake(job: &BakeJob<'_>, renderer: Renderer<'_>, progress: &mut dyn Progre
                 &checked_exits.iter().map(|&i| atlas.exits[i].texel).collect::<Vec<_>>(),
             );
             let detail = format!(
-                "{} of {} exit points keep {} of their {} rays each, {} gather points",
+                "{} texels (exit points and their gutter copies) keep {} rays in all of {} per exit point, ending at {} gather points",
                 near.exits.len(),
-                atlas.exits.len(),
                 near.hits.len(),
                 params.near_rays,
                 near.points.len(),

@@ -253,7 +253,6 @@ pub fn merge(parts: &[PathBuf], output: &Path) -> Result<Merged, BakeError> {
             source,
         })?;
     }
-    // Probes: every shard places the same ones; each cluster's transfer from its owner.
     // The near field: every shard traces the same rays.
     if let Some(near) = first.near_field() {
         writer
@@ -263,6 +262,7 @@ pub fn merge(parts: &[PathBuf], output: &Path) -> Result<Merged, BakeError> {
                 source,
             })?;
     }
+    // Probes: every shard places the same ones; each cluster's transfer from its owner.
     if let Some(probes) = first.probes() {
         let n = probes.len();
         let mut merged = probes.clone();

@@ -127,9 +127,9 @@ pub(crate) fn validate(near: &NearField, resolution: u32, groups: usize) -> Resu
                 x.texel
             ));
         }
-        if x.end <= end || x.end as usize > near.hits.len() {
+        if x.end <= end || x.end as usize > near.hits.len() || x.end - end > m {
             return Err(format!(
-                "near exit {i} ends its hits at {}, not after {end} and within {}",
+                "near exit {i} ends its hits at {}, not after {end}, within {} and at most {m} rays on",
                 x.end,
                 near.hits.len()
             ));
@@ -345,6 +345,9 @@ mod tests {
         let mut n = near();
         n.exits[1].end = 4;
         assert!(validate(&n, 4, 0).is_err(), "hits beyond the list");
+        let mut n = near();
+        n.rays_per_exit = 1;
+        assert!(validate(&n, 4, 0).is_err(), "two hits of one ray");
         let mut n = near();
         n.hits.push(NearHit::default());
         assert!(validate(&n, 4, 0).is_err(), "a hit no exit covers");

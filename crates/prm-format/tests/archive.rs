@@ -826,6 +826,20 @@ fn python_reader_agrees_with_rust() {
             return;
         }
     }
+    // An archive with none of the optional sections (1.0) reads too.
+    let (bytes, _) = small_archive("python-plain", WriterOptions::default());
+    let path = dir.join("small-1.0.prm");
+    std::fs::write(&path, bytes).unwrap();
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../formats/read_prm.py");
+    let out = Command::new("python3").arg(&script).arg(&path).output().unwrap();
+    assert!(
+        out.status.success(),
+        "read_prm.py failed on a 1.0 archive: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(j["version"], "1.0");
+    assert!(j["near_field"].is_null() && j["probe_rays"].is_null());
 }
 
 /// Writes an archive, reads it with `formats/read_prm.py` and compares;
@@ -1816,7 +1830,7 @@ fn emitters_round_trip_and_hostile_headers_are_refused() {
     let n = s.entries.len() as u32;
     for (head, what) in [
         (header(2, n + 1, 16), "entries"),
-        (header(2, n, 32), "32² atlas"),
+        (header(2, n, 32), "resolution"),
         (header(limits::MAX_EMITTER_GROUPS + 1, n, 16), "emitter groups"),
     ] {
         let raw = 64u64 << 20;
@@ -1886,7 +1900,7 @@ fn sky_round_trip_and_hostile_headers_are_refused() {
         }
         d
     };
-    for (head, what) in [(header(32, 9), "32² atlas"), (header(16, 16), "coefficients")] {
+    for (head, what) in [(header(32, 9), "resolution"), (header(16, 16), "coefficients")] {
         let raw = 64u64 << 20;
         let mut data = head.clone();
         data.resize(raw as usize, 0);

@@ -18,9 +18,15 @@ use crate::PlayError;
 pub use prm_runtime::MAX_LIGHTS;
 
 /// Names of the timed passes, in frame order: the run time's, then the shading.
-pub const PASS_NAMES: [&str; 8] = {
+pub const PASS_NAMES: [&str; prm_runtime::PASS_NAMES.len() + 1] = {
     let r = prm_runtime::PASS_NAMES;
-    [r[0], r[1], r[2], r[3], r[4], r[5], r[6], "shade"]
+    let mut names = ["shade"; prm_runtime::PASS_NAMES.len() + 1];
+    let mut i = 0;
+    while i < r.len() {
+        names[i] = r[i];
+        i += 1;
+    }
+    names
 };
 
 /// What a frame shows; the codes are `MODE_*` in `shade.wgsl`.

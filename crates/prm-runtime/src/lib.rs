@@ -434,16 +434,30 @@ impl Runtime {
         let near_view = near_map.create_view(&Default::default());
         let near = match near_field {
             Some(n) => {
-                let max = device.limits().max_storage_buffer_binding_size;
-                let bytes = (n.hits.len() as u64 * 8).max(n.points.len() as u64 * 48);
-                if bytes > max {
-                    return Err(RuntimeError::NearField(format!(
-                        "{} near hits and {} gather points take {:.1} MiB, over the device's {:.1} MiB storage binding",
-                        n.hits.len(),
+                let limits = device.limits();
+                let mib = |b: u64| b as f64 / (1 << 20) as f64;
+                for (what, count, size) in [
+                    ("near hits", n.hits.len(), std::mem::size_of::<GpuNearHit>()),
+                    ("near exit records", n.exits.len(), std::mem::size_of::<GpuNearExit>()),
+                    (
+                        "near gather points",
                         n.points.len(),
-                        bytes as f64 / (1 << 20) as f64,
-                        max as f64 / (1 << 20) as f64
-                    )));
+                        std::mem::size_of::<GpuGatherPoint>(),
+                    ),
+                ] {
+                    let bytes = count as u64 * size as u64;
+                    if bytes > limits.max_storage_buffer_binding_size {
+                        return Err(RuntimeError::NearField(format!(
+                            "{count} {what} take {:.1} MiB, over the device's {:.1} MiB storage binding (play with `NearLight::Off`)",
+                            mib(bytes),
+                            mib(limits.max_storage_buffer_binding_size)
+                        )));
+                    }
+                    if (count as u64).div_ceil(64) > u64::from(limits.max_compute_workgroups_per_dimension) {
+                        return Err(RuntimeError::NearField(format!(
+                            "{count} {what} need more workgroups than the device dispatches at once (play with `NearLight::Off`)"
+                        )));
+                    }
                 }
                 Some(near_field::NearFieldPass::new(
                     device,
@@ -571,8 +585,8 @@ impl Runtime {
     }
 
     /// Records the frame set by [`Runtime::update`]: with [`Shadows::Own`] the shadow pass, then
-    /// weights, rank, select and blend into [`Runtime::lightmap`]. Timed passes are named as in
-    /// [`PASS_NAMES`].
+    /// weights, the near field (archives of format 1.7), rank, select and blend into
+    /// [`Runtime::lightmap`], then the probes. Timed passes are named as in [`PASS_NAMES`].
     pub fn encode(&self, encoder: &mut wgpu::CommandEncoder, shadows: Shadows, timer: Option<&PassTimer>) {
         let external = match shadows {
             Shadows::Own => {

@@ -34,7 +34,7 @@
 
 use glam::Vec3;
 use prm_format::{NearExit, NearField, NearHit, NEAR_MIN_WEIGHT};
-use prm_scene::{Atlas, Scene};
+use prm_scene::{Atlas, Scene, EMPTY_TEXEL};
 use rayon::prelude::*;
 
 use crate::bvh::Bvh;
@@ -121,18 +121,28 @@ pub fn near_field(scene: &Scene, bvh: &Bvh, atlas: &Atlas, rays: u32, disk: f32,
         })
         .collect();
     let (index, points) = gather_points(scene, atlas, &emitters, per_exit.iter().flatten().map(|h| h.0));
-    // Exits in texel order, each with its hits.
-    let mut order: Vec<usize> = (0..atlas.exits.len()).filter(|&i| !per_exit[i].is_empty()).collect();
-    order.sort_by_key(|&i| atlas.exits[i].texel);
+    // Records in texel order: every exit with hits, and every gutter texel whose source has
+    // them, with a copy of its source's, so that bilinear lookups at chart borders see them.
+    let mut order: Vec<(u32, usize)> = (0..atlas.exits.len())
+        .filter(|&i| !per_exit[i].is_empty())
+        .map(|i| (atlas.exits[i].texel, i))
+        .collect();
+    for &(gutter, source) in &atlas.dilation {
+        let e = atlas.texel_exit[source as usize];
+        if e != EMPTY_TEXEL && !per_exit[e as usize].is_empty() {
+            order.push((gutter, e as usize));
+        }
+    }
+    order.sort_unstable_by_key(|r| r.0);
     let mut exits = Vec::with_capacity(order.len());
     let mut hits = Vec::new();
-    for i in order {
+    for (texel, i) in order {
         hits.extend(per_exit[i].iter().map(|&(e, r2)| NearHit {
             point: index[e as usize],
             distance2: r2,
         }));
         exits.push(NearExit {
-            texel: atlas.exits[i].texel,
+            texel,
             end: hits.len() as u32,
         });
     }
@@ -184,9 +194,18 @@ mod tests {
         assert!(!near.exits.is_empty() && near.exits.len() < atlas.exits.len());
         let by_texel: std::collections::HashMap<u32, &prm_scene::ExitPoint> =
             atlas.exits.iter().map(|x| (x.texel, x)).collect();
+        let gutter: std::collections::HashMap<u32, u32> = atlas.dilation.iter().copied().collect();
         let mut start = 0;
+        let mut copies = 0;
         for x in &near.exits {
-            let exit = by_texel[&x.texel];
+            let Some(&exit) = by_texel.get(&x.texel) else {
+                // A gutter texel: its source's hits.
+                let source = gutter[&x.texel];
+                assert!(near.exits.iter().any(|y| y.texel == source), "texel {}", x.texel);
+                copies += 1;
+                start = x.end as usize;
+                continue;
+            };
             // Only exits within reach of the edge (x = 0 on the floor, y = 0 on the wall).
             let to_edge = if exit.normal.y > 0.5 {
                 exit.position.x
@@ -213,6 +232,7 @@ mod tests {
             }
             start = x.end as usize;
         }
+        assert!(copies > 0, "the gutter along the edge copies the near field");
         // The exits closest to the edge keep most of their rays (half the cosine lobe faces
         // the other face).
         let closest = near
@@ -221,8 +241,9 @@ mod tests {
             .scan(0u32, |s, x| {
                 let n = x.end - *s;
                 *s = x.end;
-                Some((by_texel[&x.texel], n))
+                Some((by_texel.get(&x.texel).copied(), n))
             })
+            .filter_map(|(e, n)| Some((e?, n)))
             .filter(|(e, _)| (if e.normal.y > 0.5 { e.position.x } else { e.position.y }) < 1.0 / 64.0)
             .map(|(_, n)| n)
             .min()

@@ -338,7 +338,8 @@ fn file_stamp(path: &Path) -> String {
 /// lattice is anchored per chart. 4: emissive materials are baked (format 1.2 emitters section). 5: `--sky`
 /// bakes the sky's transfer (f16), its indirect part smoothed over 3 × 3 texels. 7: automatic entry
 /// points stop at 16 per cluster the budgets allow, and the bake times of the AVX2 variants. 8: twice
-/// the automatic entry points (32 per cluster) where nothing cuts them; probe rays (format 1.6).
+/// the automatic entry points (32 per cluster) where nothing cuts them; probe rays (format 1.6). 9:
+/// the near field (format 1.7).
 const BAKE_EPOCH: u32 = 9;
 
 /// Runs `prm-bake bake` for `spec` (extra arguments `extra`), or reuses the cached result under
