@@ -1001,11 +1001,8 @@ fn python_reader_check(path: &Path, filter: TileFilter) -> bool {
     };
     assert_eq!(a.probes(), Some(&back));
     assert_eq!(a.probes(), Some(&probes));
-    let jr = &j["probe_rays"];
-    let back = ProbeRays {
-        rays_per_probe: u(&jr["rays_per_probe"]),
-        points: jr["points"]
-            .as_array()
+    let gather_points = |v: &serde_json::Value| -> Vec<GatherPoint> {
+        v.as_array()
             .unwrap()
             .iter()
             .map(|g| GatherPoint {
@@ -1016,7 +1013,12 @@ fn python_reader_check(path: &Path, filter: TileFilter) -> bool {
                 emission: f3(&g["emission"]),
                 emitter: u(&g["emitter"]),
             })
-            .collect(),
+            .collect()
+    };
+    let jr = &j["probe_rays"];
+    let back = ProbeRays {
+        rays_per_probe: u(&jr["rays_per_probe"]),
+        points: gather_points(&jr["points"]),
         hits: jr["hits"].as_array().unwrap().iter().map(u).collect(),
     };
     assert_eq!(a.probe_rays(), Some(&back));
@@ -1025,19 +1027,7 @@ fn python_reader_check(path: &Path, filter: TileFilter) -> bool {
     let back = NearField {
         rays_per_exit: u(&jn["rays_per_exit"]),
         disk: jn["disk"].as_f64().unwrap() as f32,
-        points: jn["points"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|g| GatherPoint {
-                texel: u(&g["texel"]),
-                position: f3(&g["position"]),
-                normal: f3(&g["normal"]),
-                albedo: f3(&g["albedo"]),
-                emission: f3(&g["emission"]),
-                emitter: u(&g["emitter"]),
-            })
-            .collect(),
+        points: gather_points(&jn["points"]),
         exits: jn["exits"]
             .as_array()
             .unwrap()

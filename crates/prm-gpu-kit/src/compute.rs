@@ -45,6 +45,22 @@ impl ComputePass {
         self.encode_with(encoder, &self.bind_group, workgroups, timer);
     }
 
+    /// [`encode`](Self::encode) on `resources` when given (a bind group made for this dispatch,
+    /// e.g. a caller's shadow maps for one frame), else on the pass's own.
+    pub fn encode_on(
+        &self,
+        device: &wgpu::Device,
+        encoder: &mut wgpu::CommandEncoder,
+        resources: Option<&[wgpu::BindingResource]>,
+        workgroups: [u32; 3],
+        timer: Option<&PassTimer>,
+    ) {
+        match resources {
+            Some(r) => self.encode_with(encoder, &self.group(device, r), workgroups, timer),
+            None => self.encode(encoder, workgroups, timer),
+        }
+    }
+
     /// [`encode`](Self::encode) with another bind group of this pass's layout.
     pub fn encode_with(
         &self,

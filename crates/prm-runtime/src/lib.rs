@@ -643,27 +643,21 @@ impl Runtime {
     /// probe rays ([`prm_format::ProbeRays::points`]; empty without rays), waiting for the
     /// device.
     pub fn read_probe_radiance(&self) -> Result<Vec<[f32; 3]>, RuntimeError> {
-        let Some((buffer, points)) = self.probes.as_ref().and_then(|p| p.ray_radiance()) else {
-            return Ok(Vec::new());
-        };
-        if points == 0 {
-            return Ok(Vec::new());
-        }
-        let bytes = readback::read_buffer(&self.device, &self.queue, buffer, u64::from(points) * 16)?;
-        let v: &[[f32; 4]] = bytemuck::cast_slice(&bytes);
-        Ok(v.iter().map(|c| [c[0], c[1], c[2]]).collect())
+        self.read_radiance(self.probes.as_ref().and_then(|p| p.ray_radiance()))
     }
 
     /// Reads back the radiance (RGB, W/m²/sr) the last frame's direct light gave every gather
     /// point of the near field ([`prm_format::NearField::points`]; empty without it), waiting
     /// for the device.
     pub fn read_near_radiance(&self) -> Result<Vec<[f32; 3]>, RuntimeError> {
-        let Some((buffer, points)) = self.near.as_ref().map(|n| n.radiance()) else {
+        self.read_radiance(self.near.as_ref().map(|n| n.radiance()))
+    }
+
+    /// The first `points` RGB values of a `vec4` radiance buffer, waiting for the device.
+    fn read_radiance(&self, buffer: Option<(&wgpu::Buffer, u32)>) -> Result<Vec<[f32; 3]>, RuntimeError> {
+        let Some((buffer, points)) = buffer.filter(|(_, p)| *p > 0) else {
             return Ok(Vec::new());
         };
-        if points == 0 {
-            return Ok(Vec::new());
-        }
         let bytes = readback::read_buffer(&self.device, &self.queue, buffer, u64::from(points) * 16)?;
         let v: &[[f32; 4]] = bytemuck::cast_slice(&bytes);
         Ok(v.iter().map(|c| [c[0], c[1], c[2]]).collect())

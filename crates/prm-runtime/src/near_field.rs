@@ -169,13 +169,9 @@ impl NearFieldPass {
         timer: Option<&PassTimer>,
     ) {
         let groups = [self.point_count.div_ceil(64).max(1), 1, 1];
-        match external {
-            Some(maps) => {
-                let group = self.radiance_pass.group(device, &self.inputs.resources(b, maps));
-                self.radiance_pass.encode_with(encoder, &group, groups, timer);
-            }
-            None => self.radiance_pass.encode(encoder, groups, timer),
-        }
+        let own = external.map(|maps| self.inputs.resources(b, maps));
+        self.radiance_pass
+            .encode_on(device, encoder, own.as_ref().map(|r| &r[..]), groups, timer);
         self.sum
             .encode(encoder, [self.exit_count.div_ceil(64).max(1), 1, 1], timer);
     }

@@ -53,12 +53,8 @@ impl WeightsPass {
         timer: Option<&PassTimer>,
     ) {
         let groups = [clusters.min(65535), clusters.div_ceil(65535), 1];
-        match external {
-            Some(maps) => {
-                let group = self.0.group(device, &resources(b, maps));
-                self.0.encode_with(encoder, &group, groups, timer);
-            }
-            None => self.0.encode(encoder, groups, timer),
-        }
+        let own = external.map(|maps| resources(b, maps));
+        self.0
+            .encode_on(device, encoder, own.as_ref().map(|r| &r[..]), groups, timer);
     }
 }
