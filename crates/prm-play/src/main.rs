@@ -63,6 +63,10 @@ struct Args {
     /// groups' summed panes (up to K + G panes a frame); 0 scales the kept clusters up instead.
     #[arg(long, value_name = "G", default_value_t = prm_format::RESIDUAL_GROUPS)]
     residual_groups: u32,
+    /// The near field of archives of format 1.7 (the light the panes' VPL bound removes next to
+    /// other surfaces, gathered each frame): `gather`, or `off` to play the panes alone.
+    #[arg(long, value_name = "gather|off", default_value = "gather", value_parser = ["gather", "off"])]
+    near_field: String,
     /// Frames to render (headless: default 1). In a window: quit after this many presented
     /// frames (default: run until closed).
     #[arg(long)]
@@ -176,6 +180,11 @@ fn run() -> Result<()> {
         residual_groups: args.residual_groups,
         shadow_resolution: args.shadow_resolution,
         fade_band: args.fade_band,
+        near_light: if args.near_field == "off" {
+            prm_play::NearLight::Off
+        } else {
+            prm_play::NearLight::Gather
+        },
         ..Default::default()
     };
     if !args.headless {
