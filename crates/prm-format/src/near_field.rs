@@ -77,22 +77,28 @@ impl NearField {
         self.disk / (r2 + self.disk)
     }
 
+    /// Exit record `i`'s hits (empty when `i` or its range is out of bounds).
+    pub fn hits_of(&self, i: usize) -> &[NearHit] {
+        let start = if i == 0 { 0 } else { self.exits[i - 1].end as usize };
+        self.exits
+            .get(i)
+            .and_then(|x| self.hits.get(start..x.end as usize))
+            .unwrap_or(&[])
+    }
+
     /// Every exit's missing irradiance (in [`NearField::exits`] order) when gather point `g`
     /// sends `direct[g]` from its direct light (radiance, RGB).
     pub fn irradiance(&self, direct: &[[f32; 3]]) -> Vec<[f32; 3]> {
         let scale = std::f32::consts::PI / self.rays_per_exit.max(1) as f32;
-        let mut start = 0usize;
-        self.exits
-            .iter()
-            .map(|x| {
+        (0..self.exits.len())
+            .map(|i| {
                 let mut e = [0.0f32; 3];
-                for h in self.hits.get(start..x.end as usize).unwrap_or(&[]) {
+                for h in self.hits_of(i) {
                     let w = self.weight(h.distance2);
                     if let Some(d) = direct.get(h.point as usize) {
                         (0..3).for_each(|k| e[k] += d[k] * w);
                     }
                 }
-                start = x.end as usize;
                 e.map(|v| v * scale)
             })
             .collect()

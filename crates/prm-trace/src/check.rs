@@ -308,13 +308,7 @@ pub fn played_indirect(bvh: &Bvh, archive: &CheckedArchive<'_>, light: Light) ->
     };
     let (mut played, mut all) = (played, blend(&weights, archive.panes));
     for ((p, a), terms) in played.iter_mut().zip(&mut all).zip(archive.near) {
-        let near: Vec3 = terms
-            .iter()
-            .map(|t| {
-                let e = crate::direct_irradiance(bvh, &[light], t.position, t.normal, t.normal, u32::MAX);
-                t.albedo * e * t.factor
-            })
-            .sum();
+        let near = crate::near_irradiance(bvh, &[light], terms);
         *p += near;
         *a += near;
     }

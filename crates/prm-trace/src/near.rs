@@ -68,6 +68,15 @@ pub struct NearTerm {
     pub factor: f32,
 }
 
+/// What the near `terms` of one exit point add to its irradiance under `lights`, with ray-cast
+/// direct light at the gather points.
+pub fn near_irradiance(bvh: &Bvh, lights: &[prm_scene::Light], terms: &[NearTerm]) -> Vec3 {
+    terms
+        .iter()
+        .map(|t| t.albedo * crate::direct_irradiance(bvh, lights, t.position, t.normal, t.normal, u32::MAX) * t.factor)
+        .sum()
+}
+
 /// Every texel's near terms (empty where the near field keeps no ray), for `texels`.
 pub fn near_terms(near: &NearField, texels: &[u32]) -> Vec<Vec<NearTerm>> {
     let m = near.rays_per_exit.max(1) as f32;
@@ -77,8 +86,7 @@ pub fn near_terms(near: &NearField, texels: &[u32]) -> Vec<Vec<NearTerm>> {
             let Ok(i) = near.exits.binary_search_by_key(t, |x| x.texel) else {
                 return Vec::new();
             };
-            let start = if i == 0 { 0 } else { near.exits[i - 1].end as usize };
-            near.hits[start..near.exits[i].end as usize]
+            near.hits_of(i)
                 .iter()
                 .map(|h| {
                     let g = &near.points[h.point as usize];

@@ -245,10 +245,7 @@ fn cpu_blend(archive: &Path, tracer: &Tracer, light: Light, texels: &[u32], entr
     // The near field, as the player adds it, with ray-cast direct light.
     if let Some(near) = a.near_field() {
         for (o, terms) in out.iter_mut().zip(prm_trace::near_terms(near, texels)) {
-            for t in terms {
-                let e = prm_trace::direct_irradiance(&tracer.bvh, &lights, t.position, t.normal, t.normal, u32::MAX);
-                *o += t.albedo * e * t.factor;
-            }
+            *o += prm_trace::near_irradiance(&tracer.bvh, &lights, &terms);
         }
     }
     Ok(out)
