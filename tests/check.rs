@@ -63,14 +63,15 @@ fn the_check_selects_the_clusters_the_player_selects() {
         let energy: Vec<Vec3> = archive.clusters().iter().map(|c| Vec3::from(c.energy)).collect();
         assert!(energy.len() > TOP_K as usize);
         let of = prm_format::residual_groups(archive.clusters(), residual_groups);
-        let group_energy = group_energies(&mut archive, &of, residual_groups as usize);
+        let formed = prm_format::residual_group_count(energy.len(), residual_groups);
+        let group_energy = group_energies(&mut archive, &of, formed as usize);
         let options = RuntimeOptions {
             top_k: TOP_K,
             residual_groups,
             ..RuntimeOptions::default()
         };
         let mut rt = Runtime::new(&ctx.device, &ctx.queue, &mut archive, &scene, options).unwrap();
-        assert_eq!(rt.group_count(), residual_groups);
+        assert_eq!(rt.group_count(), formed);
         let b = scene.bounds();
         let mut lit_groups = 0;
         for f in [[0.5, 0.8, 0.5], [0.25, 0.4, 0.3], [0.75, 0.3, 0.7], [0.1, 0.9, 0.9]] {

@@ -19,8 +19,8 @@
 const INV_PI: f32 = 0.31830988;
 
 @compute @workgroup_size(64)
-fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
-    let i = gid.x;
+fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let i = linear_index(gid, groups);
     if i >= arrayLength(&points) {
         return;
     }

@@ -130,6 +130,12 @@ struct GatherPoint {
 
 const NO_EMITTER: u32 = 0xFFFFFFFFu;
 
+// The item of a one-dimensional dispatch of 64-wide workgroups laid out in rows
+// (prm_gpu_kit::linear_workgroups): any count fits, past one dimension's 65 535 groups.
+fn linear_index(gid: vec3<u32>, groups: vec3<u32>) -> u32 {
+    return gid.x + gid.y * groups.x * 64u;
+}
+
 // The counts of the probe rays (formats/prm.md §5.5).
 struct ProbeRays {
     probes: u32,

@@ -18,13 +18,13 @@ fn cargo_run(package: &str, args: &[&str]) -> Result<()> {
 }
 
 /// `cargo xtask eval ARGS`: runs the `xtask-eval` package (dev profile for `--quick`, which CI's
-/// test build has already compiled; release for `--full` and `--budget`).
+/// test build has already compiled; release for the others).
 pub fn run_eval(args: &[String]) -> Result<()> {
     let mut cmd = Command::new(env!("CARGO"));
     cmd.args(["run", "--quiet", "-p", "xtask-eval"]);
     if args
         .iter()
-        .any(|a| ["--full", "--budget", "--emitters", "--sky"].contains(&a.as_str()))
+        .any(|a| ["--full", "--budget", "--targets", "--emitters", "--sky", "--probes"].contains(&a.as_str()))
     {
         cmd.arg("--release");
     }

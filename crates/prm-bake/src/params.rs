@@ -332,6 +332,18 @@ impl CostModel {
 /// Most entry points the automatic rules choose.
 const MAX_AUTO_ENTRIES: usize = 16384;
 
+/// Entry points per cluster of the automatic cluster count. Measured in image space
+/// (`cargo xtask eval --targets`, 4×4 error, K = 32 and 64 residual groups; the default 16 give
+/// 7.5%, 9.1%, 6.0% and 7.5% on the four cases below, `prm_format::RESIDUAL_GROUPS`): McGuire's box with
+/// 2048 entry points had 64 clusters (32 per cluster) at 6.9% with every cluster blended
+/// (light under the ceiling) and 21.3% (low near the red wall: a cluster's members lit and in
+/// shadow share one weight, so the lit ones' light leaves from the shadowed ones' panes); 256
+/// clusters (8 per cluster) 5.2% and 9.2%, and 1024 clusters 5.4% and 7.1%. Blended as played,
+/// 8 per cluster: 6.4% and 9.2%, CornellBox-Sphere 4.9% (6.8% before), chairs (960 clusters)
+/// 6.3% (7.4%). The bake's time follows the VPL count, not the clusters; the panes' memory and
+/// archive follow the clusters (the budgets cap them).
+const ENTRIES_PER_CLUSTER: usize = 8;
+
 /// The automatic walks per entry point: enough for about 8192 walks in all, 1 to 16.
 fn auto_walks_per_entry(entries: usize) -> u32 {
     8192usize.div_ceil(entries.max(1)).clamp(1, 16) as u32
@@ -389,14 +401,15 @@ impl BakeParams {
     ///   fewer walks, fewer entries (down to 1024) or a smaller atlas (down to 128²), whichever is
     ///   furthest above its floor;
     /// - then, where neither the time budget nor the cap cut anything and the budget allows it,
-    ///   twice the entry points (at most 16384) at the same walks per entry and clusters: 32 per
-    ///   cluster. The largest step down the accuracy-against-speed front (`cargo xtask eval
+    ///   twice the entry points (at most 16384) at the same walks per entry. The largest step down the accuracy-against-speed front (`cargo xtask eval
     ///   --full`, lightmap error, mean of three lights): the Cornell box 0.131 → 0.111 for a bake
     ///   of 2.7 → 4.4 s, CornellBox-Sphere 0.125 → 0.114 (9.5 → 13.7 s), chairs 0.120 → 0.107
     ///   (13.6 → 24.3 s); where the budgets cap the clusters more entries only crowd them (above);
-    /// - clusters: entries / 16 (entries / 32 after the doubling), 32 to 1024, then as many as the
-    ///   memory budget and the archive budget allow (archive estimate: 1.5 bytes per covered texel
+    /// - clusters: entries / [`ENTRIES_PER_CLUSTER`] (8), 32 to 1024, then as many as the
+    ///   memory budget (the clusters' panes and the residual groups' summed ones, up to one per
+    ///   4 clusters, at most `prm_format::RESIDUAL_GROUPS`) and the archive budget allow (archive estimate: 1.5 bytes per covered texel
     ///   per pane, the measured RGB9E5 + filter + zstd rate on smooth panes, doubled for safety).
+    ///   It was entries / 16 (entries / 32 after the doubling) before the measurement there.
     pub fn resolve(
         config: &BakeConfig,
         scene: &Scene,
@@ -446,7 +459,14 @@ impl BakeParams {
             AtlasSize::TexelSize(s) => scene.area() / (s as f64).powi(2) * 2.0,
         };
         // The most panes of `texels_per_pane` that the memory and archive budgets allow.
-        let by_memory = |texels_per_pane: f64| (memory_budget_mib * 1024.0 * 1024.0 / (4.0 * texels_per_pane)) as usize;
+        // Resident panes: the clusters' and the residual groups' summed ones (up to one group per
+        // `CLUSTERS_PER_GROUP` clusters, at most `RESIDUAL_GROUPS`).
+        let by_memory = |texels_per_pane: f64| {
+            let panes = (memory_budget_mib * 1024.0 * 1024.0 / (4.0 * texels_per_pane)) as usize;
+            let per = prm_format::CLUSTERS_PER_GROUP as usize;
+            let groups = (panes / (per + 1)).min(prm_format::RESIDUAL_GROUPS as usize);
+            panes - groups
+        };
         let by_archive =
             |texels_per_pane: f64| (archive_budget_mib * 1024.0 * 1024.0 / (1.5 * texels_per_pane)) as usize;
         let clusters_allowed =
@@ -561,16 +581,14 @@ impl BakeParams {
 
         // Twice the entry points at the same clusters and walks per entry, where neither the
         // time budget nor the cluster cap cut anything (module docs).
-        let mut entries_per_cluster = 16;
         let uncut = estimated_seconds >= planned && !capped;
         if auto_entries && uncut && entries * 2 <= MAX_AUTO_ENTRIES {
             let doubled = estimate(entries * 2, paths_per_entry, atlas);
             if doubled <= time_budget_s {
                 entries *= 2;
-                entries_per_cluster = 32;
                 estimated_seconds = doubled;
                 reasons.push(format!(
-                    "{entries} entry points: twice as many, 32 per cluster, as the time budget allows"
+                    "{entries} entry points: twice as many, as the time budget allows"
                 ));
             }
         }
@@ -580,11 +598,11 @@ impl BakeParams {
             (Some(c), _) => c,
             (None, Some(v)) => v.clusters.min(entries),
             (None, None) => {
-                let wanted = (entries / entries_per_cluster).clamp(32, 1024).min(entries);
+                let wanted = (entries / ENTRIES_PER_CLUSTER).clamp(32, 1024).min(entries);
                 let (by_memory, by_archive) = (by_memory(texels_per_pane), by_archive(texels_per_pane));
                 let c = wanted.min(clusters_allowed(texels_per_pane));
                 reasons.push(format!(
-                    "{c} clusters: entries/{entries_per_cluster} = {wanted}, memory budget allows {by_memory}, archive budget {by_archive}"
+                    "{c} clusters: entries/{ENTRIES_PER_CLUSTER} = {wanted}, memory budget allows {by_memory}, archive budget {by_archive}"
                 ));
                 c
             }

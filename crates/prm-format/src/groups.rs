@@ -18,19 +18,38 @@
 
 use crate::Cluster;
 
-/// Residual groups a run time forms by default (see the module's measurements).
-pub const RESIDUAL_GROUPS: u32 = 4;
+/// Residual groups a run time forms by default, at most one per [`CLUSTERS_PER_GROUP`]
+/// clusters ([`residual_group_count`]). Measured in image space against the reference
+/// (`cargo xtask eval --targets`'s cases, 4×4 error, K = 32, 8 entry points per cluster): 4
+/// groups gave McGuire's box 8.2% (light under the ceiling) and 9.7% (low near the red wall),
+/// CornellBox-Sphere 7.0%, chairs 8.6%; 16 groups 7.5%, 9.1%, 6.0%, 7.5%; 64 groups 6.4%,
+/// 9.2%, 4.9%, 6.3%, against 5.2%, 9.2%, 4.5%, 5.5% with every cluster blended. On lavapipe
+/// at 1024×768 (McGuire's box, 256 clusters, `prm-play --timings`, median CPU frame) 4 and 16
+/// groups cost the same (119 ms against 90 ms for the direct light alone) and 64 groups
+/// 149–159 ms, so the default is 16.
+pub const RESIDUAL_GROUPS: u32 = 16;
+
+/// Clusters per residual group at least: a group of one cluster is that cluster's pane again,
+/// which blending every cluster gives with fewer panes.
+pub const CLUSTERS_PER_GROUP: u32 = 4;
+
+/// How many residual groups `clusters` clusters get when `asked` are asked for: at most one per
+/// [`CLUSTERS_PER_GROUP`] clusters, and at least one while any are asked for.
+pub fn residual_group_count(clusters: usize, asked: u32) -> u32 {
+    let most = (clusters as u64 / u64::from(CLUSTERS_PER_GROUP)).max(1);
+    u64::from(asked).min(most).min(clusters as u64) as u32
+}
 
 /// Rounds of k-means.
 const ROUNDS: usize = 16;
 
-/// The group of every cluster: `groups` groups (at most one per cluster, at least one) by
+/// The group of every cluster: `groups` groups ([`residual_group_count`] of them: at most one per [`CLUSTERS_PER_GROUP`] clusters, at least one) by
 /// k-means of the centroids, started from farthest points (the first cluster's centroid, then
 /// each time the centroid farthest from the chosen ones, ties to the lower index). Every group
 /// keeps at least its starting cluster.
 pub fn residual_groups(clusters: &[Cluster], groups: u32) -> Vec<u32> {
     let n = clusters.len();
-    let g = (groups as usize).min(n);
+    let g = residual_group_count(n, groups) as usize;
     if g <= 1 {
         return vec![0; n];
     }
@@ -87,6 +106,17 @@ mod tests {
 
     fn at(x: f32) -> Cluster {
         Cluster::new(0, 1, [x, 0.0, 0.0], [0.0, 1.0, 0.0])
+    }
+
+    #[test]
+    fn group_count_keeps_four_clusters_a_group() {
+        assert_eq!(residual_group_count(256, 64), 64);
+        assert_eq!(residual_group_count(960, RESIDUAL_GROUPS), 16);
+        assert_eq!(residual_group_count(40, RESIDUAL_GROUPS), 10);
+        assert_eq!(residual_group_count(64, 4), 4);
+        assert_eq!(residual_group_count(3, 4), 1);
+        assert_eq!(residual_group_count(0, 4), 0);
+        assert_eq!(residual_group_count(100, 0), 0);
     }
 
     #[test]

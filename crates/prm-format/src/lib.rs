@@ -51,7 +51,7 @@ pub use emitters::{EmitterGroup, EMITTER_NAME_BYTES};
 pub use encode::{EncodedPane, PaneEncoder};
 pub use error::{Error, Result};
 pub use filter::TileFilter;
-pub use groups::{residual_groups, RESIDUAL_GROUPS};
+pub use groups::{residual_group_count, residual_groups, CLUSTERS_PER_GROUP, RESIDUAL_GROUPS};
 pub use layout::{checksum, compression, kind, limits, MAGIC, VERSION_MAJOR, VERSION_MINOR};
 pub use metadata::{Accuracy, Generator, LightAccuracy, Metadata, Units};
 pub use near_field::{NearExit, NearField, NearHit, MAX_NEAR_RAYS, MIN_WEIGHT as NEAR_MIN_WEIGHT};

@@ -5,6 +5,26 @@
 
 use crate::{pipeline, PassTimer};
 
+/// Invocations per workgroup of a [`linear_workgroups`] dispatch (`@workgroup_size(64)`).
+pub const LINEAR_GROUP_SIZE: u32 = 64;
+/// Workgroups along x of a [`linear_workgroups`] dispatch: WebGPU's guaranteed
+/// `maxComputeWorkgroupsPerDimension`, which lavapipe also reports.
+const LINEAR_GROUPS_X: u32 = 65_535;
+
+/// The workgroups of a dispatch of `invocations` one-dimensional items, 64 per group: one row
+/// while it fits one dimension, else rows of [`LINEAR_GROUPS_X`] groups, so that any count a
+/// storage buffer can hold dispatches at once (a large atlas's near field has millions of items,
+/// more than 65 535 × 64). The shader numbers an item `gid.x + gid.y × 64 × num_workgroups.x`
+/// and returns past the count (`linear_index` in `shaders/runtime/shared.wgsl`).
+pub fn linear_workgroups(invocations: u32) -> [u32; 3] {
+    let groups = invocations.div_ceil(LINEAR_GROUP_SIZE).max(1);
+    if groups <= LINEAR_GROUPS_X {
+        [groups, 1, 1]
+    } else {
+        [LINEAR_GROUPS_X, groups.div_ceil(LINEAR_GROUPS_X), 1]
+    }
+}
+
 /// A compute pipeline and its bind group.
 pub struct ComputePass {
     name: &'static str,
@@ -76,5 +96,26 @@ impl ComputePass {
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, bind_group, &[]);
         pass.dispatch_workgroups(x, y, z);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn linear_workgroups_cover_every_item_once() {
+        for n in [0u32, 1, 64, 65, 65_535 * 64, 65_535 * 64 + 1, 4_903_287, u32::MAX] {
+            let [x, y, z] = linear_workgroups(n);
+            let dim = 1..=LINEAR_GROUPS_X;
+            assert!(dim.contains(&x) && dim.contains(&y) && z == 1, "{n}: {x} {y}");
+            let covered = u64::from(x) * u64::from(y) * u64::from(LINEAR_GROUP_SIZE);
+            assert!(covered >= u64::from(n), "{n}: {covered}");
+            // No whole row of groups beyond the count.
+            assert!(
+                y == 1 || (u64::from(y) - 1) * u64::from(x) * 64 < u64::from(n),
+                "{n}: {x} {y}"
+            );
+        }
     }
 }

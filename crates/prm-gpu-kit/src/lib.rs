@@ -17,6 +17,6 @@ pub mod pipeline;
 pub mod readback;
 mod timer;
 
-pub use compute::ComputePass;
+pub use compute::{linear_workgroups, ComputePass, LINEAR_GROUP_SIZE};
 pub use context::{instance, silence_wayland_probe, Backend, ContextOptions, ErrorScopes, GpuContext, GpuError};
 pub use timer::PassTimer;

@@ -237,9 +237,7 @@ impl Runtime {
             });
         }
         // Residual groups, as many as asked for while their panes fit the array.
-        let group_count = options
-            .residual_groups
-            .min(cluster_count)
+        let group_count = prm_format::residual_group_count(cluster_count as usize, options.residual_groups)
             .min(max_layers - cluster_count);
         let group_of = if group_count > 0 {
             prm_format::residual_groups(archive.clusters(), group_count)
@@ -451,11 +449,6 @@ impl Runtime {
                             "{count} {what} take {:.1} MiB, over the device's {:.1} MiB storage binding (play with `NearLight::Off`)",
                             mib(bytes),
                             mib(limits.max_storage_buffer_binding_size)
-                        )));
-                    }
-                    if (count as u64).div_ceil(64) > u64::from(limits.max_compute_workgroups_per_dimension) {
-                        return Err(RuntimeError::NearField(format!(
-                            "{count} {what} need more workgroups than the device dispatches at once (play with `NearLight::Off`)"
                         )));
                     }
                 }

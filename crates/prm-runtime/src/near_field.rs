@@ -6,7 +6,7 @@
 //! which leaves inner edges and contacts too dark (issue #11); this gathers that light back.
 
 use prm_format::NearField;
-use prm_gpu_kit::{pipeline, ComputePass, PassTimer};
+use prm_gpu_kit::{linear_workgroups, pipeline, ComputePass, PassTimer};
 
 use crate::{Buffers, GpuGatherPoint, GpuNearExit, GpuNearField, GpuNearHit};
 
@@ -168,11 +168,10 @@ impl NearFieldPass {
         external: Option<&wgpu::TextureView>,
         timer: Option<&PassTimer>,
     ) {
-        let groups = [self.point_count.div_ceil(64).max(1), 1, 1];
+        let groups = linear_workgroups(self.point_count);
         let own = external.map(|maps| self.inputs.resources(b, maps));
         self.radiance_pass
             .encode_on(device, encoder, own.as_ref().map(|r| &r[..]), groups, timer);
-        self.sum
-            .encode(encoder, [self.exit_count.div_ceil(64).max(1), 1, 1], timer);
+        self.sum.encode(encoder, linear_workgroups(self.exit_count), timer);
     }
 }

@@ -8,7 +8,7 @@
 //! entry points only (issue #11).
 
 use prm_format::{probe_ray_direction, sh_basis, ProbeRays, SH_COEFFS, SH_COSINE_LOBE};
-use prm_gpu_kit::{pipeline, ComputePass, PassTimer};
+use prm_gpu_kit::{linear_workgroups, pipeline, ComputePass, PassTimer};
 
 use crate::{Buffers, GpuGatherPoint, GpuProbeRays};
 
@@ -175,7 +175,7 @@ impl ProbeRaysPass {
         external: Option<&wgpu::TextureView>,
         timer: Option<&PassTimer>,
     ) {
-        let groups = [self.point_count.div_ceil(64).max(1), 1, 1];
+        let groups = linear_workgroups(self.point_count);
         let own = external.map(|maps| self.inputs.resources(b, maps));
         self.radiance_pass
             .encode_on(device, encoder, own.as_ref().map(|r| &r[..]), groups, timer);

@@ -134,7 +134,6 @@ impl ProbesPass {
         );
         let (light, sky_transfer) = match rays {
             Some(rays) => {
-                let limits = device.limits();
                 let points = rays.points.len() as u64;
                 let buffers = [
                     ("ray hits", rays.hits.len() as u64 * 4),
@@ -151,11 +150,6 @@ impl ProbesPass {
                             max as f64 / (1 << 20) as f64
                         )));
                     }
-                }
-                if points.div_ceil(64) > u64::from(limits.max_compute_workgroups_per_dimension) {
-                    return Err(RuntimeError::Probes(format!(
-                        "{points} gather points need more workgroups than the device dispatches at once"
-                    )));
                 }
                 let pass = ProbeRaysPass::new(
                     device,

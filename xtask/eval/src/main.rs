@@ -22,6 +22,7 @@ mod plan;
 mod probes;
 mod reference;
 mod sky;
+mod targets;
 
 use anyhow::{bail, Context, Result};
 use plan::{Mode, Params, SceneSpec};
@@ -118,7 +119,7 @@ impl Row {
 
 fn usage() -> ! {
     eprintln!(
-        "usage: cargo xtask eval [--quick|--full|--budget|--emitters|--sky|--probes] [--out DIR]\n       cargo xtask eval compare TEST.exr REFERENCE.exr   (error, energy, shape and local error as ../shared/notes/metrics.md defines them)\n\n  --quick   Cornell box, a handful of settings, small references (CI; dev-profile binaries); default\n  --full    all scenes and sweeps (release binaries; the README's charts)\n  --budget  the error budget of the default bake, one idealised stage at a time (release; the README's budget table)\n  --emitters emissive surfaces (McGuire's CornellBox-Original by its own lamp, two lamps in our Cornell box) against the reference, and the frame cost of a scale change (release)\n  --sky     the sky and a sun (our courtyard; Sponza) against the reference, and the frame cost of turning the sky (release)\n  --probes  irradiance probes (our Cornell box, two rooms) against the reference at the probe positions, and their cost (release)\n  --out DIR output directory (default target/eval-quick, eval-full, eval-budget, eval-emitters, eval-sky or eval-probes)\n\nBakes and references are cached under target/eval/ (delete it to start over)."
+        "usage: cargo xtask eval [--quick|--full|--budget|--targets|--emitters|--sky|--probes] [--out DIR]\n       cargo xtask eval compare TEST.exr REFERENCE.exr   (error, energy, shape and local error as ../shared/notes/metrics.md defines them)\n\n  --quick   Cornell box, a handful of settings, small references (CI; dev-profile binaries); default\n  --full    all scenes and sweeps (release binaries; the README's charts)\n  --budget  the error budget of the default bake, one idealised stage at a time (release; the README's budget table)\n  --targets issue #11's targets as ../shared/notes/metrics.md measures them: default bakes of McGuire's boxes, chairs and the fireplace room against the reference in image space, bake time and the gi/direct frame ratio (release)\n  --emitters emissive surfaces (McGuire's CornellBox-Original by its own lamp, two lamps in our Cornell box) against the reference, and the frame cost of a scale change (release)\n  --sky     the sky and a sun (our courtyard; Sponza) against the reference, and the frame cost of turning the sky (release)\n  --probes  irradiance probes (our Cornell box, two rooms) against the reference at the probe positions, and their cost (release)\n  --out DIR output directory (default target/eval-quick, eval-full, eval-budget, eval-targets, eval-emitters, eval-sky or eval-probes)\n\nBakes and references are cached under target/eval/ (delete it to start over)."
     );
     std::process::exit(2);
 }
@@ -144,6 +145,7 @@ fn run(args: &[String]) -> Result<()> {
     let mut emitters = false;
     let mut sky = false;
     let mut probes = false;
+    let mut targets = false;
     let mut out = None;
     let mut it = args.iter();
     while let Some(a) = it.next() {
@@ -164,6 +166,10 @@ fn run(args: &[String]) -> Result<()> {
             }
             "--probes" => {
                 probes = true;
+                mode = Mode::Full;
+            }
+            "--targets" => {
+                targets = true;
                 mode = Mode::Full;
             }
             "--out" => out = Some(PathBuf::from(it.next().unwrap_or_else(|| usage()))),
@@ -189,6 +195,7 @@ fn run(args: &[String]) -> Result<()> {
             _ if emitters => "eval-emitters",
             _ if sky => "eval-sky",
             _ if probes => "eval-probes",
+            _ if targets => "eval-targets",
             (true, _) => "eval-budget",
             (false, Mode::Quick) => "eval-quick",
             (false, Mode::Full) => "eval-full",
@@ -232,6 +239,9 @@ fn run(args: &[String]) -> Result<()> {
     }
     if probes {
         return table("probes", probes::run(&bin, &cache, &root)?);
+    }
+    if targets {
+        return table("targets", targets::run(&bin, &cache, &root, &out)?);
     }
     if budget {
         return table("budget", budget::run(&bin, &cache, &root)?);

@@ -339,8 +339,9 @@ fn file_stamp(path: &Path) -> String {
 /// bakes the sky's transfer (f16), its indirect part smoothed over 3 × 3 texels. 7: automatic entry
 /// points stop at 16 per cluster the budgets allow, and the bake times of the AVX2 variants. 8: twice
 /// the automatic entry points (32 per cluster) where nothing cuts them; probe rays (format 1.6). 9:
-/// the near field (format 1.7).
-const BAKE_EPOCH: u32 = 9;
+/// the near field (format 1.7). 10: 8 entry points per cluster, the memory budget keeping room
+/// for the residual groups (16 by default, after `prm_format::RESIDUAL_GROUPS`).
+const BAKE_EPOCH: u32 = 10;
 
 /// Runs `prm-bake bake` for `spec` (extra arguments `extra`), or reuses the cached result under
 /// `cache` keyed by [`BAKE_EPOCH`], the scene file, the arguments and the config.

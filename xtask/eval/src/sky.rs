@@ -82,20 +82,23 @@ impl Playback<'_> {
         reference_args: &[String],
         out: &Path,
     ) -> Result<(compare::Metrics, compare::Metrics)> {
-        let play = |mode: &str| {
-            play_image(
-                self.play_bin,
-                self.archive,
-                self.camera,
-                play_args,
-                (self.size, mode),
-                &out.join(mode),
-            )
-        };
+        let play = |mode: &str| self.play(play_args, mode, &out.join(mode));
         let reference = |indirect| reference_image(self, reference_args, indirect);
         let indirect = compare::compare_files(&play("indirect")?, &reference(true)?)?;
         let full = compare::compare_files(&play("gi")?, &reference(false)?)?;
         Ok((indirect, full))
+    }
+
+    /// The archive played headless in `mode` with `play_args` into `out`: the frame's EXR.
+    pub fn play(&self, play_args: &[String], mode: &str, out: &Path) -> Result<PathBuf> {
+        play_image(
+            self.play_bin,
+            self.archive,
+            self.camera,
+            play_args,
+            (self.size, mode),
+            out,
+        )
     }
 }
 

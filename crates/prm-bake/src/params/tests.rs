@@ -60,8 +60,8 @@ fn command_line_overrides_config_overrides_preset() {
 fn automatic_sizes_follow_the_scene_and_budgets() {
     let scene = cornell();
     let p = resolve(&BakeConfig::default(), &scene, probe(&scene)).unwrap();
-    // A 16-chart box needs the minimum, 1024, doubled where nothing cut it: 32 per cluster.
-    assert_eq!((p.entries, p.clusters, p.paths_per_entry), (2048, 64, 8));
+    // A 16-chart box needs the minimum, 1024, doubled where nothing cut it: 8 per cluster.
+    assert_eq!((p.entries, p.clusters, p.paths_per_entry), (2048, 256, 8));
     assert!(p.reasons.iter().any(|r| r.contains("twice as many")), "{:?}", p.reasons);
     assert!(!p.reasons.is_empty());
     // A tight memory budget shrinks the atlas or the cluster count until the panes fit it.
@@ -145,7 +145,7 @@ fn impossible_parameters_are_refused() {
 }
 
 /// Automatic entry points stop at 16 per cluster the bake can have: chairs' 913 charts want
-/// 3840 (7680 at 32 per cluster where nothing cuts them), 100 clusters take 1536 (16 × 100, a
+/// 3840 (7680, in 960 clusters, where nothing cuts them), 100 clusters take 1536 (16 × 100, a
 /// multiple of 256, not doubled), and a memory budget that allows fewer clusters lowers them too,
 /// never below 1024; a time budget that cuts anything leaves them undoubled.
 #[test]
@@ -153,7 +153,8 @@ fn automatic_entries_follow_the_clusters() {
     let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/chairs/chairs.obj");
     let scene = prm_scene::load(&p).unwrap();
     let free = resolve(&BakeConfig::default(), &scene, probe(&scene)).unwrap();
-    assert_eq!((free.entries, free.clusters, free.paths_per_entry), (7680, 240, 3));
+    // 7680 / 8 = 960 clusters: within the memory budget's 1024 panes of 256² less 16 residual groups.
+    assert_eq!((free.entries, free.clusters, free.paths_per_entry), (7680, 960, 3));
     let hurried = BakeConfig {
         time_budget_s: Some(free.estimated_seconds * 0.9),
         ..Default::default()
@@ -161,7 +162,7 @@ fn automatic_entries_follow_the_clusters() {
     let h = resolve(&hurried, &scene, probe(&scene)).unwrap();
     assert_eq!(
         (h.entries, h.clusters, h.paths_per_entry),
-        (3840, 240, 3),
+        (3840, 480, 3),
         "{:?}",
         h.reasons
     );
