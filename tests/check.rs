@@ -62,8 +62,8 @@ fn the_check_selects_the_clusters_the_player_selects() {
         let mut archive = prm_format::Archive::open(&out).unwrap();
         let energy: Vec<Vec3> = archive.clusters().iter().map(|c| Vec3::from(c.energy)).collect();
         assert!(energy.len() > TOP_K as usize);
-        let of = prm_format::residual_groups(archive.clusters(), residual_groups);
         let formed = prm_format::residual_group_count(energy.len(), residual_groups);
+        let of = prm_format::residual_groups(archive.clusters(), formed);
         let group_energy = group_energies(&mut archive, &of, formed as usize);
         let options = RuntimeOptions {
             top_k: TOP_K,

@@ -579,7 +579,7 @@ impl BakeParams {
             }
         }
 
-        // Twice the entry points at the same clusters and walks per entry, where neither the
+        // Twice the entry points (and so clusters) at the same walks per entry, where neither the
         // time budget nor the cluster cap cut anything (module docs).
         let uncut = estimated_seconds >= planned && !capped;
         if auto_entries && uncut && entries * 2 <= MAX_AUTO_ENTRIES {

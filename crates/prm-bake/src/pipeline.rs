@@ -612,7 +612,10 @@ pub fn bake(job: &BakeJob<'_>, renderer: Renderer<'_>, progress: &mut dyn Progre
 
     let (table_entries, table_clusters, atlas_section) = archive_tables(&atlas, &entries, &clustering);
     // The player's residual groups, for the accuracy check (a function of the cluster table).
-    let residual_groups = prm_format::residual_groups(&table_clusters, prm_format::RESIDUAL_GROUPS);
+    let residual_groups = prm_format::residual_groups(
+        &table_clusters,
+        prm_format::residual_group_count(table_clusters.len(), prm_format::RESIDUAL_GROUPS),
+    );
     let out_dir = destination
         .parent()
         .filter(|d| !d.as_os_str().is_empty())

@@ -43,13 +43,14 @@ pub fn residual_group_count(clusters: usize, asked: u32) -> u32 {
 /// Rounds of k-means.
 const ROUNDS: usize = 16;
 
-/// The group of every cluster: `groups` groups ([`residual_group_count`] of them: at most one per [`CLUSTERS_PER_GROUP`] clusters, at least one) by
+/// The group of every cluster: `groups` groups (at most one per cluster, at least one; callers
+/// ask for [`residual_group_count`] of them) by
 /// k-means of the centroids, started from farthest points (the first cluster's centroid, then
 /// each time the centroid farthest from the chosen ones, ties to the lower index). Every group
 /// keeps at least its starting cluster.
 pub fn residual_groups(clusters: &[Cluster], groups: u32) -> Vec<u32> {
     let n = clusters.len();
-    let g = residual_group_count(n, groups) as usize;
+    let g = (groups as usize).min(n);
     if g <= 1 {
         return vec![0; n];
     }
