@@ -80,6 +80,14 @@ const MAX_PIXELS: u64 = 8192 * 8192;
 /// Runs `prm-bake reference`.
 pub fn run(args: &ReferenceArgs) -> Result<()> {
     let start = Instant::now();
+    // Refused before any tracing: an image named `.png` that holds an EXR misleads every viewer.
+    let is_exr = args.output.extension().is_some_and(|e| e.eq_ignore_ascii_case("exr"));
+    if !is_exr {
+        bail!(
+            "--output {}: the reference is written as OpenEXR (linear radiance); name it FILE.exr",
+            args.output.display()
+        );
+    }
     let scene = prm_scene::load(&args.scene).with_context(|| format!("cannot load scene {}", args.scene.display()))?;
     for w in &scene.report.warnings {
         eprintln!("warning: {w}");

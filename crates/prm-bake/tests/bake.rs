@@ -333,6 +333,8 @@ fn limits_are_refused_up_front() {
     let out = out.to_str().unwrap();
     let exr = dir.join("x.exr");
     let exr = exr.to_str().unwrap();
+    let png = dir.join("x.png");
+    let png = png.to_str().unwrap();
     let plan = |options: &[&'static str]| [&["bake", scene, "-o", out][..], options, &["--plan"]].concat();
     let reference = |options: &[&'static str]| {
         let view = [
@@ -352,6 +354,21 @@ fn limits_are_refused_up_front() {
         (plan(&["--clusters", "2000000", "--entries", "4000000"]), "--clusters"),
         (reference(&["--spp", "0"]), "--spp"),
         (reference(&["--size", "16384x16384"]), "--size"),
+        // An EXR under another name: the QA sweep's `-o x.png` wrote one silently.
+        (
+            [
+                "reference",
+                scene,
+                "--light",
+                "point:0,1,0:1,1,1",
+                "--size",
+                "8x8",
+                "-o",
+                png,
+            ]
+            .to_vec(),
+            "name it FILE.exr",
+        ),
     ];
     for (args, option) in cases {
         let r = run(&args);
@@ -362,7 +379,7 @@ fn limits_are_refused_up_front() {
             stderr.contains(option),
             "{args:?}: the error should name {option}:\n{stderr}"
         );
-        assert!(!Path::new(out).exists() && !Path::new(exr).exists());
+        assert!(!Path::new(out).exists() && !Path::new(exr).exists() && !Path::new(png).exists());
     }
 }
 

@@ -16,9 +16,8 @@ use anyhow::{bail, Context, Result};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::Command;
-use std::time::Instant;
 
-use crate::plan::{self, SceneSpec};
+use crate::plan;
 use crate::sky::{metric_cells, Playback};
 
 /// Reference paths per pixel: its noise after the downsample stays under a fifth of the
@@ -90,18 +89,7 @@ pub fn run(bake_bin: &Path, cache: &Path, root: &Path, out: &Path) -> Result<Str
         "| case | scales | indirect error (4×4) | full res. | energy | shape | full image error (4×4) | bake s | frame ms: scales change / light moves |\n| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n",
     );
     for case in &cases {
-        let spec = SceneSpec::new(
-            &case.name.replace([' ', ','], "-"),
-            case.scene.clone(),
-            vec![],
-            Default::default(),
-            SPP,
-        );
-        let t = Instant::now();
-        let baked = plan::bake(bake_bin, cache, &spec, &[], None, false)?;
-        let bake_s = baked.report["timings"]["total"]
-            .as_f64()
-            .unwrap_or(t.elapsed().as_secs_f64());
+        let (baked, bake_s) = plan::bake_case(bake_bin, cache, &case.name, &case.scene, &[])?;
         println!("emitters: {}: baked ({:.1} s)", case.name, bake_s);
         let (scaled_ms, moved_ms, alone_ms) = frame_costs(&baked.archive, &case.scene)?;
         for (row, scales) in case.scales.iter().enumerate() {
@@ -123,7 +111,11 @@ pub fn run(bake_bin: &Path, cache: &Path, root: &Path, out: &Path) -> Result<Str
                 size: SIZE,
                 spp: SPP,
             };
-            let (mi, mf) = playback.compare(&play_args, &reference_args, &out.join(format!("{}-{row}", spec.name)))?;
+            let (mi, mf) = playback.compare(
+                &play_args,
+                &reference_args,
+                &out.join(format!("{}-{row}", plan::case_name(&case.name))),
+            )?;
             let label = if scales.is_empty() {
                 "1".to_string()
             } else {

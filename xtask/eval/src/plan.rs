@@ -343,6 +343,24 @@ fn file_stamp(path: &Path) -> String {
 /// for the residual groups (16 by default, after `prm_format::RESIDUAL_GROUPS`).
 const BAKE_EPOCH: u32 = 10;
 
+/// A case's label as a file name: spaces and punctuation as dashes.
+pub fn case_name(label: &str) -> String {
+    label.replace([' ', ',', '(', ')', '='], "-")
+}
+
+/// The default bake of `scene` with `args` for one case of an eval mode (cached under
+/// [`case_name`] of `label`), through [`bake`]: the result and the bake's seconds (its
+/// report's, else the wall time of this call).
+pub fn bake_case(bin: &Path, cache: &Path, label: &str, scene: &Path, args: &[String]) -> Result<(Baked, f64)> {
+    let spec = SceneSpec::new(&case_name(label), scene.to_path_buf(), vec![], Default::default(), 0);
+    let t = std::time::Instant::now();
+    let baked = bake(bin, cache, &spec, args, None, false)?;
+    let seconds = baked.report["timings"]["total"]
+        .as_f64()
+        .unwrap_or(t.elapsed().as_secs_f64());
+    Ok((baked, seconds))
+}
+
 /// Runs `prm-bake bake` for `spec` (extra arguments `extra`), or reuses the cached result under
 /// `cache` keyed by [`BAKE_EPOCH`], the scene file, the arguments and the config.
 pub fn bake(

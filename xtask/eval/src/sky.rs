@@ -21,7 +21,7 @@ use std::time::Instant;
 
 use crate::compare;
 use crate::emitters::run_cmd;
-use crate::plan::{self, SceneSpec};
+use crate::plan;
 
 /// Image size and reference paths per pixel.
 const SIZE: &str = "192x144";
@@ -246,18 +246,9 @@ pub fn run(bake_bin: &Path, cache: &Path, root: &Path, out: &Path) -> Result<Str
         "| case | lighting | indirect error (4×4) | full res. | energy | shape | full image error (4×4) | bake s (sky step) | frame ms: sky turns / light moves |\n| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n",
     );
     for case in &cases {
-        let spec = SceneSpec::new(
-            &format!("sky-{}", case.name.replace([' ', ','], "-")),
-            case.scene.clone(),
-            vec![],
-            Default::default(),
-            SPP,
-        );
-        let t = Instant::now();
-        let baked = plan::bake(bake_bin, cache, &spec, &case.bake_args, None, false)?;
-        let timing = |k: &str| baked.report["timings"][k].as_f64();
-        let bake_s = timing("total").unwrap_or(t.elapsed().as_secs_f64());
-        let sky_s = timing("sky").unwrap_or(f64::NAN);
+        let case_label = format!("sky-{}", case.name);
+        let (baked, bake_s) = plan::bake_case(bake_bin, cache, &case_label, &case.scene, &case.bake_args)?;
+        let sky_s = baked.report["timings"]["sky"].as_f64().unwrap_or(f64::NAN);
         println!("sky: {}: baked ({bake_s:.1} s, sky {sky_s:.1} s)", case.name);
         let (turned_ms, moved_ms, alone_ms) = frame_costs(&baked.archive, &case.scene)?;
         for (row, (label, lighting)) in case.rows.iter().enumerate() {
@@ -272,7 +263,11 @@ pub fn run(bake_bin: &Path, cache: &Path, root: &Path, out: &Path) -> Result<Str
                 size: SIZE,
                 spp: SPP,
             };
-            let (mi, mf) = playback.compare(lighting, lighting, &out.join(format!("{}-{row}", spec.name)))?;
+            let (mi, mf) = playback.compare(
+                lighting,
+                lighting,
+                &out.join(format!("{}-{row}", plan::case_name(&case_label))),
+            )?;
             let _ = writeln!(
                 md,
                 "| {} | {label} | {} | {bake_s:.1} ({sky_s:.1}) | {} |",

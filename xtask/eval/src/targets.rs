@@ -21,7 +21,7 @@ use std::time::Instant;
 
 use crate::compare;
 use crate::emitters::run_cmd;
-use crate::plan::{self, SceneSpec};
+use crate::plan;
 use crate::sky::Playback;
 
 /// Reference paths per pixel (each of the two references).
@@ -73,10 +73,16 @@ fn without_emission(obj: &Path, dir: &Path) -> Result<PathBuf> {
         .flat_map(|l| [l, "\n"])
         .collect();
     let name = |p: &Path| p.file_name().map(PathBuf::from).unwrap_or_default();
-    let out = dir.join(name(obj));
-    std::fs::copy(obj, &out).with_context(|| format!("copying {}", obj.display()))?;
-    std::fs::write(dir.join(name(&mtl)), stripped)?;
-    Ok(out)
+    // Written only when they change: the bake cache keys on the scene file's time stamp.
+    let write_if_changed = |path: PathBuf, bytes: &[u8]| -> Result<PathBuf> {
+        if std::fs::read(&path).ok().as_deref() != Some(bytes) {
+            std::fs::write(&path, bytes).with_context(|| format!("writing {}", path.display()))?;
+        }
+        Ok(path)
+    };
+    let obj_bytes = std::fs::read(obj).with_context(|| format!("reading {}", obj.display()))?;
+    write_if_changed(dir.join(name(&mtl)), stripped.as_bytes())?;
+    write_if_changed(dir.join(name(obj)), &obj_bytes)
 }
 
 fn point(x: f32, y: f32, z: f32) -> String {
@@ -254,18 +260,8 @@ pub fn run(bake_bin: &Path, cache: &Path, root: &Path, out: &Path) -> Result<Str
         "| case | light | indirect error (4×4) | full res. | energy | shape | local | ref. noise | bake s | gi / direct frame |\n| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n",
     );
     for case in cases(root, cache)? {
-        let spec = SceneSpec::new(
-            &format!("targets-{}", case.name.replace([' ', ',', '(', ')', '='], "-")),
-            case.scene.clone(),
-            vec![],
-            Default::default(),
-            SPP,
-        );
-        let t = Instant::now();
-        let baked = plan::bake(bake_bin, cache, &spec, &case.bake_args, None, false)?;
-        let bake_s = baked.report["timings"]["total"]
-            .as_f64()
-            .unwrap_or(t.elapsed().as_secs_f64());
+        let name = format!("targets-{}", case.name);
+        let (baked, bake_s) = plan::bake_case(bake_bin, cache, &name, &case.scene, &case.bake_args)?;
         println!("targets: {}: baked ({bake_s:.1} s)", case.name);
         for (row, (label, light)) in case.lights.iter().enumerate() {
             let playback = Playback {
@@ -279,7 +275,7 @@ pub fn run(bake_bin: &Path, cache: &Path, root: &Path, out: &Path) -> Result<Str
                 size: case.size,
                 spp: SPP,
             };
-            let dir = out.join(format!("{}-{row}", spec.name));
+            let dir = out.join(format!("{}-{row}", plan::case_name(&name)));
             let played = playback.play(&["--light".into(), light.clone()], "indirect", &dir)?;
             let (ra, rb) = (reference(&playback, light, 1)?, reference(&playback, light, 2)?);
             let m = compare::compare_files(&played, &ra)?;
