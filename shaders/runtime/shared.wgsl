@@ -23,7 +23,8 @@ struct Frame {
     depth_bias: f32,
     // Residual groups: group g's summed pane is layer cluster_count + g (select.wgsl).
     group_count: u32,
-    _pad0: u32,
+    // Texels the blend pass writes (its `lit` list, blend.wgsl).
+    lit_texels: u32,
     _pad1: u32,
     _pad2: u32,
 };

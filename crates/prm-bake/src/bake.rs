@@ -79,7 +79,9 @@ pub struct BakeArgs {
     /// Seed of every random choice; the same seed gives the same archive.
     #[arg(long)]
     pub seed: Option<u64>,
-    /// Clusters blended per frame at run time (recorded in the archive for the player).
+    /// Clusters blended per frame at run time (recorded in the archive for the player). Default:
+    /// as many as 192 panes of 256² texels a frame allow, less the residual groups (64 at most),
+    /// at least 32; K = 128 at 256²
     #[arg(long)]
     pub top_k: Option<usize>,
     /// Longest bake, in seconds, that the automatic sizes (preset `default`) may plan for; they

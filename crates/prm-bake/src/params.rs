@@ -332,6 +332,25 @@ impl CostModel {
 /// Most entry points the automatic rules choose.
 const MAX_AUTO_ENTRIES: usize = 16384;
 
+/// Texels the run time blends a frame, summed over the panes it blends, from which the
+/// automatic top K follows (less the residual groups, `prm_format::RESIDUAL_GROUPS`): 192 panes
+/// of 256² texels. Measured on McGuire's box baked with 4096 entry points and 16 walks each (512
+/// clusters; `cargo xtask eval --targets`'s lights, 4×4 error, ceiling light / red wall light):
+/// K = 32 with 16 groups 8.1% / 6.5%, K = 64 with 32 groups 6.2% / 5.0%, K = 96 with 32 groups
+/// 5.4% / 4.7%, K = 128 with 64 groups 4.3% / 4.6%, every cluster 3.4% / 4.7%. On lavapipe at
+/// 1024×768 the 192 panes add about 85 ms to a 35 ms frame of direct light (`prm-play
+/// --timings`, median CPU frame); 48 panes add about 25 ms. A GPU blends them in well under a
+/// millisecond.
+const BLEND_TEXELS: f64 = 192.0 * 65536.0;
+
+/// The automatic top K at least, however large the atlas.
+const MIN_AUTO_TOP_K: usize = 32;
+
+/// How many times the automatic entry points double where the time budget allows (below):
+/// McGuire's box low near the red wall wants 4096 entry points (4.7%, 7.0% with 2048, every
+/// cluster blended), four times its charts' 1024. It was once.
+const MAX_DOUBLINGS: usize = 2;
+
 /// Entry points per cluster of the automatic cluster count. Measured in image space
 /// (`cargo xtask eval --targets`, 4×4 error, K = 32 and 64 residual groups; the default 16 give
 /// 7.5%, 9.1%, 6.0% and 7.5% on the four cases below, `prm_format::RESIDUAL_GROUPS`): McGuire's box with
@@ -344,9 +363,19 @@ const MAX_AUTO_ENTRIES: usize = 16384;
 /// archive follow the clusters (the budgets cap them).
 const ENTRIES_PER_CLUSTER: usize = 8;
 
-/// The automatic walks per entry point: enough for about 8192 walks in all, 1 to 16.
+/// Walks in all that the automatic walks per entry point aim at. Measured in image space
+/// (`cargo xtask eval --targets`'s cases, 4×4 error, every cluster blended, 8 entry points per
+/// cluster): McGuire's box under the ceiling light, 2048 entry points with 8, 16, 32 and 64
+/// walks each, 5.1%, 4.4%, 3.9% and 3.4%; 4096 with 16, 3.4%. Low near the red wall the
+/// entry points count instead: 9.1%, 7.0%, 7.1%, 7.3% with 2048 and 4.7% with 4096 (1024 with
+/// 32 walks: 13.1%). CornellBox-Sphere, 2048 with 8 against 4096 with 16: 4.5% → 2.8%; chairs,
+/// 7680 with 3 against 7680 with 8: 5.5% → 4.1%. The bake's time follows the walks: 6.4 s →
+/// 24 s on McGuire's box, 13 → 33 s on CornellBox-Sphere, 34 → 89 s on chairs. It was 8192.
+const WALKS_IN_ALL: usize = 65536;
+
+/// The automatic walks per entry point: enough for about [`WALKS_IN_ALL`], 1 to 16.
 fn auto_walks_per_entry(entries: usize) -> u32 {
-    8192usize.div_ceil(entries.max(1)).clamp(1, 16) as u32
+    WALKS_IN_ALL.div_ceil(entries.max(1)).clamp(1, 16) as u32
 }
 
 /// "s" unless `n` is one.
@@ -385,7 +414,7 @@ impl BakeParams {
     ///   shrunk until 128 panes fit the run-time memory budget;
     /// - entries: 4 per chart (charts are the scene's distinct flat pieces), 1024 to 16384, a
     ///   multiple of 256, and (applied after the time budget below, at the atlas it leaves, the
-    ///   walks per entry then rising again towards 8192 walks in all as far as the budget allows)
+    ///   walks per entry then rising again towards [`WALKS_IN_ALL`] as far as the budget allows)
     ///   no more than 16 per cluster the bake can have (`--clusters`, or the most the memory and
     ///   archive budgets allow; not below 1024). Applied before the budget's shrinking, it let
     ///   Sponza under a 60 s budget trade clusters for atlas (128 at 608² instead of 240 at 512²:
@@ -396,15 +425,18 @@ impl BakeParams {
     ///   81/50/41 % with 8192 and 80/50/42 % with 16384 (1 walk, 198 s), standard errors
     ///   2–7 points: the same, for three times the time, since pane rendering follows the VPL
     ///   count, which the entry points' own VPLs raise;
-    /// - walks per entry: enough for about 8192 walks in all, 1 to 16;
+    /// - walks per entry: enough for about [`WALKS_IN_ALL`] (65536) walks in all, 1 to 16;
     /// - then, while `cost` expects the bake to take longer than the time budget,
     ///   fewer walks, fewer entries (down to 1024) or a smaller atlas (down to 128²), whichever is
     ///   furthest above its floor;
     /// - then, where neither the time budget nor the cap cut anything and the budget allows it,
-    ///   twice the entry points (at most 16384) at the same walks per entry. The largest step down the accuracy-against-speed front (`cargo xtask eval
-    ///   --full`, lightmap error, mean of three lights): the Cornell box 0.131 → 0.111 for a bake
-    ///   of 2.7 → 4.4 s, CornellBox-Sphere 0.125 → 0.114 (9.5 → 13.7 s), chairs 0.120 → 0.107
-    ///   (13.6 → 24.3 s); where the budgets cap the clusters more entries only crowd them (above);
+    ///   twice the entry points, up to [`MAX_DOUBLINGS`] (2) times, at most 16384 and at most
+    ///   [`ENTRIES_PER_CLUSTER`] per cluster the budgets allow, the walks per entry falling to
+    ///   keep about [`WALKS_IN_ALL`]. One doubling was the largest step down the
+    ///   accuracy-against-speed front (`cargo xtask eval --full`, lightmap error, mean of three
+    ///   lights): the Cornell box 0.131 → 0.111 for a bake of 2.7 → 4.4 s, CornellBox-Sphere
+    ///   0.125 → 0.114 (9.5 → 13.7 s), chairs 0.120 → 0.107 (13.6 → 24.3 s); where the budgets
+    ///   cap the clusters more entries only crowd them (above);
     /// - clusters: entries / [`ENTRIES_PER_CLUSTER`] (8), 32 to 1024, then as many as the
     ///   memory budget (the clusters' panes and the residual groups' summed ones, up to one per
     ///   4 clusters, at most `prm_format::RESIDUAL_GROUPS`) and the archive budget allow (archive estimate: 1.5 bytes per covered texel
@@ -492,7 +524,7 @@ impl BakeParams {
             (None, None) => {
                 let m = auto_walks_per_entry(entries);
                 reasons.push(format!(
-                    "{m} walk{} per entry point: about 8192 walks in all",
+                    "{m} walk{} per entry point: about {WALKS_IN_ALL} walks in all",
                     plural(m as usize)
                 ));
                 auto_paths = true;
@@ -552,7 +584,7 @@ impl BakeParams {
         }
 
         // No more than 16 entry points per cluster the bake can have, at the atlas the budget
-        // left (module docs); the walks per entry rise again towards 8192 walks in all, as far
+        // left (module docs); the walks per entry rise again towards `WALKS_IN_ALL`, as far
         // as the time budget allows.
         let mut capped = false;
         if auto_entries {
@@ -582,13 +614,25 @@ impl BakeParams {
         // Twice the entry points (and so clusters) at the same walks per entry, where neither the
         // time budget nor the cluster cap cut anything (module docs).
         let uncut = estimated_seconds >= planned && !capped;
-        if auto_entries && uncut && entries * 2 <= MAX_AUTO_ENTRIES {
-            let doubled = estimate(entries * 2, paths_per_entry, atlas);
-            if doubled <= time_budget_s {
-                entries *= 2;
-                estimated_seconds = doubled;
+        if auto_entries && uncut {
+            // No more than `ENTRIES_PER_CLUSTER` per cluster the budgets allow: beyond, more
+            // entry points only crowd the clusters.
+            let most = MAX_AUTO_ENTRIES.min(ENTRIES_PER_CLUSTER * clusters_allowed(texels(atlas)));
+            for _ in 0..MAX_DOUBLINGS {
+                let more = entries * 2;
+                let walks = if auto_paths {
+                    auto_walks_per_entry(more)
+                } else {
+                    paths_per_entry
+                };
+                let doubled = estimate(more, walks, atlas);
+                if more > most || doubled > time_budget_s {
+                    break;
+                }
+                (entries, paths_per_entry, estimated_seconds) = (more, walks, doubled);
                 reasons.push(format!(
-                    "{entries} entry points: twice as many, as the time budget allows"
+                    "{entries} entry points, {paths_per_entry} walk{} each: twice as many, as the time budget allows",
+                    plural(paths_per_entry as usize)
                 ));
             }
         }
@@ -607,11 +651,21 @@ impl BakeParams {
                 c
             }
         };
-        let top_k = config
-            .top_k
-            .or(fixed.as_ref().map(|v| v.top_k))
-            .unwrap_or(32)
-            .min(clusters);
+        let top_k = match config.top_k.or(fixed.as_ref().map(|v| v.top_k)) {
+            Some(k) => k,
+            None => {
+                let groups = prm_format::residual_group_count(clusters, prm_format::RESIDUAL_GROUPS) as usize;
+                let panes = (BLEND_TEXELS / texels_per_pane) as usize;
+                let k = panes.saturating_sub(groups).max(MIN_AUTO_TOP_K);
+                reasons.push(format!(
+                    "top K {}: {panes} panes of {texels_per_pane:.0} texels a frame, less {groups} residual groups \
+                     (at least {MIN_AUTO_TOP_K})",
+                    k.min(clusters)
+                ));
+                k
+            }
+        }
+        .min(clusters);
         let face_resolution = config.face_resolution.or(fixed.as_ref().map(|v| v.face)).unwrap_or(128);
         let params = BakeParams {
             preset,

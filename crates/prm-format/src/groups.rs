@@ -23,11 +23,12 @@ use crate::Cluster;
 /// (`cargo xtask eval --targets`'s cases, 4×4 error, K = 32, 8 entry points per cluster): 4
 /// groups gave McGuire's box 8.2% (light under the ceiling) and 9.7% (low near the red wall),
 /// CornellBox-Sphere 7.0%, chairs 8.6%; 16 groups 7.5%, 9.1%, 6.0%, 7.5%; 64 groups 6.4%,
-/// 9.2%, 4.9%, 6.3%, against 5.2%, 9.2%, 4.5%, 5.5% with every cluster blended. On lavapipe
-/// at 1024×768 (McGuire's box, 256 clusters, `prm-play --timings`, median CPU frame) 4 and 16
-/// groups cost the same (119 ms against 90 ms for the direct light alone) and 64 groups
-/// 149–159 ms, so the default is 16.
-pub const RESIDUAL_GROUPS: u32 = 16;
+/// 9.2%, 4.9%, 6.3%, against 5.2%, 9.2%, 4.5%, 5.5% with every cluster blended. With 4096
+/// entry points (512 clusters) and K = 128, 64 groups give 4.3% and 4.6% against 3.4% and
+/// 4.7% with every cluster. A group costs the run time what a kept cluster does (a pane
+/// blended per texel; the bake's automatic top K leaves room for them), so the default is 64
+/// (16 before the bakes grew to 4096 entry points and K to 128).
+pub const RESIDUAL_GROUPS: u32 = 64;
 
 /// Clusters per residual group at least: a group of one cluster is that cluster's pane again,
 /// which blending every cluster gives with fewer panes.
@@ -112,7 +113,8 @@ mod tests {
     #[test]
     fn group_count_keeps_four_clusters_a_group() {
         assert_eq!(residual_group_count(256, 64), 64);
-        assert_eq!(residual_group_count(960, RESIDUAL_GROUPS), 16);
+        assert_eq!(residual_group_count(960, RESIDUAL_GROUPS), 64);
+        assert_eq!(residual_group_count(205, RESIDUAL_GROUPS), 51);
         assert_eq!(residual_group_count(40, RESIDUAL_GROUPS), 10);
         assert_eq!(residual_group_count(64, 4), 4);
         assert_eq!(residual_group_count(3, 4), 1);

@@ -63,8 +63,8 @@ pub use probes::{
 };
 pub use reader::{pane_energy_peak, Archive, ArchiveInfo, SectionInfo, VerifyReport};
 pub use rgb9e5::{
-    decode_rgb9e5, decode_rgb9e5_slice, encode_rgb9e5, encode_rgb9e5_slice, RGB9E5_MAX, RGB9E5_MAX_RELATIVE_ERROR,
-    RGB9E5_MIN_ABS_ERROR, RGB9E5_MIN_NORMAL, RGB9E5_NAME,
+    decode_rgb9e5, decode_rgb9e5_slice, encode_rgb9e5, encode_rgb9e5_slice, RGB9E5_MANTISSAS, RGB9E5_MAX,
+    RGB9E5_MAX_RELATIVE_ERROR, RGB9E5_MIN_ABS_ERROR, RGB9E5_MIN_NORMAL, RGB9E5_NAME,
 };
 pub use sections::{AtlasSection, Cluster, Entry};
 pub use sh::{sh_basis, sh_rotate_y, SH_COEFFS};

@@ -92,6 +92,10 @@ pub fn encode_rgb9e5(rgb: [f32; 3]) -> u32 {
     q(r) | (q(g) << 9) | (q(b) << 18) | ((exp_shared as u32) << 27)
 }
 
+/// The three mantissas' bits of a texel: it decodes to zero exactly when they are all 0,
+/// whatever its exponent.
+pub const RGB9E5_MANTISSAS: u32 = (1 << 27) - 1;
+
 /// Decodes an RGB9E5 texel into linear RGB (exact: every RGB9E5 value is
 /// representable as an `f32`).
 #[inline]

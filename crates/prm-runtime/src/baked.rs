@@ -120,6 +120,22 @@ impl BakedLights {
         }
     }
 
+    /// Marks in `lit` (one flag per texel of the `resolution`² atlas) every texel the traced
+    /// indirect lightmap can light: a group's traced indirect light or the sky's indirect
+    /// transfer is not zero there.
+    pub fn mark_indirect(&self, lit: &mut [bool]) {
+        for map in self.groups.iter().filter_map(|g| g.indirect.as_deref()) {
+            for (l, v) in lit.iter_mut().zip(map) {
+                *l |= v.iter().any(|&c| c != 0.0);
+            }
+        }
+        if let Some(sky) = &self.sky {
+            for (l, t) in lit.iter_mut().zip(&sky.indirect) {
+                *l |= t.iter().flatten().any(|&c| c != 0.0);
+            }
+        }
+    }
+
     /// Checks `scales` (one finite, non-negative RGB triple per group).
     pub fn check(&self, scales: &[[f32; 3]]) -> Result<(), RuntimeError> {
         if scales.len() != self.info.len() {

@@ -174,6 +174,8 @@ pub struct Runtime {
     group_count: u32,
     /// The top K of the frame constants last uploaded (`update`), which the passes ran with.
     frame_top_k: u32,
+    /// Texels the blend pass writes (see `blend.wgsl`).
+    lit_texels: u32,
     entry_count: u32,
     resolution: u32,
     vertex_count: u32,
@@ -365,6 +367,9 @@ impl Runtime {
         let mut sum = vec![[0f32; 3]; if group_count > 0 { texels } else { 0 }];
         let mut group_energy = Vec::with_capacity(group_count as usize);
         let mut words = Vec::with_capacity(texels);
+        // The texels the blend writes: any pane, the traced indirect light or the near field
+        // lights them (the rest of the lightmap stays zero).
+        let mut lit = vec![false; texels];
         for (i, &p) in order.iter().enumerate() {
             let pane = archive
                 .read_pane_rgb9e5(p as usize)
@@ -372,6 +377,9 @@ impl Runtime {
                     pane: p as usize,
                     source,
                 })?;
+            for (l, &w) in lit.iter_mut().zip(&pane) {
+                *l |= w & prm_format::RGB9E5_MANTISSAS != 0;
+            }
             pipeline::write_layer(queue, &pane_texture, p, bytemuck::cast_slice(&pane), res * 4);
             if group_count == 0 {
                 continue;
@@ -462,6 +470,16 @@ impl Runtime {
             }
             None => None,
         };
+        emitters.mark_indirect(&mut lit);
+        if let Some(n) = near_field {
+            for x in &n.exits {
+                if let Some(l) = lit.get_mut(x.texel as usize) {
+                    *l = true;
+                }
+            }
+        }
+        let lit: Vec<u32> = (0..texels as u32).filter(|&t| lit[t as usize]).collect();
+        let lit_texels = lit.len() as u32;
         let topk = TopKPasses::new(
             device,
             &buffers,
@@ -469,6 +487,7 @@ impl Runtime {
             &lightmap_view,
             &emitters.indirect_view,
             &near_view,
+            &lit,
         );
         let probes = match archive.probes() {
             Some(p) => Some(probes::ProbesPass::new(
@@ -495,6 +514,7 @@ impl Runtime {
             cluster_count,
             group_count,
             frame_top_k,
+            lit_texels,
             entry_count,
             resolution: res,
             vertex_count,
@@ -550,6 +570,7 @@ impl Runtime {
             normal_offset: o.normal_offset,
             depth_bias: o.depth_bias,
             group_count: self.group_count,
+            lit_texels: self.lit_texels,
             ..Default::default()
         };
         self.frame_top_k = frame.top_k;
@@ -602,7 +623,7 @@ impl Runtime {
         if let Some(n) = &self.near {
             n.encode(&self.device, encoder, &self.buffers, external, timer);
         }
-        self.topk.encode(encoder, self.cluster_count, self.resolution, timer);
+        self.topk.encode(encoder, self.cluster_count, self.lit_texels, timer);
         if let Some(p) = &self.probes {
             p.encode(&self.device, encoder, &self.buffers, external, timer);
         }

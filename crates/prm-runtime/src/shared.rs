@@ -54,8 +54,8 @@ pub struct GpuFrame {
     pub depth_bias: f32,
     /// Residual groups; their summed panes are layers `cluster_count + g` (see `select.wgsl`).
     pub group_count: u32,
-    /// Padding.
-    pub _pad0: u32,
+    /// Texels the blend pass writes (its list of lit texels, see `blend.wgsl`).
+    pub lit_texels: u32,
     /// Padding.
     pub _pad1: u32,
     /// Padding.
@@ -287,7 +287,7 @@ mod tests {
                 normal_offset,
                 depth_bias,
                 group_count,
-                _pad0,
+                lit_texels,
                 _pad1,
                 _pad2
             ]

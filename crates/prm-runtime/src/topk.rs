@@ -6,9 +6,10 @@
 //! dropped clusters' light (or, without groups, the kept weights scaled to keep it); blend
 //! (`shaders/runtime/blend.wgsl`), the indirect-irradiance lightmap, Σ over the kept clusters
 //! and the residual groups of effective weight × pane. Rank and select run one invocation per cluster, blend
-//! one per atlas texel.
+//! one per lit atlas texel (a list built at load: 70% of the Cornell box's 256² atlas, the rest
+//! gutters no pane lights).
 
-use prm_gpu_kit::{ComputePass, PassTimer};
+use prm_gpu_kit::{linear_workgroups, pipeline, ComputePass, PassTimer};
 
 use crate::Buffers;
 
@@ -17,12 +18,14 @@ pub(crate) struct TopKPasses {
     rank: ComputePass,
     select: ComputePass,
     blend: ComputePass,
+    /// The lit texels' row-major indices, which the blend pass reads (kept alive here).
+    _lit: wgpu::Buffer,
 }
 
 impl TopKPasses {
     /// The passes on `b`, blending the pane array `panes` into `lightmap`, plus the emitters'
     /// traced indirect lightmap `emitted` and the near field's lightmap `near` (each used only
-    /// when it has the lightmap's size).
+    /// when it has the lightmap's size), at the `lit` texels (row-major indices).
     pub fn new(
         device: &wgpu::Device,
         b: &Buffers,
@@ -30,7 +33,14 @@ impl TopKPasses {
         lightmap: &wgpu::TextureView,
         emitted: &wgpu::TextureView,
         near: &wgpu::TextureView,
+        lit: &[u32],
     ) -> TopKPasses {
+        let lit = pipeline::buffer_init(
+            device,
+            "prm lit texels",
+            bytemuck::cast_slice(lit),
+            wgpu::BufferUsages::STORAGE,
+        );
         let pass = |name, wgsl, resources: &[wgpu::BindingResource]| {
             ComputePass::new(device, name, &[crate::SHARED_WGSL, wgsl], resources)
         };
@@ -63,24 +73,19 @@ impl TopKPasses {
                     wgpu::BindingResource::TextureView(lightmap),
                     wgpu::BindingResource::TextureView(emitted),
                     wgpu::BindingResource::TextureView(near),
+                    lit.as_entire_binding(),
                 ],
             ),
+            _lit: lit,
         }
     }
 
-    /// Rank and select over `clusters` (workgroups of 64), then blend a `resolution`² lightmap
-    /// (8×8 workgroups).
-    pub fn encode(
-        &self,
-        encoder: &mut wgpu::CommandEncoder,
-        clusters: u32,
-        resolution: u32,
-        timer: Option<&PassTimer>,
-    ) {
+    /// Rank and select over `clusters` (workgroups of 64), then blend the `lit` texels
+    /// (workgroups of 64 in rows).
+    pub fn encode(&self, encoder: &mut wgpu::CommandEncoder, clusters: u32, lit: u32, timer: Option<&PassTimer>) {
         let per_cluster = [clusters.div_ceil(64), 1, 1];
         self.rank.encode(encoder, per_cluster, timer);
         self.select.encode(encoder, per_cluster, timer);
-        let groups = resolution.div_ceil(8);
-        self.blend.encode(encoder, [groups, groups, 1], timer);
+        self.blend.encode(encoder, linear_workgroups(lit), timer);
     }
 }

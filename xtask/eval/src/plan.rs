@@ -340,8 +340,10 @@ fn file_stamp(path: &Path) -> String {
 /// points stop at 16 per cluster the budgets allow, and the bake times of the AVX2 variants. 8: twice
 /// the automatic entry points (32 per cluster) where nothing cuts them; probe rays (format 1.6). 9:
 /// the near field (format 1.7). 10: 8 entry points per cluster, the memory budget keeping room
-/// for the residual groups (16 by default, after `prm_format::RESIDUAL_GROUPS`).
-const BAKE_EPOCH: u32 = 10;
+/// for the residual groups (16 by default, after `prm_format::RESIDUAL_GROUPS`). 11: about 65536
+/// walks in all, the entry points doubled up to twice, the top K from the blend's texel budget
+/// and 64 residual groups.
+const BAKE_EPOCH: u32 = 11;
 
 /// A case's label as a file name: spaces and punctuation as dashes.
 pub fn case_name(label: &str) -> String {

@@ -83,7 +83,7 @@ impl Playback<'_> {
         out: &Path,
     ) -> Result<(compare::Metrics, compare::Metrics)> {
         let play = |mode: &str| self.play(play_args, mode, &out.join(mode));
-        let reference = |indirect| reference_image(self, reference_args, indirect);
+        let reference = |indirect| reference_image(self, reference_args, indirect, None);
         let indirect = compare::compare_files(&play("indirect")?, &reference(true)?)?;
         let full = compare::compare_files(&play("gi")?, &reference(false)?)?;
         Ok((indirect, full))
@@ -115,14 +115,15 @@ pub(crate) fn metric_cells(indirect: &compare::Metrics, full: &compare::Metrics)
     )
 }
 
-/// The reference image of the playback's scene at its camera under the lighting `args` of
-/// `prm-bake reference` (cached under `cache/refs-NAME` by scene stamp, camera, arguments, mode,
-/// size and paths).
-fn reference_image(p: &Playback, args: &[String], indirect: bool) -> Result<PathBuf> {
+/// The reference image of `p`'s scene (`p.spp` paths per pixel) with the extra `args`, indirect
+/// light only or not, with `seed` (`None`: the tracer's default), cached under
+/// `cache/refs-NAME`.
+pub(crate) fn reference_image(p: &Playback, args: &[String], indirect: bool, seed: Option<u64>) -> Result<PathBuf> {
     let (bake_bin, cache, name, scene, camera, size, spp) =
         (p.bake_bin, p.cache, p.name, p.scene, p.camera, p.size, p.spp);
+    let seed_key = seed.map(|s| format!("|{s}")).unwrap_or_default();
     let key = format!(
-        "{}|{:?}|{camera:?}|{args:?}|{indirect}|{spp}|{size}",
+        "{}|{:?}|{camera:?}|{args:?}|{indirect}|{spp}|{size}{seed_key}",
         scene.display(),
         std::fs::metadata(scene).map(|m| m.len()).unwrap_or(0),
     );
@@ -138,15 +139,19 @@ fn reference_image(p: &Playback, args: &[String], indirect: bool) -> Result<Path
     if let Some(c) = camera {
         cmd.args(["--camera", c]);
     }
+    if let Some(s) = seed {
+        cmd.args(["--seed", &s.to_string()]);
+    }
     cmd.args(["--size", size, "--spp", &spp.to_string(), "-o"]).arg(&path);
     if indirect {
         cmd.arg("--indirect-only");
     }
     run_cmd(cmd, "prm-bake reference")?;
     println!(
-        "{name}: {} reference ({}) in {:.0} s",
+        "{name}: {} reference ({}, {spp} paths per pixel{}) in {:.0} s",
         scene.display(),
         if indirect { "indirect" } else { "full" },
+        seed.map(|s| format!(", seed {s}")).unwrap_or_default(),
         t.elapsed().as_secs_f64()
     );
     Ok(path)

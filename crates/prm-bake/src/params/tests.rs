@@ -60,9 +60,18 @@ fn command_line_overrides_config_overrides_preset() {
 fn automatic_sizes_follow_the_scene_and_budgets() {
     let scene = cornell();
     let p = resolve(&BakeConfig::default(), &scene, probe(&scene)).unwrap();
-    // A 16-chart box needs the minimum, 1024, doubled where nothing cut it: 8 per cluster.
-    assert_eq!((p.entries, p.clusters, p.paths_per_entry), (2048, 256, 8));
-    assert!(p.reasons.iter().any(|r| r.contains("twice as many")), "{:?}", p.reasons);
+    // A 16-chart box needs the minimum, 1024, doubled twice where nothing cut it: 8 per
+    // cluster, 16 walks each (65536 in all), and K = 128 of its 512 clusters beside 64 groups.
+    assert_eq!(
+        (p.entries, p.clusters, p.paths_per_entry, p.top_k),
+        (4096, 512, 16, 128)
+    );
+    assert_eq!(
+        p.reasons.iter().filter(|r| r.contains("twice as many")).count(),
+        2,
+        "{:?}",
+        p.reasons
+    );
     assert!(!p.reasons.is_empty());
     // A tight memory budget shrinks the atlas or the cluster count until the panes fit it.
     let bytes = |p: &BakeParams| match p.atlas {
@@ -84,7 +93,8 @@ fn automatic_sizes_follow_the_scene_and_budgets() {
 fn time_budget_shrinks_automatic_sizes_only() {
     let scene = cornell();
     let roomy = resolve(&BakeConfig::default(), &scene, probe(&scene)).unwrap();
-    let budget = roomy.estimated_seconds / 4.0;
+    // Below the undoubled plan's time (a quarter of the doubled twice).
+    let budget = roomy.estimated_seconds / 8.0;
     let tight = BakeConfig {
         time_budget_s: Some(budget),
         ..Default::default()
@@ -153,8 +163,9 @@ fn automatic_entries_follow_the_clusters() {
     let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/chairs/chairs.obj");
     let scene = prm_scene::load(&p).unwrap();
     let free = resolve(&BakeConfig::default(), &scene, probe(&scene)).unwrap();
-    // 7680 / 8 = 960 clusters: within the memory budget's 1024 panes of 256² less 16 residual groups.
-    assert_eq!((free.entries, free.clusters, free.paths_per_entry), (7680, 960, 3));
+    // 7680 / 8 = 960 clusters: the memory budget's 1024 panes of 256² less 64 residual groups
+    // (so not doubled twice: 15360 would crowd them), 9 walks each (about 65536 in all).
+    assert_eq!((free.entries, free.clusters, free.paths_per_entry), (7680, 960, 9));
     let hurried = BakeConfig {
         time_budget_s: Some(free.estimated_seconds * 0.9),
         ..Default::default()
@@ -162,7 +173,7 @@ fn automatic_entries_follow_the_clusters() {
     let h = resolve(&hurried, &scene, probe(&scene)).unwrap();
     assert_eq!(
         (h.entries, h.clusters, h.paths_per_entry),
-        (3840, 480, 3),
+        (3840, 480, 16),
         "{:?}",
         h.reasons
     );
