@@ -10,7 +10,12 @@ struct Material {
     texture: i32,
     // emitted radiance (the emitter group's baked radiance × its scale), 0 if not emissive
     emission: vec3<f32>,
-    _pad0: f32,
+    // the texture's size in its layer (from the top-left corner)
+    texture_width: u32,
+    texture_height: u32,
+    _pad0: u32,
+    _pad1: u32,
+    _pad2: u32,
 };
 
 @group(0) @binding(0) var<uniform> frame: Frame;
@@ -20,10 +25,9 @@ struct Material {
 @group(0) @binding(4) var<storage, read> materials: array<Material>;
 @group(0) @binding(5) var lightmap: texture_2d<f32>;
 @group(0) @binding(6) var textures: texture_2d_array<f32>;
-@group(0) @binding(7) var texture_sampler: sampler;
-@group(0) @binding(8) var<uniform> camera: Camera;
+@group(0) @binding(7) var<uniform> camera: Camera;
 // The emitters' and the sky's direct irradiance (prm_runtime::Runtime::emitter_lightmap), any size.
-@group(0) @binding(9) var emitter_lightmap: texture_2d<f32>;
+@group(0) @binding(8) var emitter_lightmap: texture_2d<f32>;
 
 struct VsIn {
     @location(0) position: vec3<f32>,
@@ -69,12 +73,32 @@ fn bilinear(map: texture_2d<f32>, uv: vec2<f32>) -> vec3<f32> {
     return mix(mix(a00, a10, f.x), mix(a01, a11, f.x), f.y);
 }
 
+// The material's texture at `uv` as prm_scene::Texture::sample reads it: v = 0 at the bottom
+// row, wrap-around bilinear at the texture's own size (the layer may be larger), sRGB decoded
+// per texel by the format.
+fn albedo_texture(m: Material, uv: vec2<f32>) -> vec3<f32> {
+    let size = vec2<i32>(i32(m.texture_width), i32(m.texture_height));
+    let t = fract(vec2<f32>(uv.x, 1.0 - uv.y)) * vec2<f32>(size) - 0.5;
+    let base = floor(t);
+    let f = t - base;
+    let b = vec2<i32>(base);
+    let x0 = (b.x % size.x + size.x) % size.x;
+    let y0 = (b.y % size.y + size.y) % size.y;
+    let x1 = (x0 + 1) % size.x;
+    let y1 = (y0 + 1) % size.y;
+    let a00 = textureLoad(textures, vec2<i32>(x0, y0), m.texture, 0).rgb;
+    let a10 = textureLoad(textures, vec2<i32>(x1, y0), m.texture, 0).rgb;
+    let a01 = textureLoad(textures, vec2<i32>(x0, y1), m.texture, 0).rgb;
+    let a11 = textureLoad(textures, vec2<i32>(x1, y1), m.texture, 0).rgb;
+    return mix(mix(a00, a10, f.x), mix(a01, a11, f.x), f.y);
+}
+
 @fragment
 fn fs_main(v: VsOut) -> @location(0) vec4<f32> {
     let m = materials[v.material];
     var albedo = m.albedo;
     if m.texture >= 0 {
-        albedo *= textureSampleLevel(textures, texture_sampler, v.uv, m.texture, 0.0).rgb;
+        albedo *= albedo_texture(m, v.uv);
     }
     // The geometric normal from screen-space derivatives (before any branch: derivatives need
     // uniform control flow), turned to the eye; the shading normal to the same side. Direct

@@ -57,8 +57,16 @@ pub struct GpuMaterial {
     pub texture: i32,
     /// Emitted radiance: the emitter group's baked radiance × its scale (0 if not emissive).
     pub emission: [f32; 3],
+    /// Width of the texture in its layer (texels from the layer's left edge).
+    pub texture_width: u32,
+    /// Height of the texture in its layer (rows from the layer's top edge).
+    pub texture_height: u32,
     /// Padding.
-    pub _pad0: f32,
+    pub _pad0: u32,
+    /// Padding.
+    pub _pad1: u32,
+    /// Padding.
+    pub _pad2: u32,
 }
 
 /// The probe sphere; `Sphere` in `sphere.wgsl`.
@@ -126,7 +134,22 @@ mod tests {
             [view_proj, eye, mode, width, _pad0, _pad1, _pad2]
         )
         .unwrap();
-        wgsl_layout!(&src, GpuMaterial, "Material", [albedo, texture, emission, _pad0]).unwrap();
+        wgsl_layout!(
+            &src,
+            GpuMaterial,
+            "Material",
+            [
+                albedo,
+                texture,
+                emission,
+                texture_width,
+                texture_height,
+                _pad0,
+                _pad1,
+                _pad2
+            ]
+        )
+        .unwrap();
         let sphere = crate::sphere::source().join("\n");
         wgsl_layout!(&sphere, GpuSphere, "Sphere", [centre, radius, albedo, _pad0]).unwrap();
         check_consts(

@@ -36,7 +36,6 @@ struct Resources {
     base: Vec<GpuMaterial>,
     materials: wgpu::Buffer,
     textures: wgpu::TextureView,
-    sampler: wgpu::Sampler,
     vertices: wgpu::Buffer,
     vertex_count: u32,
 }
@@ -67,7 +66,8 @@ impl ShadePass {
                 })
             })
             .collect();
-        let base = base_materials(scene);
+        let (textures, sizes) = texture_array(ctx, scene);
+        let base = base_materials(scene, &sizes);
         let materials = with_emission(&base, runtime);
         let res = Resources {
             camera: pipeline::uniform(device, "play camera", std::mem::size_of::<GpuCamera>() as u64),
@@ -78,15 +78,7 @@ impl ShadePass {
                 wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
             ),
             base,
-            textures: texture_array(ctx, scene),
-            sampler: device.create_sampler(&wgpu::SamplerDescriptor {
-                label: Some("play textures"),
-                address_mode_u: wgpu::AddressMode::Repeat,
-                address_mode_v: wgpu::AddressMode::Repeat,
-                mag_filter: wgpu::FilterMode::Linear,
-                min_filter: wgpu::FilterMode::Linear,
-                ..Default::default()
-            }),
+            textures,
             vertex_count: vertices.len() as u32,
             vertices: pipeline::buffer_init(
                 device,
@@ -117,7 +109,6 @@ impl ShadePass {
                     res.materials.as_entire_binding(),
                     wgpu::BindingResource::TextureView(runtime.lightmap()),
                     wgpu::BindingResource::TextureView(&res.textures),
-                    wgpu::BindingResource::Sampler(&res.sampler),
                     res.camera.as_entire_binding(),
                     wgpu::BindingResource::TextureView(runtime.emitter_lightmap()),
                 ],
@@ -180,16 +171,24 @@ impl ShadePass {
     }
 }
 
-/// The scene's materials, none emitting.
-fn base_materials(scene: &Scene) -> Vec<GpuMaterial> {
+/// The scene's materials, none emitting; `sizes` are the texture layers' sizes.
+fn base_materials(scene: &Scene, sizes: &[[u32; 2]]) -> Vec<GpuMaterial> {
     scene
         .materials
         .iter()
-        .map(|m| GpuMaterial {
-            albedo: m.albedo.to_array(),
-            texture: m.texture.map_or(-1, |t| t as i32),
-            emission: [0.0; 3],
-            _pad0: 0.0,
+        .map(|m| {
+            let layer = m.texture.filter(|&t| (t as usize) < sizes.len());
+            let [texture_width, texture_height] = layer.map_or([1, 1], |t| sizes[t as usize]);
+            GpuMaterial {
+                albedo: m.albedo.to_array(),
+                texture: layer.map_or(-1, |t| t as i32),
+                emission: [0.0; 3],
+                texture_width,
+                texture_height,
+                _pad0: 0,
+                _pad1: 0,
+                _pad2: 0,
+            }
         })
         .collect()
 }
@@ -206,12 +205,20 @@ fn with_emission(base: &[GpuMaterial], runtime: &Runtime) -> Vec<GpuMaterial> {
     out
 }
 
-/// Material textures as layers of one sRGB array, all at the largest size (nearest resampling
-/// of the smaller ones); one white layer when the scene has none.
-fn texture_array(ctx: &GpuContext, scene: &Scene) -> wgpu::TextureView {
+/// Material textures as layers of one sRGB array, each at its own size in its layer's top-left
+/// corner (only one larger than the device allows is shrunk, by nearest resampling), and their
+/// sizes: the shader filters them by hand as `prm_scene::Texture::sample` does, wrap-around
+/// bilinear at each texture's own size, so the player's albedo is the baker's and the
+/// reference's. One white layer when the scene has none.
+fn texture_array(ctx: &GpuContext, scene: &Scene) -> (wgpu::TextureView, Vec<[u32; 2]>) {
     let max = ctx.device.limits().max_texture_dimension_2d.min(2048);
-    let w = scene.textures.iter().map(|t| t.width).max().unwrap_or(1).clamp(1, max);
-    let h = scene.textures.iter().map(|t| t.height).max().unwrap_or(1).clamp(1, max);
+    let sizes: Vec<[u32; 2]> = scene
+        .textures
+        .iter()
+        .map(|t| [t.width.clamp(1, max), t.height.clamp(1, max)])
+        .collect();
+    let w = sizes.iter().map(|s| s[0]).max().unwrap_or(1);
+    let h = sizes.iter().map(|s| s[1]).max().unwrap_or(1);
     let layers = scene.textures.len().max(1) as u32;
     let texture = pipeline::texture(
         &ctx.device,
@@ -222,11 +229,11 @@ fn texture_array(ctx: &GpuContext, scene: &Scene) -> wgpu::TextureView {
     );
     for layer in 0..layers {
         let mut rgba = vec![255u8; (w * h * 4) as usize];
-        if let Some(t) = scene.textures.get(layer as usize) {
-            for y in 0..h {
-                for x in 0..w {
-                    let sx = ((x as u64 * t.width as u64) / w as u64) as usize;
-                    let sy = ((y as u64 * t.height as u64) / h as u64) as usize;
+        if let (Some(t), Some(&[tw, th])) = (scene.textures.get(layer as usize), sizes.get(layer as usize)) {
+            for y in 0..th {
+                for x in 0..tw {
+                    let sx = ((x as u64 * t.width as u64) / tw as u64) as usize;
+                    let sy = ((y as u64 * t.height as u64) / th as u64) as usize;
                     let p = t.texels.get(sy * t.width as usize + sx).copied().unwrap_or([255; 3]);
                     let at = ((y * w + x) * 4) as usize;
                     rgba[at..at + 3].copy_from_slice(&p);
@@ -235,5 +242,5 @@ fn texture_array(ctx: &GpuContext, scene: &Scene) -> wgpu::TextureView {
         }
         pipeline::write_layer(&ctx.queue, &texture, layer, &rgba, w * 4);
     }
-    pipeline::array_view(&texture)
+    (pipeline::array_view(&texture), sizes)
 }

@@ -1064,3 +1064,79 @@ fn cli_warns_when_materials_changed_since_the_bake() {
         "no warning for changed albedo:\n{stderr}"
     );
 }
+
+/// The player's albedo textures read as `prm_scene::Texture::sample` reads them (the baker's and
+/// the reference's): v = 0 at the bottom row, each texture at its own size in a layer that a
+/// larger texture sizes. The back wall gets a 1 × 2 texture, red on top and blue below, with
+/// v = 1 at the ceiling; the floor an 8 × 8 one, so the wall's texture fills only a corner of
+/// its layer. Found by `cargo xtask eval --targets`: the player sampled every texture upside down
+/// (the fireplace room's floor planks, 15.8% → 14.5% once fixed) and stretched smaller textures
+/// to the largest one's size by nearest resampling.
+#[test]
+fn textures_read_as_the_baker_reads_them() {
+    let dir = out_dir("textures");
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/cornell-box");
+    let obj = std::fs::read_to_string(src.join("cornell-box.obj")).unwrap();
+    let obj = obj
+        .replace(
+            "o floor\nusemtl white\nf 1 2 3 4",
+            "vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\no floor\nusemtl checks\nf 1/1 2/2 3/3 4/4",
+        )
+        .replace(
+            "o back\nusemtl white\nf 4 3 7 6",
+            "o back\nusemtl stripes\nf 4/1 3/2 7/3 6/4",
+        );
+    assert!(
+        obj.contains("usemtl stripes") && obj.contains("usemtl checks"),
+        "the OBJ's layout changed"
+    );
+    std::fs::write(dir.join("cornell-box.obj"), obj).unwrap();
+    let mtl = std::fs::read_to_string(src.join("cornell-box.mtl")).unwrap()
+        + "\nnewmtl stripes\nKd 1 1 1\nmap_Kd stripes.png\n\nnewmtl checks\nKd 1 1 1\nmap_Kd checks.png\n";
+    std::fs::write(dir.join("cornell-box.mtl"), mtl).unwrap();
+    let stripes = image::RgbImage::from_fn(1, 2, |_, y| image::Rgb(if y == 0 { [255, 0, 0] } else { [0, 0, 255] }));
+    stripes.save(dir.join("stripes.png")).unwrap();
+    let checks = image::RgbImage::from_fn(8, 8, |x, y| {
+        image::Rgb(if (x + y) % 2 == 0 { [200; 3] } else { [60; 3] })
+    });
+    checks.save(dir.join("checks.png")).unwrap();
+
+    let scene_path = dir.join("cornell-box.obj");
+    let (mut archive, scene) = prm_play::open(cornell_archive(), Some(&scene_path)).unwrap();
+    assert_eq!(scene.textures.len(), 2, "both textures load");
+    let ctx = prm_play::open_vulkan().expect("a Vulkan device (install mesa-vulkan-drivers for lavapipe)");
+    let mut r = Renderer::new(ctx, &scene, &mut archive, small(16)).unwrap();
+    let lights = cornell_lights(&scene);
+    r.render(&FrameInput {
+        camera: prm_play::default_camera(&scene),
+        lights: &lights,
+        mode: Mode::Direct,
+    })
+    .unwrap();
+    let img = r.read_image().unwrap();
+    // The back wall's pixels are the only ones without green; rows from the top.
+    let (mut red_rows, mut blue_rows) = (vec![], vec![]);
+    for (i, p) in img.rgb.iter().enumerate() {
+        if p[1] == 0.0 && p[0] + p[2] > 0.0 {
+            let row = (i as u32 / img.width) as f32;
+            if p[0] > 4.0 * p[2] {
+                red_rows.push(row);
+            } else if p[2] > 4.0 * p[0] {
+                blue_rows.push(row);
+            }
+        }
+    }
+    let mean = |v: &[f32]| v.iter().sum::<f32>() / v.len().max(1) as f32;
+    assert!(
+        red_rows.len() > 20 && blue_rows.len() > 20,
+        "the back wall shows its stripes: {} red and {} blue pixels (white means the texture was read outside its corner)",
+        red_rows.len(),
+        blue_rows.len()
+    );
+    assert!(
+        mean(&red_rows) + 5.0 < mean(&blue_rows),
+        "red (the texture's top row) must be at the top of the wall: mean row {} against blue's {}",
+        mean(&red_rows),
+        mean(&blue_rows)
+    );
+}
