@@ -327,7 +327,7 @@ struct LightBindings {
 }
 
 fn light_bindings(ctx: &prm_gpu_kit::GpuContext, lights: &[Light]) -> LightBindings {
-    let (gpu_lights, views) = shadow_views(lights, &BOUNDS, SHADOW_RES);
+    let (gpu_lights, views) = shadow_views(lights, &BOUNDS, SHADOW_RES, 1);
     let frame = GpuFrame {
         light_count: gpu_lights.len() as u32,
         shadow_resolution: SHADOW_RES as f32,

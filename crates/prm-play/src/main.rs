@@ -87,6 +87,10 @@ struct Args {
     /// Shadow-map resolution per view.
     #[arg(long, default_value_t = 512)]
     shadow_resolution: u32,
+    /// A directional light's shadow map is this many tiles on a side, each a view of
+    /// --shadow-resolution² texels over the scene's bounding sphere (1 to 8)
+    #[arg(long, default_value_t = prm_play::RuntimeOptions::DEFAULT_SUN_TILES)]
+    sun_tiles: u32,
     /// Fade band: kept clusters scoring within (1 + band) × the first dropped cluster's score are
     /// faded by a smoothstep (0: hard cut).
     #[arg(long, default_value_t = 0.25, value_parser = non_negative, allow_negative_numbers = true)]
@@ -179,6 +183,7 @@ fn run() -> Result<()> {
         top_k,
         residual_groups: args.residual_groups,
         shadow_resolution: args.shadow_resolution,
+        sun_tiles: args.sun_tiles,
         fade_band: args.fade_band,
         near_light: if args.near_field == "off" {
             prm_play::NearLight::Off

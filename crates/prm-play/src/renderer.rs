@@ -120,6 +120,7 @@ impl PlayOptions {
             RuntimeError::Option { option, message } => PlayError::Option {
                 option: match option {
                     "shadow_resolution" => "--shadow-resolution",
+                    "sun_tiles" => "--sun-tiles",
                     "top_k" => "--top-k",
                     "fade_band" => "--fade-band",
                     other => other,

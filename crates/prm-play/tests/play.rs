@@ -968,6 +968,8 @@ fn cli_refuses_hostile_options_naming_them() {
         (&["--shadow-resolution", "16384"], "--shadow-resolution", "16..="),
         (&["--shadow-resolution", "0"], "--shadow-resolution", "16..="),
         (&["--shadow-resolution", "100000"], "--shadow-resolution", "16..="),
+        (&["--sun-tiles", "0"], "--sun-tiles", "1..=8"),
+        (&["--sun-tiles", "9"], "--sun-tiles", "1..=8"),
         (&["--top-k", "0"], "--top-k", "0"),
         (&["--exposure", "nan"], "--exposure", "finite"),
         (&["--fade-band", "nan"], "--fade-band", "finite"),

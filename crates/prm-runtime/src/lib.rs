@@ -66,7 +66,9 @@ use prm_scene::{Aabb, Light, Scene};
 pub use baked::EmitterInfo;
 pub use irradiance::DILATE_STEPS;
 pub use lights::{look_to, orthographic, perspective, shadow_views, SPOT_SINGLE_VIEW_MAX_DEG};
-pub use options::{archive_top_k, NearLight, ProbeLight, RuntimeError, RuntimeOptions, MAX_SHADOW_RESOLUTION};
+pub use options::{
+    archive_top_k, NearLight, ProbeLight, RuntimeError, RuntimeOptions, MAX_SHADOW_RESOLUTION, MAX_SUN_TILES,
+};
 pub use probes::ProbeVolume;
 pub use shadow::SHADOW_FORMAT;
 pub use shared::{
@@ -544,7 +546,12 @@ impl Runtime {
         if lights.len() > MAX_LIGHTS {
             return Err(RuntimeError::TooManyLights { count: lights.len() });
         }
-        let (gpu_lights, views) = shadow_views(lights, &self.bounds, self.options.shadow_resolution);
+        let (gpu_lights, views) = shadow_views(
+            lights,
+            &self.bounds,
+            self.options.shadow_resolution,
+            self.options.sun_tiles,
+        );
         let grew = views.len() as u32 > self.maps.capacity;
         if grew {
             let capacity = (views.len() as u32).next_power_of_two();

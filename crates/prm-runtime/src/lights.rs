@@ -1,7 +1,10 @@
 //! The lights of a frame as the shaders see them, and their shadow views: a cube (6 perspective
 //! views) for point lights, one perspective view for spot lights of half angle up to
 //! [`SPOT_SINGLE_VIEW_MAX_DEG`] (a cube beyond, where a single frustum would waste its texels),
-//! one perspective view of its own aspect for rectangular spots, one orthographic view covering the scene's bounds for directional lights. Depth is [0, 1]
+//! one perspective view of its own aspect for rectangular spots, and for directional lights an
+//! orthographic map of the scene's bounding sphere cut into `sun_tiles`² views, one tile each
+//! (row-major from the map's bottom-left, each one shadow texel wider on every side so that
+//! the 2×2 filter at its edge reads its own texels; `lights.wgsl` picks the tile). Depth is [0, 1]
 //! (wgpu), linearised in `lights.wgsl`. An engine that renders its own shadow maps renders these
 //! views, in this order, one layer each ([`Shadows::External`](crate::Shadows)).
 
@@ -55,8 +58,9 @@ fn cols(m: Mat4) -> [[f32; 4]; 4] {
 }
 
 /// GPU lights and their shadow views for `lights` in a scene of bounds `bounds`, shadow maps of
-/// `resolution`² texels: light `i`'s views are layers `first_view .. first_view + view_count`.
-pub fn shadow_views(lights: &[Light], bounds: &Aabb, resolution: u32) -> (Vec<GpuLight>, Vec<GpuView>) {
+/// `resolution`² texels and `sun_tiles`² tiles (at least 1) for a directional light: light `i`'s
+/// views are layers `first_view .. first_view + view_count`.
+pub fn shadow_views(lights: &[Light], bounds: &Aabb, resolution: u32, sun_tiles: u32) -> (Vec<GpuLight>, Vec<GpuView>) {
     let res = resolution as f32;
     let diag = bounds.diagonal().max(1e-3);
     let mut out_lights = Vec::with_capacity(lights.len());
@@ -175,22 +179,35 @@ pub fn shadow_views(lights: &[Light], bounds: &Aabb, resolution: u32) -> (Vec<Gp
                 let eye = centre - d * 2.0 * r;
                 let up = if d.y.abs() > 0.99 { Vec3::Z } else { Vec3::Y };
                 let (near, far) = (0.5 * r, 3.5 * r);
-                let proj = orthographic(-r, r, -r, r, near, far);
-                views.push(GpuView {
-                    view_proj: cols(proj * look_to(eye, d, up)),
-                    texel: 2.0 * r / res,
-                    near,
-                    far,
-                    orthographic: 1,
-                });
+                let view = look_to(eye, d, up);
+                // The view's own vertical (look_to's `u`), which lights.wgsl measures tiles along.
+                let map_up = d.cross(up).normalize().cross(d);
+                let tiles = sun_tiles.max(1);
+                let step = 2.0 * r / tiles as f32;
+                let pad = step / res;
+                for iy in 0..tiles {
+                    for ix in 0..tiles {
+                        let (x0, y0) = (-r + ix as f32 * step, -r + iy as f32 * step);
+                        let proj = orthographic(x0 - pad, x0 + step + pad, y0 - pad, y0 + step + pad, near, far);
+                        views.push(GpuView {
+                            view_proj: cols(proj * view),
+                            texel: (step + 2.0 * pad) / res,
+                            near,
+                            far,
+                            orthographic: 1,
+                        });
+                    }
+                }
                 GpuLight {
                     kind: LightKind::Directional as u32,
                     first_view,
-                    view_count: 1,
+                    view_count: tiles * tiles,
                     cos_cutoff: -2.0,
-                    position: [0.0; 3],
+                    position: centre.to_array(),
+                    tan_x: r,
                     direction: d.to_array(),
                     color: irradiance.to_array(),
+                    up: map_up.to_array(),
                     ..Default::default()
                 }
             }

@@ -10,6 +10,9 @@ use crate::MAX_LIGHTS;
 /// 6 × 8192² × 4 bytes = 1.5 GiB of depth at this size; beyond it lavapipe runs out of memory
 /// with a single light.
 pub const MAX_SHADOW_RESOLUTION: u32 = 8192;
+/// Most tiles on a side of a directional light's shadow map ([`RuntimeOptions::sun_tiles`]):
+/// 64 views, each a pass over the scene.
+pub const MAX_SUN_TILES: u32 = 8;
 /// Why the run time could not load an archive or run a frame.
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
@@ -106,6 +109,10 @@ pub struct RuntimeOptions {
     pub residual_groups: u32,
     /// Shadow-map side in texels (every view).
     pub shadow_resolution: u32,
+    /// A directional light's shadow map is this many tiles on a side, one view of
+    /// `shadow_resolution`² each, over the scene's bounding sphere (1 to [`MAX_SUN_TILES`]).
+    /// Default [`RuntimeOptions::DEFAULT_SUN_TILES`].
+    pub sun_tiles: u32,
     /// Fade band: kept clusters whose score is within `band × threshold` above the threshold
     /// (the first dropped cluster's score) are faded by a smoothstep.
     pub fade_band: f32,
@@ -122,6 +129,15 @@ pub struct RuntimeOptions {
 impl RuntimeOptions {
     /// Top K when neither the caller nor the archive's `params.top_k` says otherwise.
     pub const DEFAULT_TOP_K: u32 = 32;
+
+    /// Tiles on a side of a directional light's shadow map. Measured on Sponza under a high sun
+    /// (`cargo xtask eval --sky`'s view, 192×144, 512² per view; direct light against the
+    /// difference of the full and indirect 1024-path references, 4×4 error): one map over the
+    /// bounding sphere (8 cm texels) 23.5% off with energy 1.114, light leaking through thin
+    /// geometry; 2², 4² and 8² tiles 20.0%, 13.3% (1.078) and 8.6% (1.044). Whole frames at
+    /// 1024×768 on lavapipe (`prm-play --timings`, two runs): 417–450 ms with one map, 461–474
+    /// with 4², 615 with 8² (each tile is a pass over the scene).
+    pub const DEFAULT_SUN_TILES: u32 = 4;
 
     /// The defaults with the top K the archive asks for ([`archive_top_k`]).
     pub fn for_archive<R: std::io::Read + std::io::Seek>(archive: &Archive<R>) -> RuntimeOptions {
@@ -147,6 +163,12 @@ impl RuntimeOptions {
                 ),
             );
         }
+        if !(1..=MAX_SUN_TILES).contains(&self.sun_tiles) {
+            return bad(
+                "sun_tiles",
+                format!("{} is outside 1..={MAX_SUN_TILES}", self.sun_tiles),
+            );
+        }
         if self.top_k == 0 {
             return bad("top_k", "must be at least 1".into());
         }
@@ -169,6 +191,7 @@ impl Default for RuntimeOptions {
             top_k: RuntimeOptions::DEFAULT_TOP_K,
             residual_groups: prm_format::RESIDUAL_GROUPS,
             shadow_resolution: 512,
+            sun_tiles: RuntimeOptions::DEFAULT_SUN_TILES,
             fade_band: 0.25,
             normal_offset: 1.5,
             depth_bias: 1.5,

@@ -155,13 +155,14 @@ pub struct GpuLight {
     pub kind: u32,
     /// First shadow view (texture layer).
     pub first_view: u32,
-    /// Shadow views: 1, or 6 for a cube.
+    /// Shadow views: 1, 6 for a cube, or a directional light's tiles (a square number).
     pub view_count: u32,
     /// Cosine of a spot light's half angle (−2 for the others).
     pub cos_cutoff: f32,
-    /// Position (point, spot, rect).
+    /// Position (point, spot, rect), or the centre of a directional light's shadow map.
     pub position: [f32; 3],
-    /// Tangent of a rectangular spot's horizontal half angle (about `direction × up`).
+    /// Tangent of a rectangular spot's horizontal half angle (about `direction × up`), or half
+    /// the side of a directional light's shadow map (world units).
     pub tan_x: f32,
     /// Spot or rect axis, or directional travel direction (unit).
     pub direction: [f32; 3],
@@ -171,7 +172,8 @@ pub struct GpuLight {
     pub color: [f32; 3],
     /// Padding.
     pub _pad0: f32,
-    /// A rectangular spot's vertical (unit, perpendicular to `direction`).
+    /// A rectangular spot's vertical, or a directional light's shadow-map vertical (unit,
+    /// perpendicular to `direction`).
     pub up: [f32; 3],
     /// Padding.
     pub _pad1: f32,
