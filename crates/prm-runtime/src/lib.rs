@@ -325,6 +325,7 @@ impl Runtime {
             views: pipeline::storage(
                 device,
                 "prm views",
+                // At most six views a light (update refuses more, whatever the sun tiles).
                 (MAX_LIGHTS * 6 * std::mem::size_of::<GpuView>()) as u64,
                 wgpu::BufferUsages::empty(),
             ),
@@ -552,9 +553,17 @@ impl Runtime {
             self.options.shadow_resolution,
             self.options.sun_tiles,
         );
+        let max_views = (MAX_LIGHTS * 6).min(self.device.limits().max_texture_array_layers as usize);
+        if views.len() > max_views {
+            return Err(RuntimeError::TooManyShadowViews {
+                views: views.len(),
+                max: max_views,
+                per_sun: self.options.sun_tiles * self.options.sun_tiles,
+            });
+        }
         let grew = views.len() as u32 > self.maps.capacity;
         if grew {
-            let capacity = (views.len() as u32).next_power_of_two();
+            let capacity = (views.len() as u32).next_power_of_two().min(max_views as u32);
             self.maps = ShadowMaps::new(&self.device, self.options.shadow_resolution, capacity);
             self.shadow.rebind(&self.device, &self.maps);
             self.weights.rebind(&self.device, &self.buffers, &self.maps.array);

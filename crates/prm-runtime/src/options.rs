@@ -49,6 +49,19 @@ pub enum RuntimeError {
         /// Lights given.
         count: usize,
     },
+    /// The frame's lights need more shadow views than the run time holds (a point light takes
+    /// 6, a directional light `sun_tiles`²).
+    #[error(
+        "the lights need {views} shadow views, at most {max} fit (a point light takes 6, a directional light sun_tiles² = {per_sun}); fewer lights or fewer sun tiles"
+    )]
+    TooManyShadowViews {
+        /// Views the lights need.
+        views: usize,
+        /// Views that fit: the views buffer and the device's `max_texture_array_layers`.
+        max: usize,
+        /// Views of one directional light.
+        per_sun: u32,
+    },
     /// Emitter scales that do not fit the archive's emitter groups.
     #[error("emitters: {0}")]
     Emitters(String),

@@ -97,6 +97,13 @@ fn bad_input_is_refused_naming_it() {
             },
             "fade_band",
         ),
+        (
+            RuntimeOptions {
+                sun_tiles: 0,
+                ..RuntimeOptions::default()
+            },
+            "sun_tiles",
+        ),
     ] {
         match Runtime::new(&ctx.device, &ctx.queue, &mut a, &scene, options) {
             Err(RuntimeError::Option { option, .. }) => assert_eq!(option, field),
@@ -117,6 +124,16 @@ fn bad_input_is_refused_naming_it() {
     let many = vec![point(0.2, 0.2, 0.2); MAX_LIGHTS + 1];
     let e = rt.update(&many).unwrap_err();
     assert!(e.to_string().contains(&format!("{} lights", MAX_LIGHTS + 1)), "{e}");
+    // Directional lights take sun_tiles² views each: more views than fit are refused too, not
+    // written past the views buffer.
+    let sun = Light::Directional {
+        direction: Vec3::new(0.2, -1.0, 0.1).normalize(),
+        irradiance: Vec3::ONE,
+    };
+    let suns = vec![sun; MAX_LIGHTS];
+    let e = rt.update(&suns).unwrap_err();
+    assert!(matches!(e, RuntimeError::TooManyShadowViews { .. }), "{e}");
+    assert!(e.to_string().contains("sun tiles"), "{e}");
     // The shadow array grows for more lights, and says so once.
     assert!(rt.update(&[point(0.2, 0.2, 0.2); 3]).unwrap());
     assert!(!rt.update(&[point(0.2, 0.2, 0.2); 2]).unwrap());
