@@ -47,9 +47,10 @@ pub const EMITTER_INDIRECT_MAX_PATHS: u64 = 1 << 26;
 /// The command line's paths per texel for the sky's transfer (`prm-bake bake --sky`), its
 /// indirect part then smoothed over 3 × 3 texels ([`prm_trace::sky::smooth_transfer`]).
 /// Measured (`cargo xtask eval --sky`, two cores): on the Dabrovic Sponza (a 60 s bake) the sky
-/// step takes 21–23 s at 256 paths and its indirect image is 14.9% from the reference under a
-/// uniform sky; 1024 paths take 94–101 s for 12.1%. On our courtyard the step takes 1.4–1.7 s
-/// for 3.5%.
+/// step takes 21–23 s at 256 paths and its indirect image is 11.2% from the reference under a
+/// uniform sky; 1024 paths take 91–101 s for 6.7%. On our courtyard the step takes 1.4–1.7 s
+/// for 3.5%. The planner's time budget does not count the step (README, *Sky*: counting it at
+/// Sponza's 60 s budget shrank the atlas to 224² or, at 512², the entry points to 1024).
 pub const SKY_PATHS: u32 = 256;
 
 /// The command line's probe budget (`prm-bake bake --probes`), grid cells: on our Cornell box
