@@ -332,6 +332,15 @@ impl CostModel {
 /// Most entry points the automatic rules choose.
 const MAX_AUTO_ENTRIES: usize = 16384;
 
+/// Panes the automatic atlas leaves room for in the run-time memory budget: the atlas shrinks
+/// (in steps of 64 texels a side) until this many fit. Measured on the fireplace room at the
+/// default time budget (`cargo xtask eval --targets`'s lamp, 4×4 error): with 128, a 704²
+/// atlas and 108 clusters, 18.4% (a 70 s bake); with 256, 512² and 205 clusters, 14.6% (115
+/// s). The reference's own lightmap at 512², shaded in place of the played one, is 6.1% off:
+/// the coarser atlas costs little beside the clusters it buys. Scenes whose automatic atlas is
+/// at most 512² (McGuire's boxes, chairs) do not change.
+const AUTO_ATLAS_PANES: usize = 256;
+
 /// Texels the run time blends a frame, summed over the panes it blends, from which the
 /// automatic top K follows (less the residual groups, `prm_format::RESIDUAL_GROUPS`): 192 panes
 /// of 256² texels. Measured on McGuire's box baked with 4096 entry points and 16 walks each (512
@@ -411,7 +420,7 @@ impl BakeParams {
     ///
     /// Automatic rules (preset `default`, each overridable):
     /// - atlas: the atlas's own automatic size (about 12 texels per triangle, 256 to 4096 a side),
-    ///   shrunk until 128 panes fit the run-time memory budget;
+    ///   shrunk until [`AUTO_ATLAS_PANES`] (256) panes fit the run-time memory budget;
     /// - entries: 4 per chart (charts are the scene's distinct flat pieces), 1024 to 16384, a
     ///   multiple of 256, and (applied after the time budget below, at the atlas it leaves, the
     ///   walks per entry then rising again towards [`WALKS_IN_ALL`] as far as the budget allows)
@@ -470,14 +479,14 @@ impl BakeParams {
                 let auto = probe()?;
                 let mut r = auto.resolution;
                 let memory_texels = memory_budget_mib * 1024.0 * 1024.0 / 4.0;
-                while r > 64 && (128.0 * (r as f64).powi(2)) > memory_texels {
+                while r > 64 && (AUTO_ATLAS_PANES as f64 * (r as f64).powi(2)) > memory_texels {
                     r -= 64;
                 }
                 reasons.push(format!(
                     "atlas {r}² texels: {} triangles want about 12 texels each{}",
                     scene.triangles.len(),
                     if r < auto.resolution {
-                        ", shrunk so 128 panes fit the memory budget"
+                        ", shrunk so 256 panes fit the memory budget"
                     } else {
                         ""
                     }
