@@ -147,7 +147,7 @@ impl RuntimeOptions {
     /// (`cargo xtask eval --sky`'s view, 192×144, 512² per view; direct light against the
     /// difference of the full and indirect 1024-path references, 4×4 error): one map over the
     /// bounding sphere (8 cm texels) 23.5% off with energy 1.114, light leaking through thin
-    /// geometry; 2², 4² and 8² tiles 20.0%, 13.3% (1.078) and 8.6% (1.044). Whole frames at
+    /// geometry; 2², 4² and 8² tiles 20.0%, 13.1% (1.075) and 8.3% (1.041). Whole frames at
     /// 1024×768 on lavapipe (`prm-play --timings`, two runs): 417–450 ms with one map, 461–474
     /// with 4², 615 with 8² (each tile is a pass over the scene).
     pub const DEFAULT_SUN_TILES: u32 = 4;
