@@ -19,10 +19,11 @@ fn visibility(l: Light, p: vec3<f32>, n: vec3<f32>, dist: f32) -> f32 {
     if l.kind == LIGHT_DIRECTIONAL && l.view_count > 1u {
         // A tiled orthographic map (lights.rs): the tile under the looked-up point (p moved
         // along n as below; every tile has the same texel), row-major from the map's
-        // bottom-left; position is the map's centre, tan_x half its side, up its vertical.
+        // bottom-left; position is the map's centre, tan_x half its side, up its vertical (unit and
+        // perpendicular to direction, so direction × up is the map's unit horizontal).
         let tiles = u32(round(sqrt(f32(l.view_count))));
         let d = p + n * (frame.normal_offset * views[l.first_view].texel) - l.position;
-        let xy = vec2<f32>(dot(d, normalize(cross(l.direction, l.up))), dot(d, l.up));
+        let xy = vec2<f32>(dot(d, cross(l.direction, l.up)), dot(d, l.up));
         let cell = clamp(floor((xy + l.tan_x) / (2.0 * l.tan_x) * f32(tiles)), vec2<f32>(0.0), vec2<f32>(f32(tiles - 1u)));
         face = u32(cell.y) * tiles + u32(cell.x);
     } else if l.view_count == 6u {

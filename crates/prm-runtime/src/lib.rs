@@ -178,6 +178,8 @@ pub struct Runtime {
     frame_top_k: u32,
     /// Texels the blend pass writes (see `blend.wgsl`).
     lit_texels: u32,
+    /// Most shadow views a frame's lights may need: the views buffer's and the device's layers.
+    max_views: usize,
     entry_count: u32,
     resolution: u32,
     vertex_count: u32,
@@ -518,6 +520,7 @@ impl Runtime {
             group_count,
             frame_top_k,
             lit_texels,
+            max_views: (MAX_LIGHTS * 6).min(max_layers as usize),
             entry_count,
             resolution: res,
             vertex_count,
@@ -553,7 +556,7 @@ impl Runtime {
             self.options.shadow_resolution,
             self.options.sun_tiles,
         );
-        let max_views = (MAX_LIGHTS * 6).min(self.device.limits().max_texture_array_layers as usize);
+        let max_views = self.max_views;
         if views.len() > max_views {
             return Err(RuntimeError::TooManyShadowViews {
                 views: views.len(),
