@@ -23,7 +23,7 @@ import sys
 
 MAGIC = b"\x89PRM\r\n\x1a\n"
 SUPPORTED_MAJOR = 1
-SUPPORTED_MINOR = 7
+SUPPORTED_MINOR = 8
 KINDS = {1: "metadata", 2: "atlas", 3: "entries", 4: "clusters", 5: "panes", 6: "entry_energy",
          7: "emitters", 8: "sky", 9: "probes", 10: "probe_rays",
          11: "near_field"}
@@ -319,6 +319,7 @@ class Reader:
             if k not in by_kind and k not in OPTIONAL:
                 raise InvalidArchive(f"missing {name} section")
         self.version = f"{major}.{minor}"
+        self.minor = minor
         self.file_length = n
         self.sections = sections
         self.strict = strict
@@ -372,7 +373,8 @@ class Reader:
 
     def parse_near_field(self, s):
         # 1.7: 32-byte header (exits E, rays per exit M, gather points G, flags = 0, atlas
-        # resolution, hits H, disk R^2 f32, reserved), G gather point records as in probe_rays,
+        # resolution, hits H, disk R^2 f32, reserved; from 1.8 the deeper VPLs' disk R1^2 f32
+        # there, 0 <= R1^2 <= R^2), G gather point records as in probe_rays,
         # E exit records (texel u32, end of its hits u32), then H hits (gather point u32, r^2 f32).
         texels = self.resolution * self.resolution
         groups = len(self.emitters or [])
@@ -381,12 +383,17 @@ class Reader:
             raise InvalidArchive("near_field: shorter than its header")
         e, m, g, flags, res, h = struct.unpack_from("<6I", raw, 0)
         disk, reserved = struct.unpack_from("<fI", raw, 24)
+        indirect_disk = 0.0
+        if self.minor >= 8:
+            (indirect_disk,), reserved = struct.unpack_from("<f", raw, 28), 0
         if flags or (self.strict and reserved):
             raise InvalidArchive("near_field: unknown flags or a non-zero reserved field")
         if res != self.resolution or not 1 <= m <= MAX_NEAR_RAYS or g > texels or e > texels or h > e * m:
             raise InvalidArchive("near_field: resolution, ray, point, exit or hit count out of range")
         if not (disk > 0 and disk != float("inf")):
             raise InvalidArchive("near_field: disk not finite and positive")
+        if not 0 <= indirect_disk <= disk:
+            raise InvalidArchive("near_field: indirect disk not between 0 and the disk")
         if len(raw) != 32 + 56 * g + 8 * e + 8 * h:
             raise InvalidArchive("near_field: raw size differs from what the header gives")
         points = []
@@ -415,7 +422,8 @@ class Reader:
             if point >= g or r2 != r2 or r2 < 0 or r2 == float("inf"):
                 raise InvalidArchive("near_field: a hit at a gather point that does not exist or not finite")
             hits.append(dict(point=point, distance2=r2))
-        self.near_field = dict(rays_per_exit=m, disk=disk, points=points, exits=exits, hits=hits)
+        self.near_field = dict(rays_per_exit=m, disk=disk, indirect_disk=indirect_disk, points=points, exits=exits,
+                               hits=hits)
 
     def parse_probe_rays(self, s):
         # 1.6: 32-byte header (probes N, rays per probe M, gather points G, flags = 0, atlas

@@ -157,10 +157,15 @@ struct NearHit {
     distance2: f32,
 };
 
-// The near field's constants: counts, the depth-0 VPLs' disk R² and π/M.
+// The near field's constants: counts, the depth-0 VPLs' disk R², π/M and the deeper VPLs'
+// disk R₁² (0: their share is not gathered).
 struct NearField {
     exits: u32,
     points: u32,
     disk: f32,
     scale: f32,
+    indirect_disk: f32,
+    _pad0: u32,
+    _pad1: u32,
+    _pad2: u32,
 };

@@ -185,6 +185,7 @@ pub fn summary_json<R: Read + Seek>(archive: &Archive<R>, file: &Path, report: O
         "near_field": archive.near_field().map(|n| json!({
             "rays_per_exit": n.rays_per_exit,
             "disk_radius": n.disk.sqrt(),
+            "indirect_disk_radius": n.indirect_disk.sqrt(),
             "exit_points": n.exits.len(),
             "gather_points": n.points.len(),
             "hits": n.hits.len(),
@@ -354,11 +355,16 @@ pub fn write_summary<W: Write, R: Read + Seek>(
     if let Some(n) = archive.near_field() {
         writeln!(
             out,
-            "near field   {} texels keep {} rays in all ({} traced per exit point, VPL disk radius {:.4}), ending at {} texels; the player gathers back there what the VPL bound removes",
+            "near field   {} texels keep {} rays in all ({} traced per exit point, VPL disk radius {:.4}, deeper VPLs' {}), ending at {} texels; the player gathers back there what the VPL bound removes",
             n.exits.len(),
             n.hits.len(),
             n.rays_per_exit,
             n.disk.sqrt(),
+            if n.indirect_disk > 0.0 {
+                format!("{:.4}", n.indirect_disk.sqrt())
+            } else {
+                "not gathered".to_string()
+            },
             n.points.len()
         )?;
     }

@@ -6,7 +6,7 @@ use prm_gpu::{GpuContext, PaneOutput, PaneRenderParams};
 use prm_scene::{Atlas, AtlasParams, AtlasStats, Scene, Sizing};
 use prm_trace::pane::Lattice;
 use prm_trace::{
-    Bvh, BvhParams, Clustering, Emitters, EntryParams, Lighting, PaneParams, Receiver, ReferenceParams,
+    Bvh, BvhParams, Clustering, DeepDisk, Emitters, EntryParams, Lighting, PaneParams, Receiver, ReferenceParams,
     ReferenceTracer, SurfaceSample, WalkParams,
 };
 use std::cell::OnceCell;
@@ -541,9 +541,13 @@ pub fn bake(job: &BakeJob<'_>, renderer: Renderer<'_>, progress: &mut dyn Progre
         },
     )
     .map_err(trace("sampling entry points"))?;
+    // With the near field, whose deeper share the player gathers back from the lightmap (format
+    // 1.8), the deeper VPLs take their entry point's disk, which tames their spikes.
+    let gathers_near = params.near_rays > 0 && params.vpl_disk_scale > 0.0;
     let walk_params = WalkParams {
         walks_per_entry: params.paths_per_entry,
         seed: params.seed,
+        deep_disk: if gathers_near { DeepDisk::Entry } else { DeepDisk::Walk },
         ..WalkParams::PREVIEW
     };
     let vpls = prm_trace::trace_walks(scene, &bvh, &entries, &walk_params).map_err(trace("tracing walks"))?;
@@ -638,6 +642,46 @@ pub fn bake(job: &BakeJob<'_>, renderer: Renderer<'_>, progress: &mut dyn Progre
     } else {
         Vec::new()
     };
+    // The near field: what the VPL disk bound removes next to the exit points. Traced before
+    // the panes, so the accuracy check reads them at its gather points too.
+    let near_field = match entries.first() {
+        Some(e) if gathers_near => {
+            let t = Instant::now();
+            progress.phase_start(Phase::NearField, 1);
+            let disk = prm_trace::near_disk(e.weight, params.vpl_disk_scale);
+            let mut near = prm_trace::near_field(scene, &bvh, &atlas, params.near_rays, disk, params.seed);
+            // The deeper VPLs' disk is the entry point's too (`DeepDisk::Entry` above).
+            near.indirect_disk = disk;
+            let detail = format!(
+                "{} texels (exit points and their gutter copies) keep {} rays in all of {} per exit point, ending at {} gather points",
+                near.exits.len(),
+                near.hits.len(),
+                params.near_rays,
+                near.points.len(),
+            );
+            finish_phase(&mut timings, progress, Phase::NearField, "near_field", t, &detail);
+            Some(near)
+        }
+        _ => None,
+    };
+    // The accuracy check's near terms, and the exit points it reads the panes at: its own, then
+    // the gather points of their near rays.
+    let near_terms = near_field.as_ref().filter(|_| !checked_exits.is_empty()).map(|n| {
+        prm_trace::near_terms(
+            n,
+            &checked_exits.iter().map(|&i| atlas.exits[i].texel).collect::<Vec<_>>(),
+        )
+    });
+    let checked_points: Vec<usize> = checked_exits
+        .iter()
+        .copied()
+        .chain(
+            near_terms
+                .iter()
+                .flat_map(|t| &t.gather_texels)
+                .map(|&t| atlas.texel_exit[t as usize] as usize),
+        )
+        .collect();
     let mut checked_panes: Vec<Vec<Vec3>> = Vec::new();
     let mut pane_energy: Vec<Vec3> = Vec::new();
 
@@ -666,7 +710,7 @@ pub fn bake(job: &BakeJob<'_>, renderer: Renderer<'_>, progress: &mut dyn Progre
         if !checked_exits.is_empty() {
             // What the player reads: the stored RGB9E5 texels, and the cluster table's energy.
             let stored = |v: Vec3| Vec3::from(prm_format::decode_rgb9e5(prm_format::encode_rgb9e5(v.to_array())));
-            checked_panes.push(checked_exits.iter().map(|&i| stored(pane[i])).collect());
+            checked_panes.push(checked_points.iter().map(|&i| stored(pane[i])).collect());
             let done = writer.clusters().len() - writer.panes_remaining();
             pane_energy.push(Vec3::from(writer.clusters()[done - 1].energy));
         }
@@ -850,33 +894,12 @@ pub fn bake(job: &BakeJob<'_>, renderer: Renderer<'_>, progress: &mut dyn Progre
     );
     timings.insert("pane_rendering".to_string(), render_s);
 
-    // The near field: what the VPL disk bound removes next to the exit points.
-    let near = match entries.first() {
-        Some(e) if params.near_rays > 0 && params.vpl_disk_scale > 0.0 => {
-            let t = Instant::now();
-            progress.phase_start(Phase::NearField, 1);
-            let disk = prm_trace::near_disk(e.weight, params.vpl_disk_scale);
-            let near = prm_trace::near_field(scene, &bvh, &atlas, params.near_rays, disk, params.seed);
-            let terms = prm_trace::near_terms(
-                &near,
-                &checked_exits.iter().map(|&i| atlas.exits[i].texel).collect::<Vec<_>>(),
-            );
-            let detail = format!(
-                "{} texels (exit points and their gutter copies) keep {} rays in all of {} per exit point, ending at {} gather points",
-                near.exits.len(),
-                near.hits.len(),
-                params.near_rays,
-                near.points.len(),
-            );
-            finish_phase(&mut timings, progress, Phase::NearField, "near_field", t, &detail);
-            writer.set_near_field(near).map_err(|source| BakeError::Archive {
-                what: "recording the near field".to_string(),
-                source,
-            })?;
-            terms
-        }
-        _ => Vec::new(),
-    };
+    if let Some(near) = near_field {
+        writer.set_near_field(near).map_err(|source| BakeError::Archive {
+            what: "recording the near field".to_string(),
+            source,
+        })?;
+    }
 
     if let Some(cells) = params.probes {
         let t = Instant::now();
@@ -914,7 +937,7 @@ pub fn bake(job: &BakeJob<'_>, renderer: Renderer<'_>, progress: &mut dyn Progre
             top_k: params.top_k,
             groups: &residual_groups,
             fade_band: prm_trace::check::FADE_BAND,
-            near: &near,
+            near: near_terms.as_ref(),
         };
         let exits: Vec<_> = checked_exits.iter().map(|&i| atlas.exits[i]).collect();
         let check = prm_trace::CheckParams {

@@ -20,11 +20,11 @@ pub enum Phase {
     Emitters,
     /// The sky's transfer at the texels (bakes with `--sky` only).
     Sky,
-    /// Rendering the panes (GPU or CPU) and writing them to the archive.
-    PaneRendering,
     /// The near rays from the exit points that gather back what the VPL bound removes
     /// (`near_rays` > 0 only).
     NearField,
+    /// Rendering the panes (GPU or CPU) and writing them to the archive.
+    PaneRendering,
     /// The clusters' transfer to the irradiance probes (bakes with `--probes` only).
     Probes,
     /// The bake's estimate of its own accuracy against the reference tracer

@@ -13,8 +13,9 @@ pub const VERSION_MAJOR: u16 = 1;
 /// Highest minor version this library writes (and knows); a reader accepts every minor. The
 /// writer writes the lowest minor whose features an archive uses: 1.1 adds the entry energy
 /// section, 1.2 the emitters section, 1.3 the sky section, 1.4 the probes section, 1.5 the
-/// metadata's `accuracy` key, 1.6 the probe rays section, 1.7 the near field section.
-pub const VERSION_MINOR: u16 = 7;
+/// metadata's `accuracy` key, 1.6 the probe rays section, 1.7 the near field section, 1.8 its
+/// deeper VPLs' disk.
+pub const VERSION_MINOR: u16 = 8;
 
 /// Size of the fixed file header.
 pub const HEADER_SIZE: usize = 64;

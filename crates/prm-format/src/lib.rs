@@ -19,8 +19,9 @@
 //!   empty space and every cluster's transfer to them, so the run-time weights light them too.
 //! * [`ProbeRays`]: the optional probe rays section (1.6), where each probe's rays meet the
 //!   scene, so a run time gathers the probes' light from the surfaces' radiance instead.
-//! * [`NearField`]: the optional near field section (1.7), where short cosine rays from the
-//!   exit points end, so a run time gathers back the light the panes' VPL bound removes.
+//! * [`NearField`]: the optional near field section (1.7; 1.8 adds the deeper VPLs' disk),
+//!   where short cosine rays from the exit points end, so a run time gathers back the light the
+//!   panes' VPL bound removes.
 //! * [`residual_groups`]: the clusters' spatial groups whose summed panes carry the light of the
 //!   clusters a run time drops from its top K.
 //! * [`encode_rgb9e5`] / [`decode_rgb9e5`] implement the texel encoding,

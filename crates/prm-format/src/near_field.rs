@@ -1,4 +1,4 @@
-//! The near field section (format 1.7): what the panes' VPL bound removes next to every exit
+//! The near field section (format 1.7, 1.8): what the panes' VPL bound removes next to every exit
 //! point, as cosine rays that end close by, so that a run time gathers it back from the
 //! surfaces' radiance of the frame.
 //!
@@ -13,15 +13,17 @@
 //! point sends from the lights' direct light, `albedo/π × irradiance` (emitters and the sky
 //! reach the lightmap traced, not through the VPLs, when the archive holds their indirect
 //! light). Rays whose weight would be under [`MIN_WEIGHT`] are not
-//! stored: they miss or end too far away to matter. The deeper VPLs' share (their disks are
-//! smaller, `A/(N·W)` for `W` walks per entry) is left out: gathered from the lightmap's
-//! indirect light it helped on the Cornell boxes and hurt on chairs (prm-trace's `near`
-//! module has the measurement).
+//! stored: they miss or end too far away to matter. From 1.8 the bake bounds the deeper VPLs
+//! (the ones its walks leave after the entry point) by a disk `R₁²` =
+//! [`NearField::indirect_disk`] too, and the player adds their share, `π/M · Σ I_g · R₁²/(r² +
+//! R₁²)` along the same rays, `I_g` the radiance the gather point sends from the lights' indirect
+//! light of the frame (albedo/π × the blended lightmap there). In 1.7 that word is reserved: the
+//! deeper VPLs' disks were the area one walk stands for, `A/(N·W)`, too small to gather.
 //!
 //! Layout (formats/prm.md §5.6), little-endian: a 32-byte header (exit count `E`, rays per exit
 //! `M`, gather point count `G`, flags = 0, the atlas resolution `R`, hit count `H`, `R²` as
-//! `f32`, a reserved `u32` = 0), `G` gather point records of 56 bytes (as the probe rays', §5.5), `E` exit
-//! records of 8 bytes (texel `u32`, the end of its hits `u32`: exit `i`'s hits are
+//! `f32`, `R₁²` as `f32` (1.8; a reserved `u32` = 0 in 1.7)), `G` gather point records of 56
+//! bytes (as the probe rays', §5.5), `E` exit records of 8 bytes (texel `u32`, the end of its hits `u32`: exit `i`'s hits are
 //! `[end[i−1], end[i])`), then `H` hits of 8 bytes (gather point `u32`, `r²` `f32`).
 
 use crate::layout::{Cursor, PutLe};
@@ -63,6 +65,10 @@ pub struct NearField {
     pub rays_per_exit: u32,
     /// The depth-0 VPLs' disk, `R² = A/(N·π)` (scene units²).
     pub disk: f32,
+    /// The deeper VPLs' disk `R₁²` (scene units², at most [`NearField::disk`]), whose share
+    /// the player gathers from the lightmap's indirect light; 0: none (format 1.7, whose deeper
+    /// VPLs' disks were too small to gather).
+    pub indirect_disk: f32,
     /// The surface points the rays end at.
     pub points: Vec<GatherPoint>,
     /// Exit points with at least one stored hit, in texel order.
@@ -87,9 +93,12 @@ impl NearField {
     }
 
     /// Every exit's missing irradiance (in [`NearField::exits`] order) when gather point `g`
-    /// sends `direct[g]` from its direct light (radiance, RGB).
-    pub fn irradiance(&self, direct: &[[f32; 3]]) -> Vec<[f32; 3]> {
+    /// sends `direct[g]` from the lights' direct light and `indirect[g]` from their indirect
+    /// light (radiance, RGB; `indirect` is read only with [`NearField::indirect_disk`] > 0, and
+    /// may be empty).
+    pub fn irradiance(&self, direct: &[[f32; 3]], indirect: &[[f32; 3]]) -> Vec<[f32; 3]> {
         let scale = std::f32::consts::PI / self.rays_per_exit.max(1) as f32;
+        let r1 = self.indirect_disk;
         (0..self.exits.len())
             .map(|i| {
                 let mut e = [0.0f32; 3];
@@ -97,6 +106,10 @@ impl NearField {
                     let w = self.weight(h.distance2);
                     if let Some(d) = direct.get(h.point as usize) {
                         (0..3).for_each(|k| e[k] += d[k] * w);
+                    }
+                    if let Some(d) = indirect.get(h.point as usize).filter(|_| r1 > 0.0) {
+                        let w1 = r1 / (h.distance2 + r1);
+                        (0..3).for_each(|k| e[k] += d[k] * w1);
                     }
                 }
                 e.map(|v| v * scale)
@@ -121,6 +134,12 @@ pub(crate) fn validate(near: &NearField, resolution: u32, groups: usize) -> Resu
     }
     if !(near.disk.is_finite() && near.disk > 0.0) {
         return Err(format!("near field disk {}, not finite and positive", near.disk));
+    }
+    if !(near.indirect_disk >= 0.0 && near.indirect_disk <= near.disk) {
+        return Err(format!(
+            "near field indirect disk {}, not between 0 and the disk {}",
+            near.indirect_disk, near.disk
+        ));
     }
     let texels = u64::from(resolution) * u64::from(resolution);
     probe_rays::validate_points(&near.points, texels, groups)?;
@@ -180,7 +199,7 @@ pub(crate) fn encode(near: &NearField, resolution: u32) -> Vec<u8> {
         b.put_u32(v);
     }
     b.put_f32(near.disk);
-    b.put_u32(0);
+    b.put_f32(near.indirect_disk);
     probe_rays::encode_points(&near.points, &mut b);
     for x in &near.exits {
         b.put_u32(x.texel);
@@ -202,10 +221,12 @@ pub(crate) struct Header {
     pub resolution: u32,
     pub hits: u32,
     pub disk: f32,
+    pub indirect_disk: f32,
 }
 
-/// Parses and checks the header's own fields; `strict` refuses a non-zero reserved field.
-pub(crate) fn decode_header(head: &[u8], strict: bool) -> Result<Header, String> {
+/// Parses and checks the header's own fields in a file of `minor` version; `strict` refuses a
+/// non-zero reserved field (the indirect disk's bytes before 1.8).
+pub(crate) fn decode_header(head: &[u8], minor: u16, strict: bool) -> Result<Header, String> {
     let mut c = Cursor::new(head, "near field");
     let mut v = [0u32; 6];
     for x in &mut v {
@@ -213,7 +234,13 @@ pub(crate) fn decode_header(head: &[u8], strict: bool) -> Result<Header, String>
     }
     let [exits, rays_per_exit, points, flags, resolution, hits] = v;
     let disk = c.f32().map_err(|e| e.to_string())?;
-    let reserved = c.u32().map_err(|e| e.to_string())?;
+    let last = c.u32().map_err(|e| e.to_string())?;
+    // Reserved until 1.8, which gives the word the deeper VPLs' disk.
+    let (reserved, indirect_disk) = if minor >= 8 {
+        (0, f32::from_bits(last))
+    } else {
+        (last, 0.0)
+    };
     if flags != 0 || (strict && reserved != 0) {
         return Err(format!(
             "near field section has unknown flags {flags:#x} or a non-zero reserved field"
@@ -231,6 +258,7 @@ pub(crate) fn decode_header(head: &[u8], strict: bool) -> Result<Header, String>
         resolution,
         hits,
         disk,
+        indirect_disk,
     })
 }
 
@@ -273,6 +301,7 @@ mod tests {
         NearField {
             rays_per_exit: 4,
             disk: 0.01,
+            indirect_disk: 0.005,
             points: vec![point(3), point(9)],
             exits: vec![NearExit { texel: 2, end: 2 }, NearExit { texel: 5, end: 3 }],
             hits: vec![
@@ -298,7 +327,7 @@ mod tests {
         validate(&n, 4, 0).unwrap();
         let raw = encode(&n, 4);
         assert_eq!(raw.len() as u64, raw_size_for(2, 2, 3).unwrap());
-        let h = decode_header(&raw[..NEAR_FIELD_HEADER_SIZE], true).unwrap();
+        let h = decode_header(&raw[..NEAR_FIELD_HEADER_SIZE], 8, true).unwrap();
         assert_eq!(
             h,
             Header {
@@ -308,6 +337,7 @@ mod tests {
                 resolution: 4,
                 hits: 3,
                 disk: 0.01,
+                indirect_disk: 0.005,
             }
         );
         let a = NEAR_FIELD_HEADER_SIZE + 2 * GATHER_POINT_SIZE;
@@ -315,6 +345,7 @@ mod tests {
         let back = NearField {
             rays_per_exit: 4,
             disk: h.disk,
+            indirect_disk: h.indirect_disk,
             points: probe_rays::decode_points(&raw[NEAR_FIELD_HEADER_SIZE..a]).unwrap(),
             exits: decode_exits(&raw[a..b]).unwrap(),
             hits: decode_hits(&raw[b..]).unwrap(),
@@ -326,7 +357,11 @@ mod tests {
     fn the_irradiance_weighs_each_hit_by_its_distance() {
         let n = near();
         let direct = [[1.0, 0.0, 0.5], [2.0, 4.0, 0.0]];
-        let e = n.irradiance(&direct);
+        let e = NearField {
+            indirect_disk: 0.0,
+            ..n.clone()
+        }
+        .irradiance(&direct, &direct);
         let s = std::f32::consts::PI / 4.0;
         // Exit 0: a hit at distance 0 (weight 1) and one at r² = R² (½).
         let want0 = [s * (1.0 + 2.0 * 0.5), s * 4.0 * 0.5, s * 0.5];
@@ -337,6 +372,28 @@ mod tests {
                 assert!((got[k] - want[k]).abs() < 1e-6, "{got:?} against {want:?}");
             }
         }
+    }
+
+    #[test]
+    fn the_deeper_share_weighs_each_hit_by_the_deeper_disk() {
+        // R₁² = R²/2 = 0.005: weights 1 at r² = 0, 1/3 at 0.01, 1/7 at 0.03.
+        let n = near();
+        let e = n.irradiance(&[[0.0; 3]; 2], &[[1.0, 0.0, 0.0], [0.0, 3.0, 0.0]]);
+        let s = std::f32::consts::PI / 4.0;
+        for (got, want) in e.iter().zip([[s, s, 0.0], [s / 7.0, 0.0, 0.0]]) {
+            for k in 0..3 {
+                assert!((got[k] - want[k]).abs() < 1e-6, "{got:?} against {want:?}");
+            }
+        }
+        let none = NearField {
+            indirect_disk: 0.0,
+            ..n
+        };
+        assert!(none
+            .irradiance(&[[0.0; 3]; 2], &[[1.0; 3]; 2])
+            .iter()
+            .flatten()
+            .all(|v| *v == 0.0));
     }
 
     #[test]
@@ -371,10 +428,19 @@ mod tests {
         assert!(validate(&n, 4, 0).is_err(), "no rays");
         let mut head = encode(&near(), 4)[..NEAR_FIELD_HEADER_SIZE].to_vec();
         head[12..16].copy_from_slice(&1u32.to_le_bytes());
-        assert!(decode_header(&head, false).is_err(), "unknown flags");
+        assert!(decode_header(&head, 8, false).is_err(), "unknown flags");
         let mut head = encode(&near(), 4)[..NEAR_FIELD_HEADER_SIZE].to_vec();
         head[28..32].copy_from_slice(&1u32.to_le_bytes());
-        assert!(decode_header(&head, true).is_err(), "reserved field");
-        assert!(decode_header(&head, false).is_ok(), "reserved field, lenient");
+        assert!(decode_header(&head, 7, true).is_err(), "reserved field in 1.7");
+        assert!(decode_header(&head, 7, false).is_ok(), "reserved field, lenient");
+        let h = decode_header(&head, 7, false).unwrap();
+        assert_eq!(h.indirect_disk, 0.0, "1.7 has no indirect disk");
+        let mut n = near();
+        n.indirect_disk = 0.02;
+        assert!(validate(&n, 4, 0).is_err(), "indirect disk over the disk");
+        n.indirect_disk = -1.0;
+        assert!(validate(&n, 4, 0).is_err(), "negative indirect disk");
+        n.indirect_disk = f32::NAN;
+        assert!(validate(&n, 4, 0).is_err(), "NaN indirect disk");
     }
 }

@@ -485,6 +485,7 @@ impl<R: Read + Seek> Archive<R> {
             Some(rec) => Some(read_near_field(
                 &mut src,
                 rec,
+                header.minor,
                 strict,
                 atlas.resolution,
                 emitters.len(),
@@ -1174,6 +1175,7 @@ fn read_probe_rays<R: Read + Seek>(
 fn read_near_field<R: Read + Seek>(
     src: &mut R,
     rec: &SectionRecord,
+    minor: u16,
     strict: bool,
     resolution: u32,
     groups: usize,
@@ -1190,7 +1192,7 @@ fn read_near_field<R: Read + Seek>(
     let mut raw = section.raw()?;
     let mut head = [0u8; NEAR_FIELD_HEADER_SIZE];
     raw.read_exact(&mut head)?;
-    let h = near_field::decode_header(&head, strict).map_err(Error::inconsistent)?;
+    let h = near_field::decode_header(&head, minor, strict).map_err(Error::inconsistent)?;
     let texels = u64::from(resolution) * u64::from(resolution);
     if h.resolution != resolution
         || u64::from(h.points) > texels
@@ -1214,6 +1216,7 @@ fn read_near_field<R: Read + Seek>(
     let out = crate::NearField {
         rays_per_exit: h.rays_per_exit,
         disk: h.disk,
+        indirect_disk: h.indirect_disk,
         points,
         exits,
         hits,

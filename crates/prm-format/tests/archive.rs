@@ -916,7 +916,7 @@ fn python_reader_check(path: &Path, filter: TileFilter) -> bool {
     );
     let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     let mut a = Archive::open(path).unwrap();
-    assert_eq!(j["version"], "1.7");
+    assert_eq!(j["version"], "1.8");
     assert_eq!(j["checksums_verified"], true);
     let ja = &j["accuracy"];
     assert_eq!(ja["exit_points"], 1024);
@@ -1027,6 +1027,7 @@ fn python_reader_check(path: &Path, filter: TileFilter) -> bool {
     let back = NearField {
         rays_per_exit: u(&jn["rays_per_exit"]),
         disk: jn["disk"].as_f64().unwrap() as f32,
+        indirect_disk: jn["indirect_disk"].as_f64().unwrap() as f32,
         points: gather_points(&jn["points"]),
         exits: jn["exits"]
             .as_array()
@@ -1049,7 +1050,7 @@ fn python_reader_check(path: &Path, filter: TileFilter) -> bool {
     };
     assert_eq!(a.near_field(), Some(&back));
     assert_eq!(a.near_field(), Some(&near));
-    assert_eq!(a.info().minor, 7);
+    assert_eq!(a.info().minor, 8);
     let je: Vec<[f32; 3]> = j["entry_energy"]
         .as_array()
         .unwrap()
@@ -1968,6 +1969,7 @@ fn near_set(s: &Scene) -> NearField {
     NearField {
         rays_per_exit: 8,
         disk: 0.03125,
+        indirect_disk: 0.015625,
         points,
         exits: vec![NearExit { texel: 1, end: 2 }, NearExit { texel: 4, end: 3 }],
         hits: vec![
@@ -2101,7 +2103,8 @@ fn probes_round_trip_and_hostile_headers_are_refused() {
     }
 }
 
-/// The near field round-trips exactly and makes the archive 1.7; the writer refuses gather
+/// The near field round-trips exactly and makes the archive 1.8 (1.7 without the deeper VPLs'
+/// disk); the writer refuses gather
 /// points of emitter groups the archive lacks; headers whose counts the atlas cannot hold are
 /// refused before the rest is decompressed.
 #[test]
@@ -2130,9 +2133,24 @@ fn near_field_round_trips_and_hostile_headers_are_refused() {
     w.finish().unwrap();
     let bytes = std::fs::read(&path).unwrap();
     let mut a = Archive::from_bytes(&bytes).unwrap();
-    assert_eq!(a.info().minor, 7);
+    assert_eq!(a.info().minor, 8);
     assert_eq!(a.near_field(), Some(&near));
     a.verify().unwrap();
+    let direct_only = NearField {
+        indirect_disk: 0.0,
+        ..near.clone()
+    };
+    let path7 = dir.join("near-1.7.prm");
+    let mut w = ArchiveWriter::create(&path7, s.metadata.clone(), &s.atlas, &s.entries, &s.clusters).unwrap();
+    w.set_emitters(emitter_groups(&s, 2)).unwrap();
+    w.set_near_field(direct_only.clone()).unwrap();
+    for p in &s.panes {
+        w.add_pane(p).unwrap();
+    }
+    w.finish().unwrap();
+    let a7 = Archive::open(&path7).unwrap();
+    assert_eq!(a7.info().minor, 7);
+    assert_eq!(a7.near_field(), Some(&direct_only));
 
     let texels = 16u32 * 16;
     let header = |e: u32, m: u32, g: u32, res: u32, h: u32| {

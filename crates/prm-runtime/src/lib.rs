@@ -5,7 +5,9 @@
 //! [`Shadows::External`]), the shadow-mapped irradiance of every entry point and each cluster's
 //! weight (`weights.wgsl`), when the archive holds the near field (format 1.7) the light the
 //! panes' VPL bound removes next to other surfaces, gathered from the direct light of the
-//! texels there (`near_radiance.wgsl`, `near_field.wgsl`), the rank of every cluster by score (`rank.wgsl`), the top K with
+//! texels there (`near_radiance.wgsl`, `near_field.wgsl`; from 1.8 also the deeper VPLs' share,
+//! gathered after the blend from its lightmap, `near_indirect_radiance.wgsl`,
+//! `near_indirect.wgsl`), the rank of every cluster by score (`rank.wgsl`), the top K with
 //! weights faded near the threshold and the residual groups that carry the dropped clusters'
 //! light (`select.wgsl`, [`prm_format::residual_groups`]) and the blend of the kept panes and
 //! the groups' summed panes into an `rgba32float` lightmap of indirect irradiance in W/m² (`blend.wgsl`). The caller samples it
@@ -83,7 +85,7 @@ use weights::WeightsPass;
 /// Most lights a frame may have.
 pub const MAX_LIGHTS: usize = 256;
 /// Names of the timed passes in frame order, for a [`PassTimer`] handed to [`Runtime::encode`].
-pub const PASS_NAMES: [&str; 9] = [
+pub const PASS_NAMES: [&str; 11] = [
     "shadow",
     "weights",
     "near radiance",
@@ -91,6 +93,8 @@ pub const PASS_NAMES: [&str; 9] = [
     "rank",
     "select",
     "blend",
+    "near indirect radiance",
+    "near indirect",
     "probe radiance",
     "probes",
 ];
@@ -469,8 +473,13 @@ impl Runtime {
                     device,
                     &buffers,
                     n,
+                    res,
                     &maps.array,
-                    &near_view,
+                    near_field::NearTargets {
+                        near_map: &near_view,
+                        lightmap: &lightmap_view,
+                        emitted: &emitters.indirect_view,
+                    },
                 ))
             }
             None => None,
@@ -619,7 +628,7 @@ impl Runtime {
 
     /// Records the frame set by [`Runtime::update`]: with [`Shadows::Own`] the shadow pass, then
     /// weights, the near field (archives of format 1.7), rank, select and blend into
-    /// [`Runtime::lightmap`], then the probes. Timed passes are named as in [`PASS_NAMES`].
+    /// [`Runtime::lightmap`], the near field's deeper share (1.8), then the probes. Timed passes are named as in [`PASS_NAMES`].
     pub fn encode(&self, encoder: &mut wgpu::CommandEncoder, shadows: Shadows, timer: Option<&PassTimer>) {
         let external = match shadows {
             Shadows::Own => {
@@ -643,6 +652,9 @@ impl Runtime {
             n.encode(&self.device, encoder, &self.buffers, external, timer);
         }
         self.topk.encode(encoder, self.cluster_count, self.lit_texels, timer);
+        if let Some(n) = &self.near {
+            n.encode_after_blend(encoder, &self.lightmap, timer);
+        }
         if let Some(p) = &self.probes {
             p.encode(&self.device, encoder, &self.buffers, external, timer);
         }

@@ -145,6 +145,14 @@ pub struct GpuNearField {
     pub disk: f32,
     /// `π / M`, `M` the rays per exit point.
     pub scale: f32,
+    /// The deeper VPLs' disk `R₁²` (0: their share is not gathered).
+    pub indirect_disk: f32,
+    /// Padding.
+    pub _pad0: u32,
+    /// Padding.
+    pub _pad1: u32,
+    /// Padding.
+    pub _pad2: u32,
 }
 
 /// A light; `Light` in the shaders.
@@ -325,7 +333,13 @@ mod tests {
         wgsl_layout!(s, GpuProbeRays, "ProbeRays", [probes, rays_per_probe, points, _pad0]).unwrap();
         wgsl_layout!(s, GpuNearExit, "NearExit", [texel, end]).unwrap();
         wgsl_layout!(s, GpuNearHit, "NearHit", [point, distance2]).unwrap();
-        wgsl_layout!(s, GpuNearField, "NearField", [exits, points, disk, scale]).unwrap();
+        wgsl_layout!(
+            s,
+            GpuNearField,
+            "NearField",
+            [exits, points, disk, scale, indirect_disk, _pad0, _pad1, _pad2]
+        )
+        .unwrap();
     }
 
     #[test]

@@ -233,7 +233,8 @@ pub struct CheckedArchive<'a> {
     pub entry_energy: Option<&'a [Vec3]>,
     /// Every pane's energy (the archive's cluster table, the sum of its texels).
     pub cluster_energy: &'a [Vec3],
-    /// Every pane at the checked exit points, `[cluster][point]`.
+    /// Every pane at the checked exit points, then at the near field's gather points
+    /// ([`crate::NearTerms::gather_texels`]), `[cluster][point]`.
     pub panes: &'a [Vec<Vec3>],
     /// Clusters the player blends.
     pub top_k: usize,
@@ -243,8 +244,8 @@ pub struct CheckedArchive<'a> {
     /// The player's fade band ([`FADE_BAND`]).
     pub fade_band: f32,
     /// Every checked exit point's near field ([`crate::near_terms`]), added to the panes' light
-    /// as the player adds it; empty without one.
-    pub near: &'a [Vec<crate::NearTerm>],
+    /// as the player adds it; `None` without one.
+    pub near: Option<&'a crate::NearTerms>,
 }
 
 /// The archive's indirect light at `exits` (the checked exit points) under `light`, for the
@@ -307,11 +308,17 @@ pub fn played_indirect(bvh: &Bvh, archive: &CheckedArchive<'_>, light: Light) ->
         out
     };
     let (mut played, mut all) = (played, blend(&weights, archive.panes));
-    for ((p, a), terms) in played.iter_mut().zip(&mut all).zip(archive.near) {
-        let near = crate::near_irradiance(bvh, &[light], terms);
-        *p += near;
-        *a += near;
+    let exits = archive.near.map_or(points, |n| points - n.gather_texels.len());
+    if let Some(near) = archive.near {
+        for out in [&mut played, &mut all] {
+            let (at_exits, at_gather) = out.split_at_mut(exits);
+            for (p, a) in at_exits.iter_mut().zip(near.irradiance(bvh, &[light], at_gather)) {
+                *p += a;
+            }
+        }
     }
+    played.truncate(exits);
+    all.truncate(exits);
     (played, all)
 }
 
@@ -327,11 +334,14 @@ pub fn check_accuracy(
     params: &CheckParams,
     progress: &mut dyn FnMut(u64),
 ) -> Result<Accuracy, TraceError> {
-    if archive.panes.iter().any(|p| p.len() != exits.len())
+    let gathered = archive.near.map_or(0, |n| n.gather_texels.len());
+    if archive.panes.iter().any(|p| p.len() != exits.len() + gathered)
         || archive.panes.len() != archive.members.len()
         || archive.cluster_energy.len() != archive.members.len()
         || !(archive.groups.is_empty() || archive.groups.len() == archive.members.len())
-        || !(archive.near.is_empty() || archive.near.len() == exits.len())
+        || archive.near.is_some_and(|n| {
+            n.terms.len() != exits.len() || n.terms.iter().flatten().any(|t| t.point as usize >= gathered)
+        })
     {
         return Err(TraceError::InvalidParameter(
             "every cluster needs a pane energy and one pane value per checked exit point".into(),

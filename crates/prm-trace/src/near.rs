@@ -1,4 +1,4 @@
-//! The near field (format 1.7, `prm_format::NearField`): short cosine rays from every exit
+//! The near field (format 1.7, 1.8: `prm_format::NearField`): short cosine rays from every exit
 //! point, kept where they end close enough for the VPL disk bound ([`crate::VplBound`]) to
 //! have removed light, so that the run time gathers that light back from the surfaces' direct
 //! light of the frame.
@@ -25,12 +25,23 @@
 //!
 //! A cut-off of 1/1024 instead of `NEAR_MIN_WEIGHT` = 1/16 keeps six times the rays (1.9 M
 //! against 243 k on the Cornell box) for 0.1–0.2 points (7.44%, 10.30%; 1/64: 7.54%, 10.40%).
-//! The deeper VPLs' share (disk `A/(N·W)`), gathered from the lightmap's indirect light, helps
-//! the boxes a little and hurts chairs by 1.2 points; it is left out. The error away from edges
-//! does not move (6.1, 9.2–10.0, 6.3, 3.8%): that part is the panes' own. 32, 64, 128 and 256
-//! rays give the same errors within 0.1 point on the red-wall case, so the default is
-//! [`NEAR_RAYS`] = 64. A whole final gather from the texels instead of the panes is too noisy
-//! per texel at any affordable count (17% at 64 rays, 8.9% at 256 on the first case).
+//! 32, 64, 128 and 256 rays give the same errors within 0.1 point on the red-wall case, so the
+//! default is [`NEAR_RAYS`] = 64. A whole final gather from the texels instead of the panes is
+//! too noisy per texel at any affordable count (17% at 64 rays, 8.9% at 256 on the first case).
+//!
+//! The deeper VPLs (format 1.8). With the disk of the area one walk stands for, `A/(N·W)`,
+//! gathering their share from the lightmap's indirect light helped the boxes a little and hurt
+//! chairs by 1.2 points (the table's last column but one), and their small disks spiked (the
+//! local error of issue #11). The bake now gives them their entry point's disk
+//! ([`crate::DeepDisk::Entry`]), the same `R²`, so one set of rays gathers both shares and the
+//! player adds `π/M · Σ I_g · R²/(r² + R²)` for the radiance `I_g` of the lightmap's indirect
+//! light at the gather point. Measured on McGuire's CornellBox-Original (`Ke` = 0, today's
+//! default bake; the same example at `0.5 0.865 0.5` and `0.1 0.2 0.5` of the bounds, played +
+//! both shares): 3.86% → **3.29%** (energy 1.012 → 1.009) and 5.74% → **5.12%** (0.994 →
+//! 0.990); in image space (`cargo xtask eval --targets`'s cases,
+//! 4×4 error and local error) the boxes 4.1% / 4.6% → 3.6% / 4.2%, local 22× / 15× → 9× / 10×,
+//! CornellBox-Sphere 3.7% → 3.4%, chairs 4.6% → 4.2%, the fireplace room's 120 s bake 14.5% →
+//! 12.0% (energy 0.957 → 0.979, local 4.8× → 3.6×).
 
 use glam::Vec3;
 use prm_format::{NearExit, NearField, NearHit, NEAR_MIN_WEIGHT};
@@ -54,8 +65,9 @@ pub fn near_disk(area_per_entry: f32, scale: f32) -> f32 {
 }
 
 /// A gather point's share of an exit point's near field, for the CPU's side of a comparison
-/// (the bake's accuracy check): the exit gains `factor × albedo × E` for the direct
-/// irradiance `E` at `position`.
+/// (the bake's accuracy check): the exit gains `factor × albedo × E` for the direct irradiance
+/// `E` at `position`, and `indirect_factor × albedo × I` for the played indirect irradiance `I`
+/// there (the deeper VPLs' share, format 1.8).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct NearTerm {
     /// The gather point's position.
@@ -66,10 +78,14 @@ pub struct NearTerm {
     pub albedo: Vec3,
     /// `R²/(r² + R²) / M`: `π/M` times the weight, over the `π` of `albedo/π`.
     pub factor: f32,
+    /// `R₁²/(r² + R₁²) / M` for the deeper VPLs' disk `R₁²` (0 without their share).
+    pub indirect_factor: f32,
+    /// Its gather point's place in [`NearTerms::gather_texels`].
+    pub point: u32,
 }
 
-/// What the near `terms` of one exit point add to its irradiance under `lights`, with ray-cast
-/// direct light at the gather points.
+/// What the near `terms` of one exit point add to its irradiance under `lights` from the direct
+/// light alone, ray-cast at the gather points.
 pub fn near_irradiance(bvh: &Bvh, lights: &[prm_scene::Light], terms: &[NearTerm]) -> Vec3 {
     terms
         .iter()
@@ -77,10 +93,44 @@ pub fn near_irradiance(bvh: &Bvh, lights: &[prm_scene::Light], terms: &[NearTerm
         .sum()
 }
 
-/// Every texel's near terms (empty where the near field keeps no ray), for `texels`.
-pub fn near_terms(near: &NearField, texels: &[u32]) -> Vec<Vec<NearTerm>> {
+/// The near terms of some texels, and the texels of the gather points they reach.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct NearTerms {
+    /// Every texel's terms, in the order asked (empty where the near field keeps no ray).
+    pub terms: Vec<Vec<NearTerm>>,
+    /// The texels of the gather points the terms reach, in [`NearTerm::point`] order: where the
+    /// deeper VPLs' share reads the played indirect light.
+    pub gather_texels: Vec<u32>,
+}
+
+impl NearTerms {
+    /// What the near field adds to every texel under `lights`: the direct share ray-cast and the
+    /// deeper VPLs' share from `indirect`, the played indirect irradiance (the lights' alone) at
+    /// [`NearTerms::gather_texels`]. A player's gather points take their own direct share into
+    /// that light too, a second order this leaves out.
+    pub fn irradiance(&self, bvh: &Bvh, lights: &[prm_scene::Light], indirect: &[Vec3]) -> Vec<Vec3> {
+        self.terms
+            .iter()
+            .map(|terms| {
+                let deeper: Vec3 = terms
+                    .iter()
+                    .filter(|t| t.indirect_factor > 0.0)
+                    .map(|t| {
+                        t.albedo * indirect.get(t.point as usize).copied().unwrap_or(Vec3::ZERO) * t.indirect_factor
+                    })
+                    .sum();
+                near_irradiance(bvh, lights, terms) + deeper
+            })
+            .collect()
+    }
+}
+
+/// The near terms of `texels` (empty where the near field keeps no ray).
+pub fn near_terms(near: &NearField, texels: &[u32]) -> NearTerms {
     let m = near.rays_per_exit.max(1) as f32;
-    texels
+    let mut place = std::collections::HashMap::new();
+    let mut gather_texels = Vec::new();
+    let terms = texels
         .iter()
         .map(|t| {
             let Ok(i) = near.exits.binary_search_by_key(t, |x| x.texel) else {
@@ -90,16 +140,24 @@ pub fn near_terms(near: &NearField, texels: &[u32]) -> Vec<Vec<NearTerm>> {
                 .iter()
                 .map(|h| {
                     let g = &near.points[h.point as usize];
+                    let point = *place.entry(h.point).or_insert_with(|| {
+                        gather_texels.push(g.texel);
+                        gather_texels.len() as u32 - 1
+                    });
+                    let indirect = near.indirect_disk / (h.distance2 + near.indirect_disk);
                     NearTerm {
                         position: Vec3::from(g.position),
                         normal: Vec3::from(g.normal),
                         albedo: Vec3::from(g.albedo),
                         factor: near.weight(h.distance2) / m,
+                        indirect_factor: if near.indirect_disk > 0.0 { indirect / m } else { 0.0 },
+                        point,
                     }
                 })
                 .collect()
         })
-        .collect()
+        .collect();
+    NearTerms { terms, gather_texels }
 }
 
 /// Traces `rays` cosine rays from every exit point of `atlas` (streams keyed by `seed`) and
@@ -157,6 +215,7 @@ pub fn near_field(scene: &Scene, bvh: &Bvh, atlas: &Atlas, rays: u32, disk: f32,
     NearField {
         rays_per_exit: rays,
         disk,
+        indirect_disk: 0.0,
         points,
         exits,
         hits,

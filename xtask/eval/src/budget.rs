@@ -231,21 +231,29 @@ fn cpu_blend(archive: &Path, tracer: &Tracer, light: Light, texels: &[u32], entr
             prm_trace::bounded_irradiance(&tracer.bvh, &lights, p, n, n, u32::MAX, disk)
         })
         .collect();
-    let mut out = vec![Vec3::ZERO; texels.len()];
+    // The near field, as the player adds it, with ray-cast direct light; its deeper VPLs' share
+    // reads the blend at the gather points too.
+    let near = a.near_field().map(|n| prm_trace::near_terms(n, texels));
+    let all: Vec<u32> = texels
+        .iter()
+        .chain(near.iter().flat_map(|n| &n.gather_texels))
+        .copied()
+        .collect();
+    let mut out = vec![Vec3::ZERO; all.len()];
     for (c, cl) in clusters.iter().enumerate() {
         let w = prm_trace::energy_weight(cl.members(), &e, &energy);
         if w == Vec3::ZERO {
             continue;
         }
         let pane = a.read_pane(c)?;
-        for (o, &t) in out.iter_mut().zip(texels) {
+        for (o, &t) in out.iter_mut().zip(&all) {
             *o += w * Vec3::from_array(pane[t as usize]);
         }
     }
-    // The near field, as the player adds it, with ray-cast direct light.
-    if let Some(near) = a.near_field() {
-        for (o, terms) in out.iter_mut().zip(prm_trace::near_terms(near, texels)) {
-            *o += prm_trace::near_irradiance(&tracer.bvh, &lights, &terms);
+    let (mut out, gathered) = (out[..texels.len()].to_vec(), &out[texels.len()..]);
+    if let Some(near) = &near {
+        for (o, add) in out.iter_mut().zip(near.irradiance(&tracer.bvh, &lights, gathered)) {
+            *o += add;
         }
     }
     Ok(out)

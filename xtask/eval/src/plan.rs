@@ -342,8 +342,10 @@ fn file_stamp(path: &Path) -> String {
 /// the near field (format 1.7). 10: 8 entry points per cluster, the memory budget keeping room
 /// for the residual groups (16 by default, after `prm_format::RESIDUAL_GROUPS`). 11: about 65536
 /// walks in all, the entry points doubled up to twice, the top K from the blend's texel budget
-/// and 64 residual groups. 12: the automatic atlas leaves room for 256 panes (was 128).
-const BAKE_EPOCH: u32 = 12;
+/// and 64 residual groups. 12: the automatic atlas leaves room for 256 panes (was 128). 13: the
+/// deeper VPLs take their entry point's disk, whose near field the player gathers back (format
+/// 1.8).
+const BAKE_EPOCH: u32 = 13;
 
 /// A case's label as a file name: spaces and punctuation as dashes.
 pub fn case_name(label: &str) -> String {

@@ -1,0 +1,34 @@
+// prm-runtime near indirect pass (archives of format 1.8), after the blend: the deeper VPLs' share
+// of what the panes' bound removes (formats/prm.md §5.6), π/M × Σ over an exit point's near hits
+// of R₁²/(r² + R₁²) × the radiance near_indirect_radiance.wgsl gave the gather point, added to
+// the blend's value at the exit point's texel (read from `source`, a copy of the lightmap) and
+// written to the lightmap; the other texels keep the blend's value. One invocation per exit point
+// with near hits.
+
+@group(0) @binding(0) var<uniform> near: NearField;
+@group(0) @binding(1) var<storage, read> exits: array<NearExit>;
+@group(0) @binding(2) var<storage, read> hits: array<NearHit>;
+@group(0) @binding(3) var<storage, read> radiance: array<vec4<f32>>;
+@group(0) @binding(4) var source: texture_2d<f32>;
+@group(0) @binding(5) var lightmap: texture_storage_2d<rgba32float, write>;
+
+@compute @workgroup_size(64)
+fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let i = linear_index(gid, groups);
+    if i >= near.exits {
+        return;
+    }
+    let x = exits[i];
+    var start = 0u;
+    if i > 0u {
+        start = exits[i - 1u].end;
+    }
+    var e = vec3<f32>(0.0);
+    for (var h = start; h < x.end; h++) {
+        let hit = hits[h];
+        e += near.indirect_disk / (hit.distance2 + near.indirect_disk) * radiance[hit.point].rgb;
+    }
+    let side = textureDimensions(source).x;
+    let xy = vec2<i32>(i32(x.texel % side), i32(x.texel / side));
+    textureStore(lightmap, xy, vec4<f32>(textureLoad(source, xy, 0).rgb + e * near.scale, 1.0));
+}
