@@ -24,7 +24,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     var e = vec3<f32>(0.0);
     for (var h = start; h < x.end; h++) {
         let hit = hits[h];
-        e += near.disk / (hit.distance2 + near.disk) * radiance[hit.point].rgb;
+        e += hit.weight * radiance[hit.point].rgb;
     }
     let side = textureDimensions(near_map).x;
     textureStore(near_map, vec2<i32>(i32(x.texel % side), i32(x.texel / side)), vec4<f32>(e * near.scale, 0.0));

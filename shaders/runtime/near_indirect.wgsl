@@ -26,7 +26,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     var e = vec3<f32>(0.0);
     for (var h = start; h < x.end; h++) {
         let hit = hits[h];
-        e += near.indirect_disk / (hit.distance2 + near.indirect_disk) * radiance[hit.point].rgb;
+        e += hit.indirect_weight * radiance[hit.point].rgb;
     }
     let side = textureDimensions(source).x;
     let xy = vec2<i32>(i32(x.texel % side), i32(x.texel / side));

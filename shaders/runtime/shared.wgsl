@@ -154,18 +154,15 @@ struct NearExit {
 // A near ray's end: a gather point and its squared distance from the exit point.
 struct NearHit {
     point: u32,
-    distance2: f32,
+    weight: f32,
+    indirect_weight: f32,
+    _pad0: u32,
 };
 
-// The near field's constants: counts, the depth-0 VPLs' disk R², π/M and the deeper VPLs'
-// disk R₁² (0: their share is not gathered).
+// The near field's constants: counts and π/M.
 struct NearField {
     exits: u32,
     points: u32,
-    disk: f32,
     scale: f32,
-    indirect_disk: f32,
     _pad0: u32,
-    _pad1: u32,
-    _pad2: u32,
 };

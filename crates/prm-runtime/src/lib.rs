@@ -451,9 +451,10 @@ impl Runtime {
             Some(n) => {
                 let limits = device.limits();
                 let mib = |b: u64| b as f64 / (1 << 20) as f64;
+                let merged = near_field::merge_hits(n);
                 for (what, count, size) in [
-                    ("near hits", n.hits.len(), std::mem::size_of::<GpuNearHit>()),
-                    ("near exit records", n.exits.len(), std::mem::size_of::<GpuNearExit>()),
+                    ("merged near hits", merged.1.len(), std::mem::size_of::<GpuNearHit>()),
+                    ("near exit records", merged.0.len(), std::mem::size_of::<GpuNearExit>()),
                     (
                         "near gather points",
                         n.points.len(),
@@ -473,6 +474,7 @@ impl Runtime {
                     device,
                     &buffers,
                     n,
+                    merged,
                     res,
                     &maps.array,
                     near_field::NearTargets {

@@ -123,14 +123,19 @@ pub struct GpuNearExit {
     pub end: u32,
 }
 
-/// A near ray's end (`prm_format::NearHit`); `NearHit` in the shaders.
+/// An exit point's near rays that end on one gather point (`prm_format::NearHit`s merged);
+/// `NearHit` in the shaders.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
 pub struct GpuNearHit {
     /// Gather point index.
     pub point: u32,
-    /// Squared distance from the exit point.
-    pub distance2: f32,
+    /// Σ `R²/(r² + R²)` over the rays: the direct share's weight.
+    pub weight: f32,
+    /// Σ `R₁²/(r² + R₁²)`: the deeper VPLs' share's (0 without it).
+    pub indirect_weight: f32,
+    /// Padding.
+    pub _pad0: u32,
 }
 
 /// The near field's constants; `NearField` in the shaders.
@@ -141,18 +146,10 @@ pub struct GpuNearField {
     pub exits: u32,
     /// Gather points.
     pub points: u32,
-    /// The depth-0 VPLs' disk `R²`.
-    pub disk: f32,
     /// `π / M`, `M` the rays per exit point.
     pub scale: f32,
-    /// The deeper VPLs' disk `R₁²` (0: their share is not gathered).
-    pub indirect_disk: f32,
     /// Padding.
     pub _pad0: u32,
-    /// Padding.
-    pub _pad1: u32,
-    /// Padding.
-    pub _pad2: u32,
 }
 
 /// A light; `Light` in the shaders.
@@ -332,14 +329,8 @@ mod tests {
         .unwrap();
         wgsl_layout!(s, GpuProbeRays, "ProbeRays", [probes, rays_per_probe, points, _pad0]).unwrap();
         wgsl_layout!(s, GpuNearExit, "NearExit", [texel, end]).unwrap();
-        wgsl_layout!(s, GpuNearHit, "NearHit", [point, distance2]).unwrap();
-        wgsl_layout!(
-            s,
-            GpuNearField,
-            "NearField",
-            [exits, points, disk, scale, indirect_disk, _pad0, _pad1, _pad2]
-        )
-        .unwrap();
+        wgsl_layout!(s, GpuNearHit, "NearHit", [point, weight, indirect_weight, _pad0]).unwrap();
+        wgsl_layout!(s, GpuNearField, "NearField", [exits, points, scale, _pad0]).unwrap();
     }
 
     #[test]
