@@ -91,8 +91,8 @@ fn a_cpu_bake_reports_its_phases_and_writes_the_planned_archive() {
             Phase::Bvh,
             Phase::LightTracing,
             Phase::Clustering,
-            Phase::PaneRendering,
             Phase::NearField,
+            Phase::PaneRendering,
             Phase::AccuracyCheck
         ]
     );

@@ -123,7 +123,8 @@ pub struct WalkParams {
 /// per entry point instead of 14 played at 16.9% against 14.5%, local error 19× (README, issue
 /// #11). A disk as large as its entry point's costs the light next to other surfaces, which the
 /// near field gathers back from the lightmap's indirect light (format 1.8, `near.rs` has the
-/// measurement).
+/// measurement): the fireplace room's 120 s bake then plays at 11.95% (local 3.6×), and 48 walks
+/// per entry point at 11.86%, so the walks' noise is no longer what limits it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum DeepDisk {
     /// `A/(N·M)`: the area one walk of `M` stands for.
