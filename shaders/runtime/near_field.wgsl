@@ -1,8 +1,8 @@
 // prm-runtime near field pass: every exit point's share of what the panes' VPL disk bound
 // removes (formats/prm.md §5.6), π/M × Σ over its near hits of R²/(r² + R²) × the radiance the
-// near radiance pass gave the gather point, written to its texel of the near lightmap the blend
-// adds. Texels without near hits are never written and stay zero. One invocation per exit point
-// with near hits.
+// near radiance pass gave the gather point (near_sum.wgsl), written to its texel of the near
+// lightmap the blend adds. Texels without near hits are never written and stay zero. One
+// invocation per exit point with near hits.
 
 @group(0) @binding(0) var<uniform> near: NearField;
 @group(0) @binding(1) var<storage, read> exits: array<NearExit>;
@@ -16,16 +16,6 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     if i >= near.exits {
         return;
     }
-    let x = exits[i];
-    var start = 0u;
-    if i > 0u {
-        start = exits[i - 1u].end;
-    }
-    var e = vec3<f32>(0.0);
-    for (var h = start; h < x.end; h++) {
-        let hit = hits[h];
-        e += hit.weight * radiance[hit.point].rgb;
-    }
-    let side = textureDimensions(near_map).x;
-    textureStore(near_map, vec2<i32>(i32(x.texel % side), i32(x.texel / side)), vec4<f32>(e * near.scale, 0.0));
+    let s = near_sum(i, false, textureDimensions(near_map).x);
+    textureStore(near_map, s.xy, vec4<f32>(s.irradiance, 0.0));
 }

@@ -1,9 +1,9 @@
 // prm-runtime near indirect pass (archives of format 1.8), after the blend: the deeper VPLs' share
 // of what the panes' bound removes (formats/prm.md §5.6), π/M × Σ over an exit point's near hits
-// of R₁²/(r² + R₁²) × the radiance near_indirect_radiance.wgsl gave the gather point, added to
-// the blend's value at the exit point's texel (read from `source`, a copy of the lightmap) and
-// written to the lightmap; the other texels keep the blend's value. One invocation per exit point
-// with near hits.
+// of R₁²/(r² + R₁²) × the radiance near_indirect_radiance.wgsl gave the gather point
+// (near_sum.wgsl), added to the blend's value at the exit point's texel (read from `source`, a
+// copy of the lightmap) and written to the lightmap; the other texels keep the blend's value.
+// One invocation per exit point with near hits.
 
 @group(0) @binding(0) var<uniform> near: NearField;
 @group(0) @binding(1) var<storage, read> exits: array<NearExit>;
@@ -18,17 +18,6 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     if i >= near.exits {
         return;
     }
-    let x = exits[i];
-    var start = 0u;
-    if i > 0u {
-        start = exits[i - 1u].end;
-    }
-    var e = vec3<f32>(0.0);
-    for (var h = start; h < x.end; h++) {
-        let hit = hits[h];
-        e += hit.indirect_weight * radiance[hit.point].rgb;
-    }
-    let side = textureDimensions(source).x;
-    let xy = vec2<i32>(i32(x.texel % side), i32(x.texel / side));
-    textureStore(lightmap, xy, vec4<f32>(textureLoad(source, xy, 0).rgb + e * near.scale, 1.0));
+    let s = near_sum(i, true, textureDimensions(source).x);
+    textureStore(lightmap, s.xy, vec4<f32>(textureLoad(source, s.xy, 0).rgb + s.irradiance, 1.0));
 }

@@ -1,8 +1,8 @@
-//! The near field passes (`shaders/runtime/near_radiance.wgsl`, `near_field.wgsl`), for
-//! archives that hold the near field (format 1.7): first the radiance every gather point sends
-//! this frame from the lights' direct light (through the shadow maps, times albedo/π), then every exit point's share of what the
-//! panes' VPL disk bound removes, summed along its near rays into the near lightmap the blend
-//! adds. The panes' depth-0 VPLs sample the entry points' direct light with a bounded falloff,
+//! The near field passes (`shaders/runtime/near_radiance.wgsl`, `near_field.wgsl`; both sums
+//! through `near_sum.wgsl`), for archives that hold the near field (format 1.7): first the
+//! radiance every gather point sends this frame from the lights' direct light (through the
+//! shadow maps, times albedo/π), then every exit point's share of what the panes' VPL disk bound
+//! removes, summed along its near rays into the near lightmap the blend adds. The panes' depth-0 VPLs sample the entry points' direct light with a bounded falloff,
 //! which leaves inner edges and contacts too dark (issue #11); this gathers that light back.
 //! Archives of format 1.8 bound the deeper VPLs by a disk as large, and two more passes after
 //! the blend gather their share back from the blended lightmap itself
@@ -168,6 +168,7 @@ impl NearFieldPass {
             "near field",
             &[
                 crate::SHARED_WGSL,
+                include_str!("../../../shaders/runtime/near_sum.wgsl"),
                 include_str!("../../../shaders/runtime/near_field.wgsl"),
             ],
             &[
@@ -213,6 +214,7 @@ impl NearFieldPass {
                 "near indirect",
                 &[
                     crate::SHARED_WGSL,
+                    include_str!("../../../shaders/runtime/near_sum.wgsl"),
                     include_str!("../../../shaders/runtime/near_indirect.wgsl"),
                 ],
                 &[
