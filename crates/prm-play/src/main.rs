@@ -63,8 +63,9 @@ struct Args {
     /// groups' summed panes (up to K + G panes a frame); 0 scales the kept clusters up instead.
     #[arg(long, value_name = "G", default_value_t = prm_format::RESIDUAL_GROUPS)]
     residual_groups: u32,
-    /// The near field of archives of format 1.7 (the light the panes' VPL bound removes next to
-    /// other surfaces, gathered each frame): `gather`, or `off` to play the panes alone.
+    /// The near field of archives of format 1.7 and later (the light the panes' VPL bound removes
+    /// next to other surfaces, gathered each frame): `gather`, or `off` to play the panes alone
+    /// (darker than they should be at edges, from 1.8 everywhere a little).
     #[arg(long, value_name = "gather|off", default_value = "gather", value_parser = ["gather", "off"])]
     near_field: String,
     /// Frames to render (headless: default 1). In a window: quit after this many presented

@@ -97,13 +97,15 @@ pub enum ProbeLight {
 }
 
 /// Whether the run time gathers back what the panes' VPL bound removes, for an archive that
-/// holds the near field (format 1.7).
+/// holds the near field (format 1.7; 1.8 adds the deeper VPLs' share).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum NearLight {
-    /// Gathered each frame from the surfaces' direct light along the near rays.
+    /// Gathered each frame along the near rays: from the surfaces' direct light, and in 1.8 from
+    /// the blended lightmap's indirect light too.
     #[default]
     Gather,
-    /// Left out: the panes' light only, as archives before 1.7 play, for comparison.
+    /// Left out: the panes' light only, as archives before 1.7 play, for comparison (a 1.8
+    /// archive, whose deeper VPLs' disks are large, then plays too dark).
     Off,
 }
 
