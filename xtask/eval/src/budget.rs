@@ -50,8 +50,7 @@ struct Case {
     scene: SceneSpec,
     light_name: &'static str,
     light_fraction: [f32; 3],
-    /// The large scene: no lavapipe row (hours on 2 cores), and its 2× atlas bake given the
-    /// memory and archive budgets it needs.
+    /// The large scene: no lavapipe row (hours on 2 cores).
     large: bool,
 }
 
@@ -425,10 +424,10 @@ pub fn run(bin: &Path, cache: &Path, root: &Path) -> Result<String> {
             resolution: auto.resolution * 2,
             ..auto
         };
-        // 240 panes of 1024² need 960 MiB resident and in the archive.
-        let budgets = case
-            .large
-            .then_some("memory_budget_mib = 4096\narchive_budget_mib = 4096\n");
+        // Twice the resolution is four times the panes' memory, past the default budgets on
+        // every case (the Cornell box's 512 panes of 512² need 512 MiB; Sponza's 240 of 1024²
+        // 960 MiB), resident and in the archive: this stage is an ideal, so they are raised.
+        let budgets = Some("memory_budget_mib = 4096\narchive_budget_mib = 4096\n");
         let b = variant(fine.args(), budgets)?;
         let fine_measured = measured(fine.resolution)?;
         row(
