@@ -83,6 +83,16 @@ impl NearField {
         self.disk / (r2 + self.disk)
     }
 
+    /// The deeper VPLs' weight `R₁²/(r² + R₁²)` of a hit at squared distance `r2` (0 without
+    /// their share).
+    pub fn indirect_weight(&self, r2: f32) -> f32 {
+        if self.indirect_disk > 0.0 {
+            self.indirect_disk / (r2 + self.indirect_disk)
+        } else {
+            0.0
+        }
+    }
+
     /// Exit record `i`'s hits (empty when `i` or its range is out of bounds).
     pub fn hits_of(&self, i: usize) -> &[NearHit] {
         let start = if i == 0 { 0 } else { self.exits[i - 1].end as usize };
@@ -98,7 +108,6 @@ impl NearField {
     /// may be empty).
     pub fn irradiance(&self, direct: &[[f32; 3]], indirect: &[[f32; 3]]) -> Vec<[f32; 3]> {
         let scale = std::f32::consts::PI / self.rays_per_exit.max(1) as f32;
-        let r1 = self.indirect_disk;
         (0..self.exits.len())
             .map(|i| {
                 let mut e = [0.0f32; 3];
@@ -107,8 +116,8 @@ impl NearField {
                     if let Some(d) = direct.get(h.point as usize) {
                         (0..3).for_each(|k| e[k] += d[k] * w);
                     }
-                    if let Some(d) = indirect.get(h.point as usize).filter(|_| r1 > 0.0) {
-                        let w1 = r1 / (h.distance2 + r1);
+                    if let Some(d) = indirect.get(h.point as usize) {
+                        let w1 = self.indirect_weight(h.distance2);
                         (0..3).for_each(|k| e[k] += d[k] * w1);
                     }
                 }

@@ -2,8 +2,9 @@
 //! through `near_sum.wgsl`), for archives that hold the near field (format 1.7): first the
 //! radiance every gather point sends this frame from the lights' direct light (through the
 //! shadow maps, times albedo/π), then every exit point's share of what the panes' VPL disk bound
-//! removes, summed along its near rays into the near lightmap the blend adds. The panes' depth-0 VPLs sample the entry points' direct light with a bounded falloff,
-//! which leaves inner edges and contacts too dark (issue #11); this gathers that light back.
+//! removes, summed along its near rays into the near lightmap the blend adds. The panes' depth-0
+//! VPLs sample the entry points' direct light with a bounded falloff, which leaves inner edges
+//! and contacts too dark (issue #11); this gathers that light back.
 //! Archives of format 1.8 bound the deeper VPLs by a disk as large, and two more passes after
 //! the blend gather their share back from the blended lightmap itself
 //! (`near_indirect_radiance.wgsl`, `near_indirect.wgsl`).
@@ -76,16 +77,12 @@ pub(crate) type MergedHits = (Vec<GpuNearExit>, Vec<GpuNearHit>);
 /// end on one texel (5.0 M hits make 2.25 M on the fireplace room, 225 k make 133 k on McGuire's
 /// box), and each walk along them cost lavapipe about 50 ms a frame there.
 pub(crate) fn merge_hits(near: &NearField) -> MergedHits {
-    let r1 = near.indirect_disk;
     let mut exits = Vec::with_capacity(near.exits.len());
     let mut hits: Vec<GpuNearHit> = Vec::with_capacity(near.hits.len() / 2);
     for (i, x) in near.exits.iter().enumerate() {
         let start = hits.len();
         for h in near.hits_of(i) {
-            let (w0, w1) = (
-                near.weight(h.distance2),
-                if r1 > 0.0 { r1 / (h.distance2 + r1) } else { 0.0 },
-            );
+            let (w0, w1) = (near.weight(h.distance2), near.indirect_weight(h.distance2));
             match hits[start..].iter_mut().find(|m| m.point == h.point) {
                 Some(m) => {
                     m.weight += w0;

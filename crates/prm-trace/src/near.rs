@@ -144,13 +144,12 @@ pub fn near_terms(near: &NearField, texels: &[u32]) -> NearTerms {
                         gather_texels.push(g.texel);
                         gather_texels.len() as u32 - 1
                     });
-                    let indirect = near.indirect_disk / (h.distance2 + near.indirect_disk);
                     NearTerm {
                         position: Vec3::from(g.position),
                         normal: Vec3::from(g.normal),
                         albedo: Vec3::from(g.albedo),
                         factor: near.weight(h.distance2) / m,
-                        indirect_factor: if near.indirect_disk > 0.0 { indirect / m } else { 0.0 },
+                        indirect_factor: near.indirect_weight(h.distance2) / m,
                         point,
                     }
                 })
