@@ -310,10 +310,12 @@ pub fn played_indirect(bvh: &Bvh, archive: &CheckedArchive<'_>, light: Light) ->
     let (mut played, mut all) = (played, blend(&weights, archive.panes));
     let exits = archive.near.map_or(points, |n| points - n.gather_texels.len());
     if let Some(near) = archive.near {
+        // The direct share's shadow rays once, the deeper share from each blend's own light.
+        let direct = near.direct(bvh, &[light]);
         for out in [&mut played, &mut all] {
             let (at_exits, at_gather) = out.split_at_mut(exits);
-            for (p, a) in at_exits.iter_mut().zip(near.irradiance(bvh, &[light], at_gather)) {
-                *p += a;
+            for ((p, d), i) in at_exits.iter_mut().zip(&direct).zip(near.deeper(at_gather)) {
+                *p += *d + i;
             }
         }
     }

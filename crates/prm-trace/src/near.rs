@@ -104,22 +104,38 @@ pub struct NearTerms {
 }
 
 impl NearTerms {
-    /// What the near field adds to every texel under `lights`: the direct share ray-cast and the
-    /// deeper VPLs' share from `indirect`, the played indirect irradiance (the lights' alone) at
-    /// [`NearTerms::gather_texels`]. A player's gather points take their own direct share into
-    /// that light too, a second order this leaves out.
+    /// What the near field adds to every texel under `lights`: the direct share ray-cast
+    /// ([`NearTerms::direct`]) and the deeper VPLs' share ([`NearTerms::deeper`]) from `indirect`.
     pub fn irradiance(&self, bvh: &Bvh, lights: &[prm_scene::Light], indirect: &[Vec3]) -> Vec<Vec3> {
+        self.direct(bvh, lights)
+            .into_iter()
+            .zip(self.deeper(indirect))
+            .map(|(d, i)| d + i)
+            .collect()
+    }
+
+    /// Every texel's direct share under `lights`, ray-cast at the gather points.
+    pub fn direct(&self, bvh: &Bvh, lights: &[prm_scene::Light]) -> Vec<Vec3> {
+        self.terms
+            .iter()
+            .map(|terms| near_irradiance(bvh, lights, terms))
+            .collect()
+    }
+
+    /// Every texel's deeper VPLs' share from `indirect`, the played indirect irradiance (the
+    /// lights' alone) at [`NearTerms::gather_texels`]. A player's gather points take their own
+    /// direct share into that light too, a second order this leaves out.
+    pub fn deeper(&self, indirect: &[Vec3]) -> Vec<Vec3> {
         self.terms
             .iter()
             .map(|terms| {
-                let deeper: Vec3 = terms
+                terms
                     .iter()
                     .filter(|t| t.indirect_factor > 0.0)
                     .map(|t| {
                         t.albedo * indirect.get(t.point as usize).copied().unwrap_or(Vec3::ZERO) * t.indirect_factor
                     })
-                    .sum();
-                near_irradiance(bvh, lights, terms) + deeper
+                    .sum()
             })
             .collect()
     }
