@@ -23,7 +23,7 @@ import sys
 
 MAGIC = b"\x89PRM\r\n\x1a\n"
 SUPPORTED_MAJOR = 1
-SUPPORTED_MINOR = 8
+SUPPORTED_MINOR = 9
 KINDS = {1: "metadata", 2: "atlas", 3: "entries", 4: "clusters", 5: "panes", 6: "entry_energy",
          7: "emitters", 8: "sky", 9: "probes", 10: "probe_rays",
          11: "near_field"}
@@ -374,7 +374,8 @@ class Reader:
     def parse_near_field(self, s):
         # 1.7: 32-byte header (exits E, rays per exit M, gather points G, flags = 0, atlas
         # resolution, hits H, disk R^2 f32, reserved; from 1.8 the deeper VPLs' disk R1^2 f32
-        # there, 0 <= R1^2 <= R^2), G gather point records as in probe_rays,
+        # there, 0 <= R1^2 <= R^2; from 1.9 flag bit 0: the weights complement the panes' kernel),
+        # G gather point records as in probe_rays,
         # E exit records (texel u32, end of its hits u32), then H hits (gather point u32, r^2 f32).
         texels = self.resolution * self.resolution
         groups = len(self.emitters or [])
@@ -386,7 +387,8 @@ class Reader:
         indirect_disk = 0.0
         if self.minor >= 8:
             (indirect_disk,), reserved = struct.unpack_from("<f", raw, 28), 0
-        if flags or (self.strict and reserved):
+        known = 1 if self.minor >= 9 else 0
+        if flags & ~known or (self.strict and reserved):
             raise InvalidArchive("near_field: unknown flags or a non-zero reserved field")
         if res != self.resolution or not 1 <= m <= MAX_NEAR_RAYS or g > texels or e > texels or h > e * m:
             raise InvalidArchive("near_field: resolution, ray, point, exit or hit count out of range")
@@ -422,8 +424,8 @@ class Reader:
             if point >= g or r2 != r2 or r2 < 0 or r2 == float("inf"):
                 raise InvalidArchive("near_field: a hit at a gather point that does not exist or not finite")
             hits.append(dict(point=point, distance2=r2))
-        self.near_field = dict(rays_per_exit=m, disk=disk, indirect_disk=indirect_disk, points=points, exits=exits,
-                               hits=hits)
+        self.near_field = dict(rays_per_exit=m, disk=disk, indirect_disk=indirect_disk, complement=bool(flags & 1),
+                               points=points, exits=exits, hits=hits)
 
     def parse_probe_rays(self, s):
         # 1.6: 32-byte header (probes N, rays per probe M, gather points G, flags = 0, atlas

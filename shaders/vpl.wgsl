@@ -9,6 +9,11 @@ const VPL_BOUND_NONE: u32 = 0u;
 const VPL_BOUND_CLAMP: u32 = 1u;
 // 1/(r² + value · area), value = scale²/π.
 const VPL_BOUND_DISK: u32 = 2u;
+// 1/max(r², VPL_NEAR_KEEP · (r² + value · area)), value = scale²/π: the complement of a near
+// field's cut weights (prm-trace's VplBound::Near).
+const VPL_BOUND_NEAR: u32 = 3u;
+// 1 − the near field's cut, prm-trace's NEAR_KEEP (checked in prm-gpu's pane_gather.rs).
+const VPL_NEAR_KEEP: f32 = 0.9375;
 
 const INV_PI: f32 = 0.31830988618379067;
 
@@ -19,6 +24,9 @@ fn inverse_square(r2: f32, area: f32, kind: u32, value: f32) -> f32 {
     }
     if (kind == VPL_BOUND_DISK) {
         return 1.0 / (r2 + value * area);
+    }
+    if (kind == VPL_BOUND_NEAR) {
+        return 1.0 / max(r2, VPL_NEAR_KEEP * (r2 + value * area));
     }
     return 1.0 / r2;
 }

@@ -468,6 +468,8 @@ fn vpl_irradiance_agrees_with_the_cpu_on_every_bound() {
         VplBound::Disk { scale: 0.5 },
         VplBound::DEFAULT,
         VplBound::Disk { scale: 2.0 },
+        VplBound::Near { scale: 1.0 },
+        VplBound::Near { scale: 4.0 },
     ];
     let normal = Vec3::new(0.2, 1.0, -0.3).normalize();
     let mut cpu_vpls = Vec::new();

@@ -29,13 +29,14 @@ fn the_near_field_brings_the_edges_to_the_reference() {
     };
     bake_cpu(&scene, &scene_path, &config, &path);
     let archive = Archive::open(&path).unwrap();
-    assert_eq!(archive.info().minor, 8);
+    assert_eq!(archive.info().minor, 9);
     let near = archive.near_field().expect("the bake traced the near field").clone();
     assert_eq!(near.rays_per_exit, prm_trace::NEAR_RAYS);
     assert_eq!(
         near.indirect_disk, near.disk,
         "the deeper VPLs take the entry points' disk"
     );
+    assert!(near.complement, "the panes' kernel completes the cut weights (1.9)");
     let atlas = Atlas::build(&scene, &AtlasParams::with_sizing(Sizing::Resolution(64))).unwrap();
     let share = near.exits.len() as f64 / atlas.exits.len() as f64;
     println!(

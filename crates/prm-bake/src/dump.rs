@@ -186,6 +186,7 @@ pub fn summary_json<R: Read + Seek>(archive: &Archive<R>, file: &Path, report: O
             "rays_per_exit": n.rays_per_exit,
             "disk_radius": n.disk.sqrt(),
             "indirect_disk_radius": n.indirect_disk.sqrt(),
+            "complement": n.complement,
             "exit_points": n.exits.len(),
             "gather_points": n.points.len(),
             "hits": n.hits.len(),
@@ -355,7 +356,7 @@ pub fn write_summary<W: Write, R: Read + Seek>(
     if let Some(n) = archive.near_field() {
         writeln!(
             out,
-            "near field   {} texels keep {} rays in all ({} traced per exit point, VPL disk radius {:.4}, deeper VPLs' {}), ending at {} texels; the player gathers back there what the VPL bound removes",
+            "near field   {} texels keep {} rays in all ({} traced per exit point, VPL disk radius {:.4}, deeper VPLs' {}{}), ending at {} texels; the player gathers back there what the VPL bound removes",
             n.exits.len(),
             n.hits.len(),
             n.rays_per_exit,
@@ -364,6 +365,11 @@ pub fn write_summary<W: Write, R: Read + Seek>(
                 format!("{:.4}", n.indirect_disk.sqrt())
             } else {
                 "not gathered".to_string()
+            },
+            if n.complement {
+                ", weights complement the panes' kernel"
+            } else {
+                ""
             },
             n.points.len()
         )?;

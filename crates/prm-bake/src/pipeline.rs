@@ -650,8 +650,10 @@ pub fn bake(job: &BakeJob<'_>, renderer: Renderer<'_>, progress: &mut dyn Progre
             progress.phase_start(Phase::NearField, 1);
             let disk = prm_trace::near_disk(e.weight, params.vpl_disk_scale);
             let mut near = prm_trace::near_field(scene, &bvh, &atlas, params.near_rays, disk, params.seed);
-            // The deeper VPLs' disk is the entry point's too (`DeepDisk::Entry` above).
+            // The deeper VPLs' disk is the entry point's too (`DeepDisk::Entry` above), and the
+            // panes' kernel completes the cut weights (`BakeParams::bound`).
             near.indirect_disk = disk;
+            near.complement = matches!(params.bound(), prm_trace::VplBound::Near { .. });
             let detail = format!(
                 "{} texels (exit points and their gutter copies) keep {} rays in all of {} per exit point, ending at {} gather points",
                 near.exits.len(),

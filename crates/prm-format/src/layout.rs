@@ -15,7 +15,7 @@ pub const VERSION_MAJOR: u16 = 1;
 /// section, 1.2 the emitters section, 1.3 the sky section, 1.4 the probes section, 1.5 the
 /// metadata's `accuracy` key, 1.6 the probe rays section, 1.7 the near field section, 1.8 its
 /// deeper VPLs' disk.
-pub const VERSION_MINOR: u16 = 8;
+pub const VERSION_MINOR: u16 = 9;
 
 /// Size of the fixed file header.
 pub const HEADER_SIZE: usize = 64;

@@ -1,4 +1,4 @@
-//! The near field section (format 1.7, 1.8): what the panes' VPL bound removes next to every exit
+//! The near field section (format 1.7, 1.8, 1.9): what the panes' VPL bound removes next to every exit
 //! point, as cosine rays that end close by, so that a run time gathers it back from the
 //! surfaces' radiance of the frame.
 //!
@@ -20,6 +20,14 @@
 //! light of the frame (albedo/π × the blended lightmap there). In 1.7 that word is reserved: the
 //! deeper VPLs' disks were the area one walk stands for, `A/(N·W)`, too small to gather.
 //!
+//! The cut at [`MIN_WEIGHT`] loses what the bound removes beyond it (up to a sixteenth of every
+//! VPL's light there), a loss that grows with the disk. From 1.9 the section may say
+//! ([`NearField::complement`], flag bit 0) that the panes were rendered with the kernel that
+//! completes the cut weights instead: `1/max(r², (1 − w₀)(r² + R²))` (prm-trace's
+//! `VplBound::Near`), `w₀` = [`MIN_WEIGHT`], against the weight `(R²/(r² + R²) − w₀)/(1 − w₀)`
+//! (zero where a hit was not stored). The two sum to `1/r²` at every distance, so nothing is
+//! lost at the cut and nothing counted twice; the same holds for the deeper VPLs with `R₁²`.
+//!
 //! Layout (formats/prm.md §5.6), little-endian: a 32-byte header (exit count `E`, rays per exit
 //! `M`, gather point count `G`, flags = 0, the atlas resolution `R`, hit count `H`, `R²` as
 //! `f32`, `R₁²` as `f32` (1.8; a reserved `u32` = 0 in 1.7)), `G` gather point records of 56
@@ -39,6 +47,8 @@ pub(crate) const NEAR_HIT_SIZE: usize = 8;
 pub const MAX_NEAR_RAYS: u32 = 1 << 16;
 /// The smallest depth-0 weight `R₀²/(r² + R₀²)` a stored hit has: farther hits are left out.
 pub const MIN_WEIGHT: f32 = 1.0 / 16.0;
+/// Header flag (1.9): the weights complement the panes' kernel at the cut ([`NearField::complement`]).
+pub const FLAG_COMPLEMENT: u32 = 1;
 
 /// An exit point with near hits.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -69,6 +79,9 @@ pub struct NearField {
     /// the player gathers from the lightmap's indirect light; 0: none (format 1.7, whose deeper
     /// VPLs' disks were too small to gather).
     pub indirect_disk: f32,
+    /// The weights are cut at [`MIN_WEIGHT`] and rescaled to complete the panes' kernel
+    /// (format 1.9, module docs); false: `R²/(r² + R²)` beside `1/(r² + R²)` (1.7, 1.8).
+    pub complement: bool,
     /// The surface points the rays end at.
     pub points: Vec<GatherPoint>,
     /// Exit points with at least one stored hit, in texel order.
@@ -78,18 +91,28 @@ pub struct NearField {
 }
 
 impl NearField {
-    /// The weight `R²/(r² + R²)` of a hit at squared distance `r2`.
+    /// The weight of a hit at squared distance `r2`: `R²/(r² + R²)`, or with
+    /// [`NearField::complement`] `(R²/(r² + R²) − w₀)/(1 − w₀)`, at least 0.
     pub fn weight(&self, r2: f32) -> f32 {
-        self.disk / (r2 + self.disk)
+        self.weight_for(self.disk, r2)
     }
 
-    /// The deeper VPLs' weight `R₁²/(r² + R₁²)` of a hit at squared distance `r2` (0 without
-    /// their share).
+    /// The deeper VPLs' weight of a hit at squared distance `r2`, as [`NearField::weight`] with
+    /// `R₁²` (0 without their share).
     pub fn indirect_weight(&self, r2: f32) -> f32 {
         if self.indirect_disk > 0.0 {
-            self.indirect_disk / (r2 + self.indirect_disk)
+            self.weight_for(self.indirect_disk, r2)
         } else {
             0.0
+        }
+    }
+
+    fn weight_for(&self, disk: f32, r2: f32) -> f32 {
+        let w = disk / (r2 + disk);
+        if self.complement {
+            ((w - MIN_WEIGHT) / (1.0 - MIN_WEIGHT)).max(0.0)
+        } else {
+            w
         }
     }
 
@@ -201,7 +224,7 @@ pub(crate) fn encode(near: &NearField, resolution: u32) -> Vec<u8> {
         near.exits.len() as u32,
         near.rays_per_exit,
         near.points.len() as u32,
-        0,
+        if near.complement { FLAG_COMPLEMENT } else { 0 },
         resolution,
         near.hits.len() as u32,
     ] {
@@ -231,6 +254,7 @@ pub(crate) struct Header {
     pub hits: u32,
     pub disk: f32,
     pub indirect_disk: f32,
+    pub complement: bool,
 }
 
 /// Parses and checks the header's own fields in a file of `minor` version; `strict` refuses a
@@ -250,7 +274,9 @@ pub(crate) fn decode_header(head: &[u8], minor: u16, strict: bool) -> Result<Hea
     } else {
         (last, 0.0)
     };
-    if flags != 0 || (strict && reserved != 0) {
+    // 1.9 defines bit 0.
+    let known = if minor >= 9 { FLAG_COMPLEMENT } else { 0 };
+    if flags & !known != 0 || (strict && reserved != 0) {
         return Err(format!(
             "near field section has unknown flags {flags:#x} or a non-zero reserved field"
         ));
@@ -268,6 +294,7 @@ pub(crate) fn decode_header(head: &[u8], minor: u16, strict: bool) -> Result<Hea
         hits,
         disk,
         indirect_disk,
+        complement: flags & FLAG_COMPLEMENT != 0,
     })
 }
 
@@ -311,6 +338,7 @@ mod tests {
             rays_per_exit: 4,
             disk: 0.01,
             indirect_disk: 0.005,
+            complement: false,
             points: vec![point(3), point(9)],
             exits: vec![NearExit { texel: 2, end: 2 }, NearExit { texel: 5, end: 3 }],
             hits: vec![
@@ -347,7 +375,20 @@ mod tests {
                 hits: 3,
                 disk: 0.01,
                 indirect_disk: 0.005,
+                complement: false,
             }
+        );
+        let c = encode(
+            &NearField {
+                complement: true,
+                ..n.clone()
+            },
+            4,
+        );
+        assert!(decode_header(&c[..NEAR_FIELD_HEADER_SIZE], 9, true).unwrap().complement);
+        assert!(
+            decode_header(&c[..NEAR_FIELD_HEADER_SIZE], 8, false).is_err(),
+            "flag before 1.9"
         );
         let a = NEAR_FIELD_HEADER_SIZE + 2 * GATHER_POINT_SIZE;
         let b = a + 2 * NEAR_EXIT_SIZE;
@@ -355,6 +396,7 @@ mod tests {
             rays_per_exit: 4,
             disk: h.disk,
             indirect_disk: h.indirect_disk,
+            complement: h.complement,
             points: probe_rays::decode_points(&raw[NEAR_FIELD_HEADER_SIZE..a]).unwrap(),
             exits: decode_exits(&raw[a..b]).unwrap(),
             hits: decode_hits(&raw[b..]).unwrap(),
@@ -403,6 +445,27 @@ mod tests {
             .iter()
             .flatten()
             .all(|v| *v == 0.0));
+    }
+
+    #[test]
+    fn complemented_weights_and_the_panes_kernel_sum_to_the_inverse_square() {
+        // `VplBound::Near`'s kernel, relative to 1/r², is r²/max(r², (1 − w₀)(r² + R²)).
+        let n = NearField {
+            complement: true,
+            ..near()
+        };
+        for r2 in [0.0f32, 1e-4, 0.005, 0.01, 0.05, 0.1499, 0.15, 0.1501, 0.3, 10.0] {
+            for (disk, w) in [(n.disk, n.weight(r2)), (n.indirect_disk, n.indirect_weight(r2))] {
+                let pane = if r2 > 0.0 {
+                    r2 / r2.max((1.0 - MIN_WEIGHT) * (r2 + disk))
+                } else {
+                    0.0
+                };
+                assert!((w + pane - 1.0).abs() < 1e-5, "r² {r2}, R² {disk}: {w} + {pane}");
+                // Zero exactly where the cut leaves hits out.
+                assert_eq!(w > 0.0, disk / (r2 + disk) > MIN_WEIGHT, "r² {r2}, R² {disk}");
+            }
+        }
     }
 
     #[test]

@@ -1217,6 +1217,7 @@ fn read_near_field<R: Read + Seek>(
         rays_per_exit: h.rays_per_exit,
         disk: h.disk,
         indirect_disk: h.indirect_disk,
+        complement: h.complement,
         points,
         exits,
         hits,

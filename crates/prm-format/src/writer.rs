@@ -827,7 +827,13 @@ impl ArchiveWriter {
         }
         if let Some(near) = self.near_field.take() {
             self.write_section(kind::NEAR_FIELD, &crate::near_field::encode(&near, self.resolution))?;
-            minor = if near.indirect_disk > 0.0 { 8 } else { 7 };
+            minor = if near.complement {
+                9
+            } else if near.indirect_disk > 0.0 {
+                8
+            } else {
+                7
+            };
         }
         for (k, data) in std::mem::take(&mut self.custom) {
             self.write_section(k, &data)?;

@@ -916,7 +916,7 @@ fn python_reader_check(path: &Path, filter: TileFilter) -> bool {
     );
     let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     let mut a = Archive::open(path).unwrap();
-    assert_eq!(j["version"], "1.8");
+    assert_eq!(j["version"], "1.9");
     assert_eq!(j["checksums_verified"], true);
     let ja = &j["accuracy"];
     assert_eq!(ja["exit_points"], 1024);
@@ -1028,6 +1028,7 @@ fn python_reader_check(path: &Path, filter: TileFilter) -> bool {
         rays_per_exit: u(&jn["rays_per_exit"]),
         disk: jn["disk"].as_f64().unwrap() as f32,
         indirect_disk: jn["indirect_disk"].as_f64().unwrap() as f32,
+        complement: jn["complement"].as_bool().unwrap(),
         points: gather_points(&jn["points"]),
         exits: jn["exits"]
             .as_array()
@@ -1050,7 +1051,7 @@ fn python_reader_check(path: &Path, filter: TileFilter) -> bool {
     };
     assert_eq!(a.near_field(), Some(&back));
     assert_eq!(a.near_field(), Some(&near));
-    assert_eq!(a.info().minor, 8);
+    assert_eq!(a.info().minor, 9);
     let je: Vec<[f32; 3]> = j["entry_energy"]
         .as_array()
         .unwrap()
@@ -1970,6 +1971,7 @@ fn near_set(s: &Scene) -> NearField {
         rays_per_exit: 8,
         disk: 0.03125,
         indirect_disk: 0.015625,
+        complement: true,
         points,
         exits: vec![NearExit { texel: 1, end: 2 }, NearExit { texel: 4, end: 3 }],
         hits: vec![
@@ -2133,12 +2135,27 @@ fn near_field_round_trips_and_hostile_headers_are_refused() {
     w.finish().unwrap();
     let bytes = std::fs::read(&path).unwrap();
     let mut a = Archive::from_bytes(&bytes).unwrap();
-    assert_eq!(a.info().minor, 8);
+    assert_eq!(a.info().minor, 9);
     assert_eq!(a.near_field(), Some(&near));
     a.verify().unwrap();
+    let uncut = NearField {
+        complement: false,
+        ..near.clone()
+    };
+    let path8 = dir.join("near-1.8.prm");
+    let mut w = ArchiveWriter::create(&path8, s.metadata.clone(), &s.atlas, &s.entries, &s.clusters).unwrap();
+    w.set_emitters(emitter_groups(&s, 2)).unwrap();
+    w.set_near_field(uncut.clone()).unwrap();
+    for p in &s.panes {
+        w.add_pane(p).unwrap();
+    }
+    w.finish().unwrap();
+    let a8 = Archive::open(&path8).unwrap();
+    assert_eq!(a8.info().minor, 8);
+    assert_eq!(a8.near_field(), Some(&uncut));
     let direct_only = NearField {
         indirect_disk: 0.0,
-        ..near.clone()
+        ..uncut.clone()
     };
     let path7 = dir.join("near-1.7.prm");
     let mut w = ArchiveWriter::create(&path7, s.metadata.clone(), &s.atlas, &s.entries, &s.clusters).unwrap();

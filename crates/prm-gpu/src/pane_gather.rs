@@ -24,6 +24,8 @@ pub enum VplBoundKind {
     Clamp = 1,
     /// `VPL_BOUND_DISK`: `1/(r² + value · area)`, value `scale²/π`.
     Disk = 2,
+    /// `VPL_BOUND_NEAR`: `1/max(r², (1 − w₀)(r² + value · area))`, value `scale²/π`.
+    Near = 3,
 }
 
 impl VplBoundKind {
@@ -33,6 +35,7 @@ impl VplBoundKind {
             VplBound::None => (VplBoundKind::None, 0.0),
             VplBound::Clamp { min_distance } => (VplBoundKind::Clamp, min_distance * min_distance),
             VplBound::Disk { scale } => (VplBoundKind::Disk, scale * scale * std::f32::consts::FRAC_1_PI),
+            VplBound::Near { scale } => (VplBoundKind::Near, scale * scale * std::f32::consts::FRAC_1_PI),
         }
     }
 }
@@ -185,10 +188,14 @@ mod tests {
                 ("VPL_BOUND_NONE", VplBoundKind::None as i64),
                 ("VPL_BOUND_CLAMP", VplBoundKind::Clamp as i64),
                 ("VPL_BOUND_DISK", VplBoundKind::Disk as i64),
+                ("VPL_BOUND_NEAR", VplBoundKind::Near as i64),
                 ("DEPTH_NEAREST", DepthFilter::Nearest as i64),
                 ("DEPTH_PCF2X2", DepthFilter::Pcf2x2 as i64),
             ],
         )
         .unwrap();
+        // The one float constant: `1 − w₀` of the near field's cut.
+        let keep = format!("const VPL_NEAR_KEEP: f32 = {};", prm_trace::vpl::NEAR_KEEP);
+        assert!(s.contains(&keep), "vpl.wgsl lacks `{keep}`");
     }
 }

@@ -73,7 +73,7 @@ impl RadianceBindings {
 pub(crate) type MergedHits = (Vec<GpuNearExit>, Vec<GpuNearHit>);
 
 /// The near field's hits with each exit's hits on one gather point merged into one, their
-/// weights `R²/(r² + R²)` (and `R₁²/(r² + R₁²)`) summed: several of an exit point's rays often
+/// weights ([`NearField::weight`] and [`NearField::indirect_weight`]) summed: several of an exit point's rays often
 /// end on one texel (5.0 M hits make 2.25 M on the fireplace room, 225 k make 133 k on McGuire's
 /// box), and each walk along them cost lavapipe about 50 ms a frame there.
 pub(crate) fn merge_hits(near: &NearField) -> MergedHits {
@@ -312,6 +312,7 @@ mod tests {
             rays_per_exit: 8,
             disk: 1.0,
             indirect_disk: 0.5,
+            complement: false,
             points: Vec::new(),
             exits: vec![NearExit { texel: 3, end: 3 }, NearExit { texel: 7, end: 4 }],
             // Exit 0: point 2 twice (r² 0 and 1), point 5 once; exit 1: point 2 again.

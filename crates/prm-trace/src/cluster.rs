@@ -194,7 +194,7 @@ impl Clustering {
 
     /// Clusters from one label per entry point: empty ones dropped, renumbered in order of first
     /// member, centroids and mean normals recomputed.
-    fn from_labels(entries: &[SurfaceSample], labels: &[u32]) -> Clustering {
+    pub fn from_labels(entries: &[SurfaceSample], labels: &[u32]) -> Clustering {
         let mut remap = vec![u32::MAX; labels.iter().max().map_or(0, |&l| l as usize + 1)];
         let mut members: Vec<Vec<u32>> = Vec::new();
         for (k, &l) in labels.iter().enumerate() {

@@ -137,7 +137,8 @@ struct Kernel<'a> {
     nx: Vec<f32>,
     ny: Vec<f32>,
     nz: Vec<f32>,
-    /// The bound as `1/max(r² + add, min)` ([`VplBound`]).
+    /// The bound as `1/max(k·r² + add, r², min)` ([`VplBound`]).
+    k: f32,
     add: Vec<f32>,
     min: Vec<f32>,
     cluster: Vec<u32>,
@@ -161,11 +162,16 @@ impl<'a> Kernel<'a> {
             c.resize(padded, 0.0);
             c
         };
-        // `1/max(r² + disk · area, clamp)` is each bound of [`VplBound`].
-        let (disk, clamp) = match bound {
-            VplBound::None => (0.0, 0.0),
-            VplBound::Clamp { min_distance } => (0.0, min_distance * min_distance),
-            VplBound::Disk { scale } => (scale * scale * std::f32::consts::FRAC_1_PI, 0.0),
+        // `1/max(k·r² + k·disk·area, r², clamp)` is each bound of [`VplBound`] (`k = 1` but
+        // for `Near`, whose `k` is `1 − w₀`; with `k = 1` the `r²` term never wins).
+        let (k, disk, clamp) = match bound {
+            VplBound::None => (1.0, 0.0, 0.0),
+            VplBound::Clamp { min_distance } => (1.0, 0.0, min_distance * min_distance),
+            VplBound::Disk { scale } => (1.0, scale * scale * std::f32::consts::FRAC_1_PI, 0.0),
+            VplBound::Near { scale } => {
+                let k = crate::vpl::NEAR_KEEP;
+                (k, k * scale * scale * std::f32::consts::FRAC_1_PI, 0.0)
+            }
         };
         Ok(Kernel {
             bvh,
@@ -176,6 +182,7 @@ impl<'a> Kernel<'a> {
             nx: column(&|v| v.normal.x),
             ny: column(&|v| v.normal.y),
             nz: column(&|v| v.normal.z),
+            k,
             add: column(&|v| disk * v.area),
             min: column(&|_| clamp),
             cluster: vpls
@@ -209,7 +216,7 @@ impl<'a> Kernel<'a> {
             let r2 = dx * dx + dy * dy + dz * dz;
             let cx = n.x * dx + n.y * dy + n.z * dz;
             let cv = -(nx[j] * dx + ny[j] * dy + nz[j] * dz);
-            let denominator = r2 * (r2 + add[j]).max(min[j]);
+            let denominator = r2 * (self.k * r2 + add[j]).max(r2).max(min[j]);
             let f = std::f32::consts::FRAC_1_PI * cx * cv / denominator;
             let facing = (cx > 0.0) & (cv > 0.0) & (denominator > 0.0);
             g[j] = if facing { f } else { 0.0 };
@@ -719,6 +726,41 @@ mod tests {
     use super::*;
     use crate::{sample_surface, trace_walks, BvhParams, ClusterParams, EntryParams, WalkParams};
     use prm_scene::{AtlasParams, Sizing};
+
+    /// The kernel's unoccluded factors are [`VplBound::irradiance`]'s, for every bound.
+    #[test]
+    fn kernel_factors_are_the_bounds_irradiance() {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/cornell-box/cornell-box.obj");
+        let scene = prm_scene::load(&path).unwrap();
+        let bvh = Bvh::build(&scene, &BvhParams::DEFAULT).unwrap();
+        let entries = sample_surface(&scene, &EntryParams { count: 16, seed: 2 }).unwrap();
+        let walks = trace_walks(&scene, &bvh, &entries, &WalkParams::PREVIEW).unwrap();
+        let clustering = Clustering::identity(&entries);
+        let receivers = sample_surface(&scene, &EntryParams { count: 64, seed: 9 }).unwrap();
+        for bound in [
+            VplBound::None,
+            VplBound::Clamp { min_distance: 0.05 },
+            VplBound::DEFAULT,
+            VplBound::Near { scale: 1.0 },
+            VplBound::Near { scale: 3.0 },
+        ] {
+            let kernel = Kernel::new(&bvh, &walks, &clustering, bound).unwrap();
+            for x in &receivers {
+                let mut g = [0.0f32; BLOCK];
+                for b in 0..kernel.words() {
+                    kernel.block_factors(b, x.position, x.normal, &mut g);
+                    for (j, v) in walks.vpls.iter().enumerate().skip(b * BLOCK).take(BLOCK) {
+                        let want = bound.irradiance(v, x.position, x.normal);
+                        let got = v.power * g[j - b * BLOCK];
+                        assert!(
+                            (got - want).abs().max_element() <= 1e-5 * want.abs().max_element().max(1e-3),
+                            "{bound:?}: {got} against {want}"
+                        );
+                    }
+                }
+            }
+        }
+    }
 
     /// The AVX2 variant of the kernel gives the portable one's sums, bit for bit
     /// ([`crate::isa`]), at every exit point of the bundled Cornell box.

@@ -25,6 +25,9 @@ use glam::Vec3;
 
 use crate::walk::Vpl;
 
+/// `1 − w₀` of [`VplBound::Near`], `w₀` the near field's cut (`prm_format::NEAR_MIN_WEIGHT`).
+pub const NEAR_KEEP: f32 = 1.0 - prm_format::NEAR_MIN_WEIGHT;
+
 /// How the `1/r²` term of a VPL is bounded.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum VplBound {
@@ -40,6 +43,16 @@ pub enum VplBound {
         /// Radius multiplier (1 = a disk of exactly the VPL's area).
         scale: f32,
     },
+    /// The complement of a near field's cut weights (format 1.9):
+    /// `1/max(r², (1 − w₀)(r² + R²))`, `R²` as for [`VplBound::Disk`] and `w₀` =
+    /// `prm_format::NEAR_MIN_WEIGHT`. It is the disk's kernel times `1/(1 − w₀)` out to where
+    /// `R²/(r² + R²)` falls to `w₀`, and `1/r²` beyond, so that with the near field's weight
+    /// `(R²/(r² + R²) − w₀)/(1 − w₀)` it sums to `1/r²` at every distance: the disk's kernel
+    /// loses what it removes beyond the cut, where the near field stores no rays.
+    Near {
+        /// Radius multiplier, as for [`VplBound::Disk`].
+        scale: f32,
+    },
 }
 
 impl VplBound {
@@ -53,6 +66,9 @@ impl VplBound {
             VplBound::None => 1.0 / r2,
             VplBound::Clamp { min_distance } => 1.0 / r2.max(min_distance * min_distance),
             VplBound::Disk { scale } => 1.0 / (r2 + scale * scale * vpl.area * std::f32::consts::FRAC_1_PI),
+            VplBound::Near { scale } => {
+                1.0 / r2.max(NEAR_KEEP * (r2 + scale * scale * vpl.area * std::f32::consts::FRAC_1_PI))
+            }
         }
     }
 

@@ -344,8 +344,9 @@ fn file_stamp(path: &Path) -> String {
 /// walks in all, the entry points doubled up to twice, the top K from the blend's texel budget
 /// and 64 residual groups. 12: the automatic atlas leaves room for 256 panes (was 128). 13: the
 /// deeper VPLs take their entry point's disk, whose near field the player gathers back (format
-/// 1.8).
-const BAKE_EPOCH: u32 = 13;
+/// 1.8). 14: disks three times the radius, whose kernel completes the near field's cut weights
+/// (format 1.9).
+const BAKE_EPOCH: u32 = 14;
 
 /// A case's label as a file name: spaces and punctuation as dashes.
 pub fn case_name(label: &str) -> String {
