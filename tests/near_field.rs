@@ -25,6 +25,9 @@ fn the_near_field_brings_the_edges_to_the_reference() {
         resolution: Some(64),
         seed: Some(3),
         accuracy_points: Some(0),
+        // The entry points' own radius, not the default three: at three every texel of this
+        // small box lies in the near field, and the test checks that only near ones change.
+        vpl_disk_scale: Some(1.0),
         ..Default::default()
     };
     bake_cpu(&scene, &scene_path, &config, &path);
@@ -163,8 +166,9 @@ fn the_near_field_brings_the_edges_to_the_reference() {
     let (e_on, e_off) = (rel_error(&with, &reference), rel_error(&without, &reference));
     let (en_on, en_off) = (sum(&with) / sum(&reference), sum(&without) / sum(&reference));
     println!("near field: at its exit points error {e_off:.4} → {e_on:.4}, energy {en_off:.4} → {en_on:.4}");
-    // Measured: 12.2% → 8.4%, energy 0.946 → 1.009 (1024 reference paths; with the direct share
-    // alone and the deeper VPLs' small disks of format 1.7, 12.1% → 11.1%, 0.986 → 1.012).
+    // Measured: 11.4% → 8.8%, energy 0.968 → 1.019 (1024 reference paths, the complemented
+    // kernel of 1.9; 1.8's: 12.2% → 8.4%, 0.946 → 1.009; with the direct share alone and the
+    // deeper VPLs' small disks of format 1.7, 12.1% → 11.1%, 0.986 → 1.012).
     assert!(e_on < e_off * 0.85, "error {e_off:.3} → {e_on:.3}");
     assert!(
         (en_on - 1.0).abs() < (en_off - 1.0).abs(),

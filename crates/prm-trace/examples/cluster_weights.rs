@@ -38,20 +38,8 @@ use prm_trace::{
     Bvh, BvhParams, Clustering, EntryParams, Lighting, PaneParams, ReferenceParams, ReferenceTracer, WalkParams,
 };
 
-fn rel_rmse(a: &[Vec3], r: &[Vec3]) -> (f64, f64) {
-    let (mut e, mut n, mut sa, mut sr) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
-    for (a, r) in a.iter().zip(r) {
-        e += (*a - *r).length_squared() as f64;
-        n += r.length_squared() as f64;
-        sa += a.element_sum() as f64;
-        sr += r.element_sum() as f64;
-    }
-    ((e / n.max(1e-30)).sqrt(), sa / sr.max(1e-30))
-}
-
-fn env_or(name: &str, default: u32) -> u32 {
-    std::env::var(name).ok().map_or(default, |s| s.parse().unwrap())
-}
+mod common;
+use common::{env_or, rel_rmse};
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();

@@ -39,20 +39,8 @@ use prm_trace::{
 };
 use rayon::prelude::*;
 
-fn env_or(name: &str, default: u32) -> u32 {
-    std::env::var(name).ok().map_or(default, |s| s.parse().unwrap())
-}
-
-fn rel_rmse(a: &[Vec3], r: &[Vec3]) -> (f64, f64) {
-    let (mut e, mut n, mut sa, mut sr) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
-    for (a, r) in a.iter().zip(r) {
-        e += (*a - *r).length_squared() as f64;
-        n += r.length_squared() as f64;
-        sa += a.element_sum() as f64;
-        sr += r.element_sum() as f64;
-    }
-    ((e / n.max(1e-30)).sqrt(), sa / sr.max(1e-30))
-}
+mod common;
+use common::{env_or, rel_rmse};
 
 /// k-means++ then Lloyd on dense rows; returns one label per row.
 fn kmeans(rows: &[Vec<f32>], k: usize, seed: u64) -> Vec<u32> {
