@@ -9,7 +9,9 @@
 //!   factor of a Lambertian disk of radius `R` (it tends to `1/r²` far away).
 //!
 //! Both remove energy near the VPL and so bias the result low, most at receivers close to other
-//! surfaces (inner corners, contact regions). The default is `Disk { scale: 1.0 }`. Measured in
+//! surfaces (inner corners, contact regions). The default is `Disk { scale: 1.0 }`; bakes that
+//! trace the near field, which gives that energy back, use [`VplBound::Near`] (scale 3 in
+//! `prm-bake`). Measured in
 //! `tests/transport.rs` (4096 entry points, 4 walks each):
 //!
 //! * closed-box furnace (ρ = 0.5, expected 1): mean bias −0.45 % over the exit points that are
