@@ -68,6 +68,7 @@ pub fn run(args: &AtlasArgs) -> Result<()> {
             "scene": scene.source,
             "triangles": scene.triangles.len(),
             "degenerate_dropped": scene.report.degenerate_dropped,
+            "duplicates_dropped": scene.report.duplicates_dropped,
             "materials": scene.materials.len(),
             "textures": scene.textures.len(),
             "area": scene.area(),
@@ -97,9 +98,10 @@ pub fn run(args: &AtlasArgs) -> Result<()> {
     let e = bounds.extent();
     println!("scene        {}", scene.source.display());
     println!(
-        "triangles    {} ({} degenerate dropped)",
+        "triangles    {} ({} degenerate, {} duplicates dropped)",
         scene.triangles.len(),
-        scene.report.degenerate_dropped
+        scene.report.degenerate_dropped,
+        scene.report.duplicates_dropped
     );
     println!(
         "materials    {} ({} textures)",

@@ -504,7 +504,7 @@ pub fn bake(job: &BakeJob<'_>, renderer: Renderer<'_>, progress: &mut dyn Progre
         AtlasSize::Resolution(r) => Sizing::Resolution(r),
         AtlasSize::TexelSize(s) => Sizing::TexelSize(s),
     };
-    let atlas = match (&job.plan.probed_atlas, sizing) {
+    let mut atlas = match (&job.plan.probed_atlas, sizing) {
         (Some(a), Sizing::Resolution(r)) if a.resolution == r => a.clone(),
         _ => Atlas::build(scene, &AtlasParams::with_sizing(sizing)).map_err(|source| BakeError::Atlas {
             what: "building the lightmap atlas",
@@ -528,7 +528,15 @@ pub fn bake(job: &BakeJob<'_>, renderer: Renderer<'_>, progress: &mut dyn Progre
     let t = Instant::now();
     progress.phase_start(Phase::Bvh, 1);
     let bvh = Bvh::build(scene, &BvhParams::DEFAULT).map_err(trace("building the BVH"))?;
-    let detail = format!("{} triangles", scene.triangles.len());
+    // Exit points under other geometry (a floor's texels half under a box) move to the part of
+    // their texel that sees the scene, before anything traces from them.
+    let unburied = prm_trace::unbury_exits(scene, &bvh, &mut atlas);
+    let detail = format!(
+        "{} triangles; {} exit points buried under other geometry, {} of them moved within their texel",
+        scene.triangles.len(),
+        unburied.buried,
+        unburied.moved
+    );
     finish_phase(&mut timings, progress, Phase::Bvh, "bvh", t, &detail);
 
     let t = Instant::now();

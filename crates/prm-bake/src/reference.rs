@@ -175,7 +175,9 @@ pub fn run(args: &ReferenceArgs) -> Result<()> {
             Some(r) => Sizing::Resolution(r),
             None => Sizing::Auto,
         };
-        let atlas = Atlas::build(&scene, &AtlasParams::with_sizing(sizing)).context("cannot build the atlas")?;
+        let mut atlas = Atlas::build(&scene, &AtlasParams::with_sizing(sizing)).context("cannot build the atlas")?;
+        // The bake's exit points: the buried ones moved as `prm-bake bake` moves them.
+        prm_trace::unbury_exits(&scene, &bvh, &mut atlas);
         eprintln!(
             "atlas {0}x{0}, {1} exit points; {2} passes x {3} paths",
             atlas.resolution,

@@ -40,8 +40,8 @@ use std::path::Path;
 
 /// Loads a scene file, choosing the loader by extension (`.obj`, `.gltf`, `.glb`).
 ///
-/// Recoverable problems (a missing MTL or texture, degenerate triangles) do not fail the load:
-/// they are listed in [`Scene::report`].
+/// Recoverable problems (a missing MTL or texture, degenerate or duplicate triangles) do not
+/// fail the load: they are listed in [`Scene::report`].
 pub fn load(path: &Path) -> Result<Scene, SceneError> {
     let ext = path
         .extension()

@@ -221,6 +221,11 @@ pub struct LoadReport {
     pub warnings: Vec<String>,
     /// Triangles dropped because their area was zero (or negligible).
     pub degenerate_dropped: usize,
+    /// Triangles dropped because an earlier one has the same corners in the same winding (a
+    /// face listed twice, as McGuire's Cornell boxes list two of their blocks' faces): the second
+    /// copy hides nothing from a ray, but it doubles the face's share of area-sampled points, and
+    /// a ray leaving the face from its surface meets the copy at once.
+    pub duplicates_dropped: usize,
 }
 
 /// A loaded scene, flat and in world space.
@@ -376,13 +381,29 @@ impl Scene {
         h.digest()
     }
 
-    /// Ends a loader's work: a warning for dropped degenerate triangles, an error when none is left.
+    /// Ends a loader's work: drops duplicate triangles, warns of the dropped degenerate and
+    /// duplicate triangles, and fails when none is left.
     pub(crate) fn finish_load(mut self) -> Result<Scene, crate::SceneError> {
         let n = self.report.degenerate_dropped;
         if n > 0 {
             self.report
                 .warnings
                 .push(format!("{}: {n} degenerate triangles dropped", self.source.display()));
+        }
+        let keep = first_copies(&self.triangles);
+        let duplicates = keep.iter().filter(|k| !**k).count();
+        if duplicates > 0 {
+            let mut flags = keep.iter();
+            self.triangles.retain(|_| *flags.next().unwrap_or(&true));
+            if let Some(uvs) = &mut self.lightmap_uvs {
+                let mut flags = keep.iter();
+                uvs.retain(|_| *flags.next().unwrap_or(&true));
+            }
+            self.report.duplicates_dropped = duplicates;
+            self.report.warnings.push(format!(
+                "{}: {duplicates} duplicate triangles dropped (the same corners, in the same winding, as an earlier triangle)",
+                self.source.display()
+            ));
         }
         if self.triangles.is_empty() {
             return Err(crate::SceneError::NoTriangles {
@@ -420,6 +441,21 @@ impl Scene {
         self.triangles.push(t);
         true
     }
+}
+
+/// For every triangle, whether it is the first with its corners in its winding (the same three
+/// positions, bit for bit, in the same cyclic order).
+fn first_copies(triangles: &[Triangle]) -> Vec<bool> {
+    let mut seen = std::collections::HashSet::with_capacity(triangles.len());
+    triangles
+        .iter()
+        .map(|t| {
+            let bits = t.positions.map(|p| p.to_array().map(f32::to_bits));
+            let first = (0..3).min_by_key(|&i| bits[i]).unwrap_or(0);
+            let key = [bits[first], bits[(first + 1) % 3], bits[(first + 2) % 3]];
+            seen.insert(key)
+        })
+        .collect()
 }
 
 /// Degenerate-area threshold for a scene whose bounding-box diagonal is `diag`.

@@ -267,6 +267,27 @@ fn degenerate_triangles_are_dropped_and_counted() {
 }
 
 #[test]
+fn duplicate_triangles_are_dropped_and_counted() {
+    // McGuire's boxes list a face twice ("f -12 -11 -10 -9" after four new vertices); the same
+    // corners in the other winding are a two-sided wall, not a copy, and stay.
+    let dir = scratch("duplicates");
+    let obj = write(
+        &dir,
+        "d.obj",
+        "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1 2 3\nf 2 3 1\nf 1 3 2\nf 2 4 3\nf 1 2 3\n",
+    );
+    let scene = prm_scene::load(&obj).unwrap();
+    assert_eq!(scene.triangles.len(), 3);
+    assert_eq!(scene.report.duplicates_dropped, 2);
+    assert!(scene
+        .report
+        .warnings
+        .iter()
+        .any(|w| w.contains("2 duplicate triangles dropped")));
+    assert!(scene.triangles[1].normal().z < 0.0 && scene.triangles[2].normal().z > 0.0);
+}
+
+#[test]
 fn bad_input_gives_clear_errors() {
     let dir = scratch("bad-input");
     let err = |p: &Path| prm_scene::load(p).expect_err("must fail");
@@ -462,7 +483,8 @@ fn gltf_valid_indexed_mesh_loads() {
     let bin = thirty_triangles();
     let p = indexed_gltf(&dir, &bin, bin.len(), [(0, 36), (36, 360)], [3, 90]);
     let scene = prm_scene::load(&p).unwrap();
-    assert_eq!(scene.triangles.len(), 30);
+    // All 30 read; they are one triangle thirty times, so 29 are dropped as its copies.
+    assert_eq!((scene.triangles.len(), scene.report.duplicates_dropped), (1, 29));
 }
 
 #[test]

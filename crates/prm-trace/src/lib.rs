@@ -15,6 +15,7 @@
 
 #![warn(missing_docs)]
 
+pub mod buried;
 pub mod bvh;
 pub mod check;
 pub mod cluster;
@@ -32,6 +33,7 @@ pub mod sky;
 pub mod vpl;
 pub mod walk;
 
+pub use buried::{is_buried, unbury_exits, Unburied};
 pub use bvh::{BuildQuality, Bvh, BvhKind, BvhParams, Hit, NO_OCCLUDER};
 pub use check::{check_accuracy, check_exits, check_lights, CheckParams, CheckedArchive};
 pub use cluster::{energy_weight, ClusterParams, Clustering};

@@ -8,6 +8,15 @@
 //! every triangle receives its share `N·a_t/A` of points to within one. Each sample carries the
 //! area weight `A/N` = `1/(N·p)`.
 //!
+//! The entry points, not the walks, set a bake's seed-to-seed spread. The fireplace room's 120 s
+//! sizes (3072 entry points, 14 walks each), entry points and walks from separate seeds, played
+//! against the reference: entry seed 0 with walk seed 0 or 2 gives 10.96% or 11.39% (energy
+//! 0.976, 0.968), entry seed 2 gives 14.69% or 14.81% (0.907, 0.906), with the same shape error
+//! (10.4–10.9%). On that room's small triangles this sampler spaces points only somewhat better
+//! than independent ones (mean distance to the nearest point of like normal, over `√(A/N)`: 0.655
+//! against 0.545); ordering the triangles along a 3D Hilbert curve before the strata are laid, or
+//! one shift for all strata, leaves it where it is (0.652, 0.672), so neither was kept.
+//!
 //! Normals: samples carry the **geometric** normal of their triangle. The walks, the VPLs and the
 //! reference tracer's intermediate vertices all use geometric normals; only exit points (which
 //! come from the atlas) use its shading normal as receiver. For flat-shaded scenes they agree.

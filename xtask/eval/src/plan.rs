@@ -345,8 +345,9 @@ fn file_stamp(path: &Path) -> String {
 /// and 64 residual groups. 12: the automatic atlas leaves room for 256 panes (was 128). 13: the
 /// deeper VPLs take their entry point's disk, whose near field the player gathers back (format
 /// 1.8). 14: disks three times the radius, whose kernel completes the near field's cut weights
-/// (format 1.9).
-const BAKE_EPOCH: u32 = 14;
+/// (format 1.9). 15: duplicate triangles dropped at load, near rays from just off the surface,
+/// buried exit points moved within their texel.
+const BAKE_EPOCH: u32 = 15;
 
 /// A case's label as a file name: spaces and punctuation as dashes.
 pub fn case_name(label: &str) -> String {
