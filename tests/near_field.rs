@@ -40,7 +40,10 @@ fn the_near_field_brings_the_edges_to_the_reference() {
         "the deeper VPLs take the entry points' disk"
     );
     assert!(near.complement, "the panes' kernel completes the cut weights (1.9)");
-    let atlas = Atlas::build(&scene, &AtlasParams::with_sizing(Sizing::Resolution(64))).unwrap();
+    let mut atlas = Atlas::build(&scene, &AtlasParams::with_sizing(Sizing::Resolution(64))).unwrap();
+    let bvh = Bvh::build(&scene, &BvhParams::DEFAULT).unwrap();
+    // The bake's exit points: the buried ones moved as the bake moves them.
+    prm_trace::unbury_exits(&scene, &bvh, &mut atlas);
     let share = near.exits.len() as f64 / atlas.exits.len() as f64;
     println!(
         "near field: {} texels (exit points and gutter copies) for {} exit points ({:.0}%), {} hits, {} gather points",
@@ -89,7 +92,6 @@ fn the_near_field_brings_the_edges_to_the_reference() {
     }
 
     // 2. What they gain is the CPU's sum along the near rays.
-    let bvh = Bvh::build(&scene, &BvhParams::DEFAULT).unwrap();
     let lights = [light];
     let cpu_radiance: Vec<Vec3> = near
         .points
@@ -166,7 +168,9 @@ fn the_near_field_brings_the_edges_to_the_reference() {
     let (e_on, e_off) = (rel_error(&with, &reference), rel_error(&without, &reference));
     let (en_on, en_off) = (sum(&with) / sum(&reference), sum(&without) / sum(&reference));
     println!("near field: at its exit points error {e_off:.4} → {e_on:.4}, energy {en_off:.4} → {en_on:.4}");
-    // Measured: 11.4% → 8.8%, energy 0.968 → 1.019 (1024 reference paths, the complemented
+    // Measured: 13.6% → 8.7%, energy 0.959 → 1.020 (with the near rays from just off the
+    // surface and the buried exit points moved; before them 11.4% → 8.8%, energy 0.968 →
+    // 1.019; 1024 reference paths, the complemented
     // kernel of 1.9; 1.8's: 12.2% → 8.4%, 0.946 → 1.009; with the direct share alone and the
     // deeper VPLs' small disks of format 1.7, 12.1% → 11.1%, 0.986 → 1.012).
     assert!(e_on < e_off * 0.85, "error {e_off:.3} → {e_on:.3}");

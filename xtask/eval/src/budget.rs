@@ -33,7 +33,7 @@
 use anyhow::{bail, Context, Result};
 use glam::Vec3;
 use prm_play::{FrameInput, Mode as PlayMode};
-use prm_scene::{Atlas, AtlasParams, Light, Sizing};
+use prm_scene::Light;
 use std::fmt::Write as _;
 use std::path::Path;
 use std::time::Instant;
@@ -284,7 +284,7 @@ pub fn run(bin: &Path, cache: &Path, root: &Path) -> Result<String> {
         );
         // The measured exit points of one resolution, and their reference.
         let measured = |resolution: u32| -> Result<Measured> {
-            let atlas = Atlas::build(&scene, &AtlasParams::with_sizing(Sizing::Resolution(resolution)))?;
+            let atlas = tracer.atlas(resolution)?;
             let stride = atlas.exits.len().div_ceil(TEXELS).max(1);
             let exits: Vec<_> = atlas.exits.iter().step_by(stride).copied().collect();
             let reference = tracer.lightmap(resolution, &exits, &light_spec, &light, SPP)?;

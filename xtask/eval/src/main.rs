@@ -26,7 +26,6 @@ mod targets;
 
 use anyhow::{bail, Context, Result};
 use plan::{Mode, Params, SceneSpec};
-use prm_scene::{Atlas, AtlasParams, Sizing};
 use std::collections::HashMap;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -384,7 +383,7 @@ fn evaluate_scene(mode: Mode, bin: &Path, cache: &Path, spec: &SceneSpec) -> Res
 
         // The atlas of this resolution, rebuilt (deterministic) and checked against the archive.
         if let std::collections::hash_map::Entry::Vacant(e) = atlases.entry(p.resolution) {
-            let atlas = Atlas::build(&scene, &AtlasParams::with_sizing(Sizing::Resolution(p.resolution)))?;
+            let atlas = tracer.atlas(p.resolution)?;
             let all: Vec<u32> = atlas.exits.iter().map(|x| x.texel).collect();
             let stride = atlas.exits.len().div_ceil(spec.lightmap_texels.max(1)).max(1);
             let subset: Vec<prm_scene::ExitPoint> = atlas.exits.iter().step_by(stride).copied().collect();

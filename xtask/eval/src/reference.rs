@@ -98,6 +98,15 @@ impl<'a> Tracer<'a> {
         Ok(r)
     }
 
+    /// The bake's atlas of resolution `resolution`: the exit points as `prm-bake bake` traces
+    /// from them, the buried ones moved within their texel (`prm_trace::unbury_exits`).
+    pub fn atlas(&self, resolution: u32) -> Result<prm_scene::Atlas> {
+        let sizing = prm_scene::AtlasParams::with_sizing(prm_scene::Sizing::Resolution(resolution));
+        let mut atlas = prm_scene::Atlas::build(self.scene, &sizing)?;
+        prm_trace::unbury_exits(self.scene, &self.bvh, &mut atlas);
+        Ok(atlas)
+    }
+
     /// Indirect irradiance at the exit points of an atlas of resolution `resolution`.
     pub fn lightmap(
         &self,
@@ -107,7 +116,7 @@ impl<'a> Tracer<'a> {
         light: &Light,
         spp: u32,
     ) -> Result<Reference> {
-        let key = format!("lightmap|{resolution}|{}|{light_spec}|{spp}", exits.len());
+        let key = format!("lightmap-unburied|{resolution}|{}|{light_spec}|{spp}", exits.len());
         self.cached(&key, || {
             let lights = [*light];
             let t = ReferenceTracer::new(self.scene, &self.bvh, Lighting::Lights(&lights));
