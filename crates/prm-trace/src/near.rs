@@ -357,4 +357,41 @@ mod tests {
             .unwrap();
         assert!(closest >= 16, "{closest} of 64 rays kept at the edge");
     }
+
+    #[test]
+    fn a_coplanar_patch_over_the_floor_does_not_swallow_its_rays() {
+        // The corner, plus a second floor patch lying on the first (same plane, same side, other
+        // corners: a decal, or a face listed twice), all turned off the axes so that a ray from
+        // the surface itself meets the other copy at a rounding error's distance, as a back face:
+        // its exits kept no ray (McGuire's tall block).
+        let mut scene = corner();
+        let (a, b) = (Vec3::new(0.0, 0.0, 0.25), Vec3::new(0.5, 0.0, 0.75));
+        scene
+            .triangles
+            .push(Triangle::flat([a, Vec3::new(a.x, 0.0, b.z), b], 0));
+        scene
+            .triangles
+            .push(Triangle::flat([a, b, Vec3::new(b.x, 0.0, a.z)], 0));
+        let turn = glam::Quat::from_axis_angle(Vec3::new(1.0, 2.0, 3.0).normalize(), 0.7);
+        for t in &mut scene.triangles {
+            *t = Triangle::flat(t.positions.map(|p| turn * p), 0);
+        }
+        let bvh = Bvh::build(&scene, &BvhParams::DEFAULT).unwrap();
+        let atlas = Atlas::build(&scene, &AtlasParams::with_sizing(Sizing::Resolution(64))).unwrap();
+        let disk = near_disk(2.0 / 256.0, 1.0);
+        let near = near_field(&scene, &bvh, &atlas, 64, disk, 1);
+        let kept: std::collections::HashSet<u32> = near.exits.iter().map(|x| x.texel).collect();
+        // Every floor exit within a few texels of the wall, on either copy, keeps rays to it.
+        let floor: Vec<_> = atlas
+            .exits
+            .iter()
+            .filter(|x| {
+                let (p, n) = (turn.inverse() * x.position, turn.inverse() * x.normal);
+                n.y > 0.5 && p.x < 0.05 && p.z > 0.3 && p.z < 0.7
+            })
+            .collect();
+        assert!(floor.iter().any(|x| x.triangle >= 4) && floor.iter().any(|x| x.triangle < 4));
+        let lost = floor.iter().filter(|x| !kept.contains(&x.texel)).count();
+        assert_eq!(lost, 0, "{lost} of {} exits by the wall kept no ray", floor.len());
+    }
 }
