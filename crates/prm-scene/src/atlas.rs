@@ -578,8 +578,9 @@ fn fit_resolution(charts: &[Chart], scale: f32, lay: Lay) -> Result<u32, SceneEr
     }
 }
 
-/// Signed distance-ish helper: barycentric coordinates of `p` in triangle `t` (2D).
-fn barycentric(t: &[Vec2; 3], p: Vec2) -> Option<(f32, f32, f32)> {
+/// Barycentric coordinates `(b0, b1, b2)` of `p` in the 2D triangle `t` (for example its corners'
+/// lightmap UVs in texels), negative outside it; `None` for a degenerate triangle.
+pub fn barycentric(t: &[Vec2; 3], p: Vec2) -> Option<(f32, f32, f32)> {
     let d = (t[1] - t[0]).perp_dot(t[2] - t[0]);
     if d == 0.0 || !d.is_finite() {
         return None;

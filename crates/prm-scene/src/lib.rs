@@ -21,7 +21,7 @@ mod sky;
 mod spec;
 mod texture;
 
-pub use atlas::{Atlas, AtlasParams, AtlasStats, ExitPoint, Sizing, EMPTY_TEXEL};
+pub use atlas::{barycentric, Atlas, AtlasParams, AtlasStats, ExitPoint, Sizing, EMPTY_TEXEL};
 pub use error::SceneError;
 pub use export::{read_exr_rgb, write_exr_rgb, write_gltf, ExportError};
 pub use scene::{Aabb, Camera, Light, LoadReport, Material, Scene, Triangle, RECT_MAX_HALF_ANGLE_DEG};

@@ -65,18 +65,6 @@ pub fn is_buried(bvh: &Bvh, p: Vec3, n: Vec3, tri: u32) -> bool {
     false
 }
 
-/// Barycentric coordinates `(b1, b2)` of `p` in the 2D triangle `t`, when `p` is inside it.
-fn inside(t: &[Vec2; 3], p: Vec2) -> Option<(f32, f32)> {
-    let (e1, e2, q) = (t[1] - t[0], t[2] - t[0], p - t[0]);
-    let det = e1.perp_dot(e2);
-    if det.abs() < f32::MIN_POSITIVE {
-        return None;
-    }
-    let b1 = q.perp_dot(e2) / det;
-    let b2 = e1.perp_dot(q) / det;
-    (b1 >= 0.0 && b2 >= 0.0 && b1 + b2 <= 1.0).then_some((b1, b2))
-}
-
 /// Moves every buried exit point of `atlas` to the nearest point of its texel, on its own
 /// triangle, that is not buried (see the module docs).
 pub fn unbury_exits(scene: &Scene, bvh: &Bvh, atlas: &mut Atlas) -> Unburied {
@@ -99,7 +87,8 @@ pub fn unbury_exits(scene: &Scene, bvh: &Bvh, atlas: &mut Atlas) -> Unburied {
                         tx + ((s % SUB) as f32 + 0.5) / SUB as f32,
                         ty + ((s / SUB) as f32 + 0.5) / SUB as f32,
                     );
-                    inside(&tex, p).map(|(b1, b2)| (p.distance_squared(centre), b1, b2))
+                    let (b0, b1, b2) = prm_scene::barycentric(&tex, p)?;
+                    (b0 >= 0.0 && b1 >= 0.0 && b2 >= 0.0).then_some((p.distance_squared(centre), b1, b2))
                 })
                 .collect();
             candidates.sort_by(|a, b| a.0.total_cmp(&b.0));
