@@ -45,12 +45,13 @@ pub const EMITTER_INDIRECT_SPP: u32 = 256;
 pub const EMITTER_INDIRECT_MAX_PATHS: u64 = 1 << 26;
 
 /// The command line's paths per texel for the sky's transfer (`prm-bake bake --sky`), its
-/// indirect part then smoothed over 3 × 3 texels ([`prm_trace::sky::smooth_transfer`]).
+/// indirect part then smoothed over 5 × 5 texels of its chart ([`prm_trace::sky::smooth_transfer`]).
 /// Measured (`cargo xtask eval --sky`, two cores): on the Dabrovic Sponza (a 60 s bake) the sky
-/// step takes 21–23 s at 256 paths and its indirect image is 11.2% from the reference under a
-/// uniform sky; 1024 paths take 91–101 s for 6.7%. On our courtyard the step takes 1.4–1.7 s
-/// for 3.5%. The planner's time budget does not count the step (README, *Sky*: counting it at
-/// Sponza's 60 s budget shrank the atlas to 224² or, at 512², the entry points to 1024).
+/// step takes 21–29 s at 256 paths and its indirect image is 9.2% from the reference under a
+/// uniform sky (11.2% smoothed over 3 × 3 texels); 1024 paths take 91–123 s for 6.2%. On our
+/// courtyard the step takes 1.4–1.9 s for 3.3%. The planner's time budget does not count the
+/// step (README, *Sky*: counting it at Sponza's 60 s budget shrank the atlas to 224² or, at
+/// 512², the entry points to 1024).
 pub const SKY_PATHS: u32 = 256;
 
 /// The command line's probe budget (`prm-bake bake --probes`), grid cells: on our Cornell box
@@ -295,7 +296,7 @@ fn sky_section(
         progress.phase_advance(u64::from(pass))
     })
     .map_err(trace("tracing the sky's transfer"))?;
-    let at_exits = prm_trace::sky::smooth_transfer(&at_exits, &atlas.exits, atlas.resolution);
+    let at_exits = prm_trace::sky::smooth_transfer(&at_exits, &atlas.exits, &atlas.chart_of_triangle, atlas.resolution);
     let mut out = prm_format::SkyTransfer::zeros((atlas.resolution * atlas.resolution) as usize);
     for (i, x) in atlas.exits.iter().enumerate() {
         out.direct[x.texel as usize] = at_exits.direct[i];

@@ -462,18 +462,27 @@ fn shared_visibility_stays_close_to_exact() {
     );
 }
 
-/// The emissive furnace: a closed box whose every surface emits `L_e` and reflects `ρ`. Radiance
-/// is `L = L_e / (1 − ρ)` everywhere, so at every point the emitters' direct irradiance is
-/// `π L_e`, the indirect irradiance `π (L − L_e) = π L_e ρ / (1 − ρ)`, and an image shows `L`.
-#[test]
-fn emissive_furnace_matches_the_closed_form() {
-    let rho = 0.6f32;
-    let mut scene = furnace_box(2, rho);
-    let le = Vec3::new(1.0, 0.5, 0.25);
-    scene.materials[0].emission = le;
-    let atlas = Atlas::build(&scene, &AtlasParams::with_sizing(Sizing::Resolution(16))).unwrap();
+/// The emissive furnace's albedo and emitted radiance.
+const FURNACE_RHO: f32 = 0.6;
+const FURNACE_LE: Vec3 = Vec3::new(1.0, 0.5, 0.25);
+
+/// The emissive furnace: a closed box whose every surface emits `L_e` and reflects `ρ`
+/// ([`FURNACE_LE`], [`FURNACE_RHO`]), with its BVH and emitters. Radiance is `L = L_e / (1 − ρ)`
+/// everywhere, so at every point the emitters' direct irradiance is `π L_e`, the indirect
+/// irradiance `π (L − L_e) = π L_e ρ / (1 − ρ)`, and an image shows `L`.
+fn emissive_furnace() -> (Scene, Bvh, Emitters) {
+    let mut scene = furnace_box(2, FURNACE_RHO);
+    scene.materials[0].emission = FURNACE_LE;
     let bvh = Bvh::build(&scene, &BvhParams::DEFAULT).unwrap();
     let emitters = Emitters::from_scene(&scene);
+    (scene, bvh, emitters)
+}
+
+#[test]
+fn emissive_furnace_matches_the_closed_form() {
+    let (rho, le) = (FURNACE_RHO, FURNACE_LE);
+    let (scene, bvh, emitters) = emissive_furnace();
+    let atlas = Atlas::build(&scene, &AtlasParams::with_sizing(Sizing::Resolution(16))).unwrap();
     assert_eq!(emitters.groups.len(), 1);
     assert_eq!(emitters.groups[0].triangles as usize, scene.triangles.len());
     let tracer = ReferenceTracer::new(&scene, &bvh, Lighting::Lights(&[])).with_emitters(&emitters);
@@ -516,4 +525,44 @@ fn emissive_furnace_matches_the_closed_form() {
     let ratio = mean_ratio(&img.mean, &expected);
     eprintln!("emissive furnace: image energy {ratio:.4}");
     assert!((ratio - 1.0).abs() < 0.01, "image energy {ratio}");
+}
+
+/// Pixel centres that meet the edge where two surfaces join (a camera looking square at a box's
+/// floor–wall edge puts a whole row of them on it) see the same radiance as their neighbours:
+/// in the emissive furnace every pixel shows `L_e / (1 − ρ)`.
+#[test]
+fn pixels_on_an_edge_between_two_surfaces_are_not_dark() {
+    let (scene, bvh, emitters) = emissive_furnace();
+    let tracer = ReferenceTracer::new(&scene, &bvh, Lighting::Lights(&[])).with_emitters(&emitters);
+    // Looking from the centre at the middle of the floor's edge with the wall z = 0: the edge
+    // is the image's middle row (9 rows, row 4 on the optical axis).
+    let camera = prm_scene::Camera {
+        eye: Vec3::splat(0.5),
+        target: Vec3::new(0.5, 0.0, 0.0),
+        fov_y_deg: 40.0,
+    };
+    let (w, h) = (9usize, 9usize);
+    let img = tracer
+        .render(
+            &camera,
+            w as u32,
+            h as u32,
+            ImageMode::Full,
+            &reference_params(4, 64, 7),
+            &mut |_, _| {},
+        )
+        .unwrap();
+    let expected = (FURNACE_LE / (1.0 - FURNACE_RHO)).element_sum();
+    let row_mean = |y: usize| {
+        img.mean[y * w..(y + 1) * w]
+            .iter()
+            .map(|v| v.element_sum())
+            .sum::<f32>()
+            / (w as f32 * expected)
+    };
+    let rows: Vec<f32> = (0..h).map(row_mean).collect();
+    eprintln!("row means over L: {rows:?}");
+    for (y, r) in rows.iter().enumerate() {
+        assert!((r - 1.0).abs() < 0.03, "row {y}: {r} of L");
+    }
 }

@@ -346,8 +346,9 @@ fn file_stamp(path: &Path) -> String {
 /// deeper VPLs take their entry point's disk, whose near field the player gathers back (format
 /// 1.8). 14: disks three times the radius, whose kernel completes the near field's cut weights
 /// (format 1.9). 15: duplicate triangles dropped at load, near rays from just off the surface,
-/// buried exit points moved within their texel.
-const BAKE_EPOCH: u32 = 15;
+/// buried exit points moved within their texel. 16: the sky's indirect transfer smoothed over
+/// 5 × 5 texels of one chart.
+const BAKE_EPOCH: u32 = 16;
 
 /// A case's label as a file name: spaces and punctuation as dashes.
 pub fn case_name(label: &str) -> String {

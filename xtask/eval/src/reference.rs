@@ -53,6 +53,10 @@ fn load(path: &Path) -> Result<Reference> {
     })
 }
 
+/// Changes whenever the tracer's camera images do, so that cached image references are traced
+/// again (2: a pixel centre on the edge between two surfaces leaves from in front of both).
+pub const IMAGE_EPOCH: u32 = 2;
+
 /// What identifies `scene` (loaded from `path`) in the cache keys: its path, geometry and
 /// materials fingerprint and file size.
 pub fn scene_key(path: &Path, scene: &Scene) -> String {
@@ -141,7 +145,7 @@ impl<'a> Tracer<'a> {
         direct_only: bool,
     ) -> Result<Reference> {
         let key = format!(
-            "image|{:?}|{:?}|{}|{size:?}|{light_spec}|{spp}|{direct_only}",
+            "image{IMAGE_EPOCH}|{:?}|{:?}|{}|{size:?}|{light_spec}|{spp}|{direct_only}",
             camera.eye, camera.target, camera.fov_y_deg
         );
         self.cached(&key, || {

@@ -123,9 +123,10 @@ pub(crate) fn reference_image(p: &Playback, args: &[String], indirect: bool, see
         (p.bake_bin, p.cache, p.name, p.scene, p.camera, p.size, p.spp);
     let seed_key = seed.map(|s| format!("|{s}")).unwrap_or_default();
     let key = format!(
-        "{}|{:?}|{camera:?}|{args:?}|{indirect}|{spp}|{size}{seed_key}",
+        "{}|{:?}|{camera:?}|{args:?}|{indirect}|{spp}|{size}{seed_key}|image{}",
         scene.display(),
         std::fs::metadata(scene).map(|m| m.len()).unwrap_or(0),
+        crate::reference::IMAGE_EPOCH,
     );
     let dir = cache.join(format!("refs-{name}"));
     std::fs::create_dir_all(&dir)?;
