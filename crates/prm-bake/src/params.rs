@@ -461,7 +461,10 @@ impl BakeParams {
     ///   512², 14 walks per entry, played against the reference (image space, seeds 0, 1, 2):
     ///   3072 entries 9.30 / 9.45 / 12.96 % (energy 0.990 / 1.010 / 0.919), 6144 entries 11.08
     ///   / 11.31 / 9.68 % (0.966 / 0.957 / 0.972) for 1.8 times the bake: the seeds' spread
-    ///   narrows, their mean does not move, and the energy falls;
+    ///   narrows, their mean does not move, and the energy falls. The other way, twice the
+    ///   clusters (410, the same 3072 entries; 410 MiB of panes with `memory_budget_mib =
+    ///   512`): 9.30 / 12.15 % (seeds 0 and 2; energy 0.985 / 0.928) for the same bake, so the
+    ///   memory budget's cap on the clusters is not what holds the room at 9–13 %;
     /// - walks per entry: enough for about [`WALKS_IN_ALL`] (65536) walks in all, 1 to 16;
     /// - then, while `cost` expects the bake to take longer than the time budget,
     ///   fewer walks, fewer entries (down to 1024) or a smaller atlas (down to 128²), whichever is
