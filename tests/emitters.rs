@@ -10,7 +10,7 @@
 use glam::Vec3;
 use prm_format::{Archive, ArchiveWriter, Cluster};
 use prm_runtime::{Runtime, RuntimeOptions};
-use prm_scene::{Atlas, AtlasParams, Sizing};
+use prm_scene::{AtlasParams, Sizing};
 use prm_tests::{bake_cpu, channel_sum as sum, gpu, rel_error, repo, temp_dir, unlit_frame};
 use prm_trace::{Bvh, BvhParams, Emitters, Lighting, ReferenceParams, ReferenceTracer};
 
@@ -149,10 +149,8 @@ fn two_emitter_groups_bake_scale_and_match_the_reference() {
     }
 
     // 3. Against the reference tracer with both lamps, at the exit points.
-    let mut atlas = Atlas::build(&scene, &AtlasParams::with_sizing(Sizing::Resolution(RESOLUTION))).unwrap();
     let bvh = Bvh::build(&scene, &BvhParams::DEFAULT).unwrap();
-    // The bake's exit points: the buried ones moved as the bake moves them.
-    prm_trace::unbury_exits(&scene, &bvh, &mut atlas);
+    let atlas = prm_trace::bake_atlas(&scene, &bvh, &AtlasParams::with_sizing(Sizing::Resolution(RESOLUTION))).unwrap();
     let emitters = Emitters::from_scene(&scene);
     let tracer = ReferenceTracer::new(&scene, &bvh, Lighting::Lights(&[])).with_emitters(&emitters);
     let params = ReferenceParams {

@@ -9,7 +9,7 @@
 use glam::Vec3;
 use prm_format::Archive;
 use prm_runtime::{NearLight, Runtime, RuntimeOptions, Shadows};
-use prm_scene::{Atlas, AtlasParams, Light, Sizing};
+use prm_scene::{AtlasParams, Light, Sizing};
 use prm_tests::{bake_cpu, channel_sum as sum, gpu, rel_error, repo, temp_dir};
 use prm_trace::{Bvh, BvhParams, Lighting, ReferenceParams, ReferenceTracer};
 
@@ -40,10 +40,8 @@ fn the_near_field_brings_the_edges_to_the_reference() {
         "the deeper VPLs take the entry points' disk"
     );
     assert!(near.complement, "the panes' kernel completes the cut weights (1.9)");
-    let mut atlas = Atlas::build(&scene, &AtlasParams::with_sizing(Sizing::Resolution(64))).unwrap();
     let bvh = Bvh::build(&scene, &BvhParams::DEFAULT).unwrap();
-    // The bake's exit points: the buried ones moved as the bake moves them.
-    prm_trace::unbury_exits(&scene, &bvh, &mut atlas);
+    let atlas = prm_trace::bake_atlas(&scene, &bvh, &AtlasParams::with_sizing(Sizing::Resolution(64))).unwrap();
     let share = near.exits.len() as f64 / atlas.exits.len() as f64;
     println!(
         "near field: {} texels (exit points and gutter copies) for {} exit points ({:.0}%), {} hits, {} gather points",

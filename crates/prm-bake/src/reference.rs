@@ -5,7 +5,7 @@ use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use glam::Vec3;
-use prm_scene::{Atlas, AtlasParams, Light, Sizing};
+use prm_scene::{AtlasParams, Light, Sizing};
 use prm_trace::{
     parse_camera, parse_light, parse_size, Bvh, BvhParams, Emitters, ImageMode, Lighting, ReferenceParams,
     ReferenceTracer,
@@ -175,9 +175,8 @@ pub fn run(args: &ReferenceArgs) -> Result<()> {
             Some(r) => Sizing::Resolution(r),
             None => Sizing::Auto,
         };
-        let mut atlas = Atlas::build(&scene, &AtlasParams::with_sizing(sizing)).context("cannot build the atlas")?;
-        // The bake's exit points: the buried ones moved as `prm-bake bake` moves them.
-        prm_trace::unbury_exits(&scene, &bvh, &mut atlas);
+        let atlas =
+            prm_trace::bake_atlas(&scene, &bvh, &AtlasParams::with_sizing(sizing)).context("cannot build the atlas")?;
         eprintln!(
             "atlas {0}x{0}, {1} exit points; {2} passes x {3} paths",
             atlas.resolution,

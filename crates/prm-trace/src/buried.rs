@@ -22,7 +22,7 @@
 //! Its share of back faces and ray count are not tuned: inside a closed box the share is 1.
 
 use glam::{Vec2, Vec3};
-use prm_scene::{Atlas, Scene};
+use prm_scene::{Atlas, AtlasParams, Scene, SceneError};
 use rayon::prelude::*;
 
 use crate::bvh::Bvh;
@@ -63,6 +63,15 @@ pub fn is_buried(bvh: &Bvh, p: Vec3, n: Vec3, tri: u32) -> bool {
         }
     }
     false
+}
+
+/// The atlas of `params` with the exit points the bake traces from: [`Atlas::build`], then
+/// [`unbury_exits`]. Whatever compares with a bake at its exit points (the reference's
+/// lightmaps, tests, the eval) builds its atlas here.
+pub fn bake_atlas(scene: &Scene, bvh: &Bvh, params: &AtlasParams) -> Result<Atlas, SceneError> {
+    let mut atlas = Atlas::build(scene, params)?;
+    unbury_exits(scene, bvh, &mut atlas);
+    Ok(atlas)
 }
 
 /// Moves every buried exit point of `atlas` to the nearest point of its texel, on its own

@@ -33,7 +33,7 @@ pub mod sky;
 pub mod vpl;
 pub mod walk;
 
-pub use buried::{is_buried, unbury_exits, Unburied};
+pub use buried::{bake_atlas, is_buried, unbury_exits, Unburied};
 pub use bvh::{BuildQuality, Bvh, BvhKind, BvhParams, Hit, NO_OCCLUDER};
 pub use check::{check_accuracy, check_exits, check_lights, CheckParams, CheckedArchive};
 pub use cluster::{energy_weight, ClusterParams, Clustering};

@@ -51,6 +51,7 @@ pub fn smooth_transfer(
     resolution: u32,
 ) -> SkyTransfer {
     let r = resolution as i64;
+    let chart = |e: &ExitPoint| chart_of_triangle[e.triangle as usize];
     let mut at = vec![u32::MAX; (r * r) as usize];
     for (i, x) in exits.iter().enumerate() {
         at[x.texel as usize] = i as u32;
@@ -73,7 +74,6 @@ pub fn smooth_transfer(
                     continue;
                 }
                 let y = &exits[j as usize];
-                let chart = |e: &ExitPoint| chart_of_triangle[e.triangle as usize];
                 if chart(y) != chart(x) || y.normal.dot(x.normal) < SKY_SMOOTH_MIN_COS {
                     continue;
                 }

@@ -106,9 +106,7 @@ impl<'a> Tracer<'a> {
     /// from them, the buried ones moved within their texel (`prm_trace::unbury_exits`).
     pub fn atlas(&self, resolution: u32) -> Result<prm_scene::Atlas> {
         let sizing = prm_scene::AtlasParams::with_sizing(prm_scene::Sizing::Resolution(resolution));
-        let mut atlas = prm_scene::Atlas::build(self.scene, &sizing)?;
-        prm_trace::unbury_exits(self.scene, &self.bvh, &mut atlas);
-        Ok(atlas)
+        Ok(prm_trace::bake_atlas(self.scene, &self.bvh, &sizing)?)
     }
 
     /// Indirect irradiance at the exit points of an atlas of resolution `resolution`.
