@@ -1,6 +1,7 @@
 // prm-runtime irradiance pass: the full irradiance (direct through the shadow maps + indirect
-// from the lightmap) at every lightmap texel a triangle covers, for static-lightmap export.
-// Triangles are drawn in atlas space (lightmap UV → clip space); alpha 1 marks a covered texel.
+// from the lightmap) at every lightmap texel a triangle or its edge covers, for static-lightmap
+// export. Triangles (and, first, their edges as lines) are drawn in atlas space (lightmap UV →
+// clip space); alpha 1 marks a drawn texel.
 // Comes after shared.wgsl and lights.wgsl.
 
 @group(0) @binding(0) var<uniform> frame: Frame;

@@ -156,14 +156,15 @@ pub fn write_layer(queue: &wgpu::Queue, texture: &wgpu::Texture, layer: u32, dat
     );
 }
 
-/// A colour attachment of `view`, cleared to black and stored.
+/// A colour attachment of `view`, cleared to transparent black (alpha 0, so that a pass may mark
+/// what it drew in alpha, as the run time's irradiance pass does) and stored.
 pub fn color_attachment(view: &wgpu::TextureView) -> Option<wgpu::RenderPassColorAttachment<'_>> {
     Some(wgpu::RenderPassColorAttachment {
         view,
         depth_slice: None,
         resolve_target: None,
         ops: wgpu::Operations {
-            load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
+            load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
             store: wgpu::StoreOp::Store,
         },
     })
@@ -212,6 +213,8 @@ pub struct RenderSpec<'a> {
     pub depth: Option<wgpu::TextureFormat>,
     /// Colour target format (no blending), or `None` for a depth-only pass.
     pub color: Option<wgpu::TextureFormat>,
+    /// What the vertices draw (triangle lists, or line lists for edges).
+    pub topology: wgpu::PrimitiveTopology,
 }
 
 /// A render pipeline as `spec` says.
@@ -226,7 +229,10 @@ pub fn render(device: &wgpu::Device, spec: &RenderSpec) -> wgpu::RenderPipeline 
             compilation_options: Default::default(),
             buffers: spec.vertex_buffers,
         },
-        primitive: Default::default(),
+        primitive: wgpu::PrimitiveState {
+            topology: spec.topology,
+            ..Default::default()
+        },
         depth_stencil: spec.depth.and_then(depth_state),
         multisample: Default::default(),
         fragment: spec.color.map(|_| wgpu::FragmentState {
@@ -265,6 +271,7 @@ pub fn mesh<V: Vertex>(
             vertex_buffers: &[vertices(std::mem::size_of::<V>(), V::ATTRIBUTES)],
             depth,
             color,
+            topology: wgpu::PrimitiveTopology::TriangleList,
         },
     )
 }
@@ -296,7 +303,7 @@ pub fn dynamic_uniform_layout(device: &wgpu::Device, label: &str, size: u64) -> 
     })
 }
 
-/// Begins a render pass onto `color` (cleared to black) and/or `depth` (cleared to far, kept if
+/// Begins a render pass onto `color` (cleared to transparent black) and/or `depth` (cleared to far, kept if
 /// its flag says so), with `timestamps` if given.
 pub fn begin_render_pass<'e>(
     encoder: &'e mut wgpu::CommandEncoder,

@@ -292,6 +292,7 @@ impl VplDepthPass {
                 )],
                 depth: Some(DEPTH_FORMAT),
                 color: None,
+                topology: wgpu::PrimitiveTopology::TriangleList,
             },
         );
         let frame_group = device.create_bind_group(&wgpu::BindGroupDescriptor {

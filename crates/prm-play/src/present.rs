@@ -30,6 +30,7 @@ impl Presenter {
                 vertex_buffers: &[],
                 depth: None,
                 color: Some(format),
+                topology: wgpu::PrimitiveTopology::TriangleList,
             },
         );
         let uniform = pipeline::uniform(&ctx.device, "play present", 16);

@@ -1,8 +1,12 @@
 //! The irradiance pass (`shaders/runtime/irradiance.wgsl`): the full irradiance, direct through
 //! the shadow maps plus indirect, at every lightmap texel, for engines that take only static
-//! lightmaps. Triangles are drawn in atlas space; texels no triangle's centre sample covers (the
-//! atlas's conservative edges and gutters) are then dilated from their covered neighbours on
-//! the CPU, [`DILATE_STEPS`] rings deep, so bilinear sampling at chart edges does not fetch black.
+//! lightmaps. Triangles are drawn in atlas space over their own edges, drawn first as lines, so
+//! that a texel an edge crosses but no triangle covers at its centre (the atlas's conservative
+//! chart borders, and slivers thinner than a texel) still gets the light of a point of its own
+//! triangle; texels neither reaches (gutters) are then dilated from their drawn neighbours on
+//! the CPU, [`DILATE_STEPS`] rings deep, so bilinear sampling at chart edges does not fetch
+//! black. Triangles alone left 2619 of Dabrovic Sponza's 174,648 lit texels at 512² black (its
+//! 66k triangles get about four texels each).
 
 use prm_gpu_kit::{pipeline, readback, GpuError};
 
@@ -29,10 +33,12 @@ impl pipeline::Vertex for AtlasVertex {
 /// Renders the irradiance lightmap.
 pub(crate) struct IrradiancePass {
     pipeline: wgpu::RenderPipeline,
+    /// The same shader over the triangles' edges.
+    edges: wgpu::RenderPipeline,
 }
 
 impl IrradiancePass {
-    /// The pipeline; bind groups are made per [`IrradiancePass::render`].
+    /// The pipelines; bind groups are made per [`IrradiancePass::render`].
     pub fn new(device: &wgpu::Device) -> IrradiancePass {
         let parts = [
             crate::SHARED_WGSL,
@@ -40,7 +46,23 @@ impl IrradiancePass {
             include_str!("../../../shaders/runtime/irradiance.wgsl"),
         ];
         let pipeline = pipeline::mesh::<AtlasVertex>(device, "prm irradiance", &parts, None, Some(LIGHTMAP_FORMAT));
-        IrradiancePass { pipeline }
+        let module = pipeline::shader(device, "prm irradiance edges", &parts);
+        let edges = pipeline::render(
+            device,
+            &pipeline::RenderSpec {
+                label: "prm irradiance edges",
+                module: &module,
+                layout: None,
+                vertex_buffers: &[pipeline::vertices(
+                    std::mem::size_of::<AtlasVertex>(),
+                    <AtlasVertex as pipeline::Vertex>::ATTRIBUTES,
+                )],
+                depth: None,
+                color: Some(LIGHTMAP_FORMAT),
+                topology: wgpu::PrimitiveTopology::LineList,
+            },
+        );
+        IrradiancePass { pipeline, edges }
     }
 
     /// Renders `vertices` into a `resolution`² target, reads it back and dilates it; the pass
@@ -62,18 +84,30 @@ impl IrradiancePass {
             wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
         );
         let view = target.create_view(&Default::default());
-        let bind_group = pipeline::bind_group(
+        // One bind group per pipeline: each implied layout is its own.
+        let [fill_group, edge_group] = [&self.pipeline, &self.edges]
+            .map(|p| pipeline::bind_group(device, "prm irradiance", &p.get_bind_group_layout(0), resources));
+        // Every triangle's three edges, as line-list indices into its three vertices.
+        let edge_indices: Vec<u32> = (0..vertex_count / 3)
+            .flat_map(|t| [0, 1, 1, 2, 2, 0].map(|k| 3 * t + k))
+            .collect();
+        let edge_indices = pipeline::buffer_init(
             device,
-            "prm irradiance",
-            &self.pipeline.get_bind_group_layout(0),
-            resources,
+            "prm irradiance edges",
+            bytemuck::cast_slice(&edge_indices),
+            wgpu::BufferUsages::INDEX,
         );
         let mut enc = device.create_command_encoder(&Default::default());
         {
             let mut pass = pipeline::begin_render_pass(&mut enc, "prm irradiance", Some(&view), None, None);
-            pass.set_pipeline(&self.pipeline);
-            pass.set_bind_group(0, &bind_group, &[]);
             pass.set_vertex_buffer(0, vertices.slice(..));
+            // Edges first: where a triangle covers a texel's centre, its fill overwrites them.
+            pass.set_pipeline(&self.edges);
+            pass.set_bind_group(0, &edge_group, &[]);
+            pass.set_index_buffer(edge_indices.slice(..), wgpu::IndexFormat::Uint32);
+            pass.draw_indexed(0..2 * vertex_count, 0, 0..1);
+            pass.set_pipeline(&self.pipeline);
+            pass.set_bind_group(0, &fill_group, &[]);
             pass.draw(0..vertex_count, 0..1);
         }
         queue.submit([enc.finish()]);

@@ -79,6 +79,7 @@ impl ShadowPass {
                 vertex_buffers: &[pipeline::vertices(12, &wgpu::vertex_attr_array![0 => Float32x3])],
                 depth: Some(SHADOW_FORMAT),
                 color: None,
+                topology: wgpu::PrimitiveTopology::TriangleList,
             },
         );
         let bind_group = Self::group(device, &pipeline, maps);

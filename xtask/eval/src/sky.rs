@@ -6,8 +6,9 @@
 //! - `scenes/courtyard` (a yard open to the sky) under a uniform blue sky with a low sun, and
 //!   under a smooth environment map (written here: bright towards one side of the horizon and
 //!   the zenith) turned by 40°, without a sun;
-//! - the Dabrovic Sponza (`../shared/scenes`) under the uniform sky and a high sun, baked with
-//!   `--time-budget 60` (the default budget, 600 s, is more than this eval affords).
+//! - the Dabrovic Sponza (`../shared/scenes`) under the uniform sky and a high sun, baked at the
+//!   default settings as issue #15's target asks (its plan takes about 200 s of the 600 s
+//!   budget; until session 22 this eval baked it with `--time-budget 60`).
 //!
 //! Errors are `../shared/notes/metrics.md`'s (`compare.rs`): the indirect image after a 4×4
 //! downsample and the full image. The frame cost compares, on one renderer, frames whose sky
@@ -224,7 +225,7 @@ pub fn run(bake_bin: &Path, cache: &Path, root: &Path, out: &Path) -> Result<Str
             name: "sponza",
             scene: sponza,
             camera: Some("14,3,0:-10,5,0:60"),
-            bake_args: strings(&["--sky", "--time-budget", "60"]),
+            bake_args: strings(&["--sky"]),
             rows: vec![
                 (
                     "blue sky + high sun",
@@ -242,7 +243,7 @@ pub fn run(bake_bin: &Path, cache: &Path, root: &Path, out: &Path) -> Result<Str
             name: "sponza, --sky-paths 1024",
             scene: cases[1].scene.clone(),
             camera: cases[1].camera,
-            bake_args: strings(&["--sky", "--sky-paths", "1024", "--time-budget", "60"]),
+            bake_args: strings(&["--sky", "--sky-paths", "1024"]),
             rows: vec![("blue sky alone", strings(&["--sky", BLUE_SKY]))],
         });
     } else {
