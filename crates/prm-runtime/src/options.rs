@@ -151,7 +151,15 @@ impl RuntimeOptions {
     /// bounding sphere (8 cm texels) 23.5% off with energy 1.114, light leaking through thin
     /// geometry; 2², 4² and 8² tiles 20.0%, 13.1% (1.075) and 8.3% (1.041). Whole frames at
     /// 1024×768 on lavapipe (`prm-play --timings`, two runs): 417–450 ms with one map, 461–474
-    /// with 4², 615 with 8² (each tile is a pass over the scene).
+    /// with 4², 615 with 8² (each tile is a pass over the scene). Measured again in session 22
+    /// on the eval's default Sponza bake (same view; the 256-path full reference less the
+    /// indirect one): 4² tiles of 512² 13.2% off, of 1024² 8.4%, of 2048² 5.8%, the indirect
+    /// light 15.73%, 15.68%, 16.02% (energy 0.998, 0.981, 0.952: less light leaks past shadow
+    /// edges into the entry irradiance); whole frames at 1024×768 (medians of 10, two runs)
+    /// 524–527 ms, 570–580 ms with 1024² views and 650–662 ms with 8² tiles of 512². Larger
+    /// views are the cheaper way to sharper sun shadows than more tiles, but
+    /// `shadow_resolution` is shared with the point lights' cube faces, which would pay four
+    /// times their fill too.
     pub const DEFAULT_SUN_TILES: u32 = 4;
 
     /// The defaults with the top K the archive asks for ([`archive_top_k`]).
