@@ -93,7 +93,8 @@ pub struct BakeArgs {
     /// (`prm-play --sky`), turned and scaled at run time.
     #[arg(long)]
     pub sky: bool,
-    /// Paths per texel of the sky's transfer (default 256; more: less noise, longer bake).
+    /// Paths per texel of the sky's transfer (default: 256, doubled up to 1024 while the
+    /// planned bake and the sky step fit the time budget; more: less noise, longer bake).
     #[arg(long, value_name = "PATHS", requires = "sky")]
     pub sky_paths: Option<u32>,
     /// Also place irradiance probes for moving objects: a grid of at most CELLS cells over the
@@ -162,7 +163,8 @@ impl BakeArgs {
             seed: self.seed,
             top_k: self.top_k,
             time_budget_s: self.time_budget,
-            sky_paths: self.sky.then(|| self.sky_paths.unwrap_or(prm_bake::SKY_PATHS)),
+            sky: self.sky.then_some(true),
+            sky_paths: self.sky_paths,
             probes: self.probes,
             probe_rays: self.probe_rays,
             near_rays: self.near_rays,

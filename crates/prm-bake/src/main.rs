@@ -79,19 +79,18 @@ fn main() -> ExitCode {
 mod tests {
     use super::*;
 
-    /// `--sky` alone bakes the library's default paths per texel; `--sky-paths N` takes N.
+    /// `--sky` alone leaves the paths per texel to the plan; `--sky-paths N` takes N.
     #[test]
-    fn sky_flag_defaults_to_the_library_paths() {
-        let paths =
-            |args: &[&str]| match Cli::parse_from([&["prm-bake", "bake", "s.obj", "-o", "o.prm"], args].concat())
-                .command
-            {
-                Command::Bake(b) => b.config().sky_paths,
-                _ => unreachable!("a bake"),
-            };
-        assert_eq!(paths(&["--sky"]), Some(prm_bake::SKY_PATHS));
-        assert_eq!(paths(&["--sky", "--sky-paths", "64"]), Some(64));
-        assert_eq!(paths(&[]), None);
+    fn sky_flag_leaves_the_paths_to_the_plan() {
+        let sky = |args: &[&str]| match Cli::parse_from([&["prm-bake", "bake", "s.obj", "-o", "o.prm"], args].concat())
+            .command
+        {
+            Command::Bake(b) => (b.config().sky, b.config().sky_paths),
+            _ => unreachable!("a bake"),
+        };
+        assert_eq!(sky(&["--sky"]), (Some(true), None));
+        assert_eq!(sky(&["--sky", "--sky-paths", "64"]), (Some(true), Some(64)));
+        assert_eq!(sky(&[]), (None, None));
         assert!(Cli::try_parse_from(["prm-bake", "bake", "s.obj", "-o", "o.prm", "--sky-paths", "64"]).is_err());
     }
 

@@ -68,7 +68,11 @@ pub struct BakeConfig {
     pub memory_budget_mib: Option<f64>,
     /// Longest bake the automatic sizes may plan for, seconds (by [`CostModel`]).
     pub time_budget_s: Option<f64>,
-    /// Bake the sky's transfer with this many paths per texel (unset: no sky in the archive).
+    /// Bake the sky's transfer (also when `sky_paths` is set), its paths per texel from the time
+    /// budget unless `sky_paths` gives them ([`BakeParams::sky_paths`]).
+    pub sky: Option<bool>,
+    /// Bake the sky's transfer with this many paths per texel (unset: no sky in the archive
+    /// unless `sky`).
     pub sky_paths: Option<u32>,
     /// Place irradiance probes on a grid of at most this many cells (unset: no probes).
     pub probes: Option<u32>,
@@ -114,6 +118,7 @@ impl BakeConfig {
             archive_budget_mib: over.archive_budget_mib.or(self.archive_budget_mib),
             memory_budget_mib: over.memory_budget_mib.or(self.memory_budget_mib),
             time_budget_s: over.time_budget_s.or(self.time_budget_s),
+            sky: over.sky.or(self.sky),
             sky_paths: over.sky_paths.or(self.sky_paths),
             probes: over.probes.or(self.probes),
             probe_rays: over.probe_rays.or(self.probe_rays),
@@ -161,8 +166,9 @@ pub struct BakeParams {
     pub memory_budget_mib: f64,
     /// Bake time budget of the automatic sizes, seconds.
     pub time_budget_s: f64,
-    /// Paths per texel of the sky's transfer, when the archive holds one
-    /// ([`crate::SKY_PATHS`] is the command line's default).
+    /// Paths per texel of the sky's transfer, when the archive holds one: as given, else
+    /// [`crate::SKY_PATHS`] doubled up to [`MAX_AUTO_SKY_PATHS`] while the planned bake and the
+    /// sky step (by [`SKY_PATH_SECONDS`]) stay within the time budget.
     pub sky_paths: Option<u32>,
     /// Most grid cells of the irradiance probes, when the archive holds them
     /// ([`crate::PROBE_CELLS`] is the command line's default).
@@ -333,6 +339,18 @@ impl CostModel {
 
 /// Most entry points the automatic rules choose.
 const MAX_AUTO_ENTRIES: usize = 16384;
+
+/// Most paths per texel the time budget gives the sky's transfer (from [`crate::SKY_PATHS`],
+/// doubled). Measured on Dabrovic Sponza (`cargo xtask eval --sky`, its default plan of about
+/// 200 s): 256 paths take the sky step 28.5 s for 9.20% under a uniform sky, 1024 take 120 s
+/// for 6.24%; the error falls about as `1/√paths` (the texels' noise), and beyond 1024 the 512²
+/// texels themselves are most of it (17.5% at full resolution).
+pub const MAX_AUTO_SKY_PATHS: u32 = 1024;
+
+/// Seconds per path of the sky's transfer on the reference machine (two cores), for the plan:
+/// Sponza's sky step, 26.3 M paths (256 per texel) in 28.5 s and 105 M in 120 s (1.08 and 1.14
+/// µs). Simpler scenes go faster (our courtyard about 0.2 µs), so the estimate errs long.
+pub const SKY_PATH_SECONDS: f64 = 1.14e-6;
 
 /// Panes the automatic atlas leaves room for in the run-time memory budget: the atlas shrinks
 /// (in steps of 64 texels a side) until this many fit. Measured on the fireplace room at the
@@ -707,6 +725,28 @@ impl BakeParams {
         }
         .min(clusters);
         let face_resolution = config.face_resolution.or(fixed.as_ref().map(|v| v.face)).unwrap_or(128);
+        let sky_paths = match (config.sky_paths, config.sky) {
+            (Some(paths), _) => Some(paths),
+            (None, Some(true)) => {
+                let exits = utilization * texels(atlas);
+                let step = |paths: u32| exits * paths as f64 * SKY_PATH_SECONDS;
+                let mut paths = crate::SKY_PATHS;
+                while paths < MAX_AUTO_SKY_PATHS && estimated_seconds + step(2 * paths) <= time_budget_s {
+                    paths *= 2;
+                }
+                reasons.push(format!(
+                    "sky: {paths} paths per texel, a sky step of about {:.0} s{}",
+                    step(paths),
+                    if paths > crate::SKY_PATHS {
+                        " within what the time budget leaves"
+                    } else {
+                        ""
+                    }
+                ));
+                Some(paths)
+            }
+            _ => None,
+        };
         // Without the VPL bound nothing is missing near the exit points.
         let near_rays = if config.vpl_disk_scale == Some(0.0) {
             0
@@ -728,7 +768,7 @@ impl BakeParams {
             archive_budget_mib,
             memory_budget_mib,
             time_budget_s,
-            sky_paths: config.sky_paths,
+            sky_paths,
             probes: config.probes,
             probe_rays: config.probe_rays.unwrap_or(crate::PROBE_RAYS),
             near_rays,

@@ -44,14 +44,15 @@ pub const EMITTER_INDIRECT_SPP: u32 = 256;
 /// panes (through its entry irradiance), whose cost does not grow with the atlas.
 pub const EMITTER_INDIRECT_MAX_PATHS: u64 = 1 << 26;
 
-/// The command line's paths per texel for the sky's transfer (`prm-bake bake --sky`), its
-/// indirect part then smoothed over 5 × 5 texels of its chart ([`prm_trace::sky::smooth_transfer`]).
-/// Measured (`cargo xtask eval --sky`, two cores): on the Dabrovic Sponza (a 60 s bake) the sky
-/// step takes 21–29 s at 256 paths and its indirect image is 9.2% from the reference under a
-/// uniform sky (11.2% smoothed over 3 × 3 texels); 1024 paths take 91–123 s for 6.2%. On our
-/// courtyard the step takes 1.4–1.9 s for 3.3%. The planner's time budget does not count the
-/// step (README, *Sky*: counting it at Sponza's 60 s budget shrank the atlas to 224² or, at
-/// 512², the entry points to 1024).
+/// The fewest paths per texel the plan gives the sky's transfer (`prm-bake bake --sky` without
+/// `--sky-paths`), doubled up to [`crate::params::MAX_AUTO_SKY_PATHS`] while the planned bake and
+/// the sky step fit the time budget; its indirect part is then smoothed over 5 × 5 texels of its
+/// chart ([`prm_trace::sky::smooth_transfer`]). Measured (`cargo xtask eval --sky`, two cores):
+/// on the Dabrovic Sponza the sky step takes 21–29 s at 256 paths and its indirect image is
+/// 9.2% from the reference under a uniform sky (11.2% smoothed over 3 × 3 texels); 1024 paths
+/// take 91–123 s for 6.2%. On our courtyard the step takes 1.4–1.9 s for 3.3%. The plan does
+/// not shrink the panes for the step (README, *Sky*: counting it at Sponza's 60 s budget shrank
+/// the atlas to 224² or, at 512², the entry points to 1024); it only spends what they leave.
 pub const SKY_PATHS: u32 = 256;
 
 /// The command line's probe budget (`prm-bake bake --probes`), grid cells: on our Cornell box

@@ -179,3 +179,28 @@ fn impossible_parameters_and_destinations_are_typed_errors() {
     assert!(matches!(e, BakeError::Destination(_)), "{e:?}");
     assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 0);
 }
+
+/// `sky` without `sky_paths` takes the sky's paths from what the time budget leaves: the most
+/// the rule gives under the default budget on the small Cornell box, the fewest under a budget
+/// the panes already fill; given paths stay as given.
+#[test]
+fn the_sky_paths_come_from_the_time_budget_unless_given() {
+    let scene = prm_scene::load(&scene_path()).unwrap();
+    let paths = |time_budget_s: Option<f64>, sky_paths: Option<u32>| {
+        let config = BakeConfig {
+            sky: Some(true),
+            sky_paths,
+            time_budget_s,
+            ..BakeConfig::default()
+        };
+        Plan::new(&config, &scene).unwrap().params.sky_paths
+    };
+    assert_eq!(paths(None, None), Some(prm_bake::params::MAX_AUTO_SKY_PATHS));
+    let plan = Plan::new(&BakeConfig::default(), &scene).unwrap().params;
+    assert_eq!(plan.sky_paths, None, "no sky unless asked");
+    assert_eq!(
+        paths(Some(plan.estimated_seconds * 1.01), None),
+        Some(prm_bake::SKY_PATHS)
+    );
+    assert_eq!(paths(None, Some(64)), Some(64));
+}

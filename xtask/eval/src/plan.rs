@@ -347,8 +347,8 @@ fn file_stamp(path: &Path) -> String {
 /// 1.8). 14: disks three times the radius, whose kernel completes the near field's cut weights
 /// (format 1.9). 15: duplicate triangles dropped at load, near rays from just off the surface,
 /// buried exit points moved within their texel. 16: the sky's indirect transfer smoothed over
-/// 5 × 5 texels of one chart.
-const BAKE_EPOCH: u32 = 16;
+/// 5 × 5 texels of one chart. 17: `--sky` alone takes its paths per texel from the time budget.
+const BAKE_EPOCH: u32 = 17;
 
 /// A case's label as a file name: spaces and punctuation as dashes.
 pub fn case_name(label: &str) -> String {
