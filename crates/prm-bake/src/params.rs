@@ -726,6 +726,9 @@ impl BakeParams {
         .min(clusters);
         let face_resolution = config.face_resolution.or(fixed.as_ref().map(|v| v.face)).unwrap_or(128);
         let sky_paths = match (config.sky_paths, config.sky) {
+            (Some(paths), Some(false)) => {
+                invalid!("sky_paths = {paths} asks for the sky, which sky = false turns off: drop one of them")
+            }
             (Some(paths), _) => Some(paths),
             (None, Some(true)) => {
                 let exits = utilization * texels(atlas);

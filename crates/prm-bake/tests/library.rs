@@ -203,4 +203,13 @@ fn the_sky_paths_come_from_the_time_budget_unless_given() {
         Some(prm_bake::SKY_PATHS)
     );
     assert_eq!(paths(None, Some(64)), Some(64));
+    let contradiction = BakeConfig {
+        sky: Some(false),
+        sky_paths: Some(64),
+        ..BakeConfig::default()
+    };
+    assert!(matches!(
+        Plan::new(&contradiction, &scene),
+        Err(BakeError::InvalidParams(_))
+    ));
 }
