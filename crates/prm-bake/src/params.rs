@@ -344,7 +344,7 @@ const MAX_AUTO_ENTRIES: usize = 16384;
 /// doubled). Measured on Dabrovic Sponza (`cargo xtask eval --sky`, its default plan of about
 /// 200 s): 256 paths take the sky step 28.5 s for 9.20% under a uniform sky, 1024 take 120 s
 /// for 6.24%; the error falls about as `1/√paths` (the texels' noise), and beyond 1024 the 512²
-/// texels themselves are most of it (17.5% at full resolution).
+/// texels themselves are most of what is left (15.4% at full resolution, 17.5% at 256 paths).
 pub const MAX_AUTO_SKY_PATHS: u32 = 1024;
 
 /// Seconds per path of the sky's transfer on the reference machine (two cores), for the plan:
