@@ -45,23 +45,29 @@ impl IrradiancePass {
             crate::LIGHTS_WGSL,
             include_str!("../../../shaders/runtime/irradiance.wgsl"),
         ];
-        let pipeline = pipeline::mesh::<AtlasVertex>(device, "prm irradiance", &parts, None, Some(LIGHTMAP_FORMAT));
-        let module = pipeline::shader(device, "prm irradiance edges", &parts);
-        let edges = pipeline::render(
-            device,
-            &pipeline::RenderSpec {
-                label: "prm irradiance edges",
-                module: &module,
-                layout: None,
-                vertex_buffers: &[pipeline::vertices(
-                    std::mem::size_of::<AtlasVertex>(),
-                    <AtlasVertex as pipeline::Vertex>::ATTRIBUTES,
-                )],
-                depth: None,
-                color: Some(LIGHTMAP_FORMAT),
-                topology: wgpu::PrimitiveTopology::LineList,
-            },
-        );
+        let module = pipeline::shader(device, "prm irradiance", &parts);
+        let vertex_buffers = [pipeline::vertices(
+            std::mem::size_of::<AtlasVertex>(),
+            <AtlasVertex as pipeline::Vertex>::ATTRIBUTES,
+        )];
+        let [pipeline, edges] = [
+            ("prm irradiance", wgpu::PrimitiveTopology::TriangleList),
+            ("prm irradiance edges", wgpu::PrimitiveTopology::LineList),
+        ]
+        .map(|(label, topology)| {
+            pipeline::render(
+                device,
+                &pipeline::RenderSpec {
+                    label,
+                    module: &module,
+                    layout: None,
+                    vertex_buffers: &vertex_buffers,
+                    depth: None,
+                    color: Some(LIGHTMAP_FORMAT),
+                    topology,
+                },
+            )
+        });
         IrradiancePass { pipeline, edges }
     }
 
