@@ -303,8 +303,8 @@ pub fn dynamic_uniform_layout(device: &wgpu::Device, label: &str, size: u64) -> 
     })
 }
 
-/// Begins a render pass onto `color` (cleared to transparent black) and/or `depth` (cleared to far, kept if
-/// its flag says so), with `timestamps` if given.
+/// Begins a render pass onto `color` (cleared to transparent black) and/or `depth` (cleared to
+/// far, kept if its flag says so), with `timestamps` if given.
 pub fn begin_render_pass<'e>(
     encoder: &'e mut wgpu::CommandEncoder,
     label: &str,

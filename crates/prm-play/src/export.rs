@@ -46,11 +46,8 @@ pub fn export(renderer: &mut Renderer, scene: &Scene, lights: &[Light], dir: &Pa
         gltf: dir.join("scene.gltf"),
     };
     let export_err = |e: prm_scene::ExportError| PlayError::Export(e);
-    let (indirect, irradiance) = (runtime.read_lightmap()?, runtime.read_irradiance_lightmap()?);
-    // A pass the device refused leaves its target as it was: say so rather than write it.
-    renderer.context().take_uncaptured()?;
-    prm_scene::write_exr_rgb(&out.indirect, res, res, &indirect).map_err(export_err)?;
-    prm_scene::write_exr_rgb(&out.irradiance, res, res, &irradiance).map_err(export_err)?;
+    prm_scene::write_exr_rgb(&out.indirect, res, res, &runtime.read_lightmap()?).map_err(export_err)?;
+    prm_scene::write_exr_rgb(&out.irradiance, res, res, &runtime.read_irradiance_lightmap()?).map_err(export_err)?;
     let uvs: Vec<[Vec2; 3]> = runtime.lightmap_uvs().iter().map(|t| t.map(Vec2::from_array)).collect();
     prm_scene::write_gltf(scene, &uvs, &out.gltf).map_err(export_err)?;
     Ok(out)

@@ -8,7 +8,7 @@
 //! black. Triangles alone left 2619 of Dabrovic Sponza's 174,648 lit texels at 512² black (its
 //! 66k triangles get about four texels each).
 
-use prm_gpu_kit::{pipeline, readback, GpuError};
+use prm_gpu_kit::{pipeline, readback, ErrorScopes, GpuError};
 
 use crate::LIGHTMAP_FORMAT;
 
@@ -82,6 +82,8 @@ impl IrradiancePass {
         vertex_count: u32,
         resolution: u32,
     ) -> Result<Vec<[f32; 3]>, GpuError> {
+        // A pass the device refuses leaves the target as it was: report it, not a black map.
+        let scope = ErrorScopes::push(device);
         let target = pipeline::texture(
             device,
             "prm irradiance",
@@ -117,6 +119,7 @@ impl IrradiancePass {
             pass.draw(0..vertex_count, 0..1);
         }
         queue.submit([enc.finish()]);
+        scope.pop("irradiance")?;
         let texels = readback::read_rgba32f(device, queue, &target, 0)?;
         Ok(dilate(&texels, resolution as usize, DILATE_STEPS))
     }
