@@ -21,10 +21,9 @@ struct Frame {
     normal_offset: f32,
     // Depth tolerance of a shadow lookup, in shadow texels.
     depth_bias: f32,
-    // Residual groups: group g's summed pane is layer cluster_count + g (select.wgsl).
+    // Residual groups: group g's summed pane is pane cluster_count + g (select.wgsl).
     group_count: u32,
-    // Texels the blend pass writes (its `lit` list, blend.wgsl).
-    lit_texels: u32,
+    _pad0: u32,
     _pad1: u32,
     _pad2: u32,
 };
@@ -104,6 +103,15 @@ struct Effective {
 struct Selected {
     weight: vec3<f32>,
     cluster: u32,
+};
+
+// One chunk of the blend's panes (blend.rs): quads (four row-major texels) first_quad ..
+// first_quad + quads, of which lit_quads are lit.
+struct BlendChunk {
+    first_quad: u32,
+    quads: u32,
+    lit_quads: u32,
+    _pad0: u32,
 };
 
 // The probe grid (`prm_format::ProbeGrid`): cell (i, j, k) is index i + nx·(j + ny·k), its centre

@@ -81,6 +81,26 @@ impl ComputePass {
         }
     }
 
+    /// One compute pass, timed as `name`, of a dispatch per `(bind group, workgroups)` in
+    /// `dispatches` (bind groups of this pass's layout, made with [`group`](Self::group)): the
+    /// same work over resources split across several bindings.
+    pub fn encode_groups(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        dispatches: &[(wgpu::BindGroup, [u32; 3])],
+        timer: Option<&PassTimer>,
+    ) {
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some(self.name),
+            timestamp_writes: timer.and_then(|t| t.compute(self.name)),
+        });
+        pass.set_pipeline(&self.pipeline);
+        for (group, [x, y, z]) in dispatches {
+            pass.set_bind_group(0, group, &[]);
+            pass.dispatch_workgroups(*x, *y, *z);
+        }
+    }
+
     /// [`encode`](Self::encode) with another bind group of this pass's layout.
     pub fn encode_with(
         &self,

@@ -49,6 +49,7 @@
 #![warn(missing_docs)]
 
 mod baked;
+mod blend;
 mod irradiance;
 mod lights;
 mod near_field;
@@ -74,8 +75,9 @@ pub use options::{
 pub use probes::ProbeVolume;
 pub use shadow::SHADOW_FORMAT;
 pub use shared::{
-    GpuCluster, GpuEffective, GpuEntry, GpuFrame, GpuGatherPoint, GpuLight, GpuNearExit, GpuNearField, GpuNearHit,
-    GpuProbeGrid, GpuProbeRays, GpuSelected, GpuView, GpuWeight, LightKind, LIGHTS_WGSL, PROBES_WGSL, SHARED_WGSL,
+    GpuBlendChunk, GpuCluster, GpuEffective, GpuEntry, GpuFrame, GpuGatherPoint, GpuLight, GpuNearExit, GpuNearField,
+    GpuNearHit, GpuProbeGrid, GpuProbeRays, GpuSelected, GpuView, GpuWeight, LightKind, LIGHTS_WGSL, PROBES_WGSL,
+    SHARED_WGSL,
 };
 
 use shadow::{ShadowMaps, ShadowPass};
@@ -176,12 +178,10 @@ pub struct Runtime {
     options: RuntimeOptions,
     bounds: Aabb,
     cluster_count: u32,
-    /// Residual groups built at load (their summed panes follow the clusters' in the array).
+    /// Residual groups built at load (their summed panes follow the clusters').
     group_count: u32,
     /// The top K of the frame constants last uploaded (`update`), which the passes ran with.
     frame_top_k: u32,
-    /// Texels the blend pass writes (see `blend.wgsl`).
-    lit_texels: u32,
     /// Most shadow views a frame's lights may need: the views buffer's and the device's layers.
     max_views: usize,
     entry_count: u32,
@@ -198,6 +198,9 @@ pub struct Runtime {
     shadow: ShadowPass,
     weights: WeightsPass,
     topk: TopKPasses,
+    blend: blend::BlendPass,
+    /// The panes the blend reads (kept alive here).
+    _panes: blend::Panes,
     /// Built by the first [`Runtime::read_irradiance_lightmap`].
     irradiance: std::sync::OnceLock<irradiance::IrradiancePass>,
     /// This frame's shadow views (set by [`Runtime::update`]).
@@ -240,15 +243,7 @@ impl Runtime {
         }
         let cluster_count = archive.clusters().len() as u32;
         let max_layers = device.limits().max_texture_array_layers;
-        if cluster_count > max_layers {
-            return Err(RuntimeError::TooManyPanes {
-                panes: cluster_count as usize,
-                max: max_layers,
-            });
-        }
-        // Residual groups, as many as asked for while their panes fit the array.
-        let group_count = prm_format::residual_group_count(cluster_count as usize, options.residual_groups)
-            .min(max_layers - cluster_count);
+        let group_count = prm_format::residual_group_count(cluster_count as usize, options.residual_groups);
         let group_of = if group_count > 0 {
             prm_format::residual_groups(archive.clusters(), group_count)
         } else {
@@ -360,17 +355,16 @@ impl Runtime {
             ),
         };
 
-        // Panes: one rgb9e5ufloat layer each, then the residual groups' summed panes.
+        // Panes: the clusters' RGB9E5 words, then the residual groups' summed panes.
         let res = atlas.resolution;
-        let pane_texture = pipeline::texture(
-            device,
-            "prm panes",
-            [res, res, (cluster_count + group_count).max(1)],
-            wgpu::TextureFormat::Rgb9e5Ufloat,
-            wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-        );
-        // Group by group (the groups partition the clusters), so one sum is held at a time.
         let texels = (res * res) as usize;
+        let panes = blend::Panes::new(
+            device,
+            (cluster_count + group_count).max(1) as usize,
+            texels,
+            options.pane_chunk_bytes,
+        )?;
+        // Group by group (the groups partition the clusters), so one sum is held at a time.
         let mut order: Vec<u32> = (0..cluster_count).collect();
         order.sort_by_key(|&c| group_of[c as usize]);
         let mut sum = vec![[0f32; 3]; if group_count > 0 { texels } else { 0 }];
@@ -389,7 +383,7 @@ impl Runtime {
             for (l, &w) in lit.iter_mut().zip(&pane) {
                 *l |= w & prm_format::RGB9E5_MANTISSAS != 0;
             }
-            pipeline::write_layer(queue, &pane_texture, p, bytemuck::cast_slice(&pane), res * 4);
+            panes.write(queue, p, &pane);
             if group_count == 0 {
                 continue;
             }
@@ -411,20 +405,13 @@ impl Runtime {
                 (0..3).for_each(|k| energy[k] += f64::from(v[k]));
             }
             group_energy.push([energy[0] as f32, energy[1] as f32, energy[2] as f32, 0.0]);
-            pipeline::write_layer(
-                queue,
-                &pane_texture,
-                cluster_count + g,
-                bytemuck::cast_slice(&words),
-                res * 4,
-            );
+            panes.write(queue, cluster_count + g, &words);
             sum.fill([0.0; 3]);
         }
         drop(sum);
         if !group_energy.is_empty() {
             queue.write_buffer(&buffers.group_energy, 0, bytemuck::cast_slice(&group_energy));
         }
-        let panes = pipeline::array_view(&pane_texture);
         let lightmap = pipeline::texture(
             device,
             "prm lightmap",
@@ -494,15 +481,16 @@ impl Runtime {
                 }
             }
         }
-        let lit: Vec<u32> = (0..texels as u32).filter(|&t| lit[t as usize]).collect();
-        let lit_texels = lit.len() as u32;
-        let topk = TopKPasses::new(
+        let topk = TopKPasses::new(device, &buffers);
+        let blend = blend::BlendPass::new(
             device,
             &buffers,
             &panes,
-            &lightmap_view,
-            &emitters.indirect_view,
-            &near_view,
+            &blend::BlendTargets {
+                lightmap: &lightmap_view,
+                emitted: &emitters.indirect_view,
+                near: &near_view,
+            },
             &lit,
         );
         let probes = match archive.probes() {
@@ -530,7 +518,6 @@ impl Runtime {
             cluster_count,
             group_count,
             frame_top_k,
-            lit_texels,
             max_views: (MAX_LIGHTS * 6).min(max_layers as usize),
             entry_count,
             resolution: res,
@@ -545,6 +532,8 @@ impl Runtime {
             shadow,
             weights,
             topk,
+            blend,
+            _panes: panes,
             irradiance: std::sync::OnceLock::new(),
             view_count: 0,
             entries,
@@ -600,7 +589,6 @@ impl Runtime {
             normal_offset: o.normal_offset,
             depth_bias: o.depth_bias,
             group_count: self.group_count,
-            lit_texels: self.lit_texels,
             ..Default::default()
         };
         self.frame_top_k = frame.top_k;
@@ -653,7 +641,8 @@ impl Runtime {
         if let Some(n) = &self.near {
             n.encode(&self.device, encoder, &self.buffers, external, timer);
         }
-        self.topk.encode(encoder, self.cluster_count, self.lit_texels, timer);
+        self.topk.encode(encoder, self.cluster_count, timer);
+        self.blend.encode(encoder, timer);
         if let Some(n) = &self.near {
             n.encode_after_blend(encoder, &self.lightmap, timer);
         }
@@ -833,7 +822,7 @@ impl Runtime {
     }
 
     /// Residual groups built at load ([`RuntimeOptions::residual_groups`], at most one per
-    /// cluster and as many as the texture array holds beside the panes).
+    /// cluster).
     pub fn group_count(&self) -> u32 {
         self.group_count
     }

@@ -35,12 +35,15 @@ pub enum RuntimeError {
     /// empty.
     #[error("the archive is shard {0} of a sharded bake, without the other shards' panes: join the parts with `prm-bake merge`")]
     PartialArchive(String),
-    /// More panes than the device holds in one texture array.
-    #[error("the archive has {panes} panes but this GPU holds at most {max} texture layers")]
+    /// More panes (clusters and residual groups) than one storage binding of the device holds
+    /// four texels of.
+    #[error(
+        "the archive has {panes} panes (with the residual groups) but this GPU binds at most {max} of them at once"
+    )]
     TooManyPanes {
-        /// Panes in the archive.
+        /// Panes with the residual groups.
         panes: usize,
-        /// The device's `max_texture_array_layers`.
+        /// Most panes one quad of which fits the device's storage binding.
         max: u32,
     },
     /// More lights than [`MAX_LIGHTS`].
@@ -139,6 +142,11 @@ pub struct RuntimeOptions {
     pub probe_light: ProbeLight,
     /// Whether the near field is gathered ([`NearLight::Gather`] by default).
     pub near_light: NearLight,
+    /// Most bytes one buffer of panes takes (the panes are cut into chunks of texels, each a
+    /// storage buffer: `blend.rs`); `None`: the device's storage binding limit. A smaller cap
+    /// costs a dispatch per chunk and nothing measurable; for engines that bound their
+    /// allocations, and for tests of the chunked path.
+    pub pane_chunk_bytes: Option<u64>,
 }
 
 impl RuntimeOptions {
@@ -220,6 +228,7 @@ impl Default for RuntimeOptions {
             depth_bias: 1.5,
             probe_light: ProbeLight::default(),
             near_light: NearLight::default(),
+            pane_chunk_bytes: None,
         }
     }
 }

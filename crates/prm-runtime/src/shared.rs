@@ -52,10 +52,10 @@ pub struct GpuFrame {
     pub normal_offset: f32,
     /// Depth bias of shadow lookups, in shadow texels.
     pub depth_bias: f32,
-    /// Residual groups; their summed panes are layers `cluster_count + g` (see `select.wgsl`).
+    /// Residual groups; their summed panes are panes `cluster_count + g` (see `select.wgsl`).
     pub group_count: u32,
-    /// Texels the blend pass writes (its list of lit texels, see `blend.wgsl`).
-    pub lit_texels: u32,
+    /// Padding.
+    pub _pad0: u32,
     /// Padding.
     pub _pad1: u32,
     /// Padding.
@@ -267,8 +267,22 @@ pub struct GpuEffective {
 pub struct GpuSelected {
     /// Effective (faded) weight.
     pub weight: [f32; 3],
-    /// Cluster (= pane layer).
+    /// Cluster (= pane; the residual group g is pane `cluster_count + g`).
     pub cluster: u32,
+}
+
+/// One chunk of the blend's panes (`blend.rs`); `BlendChunk` in the shaders.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct GpuBlendChunk {
+    /// The chunk's first quad (four row-major texels `4q..4q + 3`) in the atlas.
+    pub first_quad: u32,
+    /// Quads in the chunk: the stride from one pane to the next in its buffer.
+    pub quads: u32,
+    /// The chunk's quads that anything lights: the dispatch's invocations.
+    pub lit_quads: u32,
+    /// Padding.
+    pub _pad0: u32,
 }
 
 #[cfg(test)]
@@ -294,7 +308,7 @@ mod tests {
                 normal_offset,
                 depth_bias,
                 group_count,
-                lit_texels,
+                _pad0,
                 _pad1,
                 _pad2
             ]
@@ -319,6 +333,7 @@ mod tests {
         wgsl_layout!(s, GpuWeight, "Weight", [weight, score]).unwrap();
         wgsl_layout!(s, GpuEffective, "Effective", [weight, rank]).unwrap();
         wgsl_layout!(s, GpuSelected, "Selected", [weight, cluster]).unwrap();
+        wgsl_layout!(s, GpuBlendChunk, "BlendChunk", [first_quad, quads, lit_quads, _pad0]).unwrap();
         wgsl_layout!(s, GpuProbeGrid, "ProbeGrid", [origin, spacing, dims, count]).unwrap();
         wgsl_layout!(
             s,

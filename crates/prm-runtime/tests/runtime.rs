@@ -140,6 +140,41 @@ fn bad_input_is_refused_naming_it() {
     ctx.wait().unwrap();
 }
 
+/// Panes cut into many small chunks (one buffer and dispatch each, `RuntimeOptions::
+/// pane_chunk_bytes`) blend the same lightmap bit for bit as panes in one chunk; a cap under one
+/// quad of every pane is refused, naming the pane count.
+#[test]
+fn panes_in_small_chunks_blend_the_same_lightmap() {
+    let ctx = gpu();
+    let (scene, mut a) = archive("chunks");
+    let lights = [point(0.28, 0.45, 0.28), point(0.1, 0.3, 0.4)];
+    let mut whole = Runtime::new(&ctx.device, &ctx.queue, &mut a, &scene, RuntimeOptions::default()).unwrap();
+    let expected = frame(&ctx, &mut whole, &lights, Shadows::Own);
+    assert!(expected.iter().flatten().any(|&v| v > 0.0));
+    // A quad is four RGB9E5 words of every pane (clusters and residual groups).
+    let quad_bytes = 16 * u64::from(whole.cluster_count() + whole.group_count());
+    let texels = u64::from(whole.lightmap_resolution()).pow(2);
+    // 37 quads a chunk: many chunks, the last one short.
+    let options = RuntimeOptions {
+        pane_chunk_bytes: Some(37 * quad_bytes),
+        ..RuntimeOptions::default()
+    };
+    assert!(texels / 4 > 10 * 37, "too few quads for several chunks: {texels}");
+    let mut chunked = Runtime::new(&ctx.device, &ctx.queue, &mut a, &scene, options).unwrap();
+    assert_eq!(frame(&ctx, &mut chunked, &lights, Shadows::Own), expected);
+
+    let options = RuntimeOptions {
+        pane_chunk_bytes: Some(quad_bytes - 1),
+        ..RuntimeOptions::default()
+    };
+    let e = Runtime::new(&ctx.device, &ctx.queue, &mut a, &scene, options)
+        .err()
+        .unwrap();
+    assert!(matches!(e, RuntimeError::TooManyPanes { .. }), "{e}");
+    let panes = (whole.cluster_count() + whole.group_count()).to_string();
+    assert!(e.to_string().contains(&panes), "{e}");
+}
+
 /// One shard of a sharded bake (`params.shard`) holds the other shards' panes as zeros: the run
 /// time refuses it, naming the shard and the merge.
 #[test]
