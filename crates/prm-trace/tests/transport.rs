@@ -566,3 +566,55 @@ fn pixels_on_an_edge_between_two_surfaces_are_not_dark() {
         assert!((r - 1.0).abs() < 0.03, "row {y}: {r} of L");
     }
 }
+
+/// A pixel's visible point takes its light about its shading normal, as an exit point does and
+/// as the player shades it: a floor whose vertex normals lean 16.7° off its plane's, under a
+/// point light straight above the pixel, sends albedo/π × I cos θ / d² with θ the shading
+/// normal's (0.958), not the plane's (1).
+#[test]
+fn a_pixel_takes_its_light_about_its_shading_normal() {
+    let lean = Vec3::new(0.3, 1.0, 0.0).normalize();
+    let corners = [
+        Vec3::new(-1.0, 0.0, -1.0),
+        Vec3::new(1.0, 0.0, -1.0),
+        Vec3::new(1.0, 0.0, 1.0),
+        Vec3::new(-1.0, 0.0, 1.0),
+    ];
+    let triangles = [[0, 2, 1], [0, 3, 2]]
+        .iter()
+        .map(|ix| {
+            let mut t = prm_scene::Triangle::flat(ix.map(|i| corners[i]), 0);
+            t.normals = [lean; 3];
+            t
+        })
+        .collect();
+    let albedo = Vec3::splat(0.5);
+    let scene = Scene::from_parts(triangles, vec![prm_scene::Material::diffuse("floor", albedo)]);
+    let bvh = Bvh::build(&scene, &BvhParams::DEFAULT).unwrap();
+    let intensity = Vec3::splat(2.0);
+    let lights = [prm_scene::Light::Point {
+        position: Vec3::new(0.0, 1.0, 0.0),
+        intensity,
+    }];
+    let tracer = ReferenceTracer::new(&scene, &bvh, Lighting::Lights(&lights));
+    let camera = prm_scene::Camera {
+        eye: Vec3::new(0.0, 0.5, 0.0) + Vec3::new(0.0, 0.0, 0.01),
+        target: Vec3::ZERO,
+        fov_y_deg: 10.0,
+    };
+    let img = tracer
+        .render(
+            &camera,
+            1,
+            1,
+            ImageMode::Full,
+            &reference_params(1, 1, 3),
+            &mut |_, _| {},
+        )
+        .unwrap();
+    // The point seen is within 0.2 mm of the origin, 1 below the light.
+    let expected = albedo * std::f32::consts::FRAC_1_PI * intensity * lean.dot(Vec3::Y);
+    let ratio = img.mean[0] / expected;
+    eprintln!("pixel over albedo/π × I cos θ_shading: {ratio}");
+    assert!((ratio - Vec3::ONE).abs().max_element() < 0.002, "{ratio}");
+}

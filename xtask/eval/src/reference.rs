@@ -54,8 +54,9 @@ fn load(path: &Path) -> Result<Reference> {
 }
 
 /// Changes whenever the tracer's camera images do, so that cached image references are traced
-/// again (2: a pixel centre on the edge between two surfaces leaves from in front of both).
-pub const IMAGE_EPOCH: u32 = 2;
+/// again (2: a pixel centre on the edge between two surfaces leaves from in front of both; 3: a
+/// pixel's visible point takes its light about its shading normal).
+pub const IMAGE_EPOCH: u32 = 3;
 
 /// What identifies `scene` (loaded from `path`) in the cache keys: its path, geometry and
 /// materials fingerprint and file size.
