@@ -143,7 +143,9 @@ fn the_near_field_brings_the_edges_to_the_reference() {
         "near field: GPU gain {e:.4} from the CPU's sum, mean {:.4}",
         sum(&gained) / gained.len() as f64
     );
-    assert!(e < 1e-4, "the near field's gain {e:.2e} from the CPU's sum");
+    // The GPU's weights are half floats (`GpuNearHit`: rounded by at most 2⁻¹¹ of themselves;
+    // 1.7e-4 here), the CPU's f32.
+    assert!(e < 1e-3, "the near field's gain {e:.2e} from the CPU's sum");
     assert!(sum(&gained) > 0.0);
 
     // 3. At those exit points (not the gutter's copies), closer to the reference.

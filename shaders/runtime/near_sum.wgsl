@@ -17,7 +17,8 @@ fn near_sum(i: u32, deeper: bool, side: u32) -> NearSum {
     var e = vec3<f32>(0.0);
     for (var h = start; h < x.end; h++) {
         let hit = hits[h];
-        e += select(hit.weight, hit.indirect_weight, deeper) * radiance[hit.point].rgb;
+        let w = unpack2x16float(hit.weights);
+        e += select(w.x, w.y, deeper) * radiance[hit.point].rgb;
     }
     return NearSum(e * near.scale, vec2<i32>(i32(x.texel % side), i32(x.texel / side)));
 }

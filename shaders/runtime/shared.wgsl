@@ -162,9 +162,8 @@ struct NearExit {
 // A near ray's end: a gather point and its squared distance from the exit point.
 struct NearHit {
     point: u32,
-    weight: f32,
-    indirect_weight: f32,
-    _pad0: u32,
+    // unpack2x16float: x the direct share's weight, y the deeper VPLs' share's.
+    weights: u32,
 };
 
 // The near field's constants: counts and π/M.

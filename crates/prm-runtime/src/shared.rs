@@ -124,18 +124,33 @@ pub struct GpuNearExit {
 }
 
 /// An exit point's near rays that end on one gather point (`prm_format::NearHit`s merged);
-/// `NearHit` in the shaders.
+/// `NearHit` in the shaders. Eight bytes: the two weights as half floats (WGSL's
+/// `unpack2x16float`), which walking the hits twice a frame reads more than anything else.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
 pub struct GpuNearHit {
     /// Gather point index.
     pub point: u32,
-    /// Σ `R²/(r² + R²)` over the rays: the direct share's weight.
-    pub weight: f32,
-    /// Σ `R₁²/(r² + R₁²)`: the deeper VPLs' share's (0 without it).
-    pub indirect_weight: f32,
-    /// Padding.
-    pub _pad0: u32,
+    /// Low 16 bits: Σ `R²/(r² + R²)` over the rays, the direct share's weight; high 16 bits:
+    /// Σ `R₁²/(r² + R₁²)`, the deeper VPLs' share's (0 without it); both IEEE half floats.
+    pub weights: u32,
+}
+
+impl GpuNearHit {
+    /// The hit on gather point `point` with the two weights rounded to half floats.
+    pub fn new(point: u32, weight: f32, indirect_weight: f32) -> GpuNearHit {
+        let bits = |w: f32| u32::from(half::f16::from_f32(w).to_bits());
+        GpuNearHit {
+            point,
+            weights: bits(weight) | bits(indirect_weight) << 16,
+        }
+    }
+
+    /// The two weights (direct share, deeper VPLs' share) as the shader unpacks them.
+    pub fn weights(&self) -> (f32, f32) {
+        let half = |bits: u32| half::f16::from_bits(bits as u16).to_f32();
+        (half(self.weights & 0xffff), half(self.weights >> 16))
+    }
 }
 
 /// The near field's constants; `NearField` in the shaders.
@@ -344,7 +359,7 @@ mod tests {
         .unwrap();
         wgsl_layout!(s, GpuProbeRays, "ProbeRays", [probes, rays_per_probe, points, _pad0]).unwrap();
         wgsl_layout!(s, GpuNearExit, "NearExit", [texel, end]).unwrap();
-        wgsl_layout!(s, GpuNearHit, "NearHit", [point, weight, indirect_weight, _pad0]).unwrap();
+        wgsl_layout!(s, GpuNearHit, "NearHit", [point, weights]).unwrap();
         wgsl_layout!(s, GpuNearField, "NearField", [exits, points, scale, _pad0]).unwrap();
     }
 
