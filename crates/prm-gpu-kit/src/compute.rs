@@ -90,15 +90,21 @@ impl ComputePass {
         dispatches: &[(wgpu::BindGroup, [u32; 3])],
         timer: Option<&PassTimer>,
     ) {
+        let mut pass = self.begin(encoder, timer);
+        for (group, [x, y, z]) in dispatches {
+            pass.set_bind_group(0, group, &[]);
+            pass.dispatch_workgroups(*x, *y, *z);
+        }
+    }
+
+    /// A compute pass of this pipeline, timed as `name` when `timer` is given.
+    fn begin<'e>(&self, encoder: &'e mut wgpu::CommandEncoder, timer: Option<&PassTimer>) -> wgpu::ComputePass<'e> {
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some(self.name),
             timestamp_writes: timer.and_then(|t| t.compute(self.name)),
         });
         pass.set_pipeline(&self.pipeline);
-        for (group, [x, y, z]) in dispatches {
-            pass.set_bind_group(0, group, &[]);
-            pass.dispatch_workgroups(*x, *y, *z);
-        }
+        pass
     }
 
     /// [`encode`](Self::encode) with another bind group of this pass's layout.
@@ -109,11 +115,7 @@ impl ComputePass {
         [x, y, z]: [u32; 3],
         timer: Option<&PassTimer>,
     ) {
-        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-            label: Some(self.name),
-            timestamp_writes: timer.and_then(|t| t.compute(self.name)),
-        });
-        pass.set_pipeline(&self.pipeline);
+        let mut pass = self.begin(encoder, timer);
         pass.set_bind_group(0, bind_group, &[]);
         pass.dispatch_workgroups(x, y, z);
     }
