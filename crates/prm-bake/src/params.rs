@@ -368,7 +368,7 @@ const AUTO_ATLAS_PANES: usize = 256;
 /// K = 32 with 16 groups 8.1% / 6.5%, K = 64 with 32 groups 6.2% / 5.0%, K = 96 with 32 groups
 /// 5.4% / 4.7%, K = 128 with 64 groups 4.3% / 4.6%, every cluster 3.4% / 4.7%. On lavapipe at
 /// 1024×768 the 192 panes add about 85 ms to a 35 ms frame of direct light (`prm-play
-/// --timings`, median CPU frame); 48 panes add about 25 ms. A GPU blends them in well under a
+/// --timings --gi-update every-frame`, median CPU frame); 48 panes add about 25 ms. A GPU blends them in well under a
 /// millisecond.
 const BLEND_TEXELS: f64 = 192.0 * 65536.0;
 

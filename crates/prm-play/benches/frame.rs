@@ -150,6 +150,8 @@ fn bench(name: &str, scene_path: &Path, frames: usize) -> Result<(f64, f64)> {
         height: 768,
         runtime: prm_play::RuntimeOptions {
             top_k: prm_play::archive_top_k(&archive),
+            // The cost of a frame whose lights move: the bench's light stands still.
+            gi_update: prm_play::GiUpdate::EveryFrame,
             ..Default::default()
         },
         timestamps: true,

@@ -68,6 +68,11 @@ struct Args {
     /// (darker than they should be at edges, from 1.8 everywhere a little).
     #[arg(long, value_name = "gather|off", default_value = "gather", value_parser = ["gather", "off"])]
     near_field: String,
+    /// When the indirect light is computed again: `on-change` (when the lights, K, an emitter's
+    /// scale or the sky change; frames whose lights stand still cost their direct light alone)
+    /// or `every-frame` (what a frame whose lights move costs: time GI with it).
+    #[arg(long, value_name = "on-change|every-frame", default_value = "on-change", value_parser = ["on-change", "every-frame"])]
+    gi_update: String,
     /// Frames to render (headless: default 1). In a window: quit after this many presented
     /// frames (default: run until closed).
     #[arg(long)]
@@ -82,7 +87,8 @@ struct Args {
     /// from the swapchain) when the window closes; headless, a copy of the last frame's PNG.
     #[arg(long, value_name = "FILE.png")]
     screenshot: Option<PathBuf>,
-    /// Write per-pass GPU times and frame times as JSON.
+    /// Write per-pass GPU times and frame times as JSON (with a still light, add
+    /// `--gi-update every-frame` to time the indirect light's passes on every frame).
     #[arg(long)]
     timings: Option<PathBuf>,
     /// Shadow-map resolution per view.
@@ -190,6 +196,11 @@ fn run() -> Result<()> {
             prm_play::NearLight::Off
         } else {
             prm_play::NearLight::Gather
+        },
+        gi_update: if args.gi_update == "every-frame" {
+            prm_play::GiUpdate::EveryFrame
+        } else {
+            prm_play::GiUpdate::OnChange
         },
         ..Default::default()
     };

@@ -11,7 +11,7 @@
 //! (2048 on lavapipe: an unclustered bake of 4096 entry points used to be refused).
 //!
 //! Measured on lavapipe (McGuire's CornellBox-Original, its default archive, 512 clusters, K =
-//! 128 + 64 groups; `prm-play --headless --size 1024x768 --frames 12 --timings`, medians,
+//! 128 + 64 groups; `prm-play --headless --size 1024x768 --frames 12 --timings --gi-update every-frame`, medians,
 //! the three builds interleaved): the `gi` frame took 86–102 ms (direct light alone 29 ms) with
 //! the panes in an `rgb9e5ufloat` texture array read one texel per invocation, 65–74 ms with the
 //! array read four texels per invocation, and **54–64 ms** as here: the blend itself went from

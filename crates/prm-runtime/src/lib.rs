@@ -70,7 +70,7 @@ pub use baked::EmitterInfo;
 pub use irradiance::DILATE_STEPS;
 pub use lights::{look_to, orthographic, perspective, shadow_views, SPOT_SINGLE_VIEW_MAX_DEG};
 pub use options::{
-    archive_top_k, NearLight, ProbeLight, RuntimeError, RuntimeOptions, MAX_SHADOW_RESOLUTION, MAX_SUN_TILES,
+    archive_top_k, GiUpdate, NearLight, ProbeLight, RuntimeError, RuntimeOptions, MAX_SHADOW_RESOLUTION, MAX_SUN_TILES,
 };
 pub use probes::ProbeVolume;
 pub use shadow::SHADOW_FORMAT;
@@ -211,6 +211,12 @@ pub struct Runtime {
     probes: Option<probes::ProbesPass>,
     /// The near field's passes, when the archive holds it and the options gather it.
     near: Option<near_field::NearFieldPass>,
+    /// The lights of the last [`Runtime::update`].
+    last_lights: Vec<Light>,
+    /// Whether the lightmap (and the probes) no longer follow the lights, K, the emitter
+    /// scales and the sky as last set ([`GiUpdate::OnChange`]); an atomic so that `encode`
+    /// takes `&self` and the runtime stays `Sync`.
+    gi_stale: std::sync::atomic::AtomicBool,
 }
 
 impl Runtime {
@@ -417,7 +423,11 @@ impl Runtime {
             "prm lightmap",
             [res, res, 1],
             LIGHTMAP_FORMAT,
-            wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_SRC,
+            // COPY_DST: an engine may seed or clear it (and the tests of GiUpdate do).
+            wgpu::TextureUsages::STORAGE_BINDING
+                | wgpu::TextureUsages::TEXTURE_BINDING
+                | wgpu::TextureUsages::COPY_SRC
+                | wgpu::TextureUsages::COPY_DST,
         );
         let lightmap_view = lightmap.create_view(&Default::default());
 
@@ -540,6 +550,8 @@ impl Runtime {
             emitters,
             probes,
             near,
+            last_lights: Vec::new(),
+            gi_stale: std::sync::atomic::AtomicBool::new(true),
         })
     }
 
@@ -591,6 +603,10 @@ impl Runtime {
             group_count: self.group_count,
             ..Default::default()
         };
+        if lights != self.last_lights.as_slice() || frame.top_k != self.frame_top_k {
+            self.mark_stale();
+            self.last_lights = lights.to_vec();
+        }
         self.frame_top_k = frame.top_k;
         self.queue
             .write_buffer(&self.buffers.frame, 0, bytemuck::bytes_of(&frame));
@@ -618,7 +634,12 @@ impl Runtime {
 
     /// Records the frame set by [`Runtime::update`]: with [`Shadows::Own`] the shadow pass, then
     /// weights, the near field (archives of format 1.7), rank, select and blend into
-    /// [`Runtime::lightmap`], the near field's deeper share (1.8), then the probes. Timed passes are named as in [`PASS_NAMES`].
+    /// [`Runtime::lightmap`], the near field's deeper share (1.8), then the probes. Timed passes
+    /// are named as in [`PASS_NAMES`]. With [`GiUpdate::OnChange`] (the default) and the run
+    /// time's own shadow maps, the passes after the shadow pass are recorded only when
+    /// [`Runtime::gi_pending`] says so: the lightmap and the probes keep the last update's
+    /// light, which is this frame's. Submit the encoder: the run time counts what it recorded
+    /// as done.
     pub fn encode(&self, encoder: &mut wgpu::CommandEncoder, shadows: Shadows, timer: Option<&PassTimer>) {
         let external = match shadows {
             Shadows::Own => {
@@ -627,9 +648,10 @@ impl Runtime {
             }
             Shadows::External(view) => Some(view),
         };
-        if self.cluster_count == 0 {
+        if self.cluster_count == 0 || (external.is_none() && !self.gi_pending()) {
             return;
         }
+        self.gi_stale.store(false, std::sync::atomic::Ordering::Relaxed);
         self.weights.encode(
             &self.device,
             encoder,
@@ -649,6 +671,18 @@ impl Runtime {
         if let Some(p) = &self.probes {
             p.encode(&self.device, encoder, &self.buffers, external, timer);
         }
+    }
+
+    /// Whether the next [`Runtime::encode`] with the run time's own shadow maps records the
+    /// indirect light's passes: always with [`GiUpdate::EveryFrame`]; with
+    /// [`GiUpdate::OnChange`] when the lights, K, the emitter scales or the sky changed since
+    /// the last update it recorded (or none was). External shadow maps always record them.
+    pub fn gi_pending(&self) -> bool {
+        self.options.gi_update == GiUpdate::EveryFrame || self.gi_stale.load(std::sync::atomic::Ordering::Relaxed)
+    }
+
+    fn mark_stale(&self) {
+        self.gi_stale.store(true, std::sync::atomic::Ordering::Relaxed);
     }
 
     /// The probe volume, when the archive holds probes: bindings for [`PROBES_WGSL`], whose
@@ -774,6 +808,7 @@ impl Runtime {
         }
         self.queue
             .write_buffer(&self.buffers.entries, 0, bytemuck::cast_slice(&self.entries));
+        self.mark_stale();
         Ok(())
     }
 
@@ -795,6 +830,7 @@ impl Runtime {
         if let Some(p) = &self.probes {
             p.write_sky(&self.queue, coeffs);
         }
+        self.mark_stale();
         Ok(())
     }
 

@@ -78,7 +78,7 @@ pub(crate) type MergedHits = (Vec<GpuNearExit>, Vec<GpuNearHit>);
 /// box), and each walk along them cost lavapipe about 50 ms a frame there. The sums are taken in
 /// f32 and stored as half floats ([`GpuNearHit`], 8 bytes instead of 16 with f32 weights and
 /// padding): the fireplace room's default archive played its `gi` frame at 1024×768 in 197–205
-/// ms instead of 221–233 (`prm-play --timings`, medians, interleaved), the images 2·10⁻⁵ apart,
+/// ms instead of 221–233 (`prm-play --timings --gi-update every-frame`, medians, interleaved), the images 2·10⁻⁵ apart,
 /// and twice the hits fit one storage binding.
 pub(crate) fn merge_hits(near: &NearField) -> MergedHits {
     let mut exits = Vec::with_capacity(near.exits.len());

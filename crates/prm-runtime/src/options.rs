@@ -112,6 +112,22 @@ pub enum NearLight {
     Off,
 }
 
+/// When [`crate::Runtime::encode`] records the indirect light's passes (weights, near field,
+/// rank, select, blend, probes).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum GiUpdate {
+    /// Only when something they read changed since the last recorded update: the lights
+    /// ([`crate::Runtime::update`] with other lights), K, the emitter groups' scales or the sky;
+    /// always with [`crate::Shadows::External`] shadow maps, whose contents the run time cannot
+    /// see. A frame whose lights stand still (the camera moves, or nothing does) then costs its
+    /// direct light alone: McGuire's box at 1024×768 on lavapipe 28 ms instead of 58 ms.
+    #[default]
+    OnChange,
+    /// Every frame: what a frame whose lights move costs (benchmarks, and `cargo xtask eval`'s
+    /// frame times).
+    EveryFrame,
+}
+
 /// Run-time settings.
 #[derive(Clone, Debug, PartialEq)]
 pub struct RuntimeOptions {
@@ -147,6 +163,8 @@ pub struct RuntimeOptions {
     /// costs a dispatch per chunk and nothing measurable; for engines that bound their
     /// allocations, and for tests of the chunked path.
     pub pane_chunk_bytes: Option<u64>,
+    /// When the indirect light is computed again ([`GiUpdate::OnChange`] by default).
+    pub gi_update: GiUpdate,
 }
 
 impl RuntimeOptions {
@@ -158,7 +176,7 @@ impl RuntimeOptions {
     /// difference of the full and indirect 1024-path references, 4×4 error): one map over the
     /// bounding sphere (8 cm texels) 23.5% off with energy 1.114, light leaking through thin
     /// geometry; 2², 4² and 8² tiles 20.0%, 13.1% (1.075) and 8.3% (1.041). Whole frames at
-    /// 1024×768 on lavapipe (`prm-play --timings`, two runs): 417–450 ms with one map, 461–474
+    /// 1024×768 on lavapipe (`prm-play --timings --gi-update every-frame`, two runs): 417–450 ms with one map, 461–474
     /// with 4², 615 with 8² (each tile is a pass over the scene). Measured again in session 22
     /// on the eval's default Sponza bake (same view; the 256-path full reference less the
     /// indirect one): 4² tiles of 512² 13.2% off, of 1024² 8.4%, of 2048² 5.8%, the indirect
@@ -229,6 +247,7 @@ impl Default for RuntimeOptions {
             probe_light: ProbeLight::default(),
             near_light: NearLight::default(),
             pane_chunk_bytes: None,
+            gi_update: GiUpdate::default(),
         }
     }
 }

@@ -4,7 +4,7 @@
 use glam::Vec3;
 use prm_gpu_kit::{Backend, GpuContext};
 use prm_runtime::synthetic::{cornell_box_path, write_archive, SyntheticParams};
-use prm_runtime::{Runtime, RuntimeError, RuntimeOptions, Shadows, MAX_LIGHTS};
+use prm_runtime::{GiUpdate, Runtime, RuntimeError, RuntimeOptions, Shadows, MAX_LIGHTS};
 use prm_scene::{Light, Scene};
 
 type FileArchive = prm_format::Archive<std::io::BufReader<std::fs::File>>;
@@ -75,6 +75,90 @@ fn two_runtimes_share_a_device_and_shadow_maps_can_be_handed_in() {
     let w = other.read_weights().unwrap();
     assert_eq!(w.len() as u32, other.cluster_count());
     assert!(w.iter().all(|c| c.score.is_finite()));
+}
+
+/// Overwrites the run time's lightmap with zeros, so that a frame that records no indirect-light
+/// passes shows as a black lightmap.
+fn clear_lightmap(ctx: &GpuContext, rt: &Runtime) {
+    let r = rt.lightmap_resolution();
+    let zeros = vec![0u8; (r * r * 16) as usize];
+    ctx.queue.write_texture(
+        rt.lightmap_texture().as_image_copy(),
+        &zeros,
+        wgpu::TexelCopyBufferLayout {
+            offset: 0,
+            bytes_per_row: Some(r * 16),
+            rows_per_image: None,
+        },
+        rt.lightmap_texture().size(),
+    );
+    ctx.wait().unwrap();
+}
+
+#[test]
+fn a_frame_whose_lights_stand_still_keeps_the_indirect_light() {
+    let ctx = gpu();
+    let (scene, mut a) = archive("still");
+    let opts = RuntimeOptions::for_archive(&a);
+    assert_eq!(opts.gi_update, GiUpdate::OnChange, "the default");
+    let mut rt = Runtime::new(&ctx.device, &ctx.queue, &mut a, &scene, opts.clone()).unwrap();
+    let lights = [point(0.28, 0.45, 0.28)];
+    assert!(rt.gi_pending(), "nothing computed yet");
+    let lit = frame(&ctx, &mut rt, &lights, Shadows::Own);
+    assert!(lit.iter().flatten().any(|v| *v > 0.0));
+    rt.update(&lights).unwrap();
+    assert!(!rt.gi_pending());
+
+    // The same lights: the passes are not recorded, the (cleared) lightmap stays as it is.
+    clear_lightmap(&ctx, &rt);
+    let still = frame(&ctx, &mut rt, &lights, Shadows::Own);
+    assert!(
+        still.iter().flatten().all(|v| *v == 0.0),
+        "a still frame computed the lightmap again"
+    );
+
+    // Each input of the indirect light brings the passes back: the lights,
+    let moved = [point(0.3, 0.45, 0.28)];
+    let after_move = frame(&ctx, &mut rt, &moved, Shadows::Own);
+    assert!(after_move != still && after_move != lit, "the lights moved");
+    // shadow maps handed in, which may hold anything, even with the same lights,
+    let mut other = Runtime::new(&ctx.device, &ctx.queue, &mut a, &scene, opts.clone()).unwrap();
+    frame(&ctx, &mut other, &moved, Shadows::Own);
+    for _ in 0..2 {
+        clear_lightmap(&ctx, &rt);
+        rt.update(&moved).unwrap();
+        let mut enc = ctx.device.create_command_encoder(&Default::default());
+        rt.encode(
+            &mut enc,
+            Shadows::External(other.direct_light_bindings().shadow_maps),
+            None,
+        );
+        ctx.queue.submit([enc.finish()]);
+        ctx.wait().unwrap();
+        assert!(rt.read_lightmap().unwrap() == after_move, "external shadow maps");
+    }
+    // K,
+    clear_lightmap(&ctx, &rt);
+    rt.set_top_k(rt.options().top_k + 1);
+    let k = frame(&ctx, &mut rt, &moved, Shadows::Own);
+    assert!(k.iter().flatten().any(|v| *v > 0.0), "K changed");
+    // the emitters' scales and the sky.
+    let scales = vec![[1.0; 3]; rt.emitters().len()];
+    rt.update(&moved).unwrap();
+    assert!(!rt.gi_pending());
+    rt.set_emitter_scales(&scales).unwrap();
+    assert!(rt.gi_pending(), "the emitter scales were set");
+
+    // GiUpdate::EveryFrame computes still frames too, to the same light.
+    let every = RuntimeOptions {
+        gi_update: GiUpdate::EveryFrame,
+        ..opts
+    };
+    let mut rt = Runtime::new(&ctx.device, &ctx.queue, &mut a, &scene, every).unwrap();
+    assert!(frame(&ctx, &mut rt, &lights, Shadows::Own) == lit);
+    clear_lightmap(&ctx, &rt);
+    assert!(rt.gi_pending());
+    assert!(frame(&ctx, &mut rt, &lights, Shadows::Own) == lit, "every frame");
 }
 
 #[test]

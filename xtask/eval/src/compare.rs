@@ -6,7 +6,11 @@
 //! - energy: Σ t / Σ r;
 //! - shape error: the downsampled error left after t is scaled by (t·r)/(t·t);
 //! - local error: the largest error over 8×8-pixel windows (full resolution), divided by the
-//!   whole image's (blotches and spikes).
+//!   whole image's (blotches and spikes), with where that window is and how bright its
+//!   reference is against the image's: a window at a few percent of the image's brightness
+//!   is relative noise, one on a line of single pixels is geometry (session 24: McGuire's right
+//!   wall meets the floor on the image diagonal, through pixel centres, which the rasterizer
+//!   gives to the wall and the tracer to the floor).
 
 use anyhow::{bail, Context, Result};
 use std::path::Path;
@@ -72,6 +76,10 @@ pub struct Metrics {
     pub energy: f64,
     pub shape: f64,
     pub local: f64,
+    /// The worst window's top-left pixel (x, y).
+    pub local_at: (usize, usize),
+    /// The worst window's reference RMS over the whole reference's.
+    pub local_brightness: f64,
 }
 
 fn metrics(t: &Rgb, r: &Rgb) -> Metrics {
@@ -89,23 +97,30 @@ fn metrics(t: &Rgb, r: &Rgb) -> Metrics {
     };
     let best = dot(&t4, &r4) / dot(&t4, &t4).max(1e-300);
     let shape = self::error(&t4, &r4, best, 0..n4);
-    let mut worst = 0.0f64;
+    let (mut worst, mut local_at, mut worst_r2) = (0.0f64, (0, 0), 0.0);
     for by in 0..t.height / 8 {
         for bx in 0..t.width / 8 {
             let window = (0..64).map(|k| (by * 8 + k / 8) * t.width + bx * 8 + k % 8);
             // Windows where the reference is black say nothing relative.
             let r2: f64 = window.clone().map(|i| r.px[i].iter().map(|v| v * v).sum::<f64>()).sum();
             if r2 > 0.0 {
-                worst = worst.max(self::error(t, r, 1.0, window));
+                let e = self::error(t, r, 1.0, window);
+                if e > worst {
+                    (worst, local_at, worst_r2) = (e, (bx * 8, by * 8), r2);
+                }
             }
         }
     }
+    let image_r2: f64 = r.px.iter().map(|p| p.iter().map(|v| v * v).sum::<f64>()).sum();
+    let local_brightness = (worst_r2 / 64.0 / (image_r2 / r.px.len() as f64).max(1e-300)).sqrt();
     Metrics {
         error,
         error_full,
         energy,
         shape,
         local: worst / error_full.max(1e-300),
+        local_at,
+        local_brightness,
     }
 }
 
@@ -133,12 +148,15 @@ pub fn run(args: &[String]) -> Result<()> {
     };
     let m = compare_files(Path::new(test), Path::new(reference))?;
     println!(
-        "error {:.2}% (4x4 downsample), {:.2}% full resolution; energy {:.3}; shape error {:.2}%; local error {:.2}x",
+        "error {:.2}% (4x4 downsample), {:.2}% full resolution; energy {:.3}; shape error {:.2}%; local error {:.2}x (8x8 window at {}, {}; its reference at {:.0}% of the image's RMS)",
         100.0 * m.error,
         100.0 * m.error_full,
         m.energy,
         100.0 * m.shape,
-        m.local
+        m.local,
+        m.local_at.0,
+        m.local_at.1,
+        100.0 * m.local_brightness
     );
     Ok(())
 }
@@ -176,5 +194,7 @@ mod tests {
         let blotch = image(32, 32, |x, y| if x < 8 && y < 8 { 2.0 } else { 1.0 });
         let m = metrics(&blotch, &r);
         assert!(m.local > 3.0, "{m:?}");
+        assert_eq!(m.local_at, (0, 0), "{m:?}");
+        assert!((m.local_brightness - 1.0).abs() < 1e-12, "{m:?}");
     }
 }

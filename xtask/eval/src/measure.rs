@@ -177,6 +177,15 @@ pub fn renderer(
     renderer_with(archive, scene_path, runtime)
 }
 
+/// Every frame the eval times computes the indirect light again, as a frame whose lights move
+/// does, whatever else `options` asks.
+fn every_frame(options: prm_play::RuntimeOptions) -> prm_play::RuntimeOptions {
+    prm_play::RuntimeOptions {
+        gi_update: prm_play::GiUpdate::EveryFrame,
+        ..options
+    }
+}
+
 /// [`renderer`] with these run-time options.
 pub fn renderer_with(
     archive: &std::path::Path,
@@ -189,7 +198,7 @@ pub fn renderer_with(
     let opts = PlayOptions {
         width: FRAME_SIZE.0,
         height: FRAME_SIZE.1,
-        runtime,
+        runtime: every_frame(runtime),
         ..PlayOptions::default()
     };
     let mut r = Renderer::new(ctx, &scene, &mut a, opts).context("creating the renderer")?;

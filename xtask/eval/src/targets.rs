@@ -8,7 +8,8 @@
 //! boxes are read from `../shared/scenes` with every `Ke` set to 0 (a copy under the cache, as
 //! the metrics ask; the copy is never committed). The columns: the error after a 4×4 box
 //! downsample and at full resolution, the energy Σ t / Σ r, the shape error, the local error
-//! (largest 8×8 window over the whole), the reference's own noise after the downsample (from a
+//! (largest 8×8 window over the whole; where that window is and its reference's brightness
+//! against the image's, see [`compare`]), the reference's own noise after the downsample (from a
 //! second reference with another seed, [`NOISE_SPP`]), the bake's seconds (its report) and the
 //! `gi`/`direct` frame-time ratio at 1024×768 (median of interleaved frames on one renderer, as
 //! `cargo bench -p prm-play --bench frame` does). Each cell names its target and whether it is
@@ -236,7 +237,7 @@ fn against(value: String, ok: Option<bool>, target: String) -> String {
 pub fn run(bake_bin: &Path, cache: &Path, root: &Path, out: &Path) -> Result<String> {
     let play_bin = bake_bin.with_file_name(format!("prm-play{}", std::env::consts::EXE_SUFFIX));
     let mut md = String::from(
-        "| case | light | indirect error (4×4) | full res. | energy | shape | local | ref. noise | bake s | gi / direct frame |\n| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n",
+        "| case | light | indirect error (4×4) | full res. | energy | shape | local (worst 8×8 window's corner, its reference's RMS over the image's) | ref. noise | bake s | gi / direct frame |\n| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n",
     );
     for case in cases(root, cache)? {
         let name = format!("targets-{}", case.name);
@@ -286,7 +287,13 @@ pub fn run(bake_bin: &Path, cache: &Path, root: &Path, out: &Path) -> Result<Str
                 ),
                 pct(m.shape),
                 against(
-                    format!("{:.1}×", m.local),
+                    format!(
+                        "{:.1}× at ({}, {}), {:.0}%",
+                        m.local,
+                        m.local_at.0,
+                        m.local_at.1,
+                        100.0 * m.local_brightness
+                    ),
                     Some(m.local <= LOCAL),
                     format!("≤ {LOCAL}×")
                 ),
