@@ -75,7 +75,7 @@ struct Args {
     gi_update: String,
     /// Frames to render (headless: default 1). In a window: quit after this many presented
     /// frames (default: run until closed).
-    #[arg(long)]
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..))]
     frames: Option<u32>,
     /// Keyframed lights, camera, emitter scales and sky (TOML; see the prm_play::animation docs).
     #[arg(long)]

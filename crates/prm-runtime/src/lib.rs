@@ -801,6 +801,10 @@ impl Runtime {
     /// and uploaded; nothing is rendered.
     pub fn set_emitter_scales(&mut self, scales: &[[f32; 3]]) -> Result<(), RuntimeError> {
         self.emitters.check(scales)?;
+        if scales == self.emitters.scales.as_slice() {
+            // An animation holding its scales: nothing to sum, upload or compute again.
+            return Ok(());
+        }
         self.emitters.scales = scales.to_vec();
         self.emitters.apply(&self.queue, &mut self.entries);
         if let Some(p) = &self.probes {
@@ -825,6 +829,9 @@ impl Runtime {
     /// rendered. Refused when the archive has no sky transfer ([`Runtime::has_sky`]).
     pub fn set_sky(&mut self, coeffs: &[[f32; 3]; prm_format::SH_COEFFS]) -> Result<(), RuntimeError> {
         self.emitters.check_sky(coeffs)?;
+        if *coeffs == self.emitters.sky_coeffs {
+            return Ok(());
+        }
         self.emitters.sky_coeffs = *coeffs;
         self.emitters.apply(&self.queue, &mut self.entries);
         if let Some(p) = &self.probes {
