@@ -534,10 +534,11 @@ pub fn bake(job: &BakeJob<'_>, renderer: Renderer<'_>, progress: &mut dyn Progre
     // their texel that sees the scene, before anything traces from them.
     let unburied = prm_trace::unbury_exits(scene, &bvh, &mut atlas);
     let detail = format!(
-        "{} triangles; {} exit points buried under other geometry, {} of them moved within their texel",
+        "{} triangles; {} exit points buried under other geometry, {} of them moved within their texel, {} to a neighbour's",
         scene.triangles.len(),
         unburied.buried,
-        unburied.moved
+        unburied.moved,
+        unburied.copied
     );
     finish_phase(&mut timings, progress, Phase::Bvh, "bvh", t, &detail);
 

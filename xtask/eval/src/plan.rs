@@ -348,7 +348,8 @@ fn file_stamp(path: &Path) -> String {
 /// (format 1.9). 15: duplicate triangles dropped at load, near rays from just off the surface,
 /// buried exit points moved within their texel. 16: the sky's indirect transfer smoothed over
 /// 5 × 5 texels of one chart. 17: `--sky` alone takes its paths per texel from the time budget.
-const BAKE_EPOCH: u32 = 17;
+/// 18: buried exit points that cannot move within their texel take a coplanar neighbour's point.
+const BAKE_EPOCH: u32 = 18;
 
 /// A case's label as a file name: spaces and punctuation as dashes.
 pub fn case_name(label: &str) -> String {

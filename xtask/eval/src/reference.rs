@@ -104,7 +104,8 @@ impl<'a> Tracer<'a> {
     }
 
     /// The bake's atlas of resolution `resolution`: the exit points as `prm-bake bake` traces
-    /// from them, the buried ones moved within their texel (`prm_trace::unbury_exits`).
+    /// from them, the buried ones moved within their texel or to a neighbour's point
+    /// (`prm_trace::unbury_exits`).
     pub fn atlas(&self, resolution: u32) -> Result<prm_scene::Atlas> {
         let sizing = prm_scene::AtlasParams::with_sizing(prm_scene::Sizing::Resolution(resolution));
         Ok(prm_trace::bake_atlas(self.scene, &self.bvh, &sizing)?)
@@ -119,7 +120,19 @@ impl<'a> Tracer<'a> {
         light: &Light,
         spp: u32,
     ) -> Result<Reference> {
-        let key = format!("lightmap-unburied|{resolution}|{}|{light_spec}|{spp}", exits.len());
+        // Keyed by the exit points themselves: the bake's rules for them change (buried ones
+        // moved, session 20; shut-in ones given a neighbour's point, session 24).
+        let mut h = std::collections::hash_map::DefaultHasher::new();
+        for x in exits {
+            for v in x.position.to_array().into_iter().chain(x.normal.to_array()) {
+                std::hash::Hasher::write_u32(&mut h, v.to_bits());
+            }
+        }
+        let exits_hash = std::hash::Hasher::finish(&h);
+        let key = format!(
+            "lightmap|{resolution}|{}|{exits_hash:016x}|{light_spec}|{spp}",
+            exits.len()
+        );
         self.cached(&key, || {
             let lights = [*light];
             let t = ReferenceTracer::new(self.scene, &self.bvh, Lighting::Lights(&lights));
