@@ -120,7 +120,8 @@ pub enum GiUpdate {
     /// ([`crate::Runtime::update`] with other lights), K, the emitter groups' scales or the sky;
     /// always with [`crate::Shadows::External`] shadow maps, whose contents the run time cannot
     /// see. A frame whose lights stand still (the camera moves, or nothing does) then costs its
-    /// direct light alone: McGuire's box at 1024×768 on lavapipe 28 ms instead of 58 ms.
+    /// direct light alone: McGuire's box at 1024×768 on lavapipe 24–25 ms instead of 52–56 ms
+    /// (`prm-play --headless --frames 12 --timings`, medians, with `--gi-update every-frame`).
     #[default]
     OnChange,
     /// Every frame: what a frame whose lights move costs (benchmarks, and `cargo xtask eval`'s

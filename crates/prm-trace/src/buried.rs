@@ -76,35 +76,28 @@ pub struct Unburied {
     pub copied: u32,
 }
 
+/// For each of the [`BURIED_RAYS`] cosine rays from the point `p` of triangle `tri` (shading
+/// normal `n`), lazily: whether it meets a back face first.
+fn back_face_rays(bvh: &Bvh, p: Vec3, n: Vec3, tri: u32) -> impl Iterator<Item = bool> + '_ {
+    let ng = bvh.geometric_normal(tri);
+    (0..BURIED_RAYS).map(move |i| {
+        let d = cosine_hemisphere(sobol2(i, RAY_SEED), n);
+        bvh.closest_hit(bvh.spawn(p, ng, d), d, f32::INFINITY, tri)
+            .is_some_and(|h| !h.front)
+    })
+}
+
 /// Whether the point `p` of triangle `tri` (shading normal `n`) sees mostly back faces.
 pub fn is_buried(bvh: &Bvh, p: Vec3, n: Vec3, tri: u32) -> bool {
-    let ng = bvh.geometric_normal(tri);
-    let limit = (BURIED_BACK_FRACTION * BURIED_RAYS as f32).ceil() as u32;
-    let mut back = 0;
-    for i in 0..BURIED_RAYS {
-        let d = cosine_hemisphere(sobol2(i, RAY_SEED), n);
-        if let Some(h) = bvh.closest_hit(bvh.spawn(p, ng, d), d, f32::INFINITY, tri) {
-            if !h.front {
-                back += 1;
-                if back >= limit {
-                    return true;
-                }
-            }
-        }
-    }
-    false
+    let limit = (BURIED_BACK_FRACTION * BURIED_RAYS as f32).ceil() as usize;
+    back_face_rays(bvh, p, n, tri).filter(|&back| back).take(limit).count() == limit
 }
 
 /// Whether every one of the [`BURIED_RAYS`] cosine rays from `p` meets a back face first: the
 /// point is shut in (under a box, behind a frame on a wall), not merely among single-sided
 /// surfaces seen from behind (a plant's leaves, where about half the rays do).
 fn is_enclosed(bvh: &Bvh, p: Vec3, n: Vec3, tri: u32) -> bool {
-    let ng = bvh.geometric_normal(tri);
-    (0..BURIED_RAYS).all(|i| {
-        let d = cosine_hemisphere(sobol2(i, RAY_SEED), n);
-        bvh.closest_hit(bvh.spawn(p, ng, d), d, f32::INFINITY, tri)
-            .is_some_and(|h| !h.front)
-    })
+    back_face_rays(bvh, p, n, tri).all(|back| back)
 }
 
 /// The atlas of `params` with the exit points the bake traces from: [`Atlas::build`], then
@@ -166,9 +159,10 @@ pub fn unbury_exits(scene: &Scene, bvh: &Bvh, atlas: &mut Atlas) -> Unburied {
         }
     }
     // The exits no point of whose texel sees the scene, shut in (every ray from the exit meets
-    // a back face), take the point of the nearest exit of their chart, within NEIGHBOUR_REACH
-    // texels and facing within NEIGHBOUR_COS, that does: such a texel shows nowhere itself, but
-    // the bilinear lookups of the visible texels beside it fetch it, and its own pane is dark.
+    // a back face), take the point of the nearest exit of their chart that does, within
+    // NEIGHBOUR_REACH texels, facing within NEIGHBOUR_COS and within NEIGHBOUR_PLANE texels of
+    // their plane: such a texel shows nowhere itself, but the bilinear lookups of the visible
+    // texels beside it fetch it, and its own pane is dark.
     let still: Vec<bool> = moves.iter().map(|m| matches!(m, Some(None))).collect();
     let texel_size = atlas.stats.texel_size;
     let exits = &atlas.exits;
