@@ -68,6 +68,12 @@ struct Args {
     /// (darker than they should be at edges, from 1.8 everywhere a little).
     #[arg(long, value_name = "gather|off", default_value = "gather", value_parser = ["gather", "off"])]
     near_field: String,
+    /// How many times the near field's deeper share is gathered after the blend, each from the
+    /// lightmap the previous gather completed: light passing back and forth between close
+    /// surfaces (0 leaves that share out; each gather costs a pass over the near field).
+    #[arg(long, value_name = "N", default_value_t = prm_play::RuntimeOptions::DEFAULT_NEAR_BOUNCES,
+          value_parser = clap::value_parser!(u32).range(0..=prm_play::MAX_NEAR_BOUNCES as i64))]
+    near_bounces: u32,
     /// When the indirect light is computed again: `on-change` (when the lights, K, an emitter's
     /// scale or the sky change; frames whose lights stand still cost their direct light alone)
     /// or `every-frame` (what a frame whose lights move costs: time GI with it).
@@ -192,6 +198,7 @@ fn run() -> Result<()> {
         shadow_resolution: args.shadow_resolution,
         sun_tiles: args.sun_tiles,
         fade_band: args.fade_band,
+        near_bounces: args.near_bounces,
         near_light: if args.near_field == "off" {
             prm_play::NearLight::Off
         } else {

@@ -123,6 +123,7 @@ impl PlayOptions {
                     "sun_tiles" => "--sun-tiles",
                     "top_k" => "--top-k",
                     "fade_band" => "--fade-band",
+                    "near_bounces" => "--near-bounces",
                     other => other,
                 },
                 message,

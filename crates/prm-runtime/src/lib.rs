@@ -70,7 +70,8 @@ pub use baked::EmitterInfo;
 pub use irradiance::DILATE_STEPS;
 pub use lights::{look_to, orthographic, perspective, shadow_views, SPOT_SINGLE_VIEW_MAX_DEG};
 pub use options::{
-    archive_top_k, GiUpdate, NearLight, ProbeLight, RuntimeError, RuntimeOptions, MAX_SHADOW_RESOLUTION, MAX_SUN_TILES,
+    archive_top_k, GiUpdate, NearLight, ProbeLight, RuntimeError, RuntimeOptions, MAX_NEAR_BOUNCES,
+    MAX_SHADOW_RESOLUTION, MAX_SUN_TILES,
 };
 pub use probes::ProbeVolume;
 pub use shadow::SHADOW_FORMAT;
@@ -472,13 +473,14 @@ impl Runtime {
                     &buffers,
                     n,
                     merged,
-                    res,
                     &maps.array,
                     near_field::NearTargets {
                         near_map: &near_view,
                         lightmap: &lightmap_view,
                         emitted: &emitters.indirect_view,
+                        resolution: res,
                     },
+                    options.near_bounces,
                 ))
             }
             None => None,

@@ -7,7 +7,9 @@
 //! and contacts too dark (issue #11); this gathers that light back.
 //! Archives of format 1.8 bound the deeper VPLs by a disk as large, and two more passes after
 //! the blend gather their share back from the blended lightmap itself
-//! (`near_indirect_radiance.wgsl`, `near_indirect.wgsl`).
+//! (`near_indirect_radiance.wgsl`, `near_indirect.wgsl`), once per
+//! [`crate::RuntimeOptions::near_bounces`], each time from the lightmap the previous gather
+//! completed.
 
 use prm_format::NearField;
 use prm_gpu_kit::{linear_workgroups, pipeline, ComputePass, PassTimer};
@@ -26,7 +28,9 @@ pub(crate) struct NearFieldPass {
 
 /// The deeper VPLs' share (format 1.8), after the blend: from a copy of its lightmap (`source`,
 /// which holds the direct share already), the gather points' indirect radiance, then each exit
-/// point's sum of it written into the lightmap. Summing both shares after the blend in one walk
+/// point's sum of it added to `source` and written into the lightmap; then, for each further
+/// bounce ([`crate::RuntimeOptions::near_bounces`]), the same from a copy of the lightmap that
+/// sum completed (`again`), added to `source` again. Summing both shares after the blend in one walk
 /// along the hits, without the direct share in the indirect light, played the fireplace room's
 /// 120 s bake at 13.14% instead of 11.95% (McGuire's box 3.70% / 4.44% instead of 3.60% /
 /// 4.24%).
@@ -34,6 +38,10 @@ struct IndirectShare {
     radiance_pass: ComputePass,
     sum: ComputePass,
     source: wgpu::Texture,
+    /// The radiance pass reading `completed`, and the copy itself, for the bounces after the
+    /// first; `None` with one bounce.
+    again: Option<(ComputePass, wgpu::Texture)>,
+    bounces: u32,
 }
 
 /// The textures the near field reads and writes besides its own buffers.
@@ -45,6 +53,8 @@ pub(crate) struct NearTargets<'a> {
     pub lightmap: &'a wgpu::TextureView,
     /// The emitters' and sky's traced indirect lightmap (1×1 without one).
     pub emitted: &'a wgpu::TextureView,
+    /// The atlas's side in texels: the lightmap's and the near lightmap's.
+    pub resolution: u32,
 }
 
 /// The radiance pass's own bindings; the shadow maps and the frame's buffers come per bind group.
@@ -113,9 +123,9 @@ impl NearFieldPass {
         b: &Buffers,
         near: &NearField,
         merged: MergedHits,
-        resolution: u32,
         shadow_maps: &wgpu::TextureView,
         targets: NearTargets,
+        bounces: u32,
     ) -> NearFieldPass {
         let st = wgpu::BufferUsages::STORAGE;
         // Never empty: a binding of zero bytes is invalid.
@@ -178,36 +188,41 @@ impl NearFieldPass {
                 wgpu::BindingResource::TextureView(targets.near_map),
             ],
         );
-        let indirect = (near.indirect_disk > 0.0).then(|| {
-            let source = pipeline::texture(
-                device,
-                "prm near source",
-                [resolution, resolution, 1],
-                crate::LIGHTMAP_FORMAT,
-                wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-            );
-            let source_view = source.create_view(&Default::default());
+        let indirect = (near.indirect_disk > 0.0 && bounces > 0).then(|| {
+            let copy = |label| {
+                pipeline::texture(
+                    device,
+                    label,
+                    [targets.resolution, targets.resolution, 1],
+                    crate::LIGHTMAP_FORMAT,
+                    wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+                )
+            };
             let indirect = pipeline::storage(
                 device,
                 "prm near indirect radiance",
                 points.len() as u64 * 16,
                 wgpu::BufferUsages::empty(),
             );
-            let radiance_pass = ComputePass::new(
-                device,
-                "near indirect radiance",
-                &[
-                    crate::SHARED_WGSL,
-                    include_str!("../../../shaders/runtime/near_indirect_radiance.wgsl"),
-                ],
-                &[
-                    info.as_entire_binding(),
-                    points_buf.as_entire_binding(),
-                    wgpu::BindingResource::TextureView(&source_view),
-                    wgpu::BindingResource::TextureView(targets.emitted),
-                    indirect.as_entire_binding(),
-                ],
-            );
+            let radiance_from = |from: &wgpu::Texture| {
+                ComputePass::new(
+                    device,
+                    "near indirect radiance",
+                    &[
+                        crate::SHARED_WGSL,
+                        include_str!("../../../shaders/runtime/near_indirect_radiance.wgsl"),
+                    ],
+                    &[
+                        info.as_entire_binding(),
+                        points_buf.as_entire_binding(),
+                        wgpu::BindingResource::TextureView(&from.create_view(&Default::default())),
+                        wgpu::BindingResource::TextureView(targets.emitted),
+                        indirect.as_entire_binding(),
+                    ],
+                )
+            };
+            let source = copy("prm near source");
+            let radiance_pass = radiance_from(&source);
             let sum = ComputePass::new(
                 device,
                 "near indirect",
@@ -221,14 +236,20 @@ impl NearFieldPass {
                     exits_buf.as_entire_binding(),
                     hits_buf.as_entire_binding(),
                     indirect.as_entire_binding(),
-                    wgpu::BindingResource::TextureView(&source_view),
+                    wgpu::BindingResource::TextureView(&source.create_view(&Default::default())),
                     wgpu::BindingResource::TextureView(targets.lightmap),
                 ],
             );
+            let again = (bounces > 1).then(|| {
+                let completed = copy("prm near completed");
+                (radiance_from(&completed), completed)
+            });
             IndirectShare {
                 radiance_pass,
                 sum,
                 source,
+                again,
+                bounces,
             }
         });
         let inputs = RadianceBindings {
@@ -284,7 +305,8 @@ impl NearFieldPass {
 
     /// After the blend, for format 1.8: copies the blended `lightmap`, gives every gather point
     /// its radiance from the lights' indirect light in it, and adds the deeper VPLs' share at
-    /// every exit point with near hits. Nothing for 1.7.
+    /// every exit point with near hits; then once per further bounce the same from the lightmap
+    /// that share completed, added to the blended copy. Nothing for 1.7.
     pub fn encode_after_blend(
         &self,
         encoder: &mut wgpu::CommandEncoder,
@@ -299,6 +321,13 @@ impl NearFieldPass {
             .radiance_pass
             .encode(encoder, linear_workgroups(self.point_count), timer);
         share.sum.encode(encoder, linear_workgroups(self.exit_count), timer);
+        if let Some((radiance_pass, completed)) = &share.again {
+            for _ in 1..share.bounces {
+                encoder.copy_texture_to_texture(lightmap.as_image_copy(), completed.as_image_copy(), lightmap.size());
+                radiance_pass.encode(encoder, linear_workgroups(self.point_count), timer);
+                share.sum.encode(encoder, linear_workgroups(self.exit_count), timer);
+            }
+        }
     }
 }
 

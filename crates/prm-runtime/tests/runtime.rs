@@ -180,6 +180,13 @@ fn bad_input_is_refused_naming_it() {
             },
             "sun_tiles",
         ),
+        (
+            RuntimeOptions {
+                near_bounces: prm_runtime::MAX_NEAR_BOUNCES + 1,
+                ..RuntimeOptions::default()
+            },
+            "near_bounces",
+        ),
     ] {
         match Runtime::new(&ctx.device, &ctx.queue, &mut a, &scene, options) {
             Err(RuntimeError::Option { option, .. }) => assert_eq!(option, field),

@@ -157,7 +157,8 @@ impl NearTerms {
 
     /// Every texel's deeper VPLs' share from `indirect`, the played indirect irradiance (the
     /// lights' alone) at [`NearTerms::gather_texels`]. A player's gather points take their own
-    /// direct share into that light too, a second order this leaves out.
+    /// direct share into that light too, and from its second gather their deeper share
+    /// (`prm_runtime::RuntimeOptions::near_bounces`): orders this leaves out.
     pub fn deeper(&self, indirect: &[Vec3]) -> Vec<Vec3> {
         self.terms
             .iter()
