@@ -3,7 +3,10 @@
 // of R₁²/(r² + R₁²) × the radiance near_indirect_radiance.wgsl gave the gather point
 // (near_sum.wgsl), added to the blend's value at the exit point's texel (read from `source`, a
 // copy of the lightmap) and written to the lightmap; the other texels keep the blend's value.
-// One invocation per exit point with near hits.
+// With `near.tail` (the last gather) it adds the rest of the share's series too: this sum less
+// the previous gather's (`previous` less `source`; `previous` is `source` itself after the first
+// gather), the series' last term, times the exit point's factor from near_field.rs's
+// `series_tail`. One invocation per exit point with near hits.
 
 @group(0) @binding(0) var<uniform> near: NearField;
 @group(0) @binding(1) var<storage, read> exits: array<NearExit>;
@@ -11,6 +14,8 @@
 @group(0) @binding(3) var<storage, read> radiance: array<vec4<f32>>;
 @group(0) @binding(4) var source: texture_2d<f32>;
 @group(0) @binding(5) var lightmap: texture_storage_2d<rgba32float, write>;
+@group(0) @binding(6) var previous: texture_2d<f32>;
+@group(0) @binding(7) var<storage, read> tail: array<vec4<f32>>;
 
 @compute @workgroup_size(64)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
@@ -19,5 +24,11 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
         return;
     }
     let s = near_sum(i, true, textureDimensions(source).x);
-    textureStore(lightmap, s.xy, vec4<f32>(textureLoad(source, s.xy, 0).rgb + s.irradiance, 1.0));
+    let base = textureLoad(source, s.xy, 0).rgb;
+    var e = base + s.irradiance;
+    if near.tail != 0u {
+        let term = s.irradiance - (textureLoad(previous, s.xy, 0).rgb - base);
+        e += tail[i].rgb * max(term, vec3<f32>(0.0));
+    }
+    textureStore(lightmap, s.xy, vec4<f32>(e, 1.0));
 }

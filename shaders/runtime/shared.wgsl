@@ -171,5 +171,5 @@ struct NearField {
     exits: u32,
     points: u32,
     scale: f32,
-    _pad0: u32,
+    tail: u32,
 };

@@ -26,7 +26,8 @@ pub mod window;
 pub use error::PlayError;
 pub use gpu::{open_vulkan, open_vulkan_for, vulkan_instance};
 pub use prm_runtime::{
-    archive_top_k, synthetic, ClusterWeight, GiUpdate, NearLight, ProbeLight, RuntimeOptions, MAX_NEAR_BOUNCES,
+    archive_top_k, synthetic, ClusterWeight, GiUpdate, NearLight, NearTail, ProbeLight, RuntimeOptions,
+    MAX_NEAR_BOUNCES,
 };
 pub use renderer::{FrameInput, FrameTimings, Image, Mode, PlayOptions, Renderer, MAX_LIGHTS, PASS_NAMES};
 pub use sphere::ProbeSphere;

@@ -74,6 +74,11 @@ struct Args {
     #[arg(long, value_name = "N", default_value_t = prm_play::RuntimeOptions::DEFAULT_NEAR_BOUNCES,
           value_parser = clap::value_parser!(u32).range(0..=prm_play::MAX_NEAR_BOUNCES as i64))]
     near_bounces: u32,
+    /// After the last gather: `extrapolate` the rest of the light passed back and forth, from
+    /// the last gather's share and each exit point's ratio for uniform light, or `off` to stop at
+    /// the gathers.
+    #[arg(long, value_name = "extrapolate|off", default_value = "extrapolate", value_parser = ["extrapolate", "off"])]
+    near_tail: String,
     /// When the indirect light is computed again: `on-change` (when the lights, K, an emitter's
     /// scale or the sky change; frames whose lights stand still cost their direct light alone)
     /// or `every-frame` (what a frame whose lights move costs: time GI with it).
@@ -199,6 +204,11 @@ fn run() -> Result<()> {
         sun_tiles: args.sun_tiles,
         fade_band: args.fade_band,
         near_bounces: args.near_bounces,
+        near_tail: if args.near_tail == "off" {
+            prm_play::NearTail::Off
+        } else {
+            prm_play::NearTail::Extrapolated
+        },
         near_light: if args.near_field == "off" {
             prm_play::NearLight::Off
         } else {

@@ -70,7 +70,7 @@ pub use baked::EmitterInfo;
 pub use irradiance::DILATE_STEPS;
 pub use lights::{look_to, orthographic, perspective, shadow_views, SPOT_SINGLE_VIEW_MAX_DEG};
 pub use options::{
-    archive_top_k, GiUpdate, NearLight, ProbeLight, RuntimeError, RuntimeOptions, MAX_NEAR_BOUNCES,
+    archive_top_k, GiUpdate, NearLight, NearTail, ProbeLight, RuntimeError, RuntimeOptions, MAX_NEAR_BOUNCES,
     MAX_SHADOW_RESOLUTION, MAX_SUN_TILES,
 };
 pub use probes::ProbeVolume;
@@ -480,7 +480,10 @@ impl Runtime {
                         emitted: &emitters.indirect_view,
                         resolution: res,
                     },
-                    options.near_bounces,
+                    near_field::NearSeries {
+                        gathers: options.near_bounces,
+                        tail: options.near_tail,
+                    },
                 ))
             }
             None => None,

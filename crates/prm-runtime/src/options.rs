@@ -17,7 +17,7 @@ pub const MAX_SUN_TILES: u32 = 8;
 /// Most gathers of the near field's deeper share a frame ([`RuntimeOptions::near_bounces`]):
 /// 7 instead of 4 move the fireplace room's error by 0.1 point (7.36% → 7.25%), and each costs
 /// a pass over every gather point and every near exit point.
-pub const MAX_NEAR_BOUNCES: u32 = 8;
+pub const MAX_NEAR_BOUNCES: u32 = 64;
 /// Why the run time could not load an archive or run a frame.
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
@@ -117,6 +117,24 @@ pub enum NearLight {
     Off,
 }
 
+/// What follows the last gather of the near field's deeper share ([`RuntimeOptions::near_tail`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum NearTail {
+    /// The rest of the share's series, extrapolated at every exit point from its last term:
+    /// that term times the ratio of the rest to it for uniform light (`near_field.rs`'s
+    /// `series_tail`, summed once at load on the CPU: 0.5 s for the fireplace room's 185k near
+    /// exit points on two cores). Light passed back and forth between close surfaces converges
+    /// slowly where they enclose a space (under furniture, between a sofa's cushions, behind a
+    /// picture: the terms fall by about 0.87 each on the fireplace room), and this takes it
+    /// close to the series' limit at no cost a frame: the fireplace room's lightmap against its
+    /// reference (1024 paths a texel, every covered texel) 54.0% off after two gathers, 15.8%
+    /// with the tail, 15.1% at the limit (64 gathers).
+    #[default]
+    Extrapolated,
+    /// The series cut after the gathers.
+    Off,
+}
+
 /// When [`crate::Runtime::encode`] records the indirect light's passes (weights, near field,
 /// rank, select, blend, probes).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -168,6 +186,8 @@ pub struct RuntimeOptions {
     /// later) is gathered after the blend ([`RuntimeOptions::DEFAULT_NEAR_BOUNCES`] by
     /// default); 0 leaves it out.
     pub near_bounces: u32,
+    /// What follows the last of those gathers ([`NearTail::Extrapolated`] by default).
+    pub near_tail: NearTail,
     /// Most bytes one buffer of panes takes (the panes are cut into chunks of texels, each a
     /// storage buffer: `blend.rs`); `None`: the device's storage binding limit. A smaller cap
     /// costs a dispatch per chunk and nothing measurable; for engines that bound their
@@ -185,15 +205,15 @@ impl RuntimeOptions {
     /// surfaces around an exit point, which the indirect light it completes is part of: the
     /// first gather reads the blended lightmap (the panes and the direct share), each further
     /// one the lightmap the previous gather completed, so that light passing back and forth
-    /// between close surfaces (a sofa's cushions, a moulding) is counted more than once.
-    /// `cargo xtask eval --targets`' fireplace room (default bake) with 1, 2, 3, 4 and 7
-    /// gathers: 8.73%, 7.55%, 7.42%, 7.36% and 7.25% (energy 0.989, 1.013, 1.020, 1.023,
-    /// 1.025; the sofa's seams, a quarter of its squared error, come right and the window's
-    /// panelled shutters turn a little too bright); with 2, McGuire's box 3.5% → 3.2% and
-    /// 2.9% → 2.8%, CornellBox-Sphere 2.7% → 2.5%, chairs 3.7% → 3.6%, Sponza's sun 15.72% →
-    /// 15.86%. Each gather costs the fireplace room's 1024×768 `gi` frame about 30 ms of its
-    /// 405 ms on lavapipe (`prm-play --timings --gi-update every-frame`, medians of 10, two
-    /// runs: 405, 436 and 480 ms with 1, 2 and 4 gathers).
+    /// between close surfaces (a sofa's cushions, a moulding) is counted more than once; the
+    /// rest of that series is extrapolated after the last ([`NearTail`]). `cargo xtask eval
+    /// --targets`' fireplace room (default bake) with 1, 2, 3, 4 and 7 gathers and no tail:
+    /// 8.73%, 7.55%, 7.42%, 7.36% and 7.25% (energy 0.989, 1.013, 1.020, 1.023, 1.025), 64:
+    /// 7.16%; with the tail 7.51% after one gather (a texel at a wall lamp spikes: local error
+    /// 6.1×), **7.08%** after two, 7.27% after three. Each gather costs the fireplace room's
+    /// 1024×768 `gi` frame about 30 ms of its 405 ms on lavapipe (`prm-play --timings
+    /// --gi-update every-frame`, medians of 10, two runs: 405, 436 and 480 ms with 1, 2 and 4
+    /// gathers).
     pub const DEFAULT_NEAR_BOUNCES: u32 = 2;
 
     /// Tiles on a side of a directional light's shadow map. Measured on Sponza under a high sun
@@ -278,6 +298,7 @@ impl Default for RuntimeOptions {
             probe_light: ProbeLight::default(),
             near_light: NearLight::default(),
             near_bounces: Self::DEFAULT_NEAR_BOUNCES,
+            near_tail: NearTail::default(),
             pane_chunk_bytes: None,
             gi_update: GiUpdate::default(),
         }

@@ -163,8 +163,9 @@ pub struct GpuNearField {
     pub points: u32,
     /// `π / M`, `M` the rays per exit point.
     pub scale: f32,
-    /// Padding.
-    pub _pad0: u32,
+    /// 1 when the deeper share's sum adds the rest of its series (the last gather with
+    /// [`crate::NearTail::Extrapolated`]), else 0.
+    pub tail: u32,
 }
 
 /// A light; `Light` in the shaders.
@@ -360,7 +361,7 @@ mod tests {
         wgsl_layout!(s, GpuProbeRays, "ProbeRays", [probes, rays_per_probe, points, _pad0]).unwrap();
         wgsl_layout!(s, GpuNearExit, "NearExit", [texel, end]).unwrap();
         wgsl_layout!(s, GpuNearHit, "NearHit", [point, weights]).unwrap();
-        wgsl_layout!(s, GpuNearField, "NearField", [exits, points, scale, _pad0]).unwrap();
+        wgsl_layout!(s, GpuNearField, "NearField", [exits, points, scale, tail]).unwrap();
     }
 
     #[test]
