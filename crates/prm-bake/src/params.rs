@@ -380,27 +380,49 @@ const MIN_AUTO_TOP_K: usize = 32;
 /// cluster blended), four times its charts' 1024. It was once.
 const MAX_DOUBLINGS: usize = 2;
 
-/// The VPL disk's radius multiplier (`vpl_disk_scale`) where the bake traces the near field:
-/// the panes then bound each VPL by a disk three times the radius of its entry point's area
-/// `A/N`, with the kernel that completes the near field's cut weights (format 1.9,
-/// `prm_trace::VplBound::Near`), and the near field gathers back, from the texels' light of the
-/// frame, what the disk removes within about `3.9 × 3` radii. A larger disk moves more of the
-/// first bounce from the entry points' point samples to the gather, whose noise is per texel
-/// rather than per entry point. Measured (image space, indirect light, 4×4 error, the
-/// complemented kernel; seed 1 for the fireplace room's 120 s sizes and Sponza's 60 s plan
-/// under the sun of `cargo xtask eval --sky`; McGuire's box under the ceiling / low near the
-/// red wall with the energy of the second):
+/// The VPL disk's radius multiplier (`vpl_disk_scale`) where the bake traces the near field and
+/// its hits fit [`NEAR_HIT_BUDGET`]: the panes then bound each VPL by a disk this many times
+/// the radius of its entry point's area `A/N`, with the kernel that completes the near field's
+/// cut weights (format 1.9, `prm_trace::VplBound::Near`), and the near field gathers back, from
+/// the texels' light of the frame, what the disk removes within about `3.9 ×` that radius. A
+/// larger disk moves more of the light from the entry points' point samples to the gather,
+/// whose noise is per texel rather than per entry point.
 ///
-/// | scale | McGuire's box | fireplace room | Sponza, sun |
+/// Session 19 measured 1 to 4 with one gather of the deeper share (image space, indirect light,
+/// 4×4 error; seed 1 for the fireplace room's 120 s sizes and Sponza's 60 s plan under the sun
+/// of `cargo xtask eval --sky`; McGuire's box under the ceiling / low near the red wall with the
+/// energy of the second): 1: 3.71% / 3.93% (0.989), 12.57%, 22.69% (the 1.8 kernel); 2: 3.57% /
+/// 3.98% (0.986), 11.24%, 19.62%; 3: 3.66% / 4.37% (0.983), 10.92%, 17.88%; 4: 3.83% / 4.91%
+/// (0.978), 10.81%, 16.64%. 4 took the red-wall light's energy outside the ±2% of issue #11,
+/// so 3. With the series of the player's near field (two gathers and the tail, session 25) the
+/// energy no longer falls with the disk, and larger disks win everywhere (default bakes, seed
+/// 0; McGuire's box against a reference of session 20, the fireplace room against the eval's;
+/// `cargo xtask eval --targets` for 3 → 8):
+///
+/// | scale | McGuire's box, 4×4 (full res.) | fireplace room, default | Sponza, sun |
 /// | ---: | ---: | ---: | ---: |
-/// | 1 | 3.71% / 3.93% (0.989) | 12.57% | 22.69% (the 1.8 kernel) |
-/// | 2 | 3.57% / 3.98% (0.986) | 11.24% | 19.62% |
-/// | 3 | 3.66% / 4.37% (0.983) | **10.92%** | **17.88%** |
-/// | 4 | 3.83% / 4.91% (0.978) | 10.81% | 16.64% |
+/// | 2 | | 7.66% | |
+/// | 3 | 3.14% (5.08%) / 2.94% (4.66%) | 7.08% | 15.94% |
+/// | 4 | 2.99% (5.01%) / 2.66% (4.57%) | 6.76% | |
+/// | 6 | 2.76% (4.93%) / 2.44% (4.74%) | 6.35% | |
+/// | **8** | 2.65% (4.94%) / 2.43% (5.17%) | **6.06%** | **13.68%** |
+/// | 12 | 2.55% (5.14%) / 2.72% (6.31%) | | |
 ///
-/// 4 takes the red-wall light's energy outside the ±2% issue #11 sets, so 3. Without the near
-/// field (`--near-rays 0`) the scale stays 1: nothing gives back what a larger disk removes.
-pub const NEAR_FIELD_DISK_SCALE: f32 = 3.0;
+/// Past 8 the full-resolution error grows (the gather's 64 rays a texel show), and the near
+/// field holds more hits: the fireplace room's 9.8 M rays instead of 7.0 M at 3, its `gi` frame
+/// on lavapipe 1.57 times its direct light instead of 1.37. Without the near field (`--near-rays
+/// 0`) the scale stays 1: nothing gives back what a larger disk removes.
+pub const NEAR_FIELD_DISK_SCALE: f32 = 8.0;
+
+/// The scale where the near field's hits could pass [`NEAR_HIT_BUDGET`]: session 19's choice
+/// (above), whose smaller reach keeps fewer hits (a 1024² fireplace room played at 3).
+pub const NEAR_FIELD_DISK_SCALE_LARGE: f32 = 3.0;
+
+/// Most near hits (the atlas's texels times the near rays each, before merging) for which the
+/// bake takes [`NEAR_FIELD_DISK_SCALE`]: 2²⁴ hits of 8 bytes fill one 128 MiB storage binding,
+/// lavapipe's limit and wgpu's default, so the player can hold them even unmerged (512² texels
+/// at the default 64 rays).
+pub const NEAR_HIT_BUDGET: u64 = 1 << 24;
 
 /// Entry points per cluster of the automatic cluster count. Measured in image space
 /// (`cargo xtask eval --targets`, 4×4 error, K = 32 and 64 residual groups; the default 16 give
@@ -756,6 +778,29 @@ impl BakeParams {
         } else {
             config.near_rays.unwrap_or(prm_trace::NEAR_RAYS)
         };
+        let vpl_disk_scale = match config.vpl_disk_scale {
+            Some(scale) => scale,
+            None if near_rays == 0 => 1.0,
+            None => {
+                let hits = texels(atlas) * near_rays as f64;
+                let scale = if hits <= NEAR_HIT_BUDGET as f64 {
+                    NEAR_FIELD_DISK_SCALE
+                } else {
+                    NEAR_FIELD_DISK_SCALE_LARGE
+                };
+                reasons.push(format!(
+                    "VPL disks {scale} times the entry points' radius: {near_rays} near rays from each of about \
+                     {:.0} texels, {} {NEAR_HIT_BUDGET} hits",
+                    texels(atlas),
+                    if hits <= NEAR_HIT_BUDGET as f64 {
+                        "at most"
+                    } else {
+                        "possibly over"
+                    }
+                ));
+                scale
+            }
+        };
         let params = BakeParams {
             preset,
             entries,
@@ -765,9 +810,7 @@ impl BakeParams {
             seed: config.seed.unwrap_or(0),
             top_k,
             face_resolution,
-            vpl_disk_scale: config
-                .vpl_disk_scale
-                .unwrap_or(if near_rays > 0 { NEAR_FIELD_DISK_SCALE } else { 1.0 }),
+            vpl_disk_scale,
             archive_budget_mib,
             memory_budget_mib,
             time_budget_s,

@@ -490,4 +490,48 @@ mod tests {
         };
         assert!(merge_hits(&direct_only).1.iter().all(|h| h.weights().1 == 0.0));
     }
+
+    #[test]
+    fn the_tail_of_two_facing_exits_is_the_geometric_series() {
+        // Exits at texels 0 and 1, every one of their 4 rays on the other's gather point at
+        // r² = 0 (merged: one hit of weight 4 w₁): each term is f = albedo × 4 w₁ / M times the
+        // one before, so
+        // the rest after any term is f/(1 − f) of it. A third exit's rays end on a texel
+        // without near hits (no second term).
+        let point = |texel, albedo| prm_format::GatherPoint {
+            texel,
+            position: [0.0; 3],
+            normal: [0.0, 1.0, 0.0],
+            albedo: [albedo; 3],
+            emission: [0.0; 3],
+            emitter: prm_format::NO_EMITTER,
+        };
+        let hit = |point| NearHit { point, distance2: 0.0 };
+        let near = NearField {
+            rays_per_exit: 4,
+            disk: 1.0,
+            indirect_disk: 1.0,
+            complement: true,
+            points: vec![point(0, 0.5), point(1, 0.5), point(9, 0.8)],
+            exits: vec![
+                NearExit { texel: 0, end: 4 },
+                NearExit { texel: 1, end: 8 },
+                NearExit { texel: 5, end: 12 },
+            ],
+            hits: [[1; 4], [0; 4], [2; 4]].concat().into_iter().map(hit).collect(),
+        };
+        let merged = merge_hits(&near);
+        let w = merged.1[0].weights().1;
+        let f = 0.5 * w / 4.0;
+        assert!((f - 0.5).abs() < 1e-3, "{f}");
+        for gathers in [1, 2, 3] {
+            let tail = series_tail(&near, &merged, gathers);
+            for t in &tail[..2] {
+                for c in &t[..3] {
+                    assert!((c - f / (1.0 - f)).abs() < 1e-4, "{gathers} gathers: {tail:?}, f = {f}");
+                }
+            }
+            assert_eq!(tail[2], [0.0; 4], "nothing after its first term");
+        }
+    }
 }

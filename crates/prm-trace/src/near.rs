@@ -53,7 +53,8 @@
 //! radius 12.27% → 12.57% (energy 0.993 → 1.000), at four times 11.40% → 10.81% (0.964 →
 //! 0.988); McGuire's red-wall light at twice the radius 5.33% (energy 0.970, session 18, the
 //! old kernel) → 3.98% (0.986). That freed the disk's size (`prm-bake`'s
-//! `NEAR_FIELD_DISK_SCALE`, 3, where the table is).
+//! `NEAR_FIELD_DISK_SCALE`, where the tables are: 3 from session 19, 8 since the player sums
+//! the near field's series in session 25).
 //!
 //! Rays leave from just off the surface ([`Bvh::spawn`]), as the walks' and the reference's do.
 //! They used to leave from the exit point itself, ignoring its own triangle only, so a coplanar

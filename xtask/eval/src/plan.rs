@@ -349,7 +349,9 @@ fn file_stamp(path: &Path) -> String {
 /// buried exit points moved within their texel. 16: the sky's indirect transfer smoothed over
 /// 5 × 5 texels of one chart. 17: `--sky` alone takes its paths per texel from the time budget.
 /// 18: buried exit points that cannot move within their texel take a coplanar neighbour's point.
-const BAKE_EPOCH: u32 = 18;
+/// 19: VPL disks eight entry-point radii where the near hits fit one binding (the player sums
+/// the near field's series).
+const BAKE_EPOCH: u32 = 19;
 
 /// A case's label as a file name: spaces and punctuation as dashes.
 pub fn case_name(label: &str) -> String {
