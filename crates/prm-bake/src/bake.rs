@@ -110,8 +110,9 @@ pub struct BakeArgs {
     /// Cosine rays per exit point that find the surfaces close enough for the VPL bound to
     /// have removed their light (default 64; 0: none). The player gathers it back each frame
     /// from their light, mostly at inner edges and contacts (format 1.7 to 1.9). With it the
-    /// VPL disks are three times their entry point's radius (`vpl_disk_scale` in --config),
-    /// without it once.
+    /// VPL disks are eight times their entry point's radius where atlas texels × near rays fit
+    /// 2^24 hits (a 512² atlas at 64 rays), else three (`vpl_disk_scale` in --config); without
+    /// it once.
     #[arg(long, value_name = "RAYS")]
     pub near_rays: Option<u32>,
     /// After the panes, estimate the archive's accuracy: its indirect light against a

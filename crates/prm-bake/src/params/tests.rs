@@ -37,7 +37,11 @@ fn paper_preset_is_the_papers_settings() {
         (p.entries, p.clusters, p.atlas, p.top_k),
         (4096, 256, AtlasSize::Resolution(256), 32)
     );
-    assert!(p.reasons.is_empty());
+    // The preset fixes every size; only the VPL disks, which the paper does not have, are
+    // chosen (from the atlas: 256² texels × 64 near rays fit the hit budget, so the larger disks).
+    assert_eq!(p.vpl_disk_scale, NEAR_FIELD_DISK_SCALE);
+    assert_eq!(p.reasons.len(), 1, "{:?}", p.reasons);
+    assert!(p.reasons[0].starts_with("VPL disks"), "{:?}", p.reasons);
 }
 
 #[test]
