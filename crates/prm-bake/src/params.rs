@@ -410,11 +410,12 @@ const MAX_DOUBLINGS: usize = 2;
 ///
 /// Past 8 the full-resolution error grows (the gather's 64 rays a texel show), and the near
 /// field holds more hits: the fireplace room's 9.8 M rays instead of 7.0 M at 3, its `gi` frame
-/// on lavapipe 1.57 times its direct light instead of 1.37. Without the near field (`--near-rays
-/// 0`) the scale stays 1: nothing gives back what a larger disk removes. The measurements are of
-/// automatic plans, which take 1024 entry points or more; with few entry points set by hand the
-/// disks grow with their radius (256 on the Cornell box: 40 cm in a 55 cm box, and the bake's
-/// own estimate 28% at K = 1 and K = all alike), so the tests' small bakes set 3.
+/// on lavapipe (with the second gather) 1.63 times its direct light instead of 1.37. Without
+/// the near field (`--near-rays 0`) the scale stays 1: nothing gives back what a larger disk
+/// removes. The measurements are of automatic plans, which take 1024 entry points or more; with
+/// few entry points set by hand the disks grow with their radius (256 on the Cornell box: 40 cm
+/// in a 55 cm box, and the bake's own estimate 28% at K = 1 and K = all alike), so the tests'
+/// small bakes set 3.
 pub const NEAR_FIELD_DISK_SCALE: f32 = 8.0;
 
 /// The scale where the near field's hits could pass [`NEAR_HIT_BUDGET`]: session 19's choice
