@@ -104,7 +104,8 @@ pub struct BakeArgs {
     pub probes: Option<u32>,
     /// Rays per probe that find the surfaces the player gathers the probes' light from, each
     /// frame, through the lightmap (default 1024; 0: none, the probes are lit through the panes'
-    /// VPLs instead, as archives before format 1.6 are).
+    /// VPLs instead, as archives before format 1.6 are, and the VPL disks stay three entry-point
+    /// radii).
     #[arg(long, value_name = "RAYS", requires = "probes")]
     pub probe_rays: Option<u32>,
     /// Cosine rays per exit point that find the surfaces close enough for the VPL bound to

@@ -419,7 +419,10 @@ const MAX_DOUBLINGS: usize = 2;
 pub const NEAR_FIELD_DISK_SCALE: f32 = 8.0;
 
 /// The scale where the near field's hits could pass [`NEAR_HIT_BUDGET`]: session 19's choice
-/// (above), whose smaller reach keeps fewer hits (a 1024² fireplace room played at 3).
+/// (above), whose smaller reach keeps fewer hits (a 1024² fireplace room played at 3). Also the
+/// scale of a bake whose probes are lit through the panes (`--probe-rays 0`): a probe has no
+/// near field, and the disks take its light (`cargo xtask eval --probes`, the panes' column,
+/// default Cornell box: 23.2%, energy 0.881, at 3; 45.9%, 0.681, at 8).
 pub const NEAR_FIELD_DISK_SCALE_LARGE: f32 = 3.0;
 
 /// Most near hits (the atlas's texels times the near rays each, before merging) for which the
@@ -785,6 +788,14 @@ impl BakeParams {
         let vpl_disk_scale = match config.vpl_disk_scale {
             Some(scale) => scale,
             None if near_rays == 0 => 1.0,
+            // Probes lit through the panes have no near field to give back what a disk takes.
+            None if config.probes.is_some() && config.probe_rays == Some(0) => {
+                reasons.push(format!(
+                    "VPL disks {NEAR_FIELD_DISK_SCALE_LARGE} times the entry points' radius: the probes are \
+                     lit through the panes (--probe-rays 0), which larger disks would take light from"
+                ));
+                NEAR_FIELD_DISK_SCALE_LARGE
+            }
             None => {
                 let hits = texels(atlas) * near_rays as f64;
                 let scale = if hits <= NEAR_HIT_BUDGET as f64 {

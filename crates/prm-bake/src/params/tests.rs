@@ -200,3 +200,25 @@ fn automatic_entries_follow_the_clusters() {
     assert!(q.entries < 3840 && q.entries >= 1024, "{q:?}");
     assert!(q.entries / 16 <= q.clusters + 16, "{q:?}");
 }
+
+#[test]
+fn probes_lit_through_the_panes_keep_the_smaller_disks() {
+    let scene = cornell();
+    let scale = |probes: Option<u32>, probe_rays: Option<u32>, near_rays: Option<u32>| {
+        let cfg = BakeConfig {
+            resolution: Some(64),
+            probes,
+            probe_rays,
+            near_rays,
+            ..Default::default()
+        };
+        resolve(&cfg, &scene, probe(&scene)).unwrap().vpl_disk_scale
+    };
+    // 64² texels × 64 near rays fit the hit budget: the larger disks, with probes or without.
+    assert_eq!(scale(None, None, None), NEAR_FIELD_DISK_SCALE);
+    assert_eq!(scale(Some(64), None, None), NEAR_FIELD_DISK_SCALE);
+    // Probes without rays read the panes, which have no near field.
+    assert_eq!(scale(Some(64), Some(0), None), NEAR_FIELD_DISK_SCALE_LARGE);
+    // Without the near field the disks stay one radius whatever the probes.
+    assert_eq!(scale(Some(64), Some(0), Some(0)), 1.0);
+}
