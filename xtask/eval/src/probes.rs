@@ -10,7 +10,8 @@
 //! (negative values clamped, as `probe_volume.wgsl` does). The reference is
 //! `prm_trace::ReferenceTracer::indirect_at_points` at the same points and normals, twice with
 //! different seeds for its own noise. Error = ‖t − r‖/‖r‖ over every probe, normal and channel;
-//! energy = Σt/Σr; shape = the error after the best global scale (metrics.md's split).
+//! energy = Σt/Σr; shape = the error after the best global scale (metrics.md's split). The
+//! panes' column is of a second bake with `--probe-rays 0`, the probes played through the panes.
 
 use anyhow::{Context, Result};
 use glam::Vec3;
@@ -156,14 +157,29 @@ pub fn run(bake_bin: &Path, cache: &Path, root: &Path) -> Result<String> {
         };
         r.render(&input)?;
         let played = read(&r)?;
-        // The same archive with the probes lit through the panes, as before format 1.6.
+        // The probes lit through the panes, as before format 1.6: the bake a user makes for
+        // that, `--probe-rays 0` (whose plan keeps the smaller VPL disks), at the same probes.
+        let panes_args: Vec<String> = ["--probes", "--probe-rays", "0"]
+            .into_iter()
+            .chain(extra.iter().copied())
+            .map(String::from)
+            .collect();
+        let panes_baked = plan::bake(bake_bin, cache, &spec, &panes_args, None, false)?;
+        let panes_probes = prm_format::Archive::open(&panes_baked.archive)
+            .with_context(|| format!("opening {}", panes_baked.archive.display()))?
+            .probes()
+            .map(|p| p.positions.clone());
+        anyhow::ensure!(
+            panes_probes.as_ref() == Some(&probes.positions),
+            "{name}: the --probe-rays 0 bake placed other probes"
+        );
         let panes_played = {
             let options = prm_play::RuntimeOptions {
                 top_k: 32,
                 probe_light: prm_play::ProbeLight::Panes,
                 ..Default::default()
             };
-            let (mut p, _) = crate::measure::renderer_with(&baked.archive, &scene_path, options)?;
+            let (mut p, _) = crate::measure::renderer_with(&panes_baked.archive, &scene_path, options)?;
             light_up(&mut p)?;
             p.render(&input)?;
             read(&p)?
