@@ -797,8 +797,8 @@ impl BakeParams {
                 NEAR_FIELD_DISK_SCALE_LARGE
             }
             None => {
-                let hits = texels(atlas) * near_rays as f64;
-                let scale = if hits <= NEAR_HIT_BUDGET as f64 {
+                let fits = texels(atlas) * near_rays as f64 <= NEAR_HIT_BUDGET as f64;
+                let scale = if fits {
                     NEAR_FIELD_DISK_SCALE
                 } else {
                     NEAR_FIELD_DISK_SCALE_LARGE
@@ -807,11 +807,7 @@ impl BakeParams {
                     "VPL disks {scale} times the entry points' radius: {near_rays} near rays from each of about \
                      {:.0} texels, {} {NEAR_HIT_BUDGET} hits",
                     texels(atlas),
-                    if hits <= NEAR_HIT_BUDGET as f64 {
-                        "at most"
-                    } else {
-                        "possibly over"
-                    }
+                    if fits { "at most" } else { "possibly over" }
                 ));
                 scale
             }

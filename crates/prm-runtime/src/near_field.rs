@@ -37,15 +37,20 @@ pub(crate) struct NearFieldPass {
 /// at 13.14% instead of 11.95% (McGuire's box 3.70% / 4.44% instead of 3.60% / 4.24%).
 struct IndirectShare {
     radiance_pass: ComputePass,
-    /// The sums before the last (no tail), when there are several gathers.
-    sum: ComputePass,
-    /// The last sum.
+    /// The last sum (with the tail, if any).
     last: ComputePass,
     source: wgpu::Texture,
-    /// The radiance pass reading `completed`, and the copy itself, for the gathers after the
-    /// first; `None` with one.
-    again: Option<(ComputePass, wgpu::Texture)>,
+    /// What the gathers after the first need; `None` with one.
+    again: Option<Again>,
     gathers: u32,
+}
+
+/// The gathers after the first: the copy of the lightmap the previous sum completed, the
+/// radiance pass reading it, and the sums before the last (without the tail).
+struct Again {
+    completed: wgpu::Texture,
+    radiance_pass: ComputePass,
+    sum: ComputePass,
 }
 
 /// How the run time sums the deeper share's series: [`crate::RuntimeOptions::near_bounces`]
@@ -247,6 +252,7 @@ impl NearFieldPass {
             NearTail::Extrapolated if gathers > 0 => series_tail(near, &merged, gathers),
             _ => Vec::new(),
         };
+        let with_tail = !tail.is_empty();
         let (exits, hits) = (at_least_one(merged.0), at_least_one(merged.1));
         let points_buf = pipeline::buffer_init(device, "prm near points", bytemuck::cast_slice(&points), st);
         let radiance = pipeline::storage(
@@ -319,12 +325,8 @@ impl NearFieldPass {
             };
             let source = copy("prm near source");
             let completed = (gathers > 1).then(|| copy("prm near completed"));
-            let tail_buf = pipeline::buffer_init(
-                device,
-                "prm near tail",
-                bytemuck::cast_slice(&at_least_one(tail.clone())),
-                st,
-            );
+            let tail_buf =
+                pipeline::buffer_init(device, "prm near tail", bytemuck::cast_slice(&at_least_one(tail)), st);
             // The sum after `previous`'s gather, with or without the series' tail.
             let sum_after = |previous: &wgpu::Texture, constants: &wgpu::Buffer| {
                 ComputePass::new(
@@ -350,16 +352,19 @@ impl NearFieldPass {
             let last_info = uniform(
                 "prm near field, last sum",
                 &GpuNearField {
-                    tail: u32::from(!tail.is_empty()),
+                    tail: u32::from(with_tail),
                     ..constants
                 },
             );
             let previous = completed.as_ref().unwrap_or(&source);
             IndirectShare {
                 radiance_pass: radiance_from(&source),
-                sum: sum_after(previous, &info),
                 last: sum_after(previous, &last_info),
-                again: completed.map(|c| (radiance_from(&c), c)),
+                again: completed.map(|c| Again {
+                    radiance_pass: radiance_from(&c),
+                    sum: sum_after(&c, &info),
+                    completed: c,
+                }),
                 source,
                 gathers,
             }
@@ -433,12 +438,22 @@ impl NearFieldPass {
             .radiance_pass
             .encode(encoder, linear_workgroups(self.point_count), timer);
         for k in 1..=share.gathers {
+            let again = share.again.as_ref();
             if k > 1 {
-                let (radiance_pass, completed) = share.again.as_ref().expect("a copy for every gather after the first");
-                encoder.copy_texture_to_texture(lightmap.as_image_copy(), completed.as_image_copy(), lightmap.size());
-                radiance_pass.encode(encoder, linear_workgroups(self.point_count), timer);
+                let again = again.expect("a copy for every gather after the first");
+                encoder.copy_texture_to_texture(
+                    lightmap.as_image_copy(),
+                    again.completed.as_image_copy(),
+                    lightmap.size(),
+                );
+                again
+                    .radiance_pass
+                    .encode(encoder, linear_workgroups(self.point_count), timer);
             }
-            let sum = if k == share.gathers { &share.last } else { &share.sum };
+            let sum = match again {
+                Some(again) if k < share.gathers => &again.sum,
+                _ => &share.last,
+            };
             sum.encode(encoder, linear_workgroups(self.exit_count), timer);
         }
     }
