@@ -254,6 +254,7 @@ pub fn sky_transfer_at_probes(
                     scene,
                     bvh,
                     (x, axis, axis, u32::MAX),
+                    None,
                     params,
                     &mut rng,
                     &mut |step, _| match step {

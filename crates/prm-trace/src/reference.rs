@@ -315,6 +315,7 @@ impl<'a> ReferenceTracer<'a> {
             self.scene,
             self.bvh,
             (x, ng, n, tri),
+            None,
             p,
             rng,
             &mut |step, rng| match step {
@@ -515,13 +516,15 @@ pub(crate) struct Vertex<'h> {
 }
 
 /// Follows one cosine-sampled path from `start = (x, ng, n, triangle)` (the first cosine about
-/// the shading normal `n`, later ones about geometric normals), with Russian roulette after each
-/// vertex and at most `max_bounces` rays, calling `visit` at every event. A ray below the
-/// geometric surface or meeting a back face ends the path without an event.
+/// the shading normal `n`, from `first` if given, else from `rng`; later ones about geometric
+/// normals), with Russian roulette after each vertex and at most `max_bounces` rays, calling
+/// `visit` at every event. A ray below the geometric surface or meeting a back face ends the
+/// path without an event.
 pub(crate) fn walk_path(
     scene: &Scene,
     bvh: &Bvh,
     start: (Vec3, Vec3, Vec3, u32),
+    first: Option<Vec2>,
     p: &ReferenceParams,
     rng: &mut Rng,
     visit: &mut dyn FnMut(Step, &mut Rng),
@@ -529,7 +532,11 @@ pub(crate) fn walk_path(
     let (mut pos, mut ng, mut n, mut tri) = start;
     let mut throughput = Vec3::ONE;
     for bounce in 0..p.max_bounces {
-        let dir = cosine_hemisphere(rng.next_vec2(), n);
+        let u = match first {
+            Some(u) if bounce == 0 => u,
+            _ => rng.next_vec2(),
+        };
+        let dir = cosine_hemisphere(u, n);
         if dir.dot(ng) <= 0.0 {
             return;
         }

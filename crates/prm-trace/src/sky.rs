@@ -10,6 +10,13 @@
 //! `w · π · Y_c(ω)`, exactly what [`crate::ReferenceTracer::with_sky`] scores with `L(ω)` in
 //! place of `Y_c(ω)`. So against the reference the transfer differs only by noise and by the
 //! order-2 truncation of the sky; for a constant sky the truncation is nil (a test below).
+//!
+//! The first rays of an exit point's paths, over all passes, are one Owen-scrambled Sobol set
+//! (scrambled per exit point) rather than independent draws: the direct part, the sky's
+//! visibility, is then stratified over the hemisphere. Measured on the Dabrovic Sponza's default
+//! `--sky` bake under `cargo xtask eval --sky`'s blue sky (seed 0): the full image 4.33% →
+//! 3.74% off the reference; the indirect light, whose noise lies in the later bounces and the
+//! panes, 6.21% → 6.30%.
 
 use glam::Vec3;
 use prm_format::{sh_basis, SkyTransfer, SH_COEFFS};
@@ -17,6 +24,7 @@ use prm_scene::{ExitPoint, Scene};
 use rayon::prelude::*;
 
 use crate::reference::{validate, walk_path, ReferenceParams, Step};
+use crate::sampling::sobol2;
 use crate::{Bvh, Rng, TraceError};
 
 /// Least cosine between two exit points' normals for [`smooth_transfer`] to average them
@@ -115,11 +123,15 @@ pub fn sky_transfer_at_exits(
             let x = &exits[i];
             let ng = bvh.geometric_normal(x.triangle);
             let mut rng = Rng::new(params.seed, i as u64, u64::from(pass));
-            for _ in 0..params.samples_per_pass {
+            // The first rays of all passes are one Owen-scrambled Sobol set per exit point.
+            let scramble = Rng::new(params.seed, i as u64, u64::MAX).next_u32();
+            for s in 0..params.samples_per_pass {
+                let first = sobol2(pass * params.samples_per_pass + s, scramble);
                 walk_path(
                     scene,
                     bvh,
                     (x.position, ng, x.normal, x.triangle),
+                    Some(first),
                     params,
                     &mut rng,
                     &mut |step, _| {

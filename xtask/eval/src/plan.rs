@@ -350,8 +350,9 @@ fn file_stamp(path: &Path) -> String {
 /// 5 × 5 texels of one chart. 17: `--sky` alone takes its paths per texel from the time budget.
 /// 18: buried exit points that cannot move within their texel take a coplanar neighbour's point.
 /// 19: VPL disks eight entry-point radii where the near hits fit one binding (the player sums
-/// the near field's series).
-const BAKE_EPOCH: u32 = 19;
+/// the near field's series). 20: each exit point's near rays, and the first rays of its sky
+/// paths, one scrambled Sobol set.
+const BAKE_EPOCH: u32 = 20;
 
 /// A case's label as a file name: spaces and punctuation as dashes.
 pub fn case_name(label: &str) -> String {
