@@ -84,7 +84,11 @@ const TAIL_TERMS: u32 = 512;
 /// the limit by more (in a 6 mm gap between two parallel faces of albedo 0.89, 2.9 against the
 /// limit's 5.9 and the reference's 3.0: the panes leak light into the gap, and the limit
 /// multiplies it). In image space two gathers and the tail (7.08%) come closer to the reference
-/// than the limit (7.16%).
+/// than the limit (7.16%). Capping the factor per texel by the frame's own geometric rate
+/// (`r/(1 − r)`, `r` the last term over the one before, session 27) only lowered the energy
+/// everywhere (`cargo xtask eval --targets`: the fireplace room 1.024 → 1.019, its shape error
+/// 5.1% → 5.2%; McGuire's box 0.988 → 0.987, 2.53% → 2.56%), and the rate alone, uncapped, is too
+/// noisy (the fireplace room 5.5% → 11.5%), so neither was kept.
 pub(crate) fn series_tail(near: &NearField, merged: &MergedHits, gathers: u32) -> Vec<[f32; 4]> {
     let (exits, hits) = merged;
     let scale = 1.0 / near.rays_per_exit.max(1) as f32;
