@@ -64,7 +64,8 @@
 //! share differed by 6.5% of the reference's norm (the panes by 5.9%, the deeper share by
 //! 3.1%); stratified, 4.0% (deeper share 2.5%). Indirect error (4×4), seeds 0 and 1: Sponza's
 //! sun 13.69% → 13.23% and 11.35% → 10.70%, sky and sun 10.70% → 10.36% and 9.06% → 8.58%;
-//! the fireplace room's default bake (`--targets`' lamp) 6.04% → 5.52% and 6.68% → 6.25%.
+//! the fireplace room's default bake (`--targets`' lamp) 6.04% → 5.52% and 6.68% → 6.25%
+//! (`cargo xtask eval compare` of each archive played against the eval's reference).
 //!
 //! Rays leave from just off the surface ([`Bvh::spawn`]), as the walks' and the reference's do.
 //! They used to leave from the exit point itself, ignoring its own triangle only, so a coplanar
