@@ -162,10 +162,10 @@ fn cases(root: &Path, cache: &Path) -> Result<Vec<Case>> {
     if fireplace.is_file() {
         let lamp = vec![("mid-room lamp".to_string(), FIREPLACE_LAMP.to_string())];
         // The default budget once more with another seed: how much of the error the seed moves.
-        let runs = [
-            ("fireplace room, --time-budget 120", vec!["--time-budget", "120"], 0.10),
-            ("fireplace room, default budget", vec![], 0.06),
-            ("fireplace room, default budget, --seed 1", vec!["--seed", "1"], 0.06),
+        let runs: [(&str, &[&str], f64); 3] = [
+            ("fireplace room, --time-budget 120", &["--time-budget", "120"], 0.10),
+            ("fireplace room, default budget", &[], 0.06),
+            ("fireplace room, default budget, --seed 1", &["--seed", "1"], 0.06),
         ];
         for (name, args, error) in runs {
             out.push(Case {
