@@ -2,7 +2,8 @@
 //! the run time's weights pass computed on lavapipe, give the effective weights its rank and
 //! select passes chose, cluster for cluster, with the run time's default fade band: with
 //! residual groups (the default; `select_with_residuals`, the groups' weights too) and without
-//! (`select_top_k`).
+//! (`select_top_k`). Its near field's series takes the player's gathers and tail
+//! (`tests/near_field.rs` compares the two lightmaps).
 
 use glam::Vec3;
 use prm_runtime::synthetic::{cornell_box_path, write_archive, SyntheticParams};
@@ -52,6 +53,14 @@ fn the_check_selects_the_clusters_the_player_selects() {
         RuntimeOptions::default().fade_band,
         FADE_BAND,
         "the check's fade band is the player's"
+    );
+    assert_eq!(
+        (
+            RuntimeOptions::default().near_bounces,
+            RuntimeOptions::default().near_tail
+        ),
+        (prm_trace::NEAR_GATHERS, prm_runtime::NearTail::Extrapolated),
+        "the check's near series is the player's"
     );
     let ctx = gpu();
     let scene_path = cornell_box_path();

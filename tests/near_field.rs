@@ -211,6 +211,28 @@ fn the_near_field_brings_the_edges_to_the_reference() {
         // themselves; 1.7e-4 here), the CPU's f32.
         assert!(e < 1e-3, "{what}: the near field's gain {e:.2e} from the CPU's sum");
     }
+    // The bake's accuracy check plays the same series on the CPU (`prm_trace::NearPlay`, over
+    // values per texel here): from this blend and direct share, and from the blend alone with
+    // its own ray-cast direct share.
+    let identity: Vec<u32> = (0..on.len() as u32).collect();
+    let texels: Vec<u32> = near.exits.iter().map(|x| x.texel).collect();
+    let model = prm_trace::NearPlay::new(&near, &identity, &texels, prm_trace::NEAR_GATHERS);
+    let vec3 = |lm: &[[f32; 3]]| -> Vec<Vec3> { lm.iter().map(|v| Vec3::from(*v)).collect() };
+    let played: Vec<Vec3> = texels.iter().map(|&t| Vec3::from(on[t as usize])).collect();
+    let e_same = rel_error(&model.series(&vec3(&with_share(&direct_share))), &played);
+    let ray_cast: Vec<Vec3> = model
+        .series(&vec3(&off))
+        .iter()
+        .zip(model.direct(&bvh, &lights))
+        .map(|(a, b)| *a + b)
+        .collect();
+    let e_own = rel_error(&ray_cast, &played);
+    println!(
+        "near field: the check's CPU series {e_same:.2e} from the GPU's, {e_own:.4} with its ray-cast direct share"
+    );
+    assert!(e_same < 1e-3, "the check's series {e_same:.2e} from the player's");
+    // Measured 0.0010: the shadow maps against ray-cast light at the gather points.
+    assert!(e_own < 0.01, "the check's near field {e_own:.4} from the player's");
     let (e_twice, e_tail) = (rel_error(&gain(&twice), limit), rel_error(&gain(&on), limit));
     assert!(
         e_tail < 0.5 * e_twice,

@@ -117,12 +117,13 @@ pub struct BakeArgs {
     #[arg(long, value_name = "RAYS")]
     pub near_rays: Option<u32>,
     /// After the panes, estimate the archive's accuracy: its indirect light against a
-    /// reference path tracer at N exit points (default 1024) for three point lights placed in
-    /// the scene, printed, recorded in the archive and shown by `dump`. 0 skips it. About 1-3%
-    /// of a default bake; shards skip it.
+    /// reference path tracer at N exit points (default 512) for three point lights placed in
+    /// the scene, played as prm-play plays it (top K, residual groups, the near field's
+    /// gathers), printed, recorded in the archive and shown by `dump`. 0 skips it. About 1% of
+    /// a default bake; shards skip it.
     #[arg(long, value_name = "N")]
     pub accuracy_points: Option<u32>,
-    /// Reference paths per checked exit point and light (default 64): the reference's noise
+    /// Reference paths per checked exit point and light (default 512): the reference's noise
     /// is removed from the estimate, more paths only narrow its spread.
     #[arg(long, value_name = "PATHS")]
     pub accuracy_paths: Option<u32>,

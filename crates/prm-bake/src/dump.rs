@@ -377,23 +377,7 @@ pub fn write_summary<W: Write, R: Read + Seek>(
     writeln!(out, "clusters     {} (one pane each)", archive.clusters().len())?;
     match &meta.accuracy {
         None => writeln!(out, "accuracy     not estimated by the bake")?,
-        Some(a) => {
-            writeln!(out, "accuracy     {}", prm_bake::accuracy_line(a))?;
-            for l in &a.lights {
-                writeln!(
-                    out,
-                    "               light at ({:.3}, {:.3}, {:.3}): {:.1}% ± {:.1} (measured {:.1}%, K = all {:.1}%), energy {:.3}",
-                    l.position[0],
-                    l.position[1],
-                    l.position[2],
-                    100.0 * l.error,
-                    100.0 * l.standard_error,
-                    100.0 * l.measured,
-                    100.0 * l.error_all_clusters,
-                    l.energy
-                )?;
-            }
-        }
+        Some(a) => write_accuracy(out, "accuracy     ", a)?,
     }
 
     writeln!(out, "\nsections")?;
@@ -600,6 +584,29 @@ fn uniform_sky_sums(s: &prm_format::SkyTransfer) -> ([f64; 3], [f64; 3]) {
 fn rgb_sum(v: &[[f32; 3]]) -> [f64; 3] {
     v.iter()
         .fold([0.0; 3], |s, x| [0, 1, 2].map(|k| s[k] + f64::from(x[k])))
+}
+
+/// An accuracy estimate as `dump` and `check` print it: the line `prm_bake::accuracy_line`
+/// gives after `lead`, then one line per light.
+pub(crate) fn write_accuracy(out: &mut impl Write, lead: &str, a: &prm_format::Accuracy) -> std::io::Result<()> {
+    writeln!(out, "{lead}{}", prm_bake::accuracy_line(a))?;
+    for l in &a.lights {
+        writeln!(
+            out,
+            "{:w$}light at ({:.3}, {:.3}, {:.3}): {:.1}% ± {:.1} (measured {:.1}%, K = all {:.1}%), energy {:.3}",
+            "",
+            l.position[0],
+            l.position[1],
+            l.position[2],
+            100.0 * l.error,
+            100.0 * l.standard_error,
+            100.0 * l.measured,
+            100.0 * l.error_all_clusters,
+            l.energy,
+            w = lead.chars().count() + 2,
+        )?;
+    }
+    Ok(())
 }
 
 #[cfg(test)]

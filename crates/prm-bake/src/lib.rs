@@ -44,12 +44,14 @@
 
 mod archive;
 mod error;
+mod estimate;
 pub mod params;
 mod pipeline;
 mod shard;
 mod sink;
 
 pub use error::BakeError;
+pub use estimate::{estimate_accuracy, EstimateSize};
 pub use params::{AtlasSize, BakeConfig, BakeParams, CostModel, Preset};
 pub use pipeline::{
     accuracy_line, bake, BakeJob, Baked, Plan, Renderer, ACCURACY_PATHS, ACCURACY_POINTS, PROBE_CELLS, PROBE_RAYS,

@@ -3,6 +3,7 @@
 
 mod atlas;
 mod bake;
+mod check;
 mod dump;
 mod merge;
 mod progress;
@@ -44,6 +45,13 @@ enum Command {
     ///
     /// Example: prm-bake atlas scenes/cornell-box/cornell-box.obj --resolution 256 --png charts.png
     Atlas(atlas::AtlasArgs),
+    /// Estimate an archive's accuracy as a bake's last step does: its indirect light, played
+    /// as prm-play plays it, against the reference path tracer under three test lights.
+    ///
+    /// For a merged sharded bake (whose shards skip the check) or at another size than the
+    /// bake's. Needs the scene the archive was baked from; refuses another.
+    /// Example: prm-bake check scenes/cornell-box/cornell-box.gltf out/cornell-box.prm
+    Check(check::CheckArgs),
     /// Inspect a .prm archive: summary, JSON, full verification or EXR export of its panes.
     ///
     /// Exit status 0 when the archive is good, 1 when it is damaged or the arguments are wrong.
@@ -62,6 +70,7 @@ fn main() -> ExitCode {
     let result = match &cli.command {
         Command::Bake(args) => bake::run(args),
         Command::Atlas(args) => atlas::run(args),
+        Command::Check(args) => check::run(args),
         Command::Dump(args) => dump::run(args),
         Command::Merge(args) => merge::run(args),
         Command::Reference(args) => reference::run(args),

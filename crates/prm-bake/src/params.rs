@@ -130,7 +130,7 @@ impl BakeConfig {
 }
 
 /// How the atlas is sized.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub enum AtlasSize {
     /// Texels on a side.
     Resolution(u32),
@@ -414,12 +414,12 @@ const MAX_DOUBLINGS: usize = 2;
 /// the near field (`--near-rays 0`) the scale stays 1: nothing gives back what a larger disk
 /// removes. The measurements are of automatic plans, which take 1024 entry points or more; with
 /// few entry points set by hand the disks grow with their radius (256 on the Cornell box: 40 cm
-/// in a 55 cm box, and the bake's own estimate 28% at K = 1 and K = all alike), so the tests'
-/// small bakes set 3. The played image does not suffer from them: McGuire's box (`Ke` = 0)
-/// with `--entries 256 --clusters 64`, played at `--targets`' camera and lights against its
-/// references (session 27, stratified near rays), scale 1: 7.49% / 13.28%, 3: 4.76% / 6.76%,
-/// 4: 3.95% / 4.93%, 8: **3.16% / 2.35%**. What they break is the estimate, whose near field
-/// stops at the first gather (`prm_trace::NearTerms::deeper`) where the player sums the series.
+/// in a 55 cm box, and the bake's own estimate 28% at K = 1 and K = all alike, before the
+/// estimate played the near field's series in session 28), so the tests' small bakes set 3.
+/// The played image does not suffer from them: McGuire's box (`Ke` = 0) with `--entries 256
+/// --clusters 64`, played at `--targets`' camera and lights against its references (session
+/// 27, stratified near rays), scale 1: 7.49% / 13.28%, 3: 4.76% / 6.76%, 4: 3.95% / 4.93%, 8:
+/// **3.16% / 2.35%**.
 pub const NEAR_FIELD_DISK_SCALE: f32 = 8.0;
 
 /// The scale where the near field's hits could pass [`NEAR_HIT_BUDGET`]: session 19's choice

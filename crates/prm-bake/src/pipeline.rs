@@ -79,9 +79,9 @@ pub const PROBE_RAYS: u32 = 1024;
 
 /// Exit points of the bake's accuracy check by default (`--accuracy-points`), each traced with
 /// [`ACCURACY_PATHS`] reference paths for each of three test lights ([`prm_trace::check`]).
-/// Measured (see `prm_trace::check`): 2–3% of a default bake on the bundled Cornell box and under
-/// 1% on chairs and CornellBox-Sphere, within one or two standard errors of a 4096-point
-/// measurement of the same archive.
+/// Measured (see `prm_trace::check`): 1.2–1.3% of a default bake on the boxes and under 1% on
+/// chairs and the fireplace room, within one or two standard errors of a 4096-point × 1024-path
+/// measurement of the same archive but where a light's error lies in a few points.
 pub const ACCURACY_POINTS: u32 = prm_trace::CheckParams::DEFAULT.exit_points;
 
 /// Reference paths per checked exit point and light.
@@ -654,7 +654,7 @@ pub fn bake(job: &BakeJob<'_>, renderer: Renderer<'_>, progress: &mut dyn Progre
         Vec::new()
     };
     // The near field: what the VPL disk bound removes next to the exit points. Traced before
-    // the panes, so the accuracy check reads them at its gather points too.
+    // the panes, so the accuracy check plays each pane's share of its series as it comes.
     let near_field = match entries.first() {
         Some(e) if gathers_near => {
             let t = Instant::now();
@@ -677,24 +677,11 @@ pub fn bake(job: &BakeJob<'_>, renderer: Renderer<'_>, progress: &mut dyn Progre
         }
         _ => None,
     };
-    // The accuracy check's near terms, and the exit points it reads the panes at: its own, then
-    // the gather points of their near rays.
-    let near_terms = near_field.as_ref().filter(|_| !checked_exits.is_empty()).map(|n| {
-        prm_trace::near_terms(
-            n,
-            &checked_exits.iter().map(|&i| atlas.exits[i].texel).collect::<Vec<_>>(),
-        )
+    // The accuracy check's model of the player's near field, over the whole atlas.
+    let near_play = near_field.as_ref().filter(|_| !checked_exits.is_empty()).map(|n| {
+        let texels: Vec<u32> = checked_exits.iter().map(|&i| atlas.exits[i].texel).collect();
+        prm_trace::NearPlay::new(n, &atlas.texel_exit, &texels, prm_trace::NEAR_GATHERS)
     });
-    let checked_points: Vec<usize> = checked_exits
-        .iter()
-        .copied()
-        .chain(
-            near_terms
-                .iter()
-                .flat_map(|t| &t.gather_texels)
-                .map(|&t| atlas.texel_exit[t as usize] as usize),
-        )
-        .collect();
     let mut checked_panes: Vec<Vec<Vec3>> = Vec::new();
     let mut pane_energy: Vec<Vec3> = Vec::new();
 
@@ -722,8 +709,13 @@ pub fn bake(job: &BakeJob<'_>, renderer: Renderer<'_>, progress: &mut dyn Progre
         })?;
         if !checked_exits.is_empty() {
             // What the player reads: the stored RGB9E5 texels, and the cluster table's energy.
-            let stored = |v: Vec3| Vec3::from(prm_format::decode_rgb9e5(prm_format::encode_rgb9e5(v.to_array())));
-            checked_panes.push(checked_points.iter().map(|&i| stored(pane[i])).collect());
+            let stored = |v: &Vec3| Vec3::from(prm_format::decode_rgb9e5(prm_format::encode_rgb9e5(v.to_array())));
+            let stored: Vec<Vec3> = pane.par_iter().map(stored).collect();
+            checked_panes.push(crate::estimate::checked_pane(
+                near_play.as_ref(),
+                &checked_exits,
+                &stored,
+            ));
             let done = writer.clusters().len() - writer.panes_remaining();
             pane_energy.push(Vec3::from(writer.clusters()[done - 1].energy));
         }
@@ -907,13 +899,6 @@ pub fn bake(job: &BakeJob<'_>, renderer: Renderer<'_>, progress: &mut dyn Progre
     );
     timings.insert("pane_rendering".to_string(), render_s);
 
-    if let Some(near) = near_field {
-        writer.set_near_field(near).map_err(|source| BakeError::Archive {
-            what: "recording the near field".to_string(),
-            source,
-        })?;
-    }
-
     if let Some(cells) = params.probes {
         let t = Instant::now();
         let (probes, mut detail) = probe_section(scene, &bvh, &vpls, &clustering, cells, params, progress)?;
@@ -941,30 +926,24 @@ pub fn bake(job: &BakeJob<'_>, renderer: Renderer<'_>, progress: &mut dyn Progre
         None
     } else {
         let t = Instant::now();
-        let archive = prm_trace::CheckedArchive {
+        let inputs = crate::estimate::CheckInputs {
+            scene,
+            bvh: &bvh,
+            atlas: &atlas,
             entries: &entries,
-            members: &clustering.members,
+            clustering: &clustering,
             entry_energy: entry_energy_known.then_some(sampled_energy.as_slice()),
-            cluster_energy: &pane_energy,
-            panes: &checked_panes,
-            top_k: params.top_k,
+            pane_energy: &pane_energy,
             groups: &residual_groups,
-            fade_band: prm_trace::check::FADE_BAND,
-            near: near_terms.as_ref(),
+            top_k: params.top_k,
+            near: near_play.as_ref(),
         };
-        let exits: Vec<_> = checked_exits.iter().map(|&i| atlas.exits[i]).collect();
         let check = prm_trace::CheckParams {
             exit_points: params.accuracy_points,
             paths: params.accuracy_paths,
             seed: params.seed,
         };
-        let lights = prm_trace::check_lights(scene, &bvh);
-        let passes = ReferenceParams::with_spp(check.paths).passes;
-        progress.phase_start(Phase::AccuracyCheck, lights.len() as u64 * u64::from(passes));
-        let accuracy = prm_trace::check_accuracy(scene, &bvh, &exits, &archive, &lights, &check, &mut |done| {
-            progress.phase_advance(done)
-        })
-        .map_err(trace("checking the bake's accuracy"))?;
+        let accuracy = crate::estimate::check(&inputs, &checked_exits, &checked_panes, &check, progress)?;
         // A NaN in a pane or the reference must not cost the whole bake: no estimate then.
         let valid = accuracy.validate();
         let detail = match &valid {
@@ -983,6 +962,13 @@ pub fn bake(job: &BakeJob<'_>, renderer: Renderer<'_>, progress: &mut dyn Progre
         (!accuracy.lights.is_empty() && valid.is_ok()).then_some(accuracy)
     };
     writer.metadata_mut().accuracy = accuracy.clone();
+    drop(near_play);
+    if let Some(near) = near_field {
+        writer.set_near_field(near).map_err(|source| BakeError::Archive {
+            what: "recording the near field".to_string(),
+            source,
+        })?;
+    }
 
     // Timings go to the caller only: the archive's bytes depend on nothing but the scene, the
     // parameters and the backend, so caches and content-addressed pipelines can key on them

@@ -735,6 +735,49 @@ fn the_accuracy_check_sees_a_worse_bake() {
     assert_eq!(a.info().minor, 1);
 }
 
+/// `prm-bake check` estimates an archive as the bake's last step did: the same estimate to the
+/// bit (near field and all) from the archive, the scene and the seed it records; it refuses a
+/// shard's part, another scene, and nonsense sizes, with a message.
+#[test]
+fn check_repeats_the_bake_s_own_estimate() {
+    let dir = temp_dir("check");
+    let size = ["--accuracy-points", "96", "--accuracy-paths", "32"];
+    let (path, _, _) = bake(&dir, "box", 5, "cpu", &[&["--quiet"][..], &size].concat());
+    let archive = Archive::open(&path).unwrap();
+    assert!(archive.near_field().is_some(), "the check plays the near field too");
+    let recorded = archive.metadata().accuracy.clone().expect("checked");
+    let (scene, p) = (scene_path(), path.to_str().unwrap().to_string());
+    let scene = scene.to_str().unwrap();
+    let out = run(&[&["check", scene, &p, "--json", "--quiet"][..], &size].concat());
+    assert!(out.status.success(), "{}", describe(&out));
+    let got: prm_format::Accuracy = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(got, recorded);
+    // The text form, as `dump` shows it.
+    let out = run(&[&["check", scene, &p, "--quiet"][..], &size].concat());
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        text.starts_with("estimated accuracy: indirect light") && text.matches("light at (").count() == 3,
+        "{}",
+        describe(&out)
+    );
+
+    let (part, _, _) = bake(&dir, "part", 5, "cpu", &["--quiet", "--shard", "0/2"]);
+    let chairs = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/chairs/chairs.obj");
+    for (args, expected) in [
+        (vec![scene, part.to_str().unwrap()], "merge the shards first"),
+        (vec![chairs.to_str().unwrap(), &p], "other geometry"),
+        (vec![scene, &p, "--accuracy-paths", "0"], "at least 1"),
+    ] {
+        let r = run(&[&["check"][..], &args, &["--quiet"]].concat());
+        assert_eq!(r.status.code(), Some(1), "{args:?}: {}", describe(&r));
+        assert!(
+            String::from_utf8_lossy(&r.stderr).contains(expected),
+            "{args:?}: {}",
+            describe(&r)
+        );
+    }
+}
+
 /// `--shard I/N` on two processes at once, then `merge`: exactly the bytes of the single bake
 /// (probes included: each part has its own clusters' transfer), whatever order the parts come
 /// in; and the merge refuses what does not make one bake. A shard never checks its accuracy

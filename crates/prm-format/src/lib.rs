@@ -36,6 +36,7 @@ mod groups;
 mod layout;
 mod metadata;
 mod near_field;
+mod near_series;
 mod probe_rays;
 mod probes;
 mod reader;
@@ -56,6 +57,9 @@ pub use groups::{residual_group_count, residual_groups, CLUSTERS_PER_GROUP, RESI
 pub use layout::{checksum, compression, kind, limits, MAGIC, VERSION_MAJOR, VERSION_MINOR};
 pub use metadata::{Accuracy, Generator, LightAccuracy, Metadata, Units};
 pub use near_field::{NearExit, NearField, NearHit, MAX_NEAR_RAYS, MIN_WEIGHT as NEAR_MIN_WEIGHT};
+pub use near_series::{
+    DeeperOperator, MergedHit, TAIL_TERMS as NEAR_TAIL_TERMS, TAIL_TOLERANCE as NEAR_TAIL_TOLERANCE,
+};
 pub use probe_rays::{
     probe_ray_direction, GatherPoint, ProbeRays, MAX_PROBE_RAYS, NO_EMITTER, RAY_BLOCKED, RAY_SKY, SH_COSINE_LOBE,
 };

@@ -63,6 +63,20 @@ pub struct GatherPoint {
     pub emitter: u32,
 }
 
+impl Default for GatherPoint {
+    /// Texel 0 at the origin, facing +y, black, emitting nothing ([`NO_EMITTER`]).
+    fn default() -> Self {
+        GatherPoint {
+            texel: 0,
+            position: [0.0; 3],
+            normal: [0.0, 1.0, 0.0],
+            albedo: [0.0; 3],
+            emission: [0.0; 3],
+            emitter: NO_EMITTER,
+        }
+    }
+}
+
 /// Every probe's rays: `hits[p * M + d]` is where direction `d` from probe `p` ends.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ProbeRays {
@@ -406,12 +420,8 @@ mod tests {
         let r = ProbeRays {
             rays_per_probe: m,
             points: vec![GatherPoint {
-                texel: 0,
-                position: [0.0; 3],
-                normal: [0.0, 1.0, 0.0],
                 albedo: [1.0; 3],
-                emission: [0.0; 3],
-                emitter: NO_EMITTER,
+                ..Default::default()
             }],
             hits: vec![0; m as usize],
         };

@@ -449,10 +449,14 @@ impl Runtime {
             Some(n) => {
                 let limits = device.limits();
                 let mib = |b: u64| b as f64 / (1 << 20) as f64;
-                let merged = near_field::merge_hits(n);
+                let merged = near_field::Merged::new(n);
                 for (what, count, size) in [
-                    ("merged near hits", merged.1.len(), std::mem::size_of::<GpuNearHit>()),
-                    ("near exit records", merged.0.len(), std::mem::size_of::<GpuNearExit>()),
+                    ("merged near hits", merged.hits.len(), std::mem::size_of::<GpuNearHit>()),
+                    (
+                        "near exit records",
+                        merged.ends.len(),
+                        std::mem::size_of::<GpuNearExit>(),
+                    ),
                     (
                         "near gather points",
                         n.points.len(),
@@ -472,7 +476,7 @@ impl Runtime {
                     device,
                     &buffers,
                     n,
-                    merged,
+                    &merged,
                     &maps.array,
                     near_field::NearTargets {
                         near_map: &near_view,

@@ -61,88 +61,17 @@ pub(crate) struct NearSeries {
     pub tail: NearTail,
 }
 
-/// Below this share of the sum so far a term of the uniform light's series ends it
-/// ([`series_tail`]): at the fireplace room's 0.87 a term, after about 85 terms (0.5 s on two
-/// cores; 10⁻⁶ took 1.0 s on one).
-const TAIL_TOLERANCE: f32 = 1e-5;
-/// Most terms [`series_tail`] sums, which bounds the work where surfaces of albedo near 1
-/// enclose a space and the terms hardly fall.
-const TAIL_TERMS: u32 = 512;
-
-/// Every exit record's factor (RGB, then 0) from the `gathers`-th term of the deeper share's
-/// series to the sum of the terms after it, for uniform light: with `N` the deeper share's
-/// operator on the lightmap (an exit point's `1/M · Σ w₁ · albedo` over its merged hits, of the
-/// texels they end on, 0 at texels without near hits), `g_k = N^k 1`, the factor is
-/// `Σ_{k > K} g_k / g_K` at `K = gathers`. After K gathers of the frame's light the exit point's
-/// last increment `d_K` times it stands for the rest: exact for uniform light, and close where
-/// the terms fall at one rate, which the enclosed spaces where the series converges slowly
-/// reach after a term or two. The fireplace room's default archive, its lightmap over every
-/// covered texel against the reference at 1024 paths a texel (a numpy model of these sums that
-/// matches the player's export to 3·10⁻⁵): one and two gathers 61.6% and 54.0% off, with this
-/// tail 15.5% and 15.8% (5.3% and 3.1% from the series' limit), the limit itself 15.1%. Where
-/// the frame's light reaches an enclosed space unlike uniform light does, single texels miss
-/// the limit by more (in a 6 mm gap between two parallel faces of albedo 0.89, 2.9 against the
-/// limit's 5.9 and the reference's 3.0: the panes leak light into the gap, and the limit
-/// multiplies it). In image space two gathers and the tail (7.08%) come closer to the reference
-/// than the limit (7.16%). Capping the factor per texel by the frame's own geometric rate
-/// (`r/(1 − r)`, `r` the last term over the one before, session 27) only lowered the energy
-/// everywhere (`cargo xtask eval --targets`: the fireplace room 1.024 → 1.019, its shape error
-/// 5.1% → 5.2%; McGuire's box 0.988 → 0.987, 2.53% → 2.56%), and the rate alone, uncapped, is too
-/// noisy (the fireplace room 5.5% → 11.5%), so neither was kept.
-pub(crate) fn series_tail(near: &NearField, merged: &MergedHits, gathers: u32) -> Vec<[f32; 4]> {
-    let (exits, hits) = merged;
-    let scale = 1.0 / near.rays_per_exit.max(1) as f32;
-    // Each merged hit's exit record at its gather point's texel (u32::MAX: none) and factor.
-    let terms: Vec<(u32, glam::Vec3)> = hits
-        .iter()
-        .map(|h| {
-            let g = &near.points[h.point as usize];
-            let at = exits
-                .binary_search_by_key(&g.texel, |x| x.texel)
-                .map_or(u32::MAX, |i| i as u32);
-            (at, glam::Vec3::from(g.albedo) * h.weights().1 * scale)
-        })
-        .collect();
-    let apply = |prev: Option<&[glam::Vec3]>| -> Vec<glam::Vec3> {
-        (0..exits.len())
-            .into_par_iter()
-            .map(|i| {
-                let start = if i == 0 { 0 } else { exits[i - 1].end as usize };
-                terms[start..exits[i].end as usize]
-                    .iter()
-                    .map(|&(at, f)| match prev {
-                        None => f,
-                        Some(p) => p.get(at as usize).map_or(glam::Vec3::ZERO, |v| f * *v),
-                    })
-                    .sum()
-            })
-            .collect()
-    };
-    let mut g = apply(None);
-    let (mut total, mut last, mut rest) = (0.0f32, Vec::new(), vec![glam::Vec3::ZERO; exits.len()]);
-    for k in 1..=TAIL_TERMS {
-        let size: f32 = g.iter().map(|v| v.element_sum()).sum();
-        total += size;
-        if k == gathers {
-            last = g.clone();
-        } else if k > gathers {
-            rest.iter_mut().zip(&g).for_each(|(r, v)| *r += *v);
-        }
-        if k >= gathers && size <= TAIL_TOLERANCE * total {
-            break;
-        }
-        g = apply(Some(&g));
-    }
-    if last.is_empty() {
-        return vec![[0.0; 4]; exits.len()];
-    }
-    rest.iter()
-        .zip(&last)
-        .map(|(r, l)| {
-            let f = |r: f32, l: f32| if l > 0.0 { r / l } else { 0.0 };
-            [f(r.x, l.x), f(r.y, l.y), f(r.z, l.z), 0.0]
-        })
-        .collect()
+/// Every exit record's tail factor (RGB, then 0) at `gathers` gathers
+/// ([`prm_format::DeeperOperator::series_tail`], its terms summed on every thread), from the
+/// merged hits' f32 weights.
+pub(crate) fn series_tail(near: &NearField, merged: &Merged, gathers: u32) -> Vec<[f32; 4]> {
+    let op = prm_format::DeeperOperator::new(near, &merged.ends, &merged.hits);
+    op.series_tail(gathers, |v| {
+        (0..op.len()).into_par_iter().map(|i| op.row(i, v)).collect()
+    })
+    .into_iter()
+    .map(|[r, g, b]| [r, g, b, 0.0])
+    .collect()
 }
 
 /// The textures the near field reads and writes besides its own buffers.
@@ -180,41 +109,41 @@ impl RadianceBindings {
     }
 }
 
-/// The exit records and their hits as the passes read them.
-pub(crate) type MergedHits = (Vec<GpuNearExit>, Vec<GpuNearHit>);
+/// The near field's hits with each exit record's hits on one gather point merged into one
+/// ([`NearField::merged_hits`]): each walk along them cost lavapipe about 50 ms a frame on the
+/// fireplace room before. The passes read the sums as half floats ([`GpuNearHit`], 8 bytes
+/// instead of 16 with f32 weights and padding): the fireplace room's default archive played its
+/// `gi` frame at 1024×768 in 197–205 ms instead of 221–233 (`prm-play --timings --gi-update
+/// every-frame`, medians, interleaved), the images 2·10⁻⁵ apart, and twice the hits fit one
+/// storage binding.
+pub(crate) struct Merged {
+    /// Every exit record's end in `hits`.
+    pub ends: Vec<u32>,
+    /// The merged hits, f32.
+    pub hits: Vec<prm_format::MergedHit>,
+}
 
-/// The near field's hits with each exit's hits on one gather point merged into one, their
-/// weights ([`NearField::weight`] and [`NearField::indirect_weight`]) summed: several of an exit point's rays often
-/// end on one texel (5.0 M hits make 2.25 M on the fireplace room, 225 k make 133 k on McGuire's
-/// box), and each walk along them cost lavapipe about 50 ms a frame there. The sums are taken in
-/// f32 and stored as half floats ([`GpuNearHit`], 8 bytes instead of 16 with f32 weights and
-/// padding): the fireplace room's default archive played its `gi` frame at 1024×768 in 197–205
-/// ms instead of 221–233 (`prm-play --timings --gi-update every-frame`, medians, interleaved), the images 2·10⁻⁵ apart,
-/// and twice the hits fit one storage binding.
-pub(crate) fn merge_hits(near: &NearField) -> MergedHits {
-    let mut exits = Vec::with_capacity(near.exits.len());
-    let mut hits: Vec<GpuNearHit> = Vec::with_capacity(near.hits.len() / 2);
-    // One exit's merged hits, summed in f32 before they are rounded to half floats.
-    let mut sums: Vec<(u32, f32, f32)> = Vec::new();
-    for (i, x) in near.exits.iter().enumerate() {
-        sums.clear();
-        for h in near.hits_of(i) {
-            let (w0, w1) = (near.weight(h.distance2), near.indirect_weight(h.distance2));
-            match sums.iter_mut().find(|m| m.0 == h.point) {
-                Some(m) => {
-                    m.1 += w0;
-                    m.2 += w1;
-                }
-                None => sums.push((h.point, w0, w1)),
-            }
-        }
-        hits.extend(sums.iter().map(|&(p, w0, w1)| GpuNearHit::new(p, w0, w1)));
-        exits.push(GpuNearExit {
-            texel: x.texel,
-            end: hits.len() as u32,
-        });
+impl Merged {
+    pub fn new(near: &NearField) -> Merged {
+        let (ends, hits) = near.merged_hits();
+        Merged { ends, hits }
     }
-    (exits, hits)
+
+    /// The exit records and their hits as the passes read them.
+    fn gpu(&self, near: &NearField) -> (Vec<GpuNearExit>, Vec<GpuNearHit>) {
+        let exits = near
+            .exits
+            .iter()
+            .zip(&self.ends)
+            .map(|(x, &end)| GpuNearExit { texel: x.texel, end })
+            .collect();
+        let hits = self
+            .hits
+            .iter()
+            .map(|h| GpuNearHit::new(h.point, h.weight, h.indirect_weight))
+            .collect();
+        (exits, hits)
+    }
 }
 
 impl NearFieldPass {
@@ -223,7 +152,7 @@ impl NearFieldPass {
         device: &wgpu::Device,
         b: &Buffers,
         near: &NearField,
-        merged: MergedHits,
+        merged: &Merged,
         shadow_maps: &wgpu::TextureView,
         targets: NearTargets,
         series: NearSeries,
@@ -250,14 +179,15 @@ impl NearFieldPass {
                 })
                 .collect(),
         );
-        let exit_count = merged.0.len() as u32;
+        let exit_count = merged.ends.len() as u32;
         let gathers = if near.indirect_disk > 0.0 { series.gathers } else { 0 };
         let tail = match series.tail {
-            NearTail::Extrapolated if gathers > 0 => series_tail(near, &merged, gathers),
+            NearTail::Extrapolated if gathers > 0 => series_tail(near, merged, gathers),
             _ => Vec::new(),
         };
         let with_tail = !tail.is_empty();
-        let (exits, hits) = (at_least_one(merged.0), at_least_one(merged.1));
+        let (exits, hits) = merged.gpu(near);
+        let (exits, hits) = (at_least_one(exits), at_least_one(hits));
         let points_buf = pipeline::buffer_init(device, "prm near points", bytemuck::cast_slice(&points), st);
         let radiance = pipeline::storage(
             device,
@@ -481,7 +411,7 @@ mod tests {
             // Exit 0: point 2 twice (r² 0 and 1), point 5 once; exit 1: point 2 again.
             hits: vec![hit(2, 0.0), hit(5, 3.0), hit(2, 1.0), hit(2, 0.0)],
         };
-        let (exits, hits) = merge_hits(&near);
+        let (exits, hits) = Merged::new(&near).gpu(&near);
         assert_eq!(
             exits.iter().map(|x| (x.texel, x.end)).collect::<Vec<_>>(),
             [(3, 2), (7, 3)]
@@ -507,7 +437,11 @@ mod tests {
             indirect_disk: 0.0,
             ..near
         };
-        assert!(merge_hits(&direct_only).1.iter().all(|h| h.weights().1 == 0.0));
+        assert!(Merged::new(&direct_only)
+            .gpu(&direct_only)
+            .1
+            .iter()
+            .all(|h| h.weights().1 == 0.0));
     }
 
     #[test]
@@ -539,8 +473,8 @@ mod tests {
             ],
             hits: [[1; 4], [0; 4], [2; 4]].concat().into_iter().map(hit).collect(),
         };
-        let merged = merge_hits(&near);
-        let w = merged.1[0].weights().1;
+        let merged = Merged::new(&near);
+        let w = merged.hits[0].indirect_weight;
         let f = 0.5 * w / 4.0;
         assert!((f - 0.5).abs() < 1e-3, "{f}");
         for gathers in [1, 2, 3] {

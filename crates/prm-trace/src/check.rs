@@ -14,7 +14,9 @@
 //! passes, the rest of the light carried by the residual groups' summed panes
 //! ([`select_with_residuals`], [`prm_format::residual_groups`]; or the kept ones scaled up,
 //! [`select_top_k`], for a player without groups), and the panes summed at the sampled exit
-//! points. The run
+//! points, each pane with its share of the near field's deeper series and the near field's
+//! direct share with its own ([`crate::NearPlay`]: the player's gathers and tail, on the CPU).
+//! The run
 //! time's shadow maps are not modelled: the error budget (`cargo xtask eval --budget`) measured
 //! ray-cast against shadow-mapped entry irradiance within 0.1 points on every case.
 //!
@@ -26,19 +28,29 @@
 //! `(Σ|p − r̂|² − Σ var) / (Σ|r̂|² − Σ var)` estimates the squared error without the noise's
 //! bias, and a cheap reference costs only the estimate's spread.
 //!
-//! **How much** ([`CheckParams::DEFAULT`], 1024 points × 64 paths × 3 lights). Measured with
-//! release binaries of default bakes, against the same check of the same archive at 4096
-//! points × 1024 paths ("truth"), with the run time's residual groups: the bundled Cornell box
-//! (glTF) 12.1 ± 0.4% true, four draws of the default (`--accuracy-points` 1000, 1012, 1024,
-//! 1036) 12.1–12.8% with a standard error of 1.3–1.6 points, in 0.07–0.08 s of a 2.9–3.3 s
-//! bake; chairs 13.0 ± 0.9% against 12.6% true (0.13 s of 17.5 s); CornellBox-Sphere 11.4 ±
-//! 0.8% against 11.7% (0.08 s of 11 s). Fewer
-//! points traced longer spread wider, since the error varies more between points than the
-//! reference's noise does (measured before the noise left the denominator too, which moves an
-//! estimate by about 3% of itself): 256 × 256 gave 9.7–24.7% on the Cornell box (one light at
-//! 47.7%), 512 × 128 11.1–15.3%, 1024 × 64 10.6–13.7%, 2048 × 32 9.7–13.3%. The error budget's
-//! even-stride measurement of the same bakes as played on the GPU (`cargo xtask eval --budget`:
-//! 12.6%, 11.2%, 11.0%, with one light each) agrees.
+//! **How much** ([`CheckParams::DEFAULT`], 512 points × 512 paths × 3 lights). Measured in
+//! session 28 with release binaries of default bakes, against the same check of the same
+//! archive at 4096 points × 1024 paths ("truth"; `prm-bake bake SCENE --accuracy-points 4096
+//! --accuracy-paths 1024`, the panes do not depend on the check), other draws of the sample from
+//! `--accuracy-points` near the default:
+//!
+//! | scene | truth | 1024 × 64 (until session 28) | 1024 × 256 | **512 × 512** | check s / bake s |
+//! | --- | --- | --- | --- | --- | --- |
+//! | bundled Cornell box (glTF) | 2.4 ± 0.2% | 0.0 ± 4.1 | 2.1 ± 1.9, 2.0 ± 1.8, 0.4 ± 1.9 | 1.5 ± 1.5, 1.4 ± 1.3, 2.5 ± 1.1 | 0.26 / 21.7 |
+//! | McGuire's CornellBox-Original (`Ke` = 0) | 2.3 ± 0.1% | 2.5 ± 1.7 | 0.9 ± 1.0, 1.3 ± 1.1 | 2.5 ± 0.4, 1.8 ± 0.7, 1.4 ± 0.7 | 0.28 / 22.1 |
+//! | chairs (bundled glTF) | 4.6 ± 0.2% | 3.3 ± 1.7 | | 5.0 ± 0.7 | 0.43 / 76.8 |
+//! | CornellBox-Sphere (`Ke` = 0) | 2.1 ± 0.3% | 2.2 ± 2.3 | | | 0.12 (1024 × 64) / 32.4 |
+//! | fireplace room | 14.9 ± 2.7% | 9.5 ± 3.2 | 13.3 ± 1.8, 11.6 ± 1.3 | 11.2 ± 1.4, 10.5 ± 0.8 | 0.93 / 116 |
+//!
+//! Today's bakes are 2–5% off at their exit points where they were 10–13% when the default was
+//! chosen (1024 × 64, session 13), and a reference of 64 paths is then 16–25% noisy: removing
+//! noise four to ten times the error left estimates of 0.0 ± 4.1. At four times that cost, 512
+//! points × 512 paths resolves them (1.2–1.3% of the boxes' bakes, under 1% of the others').
+//! Where a few points carry most of a light's error (the fireplace room's second light, 23.5 ±
+//! 7.9% true, its other two 10.5% and 10.7%) a sample of 512 rarely meets them, and the
+//! estimate reads like the other lights (10.9 ± 1.8%): the standard error is of the sample, and
+//! cannot show what it did not draw. The error budget's even-stride measurement of the bakes as
+//! played on the GPU (`cargo xtask eval --budget`, one light each) is the other yardstick.
 
 use glam::Vec3;
 use prm_format::{Accuracy, LightAccuracy};
@@ -92,10 +104,10 @@ pub struct CheckParams {
 }
 
 impl CheckParams {
-    /// 1024 exit points × 64 paths (see the module's *How much*).
+    /// 512 exit points × 512 paths (see the module's *How much*).
     pub const DEFAULT: CheckParams = CheckParams {
-        exit_points: 1024,
-        paths: 64,
+        exit_points: 512,
+        paths: 512,
         seed: 0,
     };
 }
@@ -233,8 +245,9 @@ pub struct CheckedArchive<'a> {
     pub entry_energy: Option<&'a [Vec3]>,
     /// Every pane's energy (the archive's cluster table, the sum of its texels).
     pub cluster_energy: &'a [Vec3],
-    /// Every pane at the checked exit points, then at the near field's gather points
-    /// ([`crate::NearTerms::gather_texels`]), `[cluster][point]`.
+    /// Every pane as the player shows it at the checked exit points, `[cluster][point]`: with
+    /// the near field, its light and the deeper share's series from it
+    /// ([`crate::NearPlay::series`]).
     pub panes: &'a [Vec<Vec3>],
     /// Clusters the player blends.
     pub top_k: usize,
@@ -243,9 +256,9 @@ pub struct CheckedArchive<'a> {
     pub groups: &'a [u32],
     /// The player's fade band ([`FADE_BAND`]).
     pub fade_band: f32,
-    /// Every checked exit point's near field ([`crate::near_terms`]), added to the panes' light
-    /// as the player adds it; `None` without one.
-    pub near: Option<&'a crate::NearTerms>,
+    /// The near field as the player sums it, whose direct share ([`crate::NearPlay::direct`])
+    /// is added to the panes' light; `None` without one.
+    pub near: Option<&'a crate::NearPlay<'a>>,
 }
 
 /// The archive's indirect light at `exits` (the checked exit points) under `light`, for the
@@ -308,19 +321,15 @@ pub fn played_indirect(bvh: &Bvh, archive: &CheckedArchive<'_>, light: Light) ->
         out
     };
     let (mut played, mut all) = (played, blend(&weights, archive.panes));
-    let exits = archive.near.map_or(points, |n| points - n.gather_texels.len());
     if let Some(near) = archive.near {
-        // The direct share's shadow rays once, the deeper share from each blend's own light.
+        // The direct share and its series, once for both blends (the panes' series are in them).
         let direct = near.direct(bvh, &[light]);
         for out in [&mut played, &mut all] {
-            let (at_exits, at_gather) = out.split_at_mut(exits);
-            for ((p, d), i) in at_exits.iter_mut().zip(&direct).zip(near.deeper(at_gather)) {
-                *p += *d + i;
+            for (p, d) in out.iter_mut().zip(&direct) {
+                *p += *d;
             }
         }
     }
-    played.truncate(exits);
-    all.truncate(exits);
     (played, all)
 }
 
@@ -336,14 +345,11 @@ pub fn check_accuracy(
     params: &CheckParams,
     progress: &mut dyn FnMut(u64),
 ) -> Result<Accuracy, TraceError> {
-    let gathered = archive.near.map_or(0, |n| n.gather_texels.len());
-    if archive.panes.iter().any(|p| p.len() != exits.len() + gathered)
+    if archive.panes.iter().any(|p| p.len() != exits.len())
         || archive.panes.len() != archive.members.len()
         || archive.cluster_energy.len() != archive.members.len()
         || !(archive.groups.is_empty() || archive.groups.len() == archive.members.len())
-        || archive.near.is_some_and(|n| {
-            n.terms.len() != exits.len() || n.terms.iter().flatten().any(|t| t.point as usize >= gathered)
-        })
+        || archive.near.is_some_and(|n| n.checked() != exits.len())
     {
         return Err(TraceError::InvalidParameter(
             "every cluster needs a pane energy and one pane value per checked exit point".into(),

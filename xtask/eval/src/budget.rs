@@ -230,28 +230,31 @@ fn cpu_blend(archive: &Path, tracer: &Tracer, light: Light, texels: &[u32], entr
             prm_trace::bounded_irradiance(&tracer.bvh, &lights, p, n, n, u32::MAX, disk)
         })
         .collect();
-    // The near field, as the player adds it, with ray-cast direct light; its deeper VPLs' share
-    // reads the blend at the gather points too.
-    let near = a.near_field().map(|n| prm_trace::near_terms(n, texels));
-    let all: Vec<u32> = texels
-        .iter()
-        .chain(near.iter().flat_map(|n| &n.gather_texels))
-        .copied()
-        .collect();
-    let mut out = vec![Vec3::ZERO; all.len()];
+    // The near field as the player sums it (`prm_trace::NearPlay`, over the atlas's texels),
+    // with ray-cast direct light: each pane with its deeper share's series.
+    let near = a.near_field().cloned();
+    let side = a.atlas().resolution;
+    let identity: Vec<u32> = (0..side * side).collect();
+    let model = near
+        .as_ref()
+        .map(|n| prm_trace::NearPlay::new(n, &identity, texels, prm_trace::NEAR_GATHERS));
+    let mut out = vec![Vec3::ZERO; texels.len()];
     for (c, cl) in clusters.iter().enumerate() {
         let w = prm_trace::energy_weight(cl.members(), &e, &energy);
         if w == Vec3::ZERO {
             continue;
         }
         let pane = a.read_pane(c)?;
-        for (o, &t) in out.iter_mut().zip(&all) {
-            *o += w * Vec3::from_array(pane[t as usize]);
+        let played = match &model {
+            Some(m) => m.series(&pane.iter().map(|v| Vec3::from_array(*v)).collect::<Vec<_>>()),
+            None => texels.iter().map(|&t| Vec3::from_array(pane[t as usize])).collect(),
+        };
+        for (o, v) in out.iter_mut().zip(played) {
+            *o += w * v;
         }
     }
-    let (mut out, gathered) = (out[..texels.len()].to_vec(), &out[texels.len()..]);
-    if let Some(near) = &near {
-        for (o, add) in out.iter_mut().zip(near.irradiance(&tracer.bvh, &lights, gathered)) {
+    if let Some(m) = &model {
+        for (o, add) in out.iter_mut().zip(m.direct(&tracer.bvh, &lights)) {
             *o += add;
         }
     }

@@ -351,8 +351,9 @@ fn file_stamp(path: &Path) -> String {
 /// 18: buried exit points that cannot move within their texel take a coplanar neighbour's point.
 /// 19: VPL disks eight entry-point radii where the near hits fit one binding (the player sums
 /// the near field's series). 20: each exit point's near rays, and the first rays of its sky
-/// paths, one scrambled Sobol set.
-const BAKE_EPOCH: u32 = 20;
+/// paths, one scrambled Sobol set. 21: the bake's accuracy estimate plays the near field's
+/// series as the player does (the panes and sections as before; the estimate in the metadata).
+const BAKE_EPOCH: u32 = 21;
 
 /// A case's label as a file name: spaces and punctuation as dashes.
 pub fn case_name(label: &str) -> String {

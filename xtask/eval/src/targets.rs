@@ -10,8 +10,9 @@
 //! downsample and at full resolution, the energy Σ t / Σ r, the shape error, the local error
 //! (largest 8×8 window over the whole; where that window is and its reference's brightness
 //! against the image's, see [`compare`]), the reference's own noise after the downsample (from a
-//! second reference with another seed, [`NOISE_SPP`]), the bake's seconds (its report) and the
-//! `gi`/`direct` frame-time ratio at 1024×768 (median of interleaved frames on one renderer, as
+//! second reference with another seed, [`NOISE_SPP`]), the bake's seconds (its report), the
+//! bake's own estimate of its accuracy (`prm_trace::check`: its own three lights, at exit
+//! points, without the downsample; recorded in the archive) and the `gi`/`direct` frame-time ratio at 1024×768 (median of interleaved frames on one renderer, as
 //! `cargo bench -p prm-play --bench frame` does). Each cell names its target and whether it is
 //! met. The fireplace room's default bake is made twice, with seeds 0 and 1: its error moves by
 //! half a point with the seed (6.04% and 6.68% before session 27's stratified near rays).
@@ -239,12 +240,25 @@ fn against(value: String, ok: Option<bool>, target: String) -> String {
 pub fn run(bake_bin: &Path, cache: &Path, root: &Path, out: &Path) -> Result<String> {
     let play_bin = bake_bin.with_file_name(format!("prm-play{}", std::env::consts::EXE_SUFFIX));
     let mut md = String::from(
-        "| case | light | indirect error (4×4) | full res. | energy | shape | local (worst 8×8 window's corner, its reference's RMS over the image's) | ref. noise | bake s | gi / direct frame |\n| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n",
+        "| case | light | indirect error (4×4) | full res. | energy | shape | local (worst 8×8 window's corner, its reference's RMS over the image's) | ref. noise | bake s | bake's own estimate (its 3 lights, exit points) | gi / direct frame |\n| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n",
     );
     for case in cases(root, cache)? {
         let name = format!("targets-{}", case.name);
         let (baked, bake_s) = plan::bake_case(bake_bin, cache, &name, &case.scene, &case.bake_args)?;
         println!("targets: {}: baked ({bake_s:.1} s)", case.name);
+        let estimate = prm_format::Archive::open(&baked.archive)
+            .with_context(|| format!("opening {}", baked.archive.display()))?
+            .metadata()
+            .accuracy
+            .as_ref()
+            .map_or("none".to_string(), |a| {
+                format!(
+                    "{:.1}% ± {:.1}, energy {:.3}",
+                    100.0 * a.mean_error(),
+                    100.0 * a.mean_standard_error(),
+                    a.mean_energy()
+                )
+            });
         for (row, (label, light)) in case.lights.iter().enumerate() {
             let playback = Playback {
                 bake_bin,
@@ -274,7 +288,7 @@ pub fn run(bake_bin: &Path, cache: &Path, root: &Path, out: &Path) -> Result<Str
             let pct = |v: f64| format!("{:.1}%", 100.0 * v);
             let _ = writeln!(
                 md,
-                "| {} | {label} | {} | {} | {} | {} | {} | {} | {} | {} |",
+                "| {} | {label} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
                 case.name,
                 against(pct(m.error), Some(m.error <= tg.error), format!("≤ {}", pct(tg.error))),
                 against(
@@ -309,6 +323,7 @@ pub fn run(bake_bin: &Path, cache: &Path, root: &Path, out: &Path) -> Result<Str
                 } else {
                     String::new()
                 },
+                if row == 0 { estimate.clone() } else { String::new() },
                 against(
                     format!("{ratio:.2}"),
                     Some(ratio <= FRAME_RATIO),

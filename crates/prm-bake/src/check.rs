@@ -1,0 +1,55 @@
+//! `prm-bake check`: the bake's accuracy estimate of an archive already written
+//! ([`prm_bake::estimate_accuracy`]), printed as `dump` shows it or as JSON.
+
+use anyhow::{Context, Result};
+use prm_bake::EstimateSize;
+use std::path::PathBuf;
+
+use crate::progress::Progress;
+
+/// Arguments of `prm-bake check`.
+#[derive(clap::Args, Debug)]
+pub struct CheckArgs {
+    /// The scene the archive was baked from (.obj with its .mtl, .gltf or .glb).
+    pub scene: PathBuf,
+    /// The archive to check.
+    pub archive: PathBuf,
+    /// Exit points compared with the reference, drawn at random with the bake's seed.
+    #[arg(long, value_name = "N", default_value_t = EstimateSize::DEFAULT.exit_points)]
+    pub accuracy_points: u32,
+    /// Reference paths per exit point and light: the reference's noise is removed from the
+    /// estimate, more paths only narrow its spread.
+    #[arg(long, value_name = "PATHS", default_value_t = EstimateSize::DEFAULT.paths)]
+    pub accuracy_paths: u32,
+    /// Print the estimate as one JSON object (the archive metadata's `accuracy`).
+    #[arg(long)]
+    pub json: bool,
+    /// No progress on stderr.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+/// `prm-bake check`.
+pub fn run(args: &CheckArgs) -> Result<()> {
+    if args.accuracy_points == 0 || args.accuracy_paths == 0 {
+        anyhow::bail!("--accuracy-points and --accuracy-paths must be at least 1");
+    }
+    let scene = prm_scene::load(&args.scene).with_context(|| format!("cannot load scene {}", args.scene.display()))?;
+    let mut progress = Progress::new(args.quiet);
+    for w in &scene.report.warnings {
+        progress.warn(w);
+    }
+    let size = EstimateSize {
+        exit_points: args.accuracy_points,
+        paths: args.accuracy_paths,
+    };
+    let accuracy = prm_bake::estimate_accuracy(&scene, &args.archive, size, &mut progress)
+        .with_context(|| format!("checking {} against {}", args.archive.display(), args.scene.display()))?;
+    accuracy.validate().map_err(|e| anyhow::anyhow!("no estimate: {e}"))?;
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&accuracy)?);
+    } else {
+        crate::dump::write_accuracy(&mut std::io::stdout().lock(), "estimated accuracy: ", &accuracy)?;
+    }
+    Ok(())
+}

@@ -1,0 +1,238 @@
+//! The bake's estimate of its own accuracy (`prm_trace::check`), for the bake's last step and
+//! for an archive already written ([`estimate_accuracy`]: a merged sharded bake, which carries
+//! none, or any archive checked at another size).
+//!
+//! An archive does not hold everything the check reads: the entry points' triangles and the
+//! exit points come from the scene. [`estimate_accuracy`] makes them again as the bake did,
+//! from the parameters and seed the archive records (the atlas, the buried exit points, the
+//! sampled entry points and their clustering are deterministic), and refuses an archive whose
+//! tables they do not reproduce. With the same check parameters it gives the estimate the bake
+//! recorded, to the bit (`tests/bake.rs`).
+
+use glam::Vec3;
+use prm_format::{Accuracy, Archive};
+use prm_scene::{Atlas, AtlasParams, Scene, Sizing};
+use prm_trace::{Bvh, BvhParams, CheckParams, Clustering, EntryParams, NearPlay, ReferenceParams, SurfaceSample};
+use rayon::prelude::*;
+use std::path::Path;
+
+use crate::archive::archive_tables;
+use crate::params::AtlasSize;
+use crate::sink::{Phase, ProgressSink};
+use crate::BakeError;
+
+/// What the check reads of a bake besides its panes.
+pub(crate) struct CheckInputs<'a> {
+    pub scene: &'a Scene,
+    pub bvh: &'a Bvh,
+    pub atlas: &'a Atlas,
+    pub entries: &'a [SurfaceSample],
+    pub clustering: &'a Clustering,
+    /// Every entry's pane energy in sampling order (`None`: the archive has none).
+    pub entry_energy: Option<&'a [Vec3]>,
+    /// Every pane's energy (the cluster table's).
+    pub pane_energy: &'a [Vec3],
+    /// The player's residual groups.
+    pub groups: &'a [u32],
+    pub top_k: usize,
+    pub near: Option<&'a NearPlay<'a>>,
+}
+
+/// The checked exit points' values of one pane, given at every exit point, as the player
+/// shows them: with the near field's series from it (`near`), else as they are.
+pub(crate) fn checked_pane(near: Option<&NearPlay>, checked: &[usize], pane: &[Vec3]) -> Vec<Vec3> {
+    match near {
+        // The near field's series reads the pane far from the checked exit points.
+        Some(near) => near.series(pane),
+        None => checked.iter().map(|&i| pane[i]).collect(),
+    }
+}
+
+/// Runs the check on `panes` (every pane at the `checked` exit points, [`checked_pane`]) as the
+/// phase [`Phase::AccuracyCheck`] of `progress`.
+pub(crate) fn check(
+    inputs: &CheckInputs,
+    checked: &[usize],
+    panes: &[Vec<Vec3>],
+    params: &CheckParams,
+    progress: &mut dyn ProgressSink,
+) -> Result<Accuracy, BakeError> {
+    let archive = prm_trace::CheckedArchive {
+        entries: inputs.entries,
+        members: &inputs.clustering.members,
+        entry_energy: inputs.entry_energy,
+        cluster_energy: inputs.pane_energy,
+        panes,
+        top_k: inputs.top_k,
+        groups: inputs.groups,
+        fade_band: prm_trace::check::FADE_BAND,
+        near: inputs.near,
+    };
+    let exits: Vec<_> = checked.iter().map(|&i| inputs.atlas.exits[i]).collect();
+    let lights = prm_trace::check_lights(inputs.scene, inputs.bvh);
+    let passes = ReferenceParams::with_spp(params.paths).passes;
+    progress.phase_start(Phase::AccuracyCheck, lights.len() as u64 * u64::from(passes));
+    prm_trace::check_accuracy(
+        inputs.scene,
+        inputs.bvh,
+        &exits,
+        &archive,
+        &lights,
+        params,
+        &mut |done| progress.phase_advance(done),
+    )
+    .map_err(|source| BakeError::Trace {
+        what: "checking the bake's accuracy",
+        source,
+    })
+}
+
+/// How much [`estimate_accuracy`] measures; its random streams are keyed by the bake's seed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct EstimateSize {
+    /// Exit points compared.
+    pub exit_points: u32,
+    /// Reference paths per exit point and light.
+    pub paths: u32,
+}
+
+impl EstimateSize {
+    /// The bake's own check ([`CheckParams::DEFAULT`]).
+    pub const DEFAULT: EstimateSize = EstimateSize {
+        exit_points: CheckParams::DEFAULT.exit_points,
+        paths: CheckParams::DEFAULT.paths,
+    };
+}
+
+/// Estimates the accuracy of the archive at `archive_path`, baked from `scene`, at `size`, as
+/// the bake's last step does: the estimate of an archive that has none (a merged sharded
+/// bake), or of any archive at another size. Refuses a partial archive of a sharded bake,
+/// another scene's, and one whose tables its recorded parameters do not reproduce.
+pub fn estimate_accuracy(
+    scene: &Scene,
+    archive_path: &Path,
+    size: EstimateSize,
+    progress: &mut dyn ProgressSink,
+) -> Result<Accuracy, BakeError> {
+    let open_error = |what: &str, source| BakeError::Archive {
+        what: format!("{what} {}", archive_path.display()),
+        source,
+    };
+    let mut archive = Archive::open(archive_path).map_err(|e| open_error("opening", e))?;
+    let refuse = |why: String| Err(BakeError::InvalidParams(format!("{}: {why}", archive_path.display())));
+    let meta = archive.metadata().clone();
+    if meta.params.contains_key("shard") {
+        return refuse("a shard's partial archive; merge the shards first (prm-bake merge)".into());
+    }
+    if meta.scene_fingerprint != scene.fingerprint() {
+        return refuse("baked from other geometry than this scene".into());
+    }
+    let number = |key: &str| meta.params.get(key).and_then(serde_json::Value::as_u64);
+    let (Some(entry_count), Some(cluster_count), Some(top_k)) =
+        (number("entries"), number("clusters"), number("top_k"))
+    else {
+        return refuse("its metadata records no entry, cluster or top K count".into());
+    };
+    let sizing = match meta
+        .params
+        .get("atlas")
+        .map(|v| serde_json::from_value::<AtlasSize>(v.clone()))
+    {
+        Some(Ok(AtlasSize::Resolution(r))) => Sizing::Resolution(r),
+        Some(Ok(AtlasSize::TexelSize(s))) => Sizing::TexelSize(s),
+        _ => return refuse("its metadata records no atlas size".into()),
+    };
+    let params = CheckParams {
+        exit_points: size.exit_points,
+        paths: size.paths,
+        seed: meta.seed,
+    };
+
+    // What the bake made before its panes, made again.
+    let mut atlas = Atlas::build(scene, &AtlasParams::with_sizing(sizing)).map_err(|source| BakeError::Atlas {
+        what: "building the lightmap atlas",
+        source,
+    })?;
+    let trace = |what: &'static str| move |source| BakeError::Trace { what, source };
+    let bvh = Bvh::build(scene, &BvhParams::DEFAULT).map_err(trace("building the BVH"))?;
+    prm_trace::unbury_exits(scene, &bvh, &mut atlas);
+    let entries = prm_trace::sample_surface(
+        scene,
+        &EntryParams {
+            count: entry_count as usize,
+            seed: meta.seed,
+        },
+    )
+    .map_err(trace("sampling entry points"))?;
+    let clustering = if cluster_count as usize == entries.len() {
+        Clustering::identity(&entries)
+    } else {
+        Clustering::kmeans_separated(
+            &entries,
+            &bvh,
+            scene.bounds().diagonal(),
+            cluster_count as usize,
+            meta.seed,
+        )
+        .map_err(trace("clustering entry points"))?
+    };
+    let (table_entries, table_clusters, atlas_section) = archive_tables(&atlas, &entries, &clustering);
+    let same_clusters = table_clusters.len() == archive.clusters().len()
+        && table_clusters
+            .iter()
+            .zip(archive.clusters())
+            .all(|(a, b)| (a.first, a.count) == (b.first, b.count));
+    if atlas_section.triangle_uvs != archive.atlas().triangle_uvs
+        || atlas_section.coverage != archive.atlas().coverage
+        || table_entries != archive.entries()
+        || !same_clusters
+    {
+        return refuse(
+            "its atlas, entry points or clusters differ from what its parameters make of this scene (another version of prm-bake?)"
+                .into(),
+        );
+    }
+
+    let pane_energy: Vec<Vec3> = archive.clusters().iter().map(|c| Vec3::from(c.energy)).collect();
+    let order: Vec<u32> = clustering.members.iter().flatten().copied().collect();
+    let entry_energy = archive.entry_energy().map(|e| {
+        let mut sampled = vec![Vec3::ZERO; entries.len()];
+        for (&k, v) in order.iter().zip(e) {
+            sampled[k as usize] = Vec3::from(*v);
+        }
+        sampled
+    });
+    let groups = prm_format::residual_groups(
+        archive.clusters(),
+        prm_format::residual_group_count(archive.clusters().len(), prm_format::RESIDUAL_GROUPS),
+    );
+    let checked = prm_trace::check_exits(atlas.exits.len(), params.exit_points, params.seed);
+    let near_field = archive.near_field().cloned();
+    let near = near_field.as_ref().map(|n| {
+        let texels: Vec<u32> = checked.iter().map(|&i| atlas.exits[i].texel).collect();
+        NearPlay::new(n, &atlas.texel_exit, &texels, prm_trace::NEAR_GATHERS)
+    });
+    let mut panes = Vec::with_capacity(archive.pane_count());
+    for c in 0..archive.pane_count() {
+        let pane = archive.read_pane(c).map_err(|e| open_error("reading a pane of", e))?;
+        let at_exits: Vec<Vec3> = atlas
+            .exits
+            .par_iter()
+            .map(|e| Vec3::from(pane[e.texel as usize]))
+            .collect();
+        panes.push(checked_pane(near.as_ref(), &checked, &at_exits));
+    }
+    let inputs = CheckInputs {
+        scene,
+        bvh: &bvh,
+        atlas: &atlas,
+        entries: &entries,
+        clustering: &clustering,
+        entry_energy: entry_energy.as_deref(),
+        pane_energy: &pane_energy,
+        groups: &groups,
+        top_k: top_k as usize,
+        near: near.as_ref(),
+    };
+    check(&inputs, &checked, &panes, &params, progress)
+}
