@@ -41,7 +41,7 @@ pub use cluster::{energy_weight, ClusterParams, Clustering};
 pub use direct::{bounded_irradiance, direct_irradiance, entry_irradiance};
 pub use emitters::{EmitterGroup, Emitters, Receiver};
 pub use error::TraceError;
-pub use near::{near_disk, near_field, near_irradiance, near_terms, NearTerm, NearTerms, NEAR_RAYS};
+pub use near::{near_disk, near_field, NEAR_RAYS};
 pub use near_play::{NearPlay, NEAR_GATHERS};
 pub use pane::{evaluate_atlas_panes, evaluate_panes, Lattice, PaneParams, Panes};
 pub use prm_scene::{parse_camera, parse_light, parse_size, SpecError, ENTRY_DISK};
