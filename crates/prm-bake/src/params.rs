@@ -432,7 +432,9 @@ pub const NEAR_FIELD_DISK_SCALE_LARGE: f32 = 3.0;
 /// Most near hits (the atlas's texels times the near rays each, before merging) for which the
 /// bake takes [`NEAR_FIELD_DISK_SCALE`]: 2²⁴ hits of 8 bytes fill one 128 MiB storage binding,
 /// lavapipe's limit and wgpu's default, so the player can hold them even unmerged (512² texels
-/// at the default 64 rays).
+/// at the default 64 rays). The bake holds the traced near field's merged hits to it as well,
+/// halving the rays per exit point until they fit (pipeline.rs, `fit_near_field`): an atlas set
+/// by hand passes it even at [`NEAR_FIELD_DISK_SCALE_LARGE`].
 pub const NEAR_HIT_BUDGET: u64 = 1 << 24;
 
 /// Entry points per cluster of the automatic cluster count. Measured in image space

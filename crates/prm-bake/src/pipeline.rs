@@ -469,6 +469,28 @@ fn truncate_name(name: &str) -> String {
 }
 
 /// Wraps a transport error with the step that failed.
+/// The near field `trace(rays)` makes, with `rays` halved until its merged hits
+/// ([`prm_format::NearField::merged_hits`]) are at most `budget`, and the rays it took. The player
+/// holds the merged hits in one storage binding (8 bytes each; 2²⁴ fill lavapipe's and wgpu's
+/// default 128 MiB): the planner's rule (texels × rays before merging, `NEAR_HIT_BUDGET`) keeps
+/// the default plans within it, but an atlas set by hand can pass it even at the smaller disks
+/// (the Dabrovic Sponza at 1024² and 64 rays: 26.5 M merged hits, 202 MiB, which the player
+/// refused).
+fn fit_near_field(
+    rays: u32,
+    budget: u64,
+    trace: impl Fn(u32) -> prm_format::NearField,
+) -> (prm_format::NearField, u32) {
+    let mut rays = rays;
+    loop {
+        let near = trace(rays);
+        if rays <= 1 || near.merged_hits().1.len() as u64 <= budget {
+            return (near, rays);
+        }
+        rays /= 2;
+    }
+}
+
 fn trace(what: &'static str) -> impl FnOnce(prm_trace::TraceError) -> BakeError {
     move |source| BakeError::Trace { what, source }
 }
@@ -660,7 +682,16 @@ pub fn bake(job: &BakeJob<'_>, renderer: Renderer<'_>, progress: &mut dyn Progre
             let t = Instant::now();
             progress.phase_start(Phase::NearField, 1);
             let disk = prm_trace::near_disk(e.weight, params.vpl_disk_scale);
-            let mut near = prm_trace::near_field(scene, &bvh, &atlas, params.near_rays, disk, params.seed);
+            let (mut near, rays) = fit_near_field(params.near_rays, crate::params::NEAR_HIT_BUDGET, |rays| {
+                prm_trace::near_field(scene, &bvh, &atlas, rays, disk, params.seed)
+            });
+            if rays < params.near_rays {
+                progress.info(&format!(
+                    "  near field: {rays} rays per exit point instead of {}, so that its merged hits fit the player's storage binding ({} hits)",
+                    params.near_rays,
+                    crate::params::NEAR_HIT_BUDGET
+                ));
+            }
             // The deeper VPLs' disk is the entry point's too (`DeepDisk::Entry` above), and the
             // panes' kernel completes the cut weights (`BakeParams::bound`).
             near.indirect_disk = disk;
@@ -669,7 +700,7 @@ pub fn bake(job: &BakeJob<'_>, renderer: Renderer<'_>, progress: &mut dyn Progre
                 "{} texels (exit points and their gutter copies) keep {} rays in all of {} per exit point, ending at {} gather points",
                 near.exits.len(),
                 near.hits.len(),
-                params.near_rays,
+                rays,
                 near.points.len(),
             );
             finish_phase(&mut timings, progress, Phase::NearField, "near_field", t, &detail);
@@ -1010,4 +1041,31 @@ pub fn accuracy_line(a: &prm_format::Accuracy) -> String {
         a.paths,
         100.0 * a.mean_reference_noise()
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use prm_format::{GatherPoint, NearExit, NearField, NearHit};
+
+    /// A near field of one exit whose `rays` rays end on `rays` different gather points.
+    fn near(rays: u32) -> NearField {
+        NearField {
+            rays_per_exit: rays,
+            disk: 1.0,
+            indirect_disk: 1.0,
+            complement: true,
+            points: (0..rays).map(|_| GatherPoint::default()).collect(),
+            exits: vec![NearExit { texel: 0, end: rays }],
+            hits: (0..rays).map(|point| NearHit { point, distance2: 0.0 }).collect(),
+        }
+    }
+
+    #[test]
+    fn the_near_field_halves_its_rays_until_its_hits_fit() {
+        let (n, rays) = fit_near_field(64, 10, near);
+        assert_eq!((rays, n.rays_per_exit, n.hits.len()), (8, 8, 8));
+        assert_eq!(fit_near_field(64, 64, near).1, 64, "fits at once");
+        assert_eq!(fit_near_field(4, 0, near).1, 1, "one ray at least");
+    }
 }
