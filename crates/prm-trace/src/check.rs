@@ -16,10 +16,9 @@
 //! [`select_top_k`], for a player without groups), and the panes summed at the sampled exit
 //! points, each pane with its share of the near field's deeper series and the near field's
 //! direct share with its own ([`crate::NearPlay`]: the player's gathers and tail, on the CPU).
-//! The run
-//! time's shadow maps are not modelled: the error budget (`cargo xtask eval --budget`, session
-//! 28) measured ray-cast against shadow-mapped light (the entry points' and the near field's)
-//! within 0.1 points on the boxes and 2 points on chairs, at exit points next to edges.
+//! The run time's shadow maps are not modelled: the error budget (`cargo xtask eval --budget`,
+//! session 28) measured ray-cast against shadow-mapped light (the entry points' and the near
+//! field's) within 0.1 points on the boxes and 2 points on chairs, at exit points next to edges.
 //!
 //! **The reference** is [`ReferenceTracer::indirect_at_exits`] with [`CheckParams::paths`] paths
 //! per point, its random streams keyed by the bake's seed, [`CHECK_STREAM`] and the light, apart
