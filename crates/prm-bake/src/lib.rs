@@ -57,5 +57,5 @@ pub use pipeline::{
     accuracy_line, bake, BakeJob, Baked, Plan, Renderer, ACCURACY_PATHS, ACCURACY_POINTS, PROBE_CELLS, PROBE_RAYS,
     SKY_PATHS,
 };
-pub use shard::{merge, Merged, Shard};
+pub use shard::{merge, merge_checked, Merged, Shard};
 pub use sink::{NoProgress, Phase, ProgressSink};

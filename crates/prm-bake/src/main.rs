@@ -38,8 +38,9 @@ enum Command {
     /// Join the partial archives of a sharded bake (`bake --shard I/N`) into one archive.
     ///
     /// Refuses parts of different scenes, seeds, parameters or backends, and a missing or
-    /// repeated shard. CPU-baked shards merge into exactly the bytes a single bake writes.
-    /// Example: prm-bake merge part-0.prm part-1.prm -o out/scene.prm
+    /// repeated shard. CPU-baked shards merge into exactly the bytes a single bake writes; with
+    /// --scene the merged archive's accuracy is checked and recorded as a single bake's is.
+    /// Example: prm-bake merge part-0.prm part-1.prm -o out/scene.prm --scene scene.obj
     Merge(merge::MergeArgs),
     /// Load a scene (OBJ or glTF), build its lightmap atlas and print statistics.
     ///

@@ -12,6 +12,10 @@ pub struct MergeArgs {
     /// The archive to write (replaced atomically; nothing is left behind on failure).
     #[arg(short, long, value_name = "OUT.prm")]
     pub output: PathBuf,
+    /// The scene the parts were baked from: then the merged archive's accuracy is estimated as
+    /// a single bake's last step does, and recorded (the shards skip it).
+    #[arg(long, value_name = "SCENE")]
+    pub scene: Option<PathBuf>,
     /// Print nothing but errors.
     #[arg(long)]
     pub quiet: bool,
@@ -21,8 +25,18 @@ pub struct MergeArgs {
 pub fn run(args: &MergeArgs) -> Result<()> {
     // As for a bake: SIGINT, SIGTERM and SIGHUP remove the temporary file.
     crate::signals::install(prm_format::check_destination(&args.output)?);
-    let merged = prm_bake::merge(&args.parts, &args.output)
-        .with_context(|| format!("merging {} parts into {}", args.parts.len(), args.output.display()))?;
+    let context = || format!("merging {} parts into {}", args.parts.len(), args.output.display());
+    let merged = match &args.scene {
+        None => prm_bake::merge(&args.parts, &args.output).with_context(context)?,
+        Some(path) => {
+            let scene = prm_scene::load(path).with_context(|| format!("cannot load scene {}", path.display()))?;
+            let mut progress = crate::progress::Progress::new(args.quiet);
+            let (merged, accuracy) =
+                prm_bake::merge_checked(&args.parts, &args.output, &scene, &mut progress).with_context(context)?;
+            progress.say(&format!("estimated accuracy: {}", prm_bake::accuracy_line(&accuracy)));
+            merged
+        }
+    };
     if !args.quiet {
         println!(
             "wrote {} ({} panes from {} shards, {:.2} MiB)",

@@ -131,6 +131,35 @@ fn same_clusters(a: &[Cluster], b: &[Cluster]) -> bool {
 /// written atomically like a bake. Refuses parts that are not shards, a missing or repeated
 /// shard, and parts of different scenes, seeds, parameters or renderers, saying which.
 pub fn merge(parts: &[PathBuf], output: &Path) -> Result<Merged, BakeError> {
+    merge_recording(parts, output, None)
+}
+
+/// [`merge`], then the bake's accuracy check of the merged archive against `scene` (the scene
+/// the parts were baked from; [`crate::estimate_accuracy`] at the bake's own size), recorded in
+/// it as a single bake records it: the archive is written twice, the second time with the
+/// estimate. The result is the single bake's archive, estimate included, byte for byte (CPU
+/// shards).
+pub fn merge_checked(
+    parts: &[PathBuf],
+    output: &Path,
+    scene: &prm_scene::Scene,
+    progress: &mut dyn crate::ProgressSink,
+) -> Result<(Merged, prm_format::Accuracy), BakeError> {
+    merge_recording(parts, output, None)?;
+    let accuracy = crate::estimate_accuracy(scene, output, crate::EstimateSize::DEFAULT, progress)?;
+    accuracy
+        .validate()
+        .map_err(|e| BakeError::InvalidParams(format!("no estimate of {}: {e}", output.display())))?;
+    let merged = merge_recording(parts, output, Some(accuracy.clone()))?;
+    Ok((merged, accuracy))
+}
+
+/// [`merge`] with `accuracy` as the merged archive's estimate.
+fn merge_recording(
+    parts: &[PathBuf],
+    output: &Path,
+    accuracy: Option<prm_format::Accuracy>,
+) -> Result<Merged, BakeError> {
     let invalid = |m: String| BakeError::InvalidParams(m);
     let destination = prm_format::check_destination(output).map_err(BakeError::Destination)?;
     if parts.is_empty() {
@@ -197,8 +226,8 @@ pub fn merge(parts: &[PathBuf], output: &Path) -> Result<Merged, BakeError> {
     let (first_path, _, first) = &opened[0];
     let mut metadata = first.metadata().clone();
     metadata.params.remove("shard");
-    // A shard never checks its accuracy; the merged archive was not checked as one either.
-    metadata.accuracy = None;
+    // A shard never checks its accuracy; the merged archive is checked as one, or not at all.
+    metadata.accuracy = accuracy;
     let part_dir = std::fs::canonicalize(first_path)
         .ok()
         .and_then(|p| p.parent().map(Path::to_path_buf))

@@ -782,7 +782,8 @@ fn check_repeats_the_bake_s_own_estimate() {
 /// (probes included: each part has its own clusters' transfer), whatever order the parts come
 /// in; and the merge refuses what does not make one bake. A shard never checks its accuracy
 /// (whatever `--accuracy-points` says) and a merge writes no estimate, so the merge is the single
-/// bake made with `--accuracy-points 0`.
+/// bake made with `--accuracy-points 0`; `merge --scene` checks the merged archive, and is the
+/// single bake with its default check.
 #[test]
 fn shards_merge_into_the_single_bake_byte_for_byte() {
     let dir = temp_dir("shards");
@@ -825,6 +826,26 @@ fn shards_merge_into_the_single_bake_byte_for_byte() {
     assert!(
         std::fs::read(&merged).unwrap() == std::fs::read(&single).unwrap(),
         "the merged archive differs from the single bake"
+    );
+    // With the scene, the merge checks the merged archive as the single bake checks itself.
+    let (single_checked, _, _) = bake(&dir, "single-checked", 1, "cpu", &["--quiet", "--probes", "32"]);
+    let checked = dir.join("merged-checked.prm");
+    let scene = scene_path();
+    let r = run(&[
+        "merge",
+        p0,
+        p1,
+        "-o",
+        checked.to_str().unwrap(),
+        "--scene",
+        scene.to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert!(r.status.success(), "{}", describe(&r));
+    assert!(Archive::open(&checked).unwrap().metadata().accuracy.is_some());
+    assert!(
+        std::fs::read(&checked).unwrap() == std::fs::read(&single_checked).unwrap(),
+        "the merged and checked archive differs from the single bake with its check"
     );
 
     // A part of a bake with another seed, a missing shard, a repeated one, a whole archive.
