@@ -18,6 +18,7 @@ use std::path::Path;
 
 use crate::archive::archive_tables;
 use crate::params::AtlasSize;
+use crate::pipeline::{cluster_entries, trace};
 use crate::sink::{Phase, ProgressSink};
 use crate::BakeError;
 
@@ -138,8 +139,7 @@ pub fn estimate_accuracy(
         .get("atlas")
         .map(|v| serde_json::from_value::<AtlasSize>(v.clone()))
     {
-        Some(Ok(AtlasSize::Resolution(r))) => Sizing::Resolution(r),
-        Some(Ok(AtlasSize::TexelSize(s))) => Sizing::TexelSize(s),
+        Some(Ok(size)) => Sizing::from(size),
         _ => return refuse("its metadata records no atlas size".into()),
     };
     let params = CheckParams {
@@ -153,7 +153,6 @@ pub fn estimate_accuracy(
         what: "building the lightmap atlas",
         source,
     })?;
-    let trace = |what: &'static str| move |source| BakeError::Trace { what, source };
     let bvh = Bvh::build(scene, &BvhParams::DEFAULT).map_err(trace("building the BVH"))?;
     prm_trace::unbury_exits(scene, &bvh, &mut atlas);
     let entries = prm_trace::sample_surface(
@@ -164,18 +163,7 @@ pub fn estimate_accuracy(
         },
     )
     .map_err(trace("sampling entry points"))?;
-    let clustering = if cluster_count as usize == entries.len() {
-        Clustering::identity(&entries)
-    } else {
-        Clustering::kmeans_separated(
-            &entries,
-            &bvh,
-            scene.bounds().diagonal(),
-            cluster_count as usize,
-            meta.seed,
-        )
-        .map_err(trace("clustering entry points"))?
-    };
+    let clustering = cluster_entries(scene, &bvh, &entries, cluster_count as usize, meta.seed)?;
     let (table_entries, table_clusters, atlas_section) = archive_tables(&atlas, &entries, &clustering);
     let same_clusters = table_clusters.len() == archive.clusters().len()
         && table_clusters

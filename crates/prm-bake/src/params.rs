@@ -138,6 +138,15 @@ pub enum AtlasSize {
     TexelSize(f32),
 }
 
+impl From<AtlasSize> for prm_scene::Sizing {
+    fn from(a: AtlasSize) -> prm_scene::Sizing {
+        match a {
+            AtlasSize::Resolution(r) => prm_scene::Sizing::Resolution(r),
+            AtlasSize::TexelSize(s) => prm_scene::Sizing::TexelSize(s),
+        }
+    }
+}
+
 /// Fully resolved parameters of one bake, and why each automatic value was chosen.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct BakeParams {

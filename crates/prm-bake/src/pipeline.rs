@@ -484,14 +484,32 @@ fn fit_near_field(
     let mut rays = rays;
     loop {
         let near = trace(rays);
-        if rays <= 1 || near.merged_hits().1.len() as u64 <= budget {
+        // Merging only lowers the count: the unmerged hits within the budget need no merge.
+        if rays <= 1 || near.hits.len() as u64 <= budget || near.merged_hits().1.len() as u64 <= budget {
             return (near, rays);
         }
         rays /= 2;
     }
 }
 
-fn trace(what: &'static str) -> impl FnOnce(prm_trace::TraceError) -> BakeError {
+/// The bake's clusters of `entries`: each its own with as many clusters as entries, else
+/// k-means kept apart by walls. [`crate::estimate_accuracy`] makes them again with this.
+pub(crate) fn cluster_entries(
+    scene: &Scene,
+    bvh: &Bvh,
+    entries: &[SurfaceSample],
+    clusters: usize,
+    seed: u64,
+) -> Result<Clustering, BakeError> {
+    if clusters == entries.len() {
+        Ok(Clustering::identity(entries))
+    } else {
+        Clustering::kmeans_separated(entries, bvh, scene.bounds().diagonal(), clusters, seed)
+            .map_err(trace("clustering entry points"))
+    }
+}
+
+pub(crate) fn trace(what: &'static str) -> impl FnOnce(prm_trace::TraceError) -> BakeError {
     move |source| BakeError::Trace { what, source }
 }
 
@@ -524,10 +542,7 @@ pub fn bake(job: &BakeJob<'_>, renderer: Renderer<'_>, progress: &mut dyn Progre
 
     let t = Instant::now();
     progress.phase_start(Phase::Atlas, 1);
-    let sizing = match params.atlas {
-        AtlasSize::Resolution(r) => Sizing::Resolution(r),
-        AtlasSize::TexelSize(s) => Sizing::TexelSize(s),
-    };
+    let sizing = Sizing::from(params.atlas);
     let mut atlas = match (&job.plan.probed_atlas, sizing) {
         (Some(a), Sizing::Resolution(r)) if a.resolution == r => a.clone(),
         _ => Atlas::build(scene, &AtlasParams::with_sizing(sizing)).map_err(|source| BakeError::Atlas {
@@ -595,12 +610,7 @@ pub fn bake(job: &BakeJob<'_>, renderer: Renderer<'_>, progress: &mut dyn Progre
 
     let t = Instant::now();
     progress.phase_start(Phase::Clustering, 1);
-    let clustering = if params.clusters == entries.len() {
-        Clustering::identity(&entries)
-    } else {
-        Clustering::kmeans_separated(&entries, &bvh, scene.bounds().diagonal(), params.clusters, params.seed)
-            .map_err(trace("clustering entry points"))?
-    };
+    let clustering = cluster_entries(scene, &bvh, &entries, params.clusters, params.seed)?;
     let detail = format!("{} clusters", clustering.len());
     finish_phase(&mut timings, progress, Phase::Clustering, "clustering", t, &detail);
     // A shard renders its own clusters' VPLs only; the other panes stay zero.
