@@ -353,7 +353,8 @@ fn file_stamp(path: &Path) -> String {
 /// the near field's series). 20: each exit point's near rays, and the first rays of its sky
 /// paths, one scrambled Sobol set. 21: the bake's accuracy estimate plays the near field's
 /// series as the player does (the panes and sections as before; the estimate in the metadata).
-const BAKE_EPOCH: u32 = 21;
+/// 22: where the cluster cap cuts the automatic entry points, those kept walk up to 32 times.
+const BAKE_EPOCH: u32 = 22;
 
 /// A case's label as a file name: spaces and punctuation as dashes.
 pub fn case_name(label: &str) -> String {

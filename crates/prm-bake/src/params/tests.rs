@@ -186,7 +186,8 @@ fn automatic_entries_follow_the_clusters() {
         ..Default::default()
     };
     let p = resolve(&given, &scene, probe(&scene)).unwrap();
-    assert_eq!((p.entries, p.clusters), (1536, 100));
+    // The cut entry points' walks go to those kept: twice 65536 in all, at most 32 each.
+    assert_eq!((p.entries, p.clusters, p.paths_per_entry), (1536, 100, 32));
     assert!(p
         .reasons
         .iter()
