@@ -13,8 +13,24 @@ fn linear_depth(z: f32, v: ShadowView) -> f32 {
     return n * f / (f - z * (f - n));
 }
 
+// Most shadow texels per texel of depth tolerance (`frame.depth_bias`) that a lookup takes for
+// light at a grazing angle: the tolerance grows with the tangent of the light's angle from the
+// normal, from 1 (light within 45° of the normal) to this (76°). RuntimeOptions::
+// DEFAULT_NORMAL_OFFSET (crates/prm-runtime/src/options.rs) records the measurement.
+const DEPTH_BIAS_MAX_SLOPE: f32 = 4.0;
+
 // Fraction of the light `l` that reaches `p` (surface normal `n`), 2×2 percentage-closer filter.
+// The lookup moves `p` along `n` by `frame.normal_offset` shadow texels, and its depth
+// tolerance is `frame.depth_bias` texels times the slope above: the filter's taps a texel away
+// on a surface the light grazes lie deeper by about the tangent, which a small normal offset
+// alone no longer covers (acne), and a larger one widens every lit area past its shadows.
 fn visibility(l: Light, p: vec3<f32>, n: vec3<f32>, dist: f32) -> f32 {
+    var wi = -l.direction;
+    if l.kind != LIGHT_DIRECTIONAL {
+        wi = normalize(l.position - p);
+    }
+    let cos_t = clamp(dot(n, wi), 1e-3, 1.0);
+    let slope = clamp(sqrt(1.0 - cos_t * cos_t) / cos_t, 1.0, DEPTH_BIAS_MAX_SLOPE);
     var face = 0u;
     if l.kind == LIGHT_DIRECTIONAL && l.view_count > 1u {
         // A tiled orthographic map (lights.rs): the tile under the looked-up point (p moved
@@ -51,7 +67,7 @@ fn visibility(l: Light, p: vec3<f32>, n: vec3<f32>, dist: f32) -> f32 {
     if ortho {
         mine = linear_depth(ndc.z, v);
     }
-    let bias = frame.depth_bias * texel;
+    let bias = frame.depth_bias * texel * slope;
     let res = frame.shadow_resolution;
     let uv = vec2<f32>(ndc.x * 0.5 + 0.5, 0.5 - ndc.y * 0.5) * res - 0.5;
     let base = floor(uv);
