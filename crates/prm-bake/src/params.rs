@@ -487,8 +487,9 @@ const WALKS_IN_ALL: usize = 65536;
 /// issue #11's 6% at all three seeds (`cargo xtask eval --targets`: 5.4% and 5.8%). The bake
 /// follows the walks (the panes' VPLs), within the 600 s default budget. Sponza's and Sibenik's
 /// plans rise alike, and Sponza does not gain (`cargo xtask eval --sky`, sky and sun, seeds 0 /
-/// 1: 10.38% / 8.49% → 10.50% / 8.66%, its bake 269 → 410 s): its error is the near field's
-/// systematic overshoot of the sun's light (README, *Sky*), which more walks do not reduce.
+/// 1: 10.38% / 8.49% → 10.50% / 8.66%, its bake 269 → 410 s): its error was then mostly
+/// systematic, the shadow lookups' leak of the sun's light (since mended:
+/// `prm_runtime::RuntimeOptions::DEFAULT_NORMAL_OFFSET`), which more walks do not reduce.
 const CAPPED_WALKS: u32 = 32;
 
 /// The automatic walks per entry point: enough for about [`WALKS_IN_ALL`], 1 to 16.
