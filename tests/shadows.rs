@@ -7,12 +7,13 @@
 //! tiled map lets through the shadow rays' light, summed over the entry points, within 1%.
 
 use glam::Vec3;
+use prm_gpu_kit::GpuContext;
 use prm_runtime::synthetic::{cornell_box_path, write_archive, SyntheticParams};
 use prm_runtime::{Runtime, RuntimeOptions, Shadows};
 use prm_scene::{Light, ENTRY_DISK};
 use prm_tests::{gpu, temp_dir};
 use prm_trace::{bounded_irradiance, Bvh, BvhParams};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// Entry points (one per cluster, so that a cluster's weight is its entry's irradiance).
 const ENTRIES: u32 = 1536;
@@ -36,18 +37,39 @@ fn moved(mut light: Light) -> Light {
     light
 }
 
-#[test]
-fn shadow_maps_agree_with_shadow_rays_for_every_light_kind() {
-    let ctx = gpu();
-    let scene_path = cornell_box_path();
-    let scene = prm_scene::load(&scene_path).unwrap();
-    let out = temp_dir("shadows").join("unclustered.prm");
+/// The scene at `scene_path` and a synthetic archive of it in the temporary directory `dir`,
+/// one cluster per entry point (so that a cluster's weight is its entry's irradiance).
+fn one_pane_per_entry(scene_path: &Path, dir: &str) -> (prm_scene::Scene, PathBuf) {
+    let scene = prm_scene::load(scene_path).unwrap();
+    let out = temp_dir(dir).join("unclustered.prm");
     let params = SyntheticParams {
         clusters: ENTRIES,
         entries_per_cluster: 1,
         ..SyntheticParams::default()
     };
-    write_archive(&scene, &scene_path, &out, params).unwrap();
+    write_archive(&scene, scene_path, &out, params).unwrap();
+    (scene, out)
+}
+
+/// Every cluster's weight (here an entry point's irradiance) under `light` alone, through the
+/// run time's own shadow maps.
+fn weights_under(ctx: &GpuContext, rt: &mut Runtime, light: Light) -> Vec<Vec3> {
+    rt.update(&[light]).unwrap();
+    let mut enc = ctx.device.create_command_encoder(&Default::default());
+    rt.encode(&mut enc, Shadows::Own, None);
+    ctx.queue.submit([enc.finish()]);
+    ctx.wait().unwrap();
+    rt.read_weights()
+        .unwrap()
+        .iter()
+        .map(|w| Vec3::from(w.weight))
+        .collect()
+}
+
+#[test]
+fn shadow_maps_agree_with_shadow_rays_for_every_light_kind() {
+    let ctx = gpu();
+    let (scene, out) = one_pane_per_entry(&cornell_box_path(), "shadows");
     let mut archive = prm_format::Archive::open(&out).unwrap();
     let entries = archive.entries().to_vec();
     let options = RuntimeOptions {
@@ -98,12 +120,7 @@ fn shadow_maps_agree_with_shadow_rays_for_every_light_kind() {
         ),
     ];
     for (name, light) in lights {
-        rt.update(&[light]).unwrap();
-        let mut enc = ctx.device.create_command_encoder(&Default::default());
-        rt.encode(&mut enc, Shadows::Own, None);
-        ctx.queue.submit([enc.finish()]);
-        ctx.wait().unwrap();
-        let weights = rt.read_weights().unwrap();
+        let weights = weights_under(&ctx, &mut rt, light);
         let cpu: Vec<Vec3> = entries
             .iter()
             .map(|e| {
@@ -130,7 +147,6 @@ fn shadow_maps_agree_with_shadow_rays_for_every_light_kind() {
         // Among the entry points the light reaches without occluders (or the GPU lights).
         let (mut relevant, mut agree) = (0usize, 0usize);
         for ((w, c), u) in weights.iter().zip(&cpu).zip(&unshadowed) {
-            let w = Vec3::from(w.weight);
             if u.max_element() == 0.0 && w.max_element() == 0.0 {
                 continue;
             }
@@ -142,7 +158,7 @@ fn shadow_maps_agree_with_shadow_rays_for_every_light_kind() {
         let share = agree as f64 / relevant as f64;
         // The light the shadow maps let through, against the shadow rays', over every entry.
         let sum = |v: &mut dyn Iterator<Item = Vec3>| v.map(|e| e.element_sum() as f64).sum::<f64>();
-        let energy = sum(&mut weights.iter().map(|w| Vec3::from(w.weight))) / sum(&mut cpu.iter().copied());
+        let energy = sum(&mut weights.iter().copied()) / sum(&mut cpu.iter().copied());
         println!(
             "{name}: {lit} of {} entries lit, {shadowed} shadowed; {agree} of {relevant} agree ({:.1}%); energy {energy:.4}",
             entries.len(),
@@ -170,20 +186,11 @@ fn shadow_maps_agree_with_shadow_rays_for_every_light_kind() {
 #[test]
 fn a_low_sun_s_shadow_map_lets_through_the_shadow_rays_light() {
     let ctx = gpu();
-    let scene_path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/courtyard/courtyard.gltf");
-    let scene = prm_scene::load(&scene_path).unwrap();
-    let out = temp_dir("shadows").join("courtyard.prm");
-    let params = SyntheticParams {
-        clusters: ENTRIES,
-        entries_per_cluster: 1,
-        ..SyntheticParams::default()
-    };
-    write_archive(&scene, &scene_path, &out, params).unwrap();
+    let courtyard = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/courtyard/courtyard.gltf");
+    let (scene, out) = one_pane_per_entry(&courtyard, "shadows-sun");
     let mut archive = prm_format::Archive::open(&out).unwrap();
     let entries = archive.entries().to_vec();
-    let options = RuntimeOptions {
-        ..RuntimeOptions::for_archive(&archive)
-    };
+    let options = RuntimeOptions::for_archive(&archive);
     let mut rt = Runtime::new(&ctx.device, &ctx.queue, &mut archive, &scene, options).unwrap();
     let bvh = Bvh::build(&scene, &BvhParams::DEFAULT).unwrap();
     let disk = ENTRY_DISK * (scene.area() / entries.len() as f64 / std::f64::consts::PI) as f32;
@@ -195,16 +202,11 @@ fn a_low_sun_s_shadow_map_lets_through_the_shadow_rays_light() {
             direction: direction.normalize(),
             irradiance: Vec3::splat(1.0),
         };
-        rt.update(&[light]).unwrap();
-        let mut enc = ctx.device.create_command_encoder(&Default::default());
-        rt.encode(&mut enc, Shadows::Own, None);
-        ctx.queue.submit([enc.finish()]);
-        ctx.wait().unwrap();
-        let weights = rt.read_weights().unwrap();
+        let weights = weights_under(&ctx, &mut rt, light);
         let (mut gpu_sum, mut cpu_sum) = (0.0f64, 0.0f64);
         for (w, e) in weights.iter().zip(&entries) {
             let (p, n) = (Vec3::from(e.position), Vec3::from(e.normal));
-            gpu_sum += Vec3::from(w.weight).element_sum() as f64;
+            gpu_sum += w.element_sum() as f64;
             cpu_sum += bounded_irradiance(&bvh, &[light], p, n, n, u32::MAX, disk).element_sum() as f64;
         }
         let energy = gpu_sum / cpu_sum;
