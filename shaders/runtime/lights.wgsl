@@ -19,18 +19,15 @@ fn linear_depth(z: f32, v: ShadowView) -> f32 {
 // DEFAULT_NORMAL_OFFSET (crates/prm-runtime/src/options.rs) records the measurement.
 const DEPTH_BIAS_MAX_SLOPE: f32 = 4.0;
 
-// Fraction of the light `l` that reaches `p` (surface normal `n`), 2×2 percentage-closer filter.
+// Fraction of the light `l` that reaches `p` (surface normal `n`, `cos_t` the cosine of the
+// light's angle from it), 2×2 percentage-closer filter.
 // The lookup moves `p` along `n` by `frame.normal_offset` shadow texels, and its depth
 // tolerance is `frame.depth_bias` texels times the slope above: the filter's taps a texel away
 // on a surface the light grazes lie deeper by about the tangent, which a small normal offset
 // alone no longer covers (acne), and a larger one widens every lit area past its shadows.
-fn visibility(l: Light, p: vec3<f32>, n: vec3<f32>, dist: f32) -> f32 {
-    var wi = -l.direction;
-    if l.kind != LIGHT_DIRECTIONAL {
-        wi = normalize(l.position - p);
-    }
-    let cos_t = clamp(dot(n, wi), 1e-3, 1.0);
-    let slope = clamp(sqrt(1.0 - cos_t * cos_t) / cos_t, 1.0, DEPTH_BIAS_MAX_SLOPE);
+fn visibility(l: Light, p: vec3<f32>, n: vec3<f32>, dist: f32, cos_t: f32) -> f32 {
+    let cos_c = clamp(cos_t, 1e-3, 1.0);
+    let slope = clamp(sqrt(1.0 - cos_c * cos_c) / cos_c, 1.0, DEPTH_BIAS_MAX_SLOPE);
     var face = 0u;
     if l.kind == LIGHT_DIRECTIONAL && l.view_count > 1u {
         // A tiled orthographic map (lights.rs): the tile under the looked-up point (p moved
@@ -130,7 +127,7 @@ fn light_irradiance_ng(i: u32, p: vec3<f32>, ng: vec3<f32>, n: vec3<f32>, disk: 
     if cos_t <= 0.0 || dot(ng, wi) <= 0.0 {
         return vec3<f32>(0.0);
     }
-    return scale * cos_t * visibility(l, p, n, dist);
+    return scale * cos_t * visibility(l, p, n, dist, cos_t);
 }
 
 // Direct irradiance (RGB, W/m²) at `p` with unit normal `n` from every light.
