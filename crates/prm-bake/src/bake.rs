@@ -1,11 +1,11 @@
 //! `prm-bake bake`: arguments → parameters → backend → [`prm_bake::bake`] → summary and report.
 
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
 use prm_bake::params::plural;
 use prm_bake::{AtlasSize, BakeConfig, BakeJob, BakeParams, Plan, Preset, Renderer, Shard};
 use prm_gpu::{Backend, GpuContext};
 use std::collections::BTreeMap;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use crate::progress::Progress;
@@ -55,7 +55,9 @@ pub enum BackendArg {
 pub struct BakeArgs {
     /// Scene file: .obj (with its .mtl), .gltf or .glb.
     pub scene: PathBuf,
-    /// The archive to write (replaced atomically; nothing is left behind on failure).
+    /// The archive to write (replaced atomically; nothing is left behind on failure; missing
+    /// directories are created). An existing file that is not an archive (the scene, say) is
+    /// not replaced.
     #[arg(short, long, value_name = "OUT.prm")]
     pub output: PathBuf,
     /// Named parameter set; `default` derives sizes from the scene and the budgets.
@@ -133,7 +135,8 @@ pub struct BakeArgs {
     /// Where panes are rendered.
     #[arg(long, value_enum, default_value = "auto")]
     pub backend: BackendArg,
-    /// Also write the parameters, counts and timings as JSON here.
+    /// Also write the parameters, counts and timings as JSON here (checked before the bake;
+    /// not the archive's own path).
     #[arg(long, value_name = "FILE.json")]
     pub report: Option<PathBuf>,
     /// Print nothing but warnings and errors.
@@ -268,6 +271,9 @@ pub fn run(args: &BakeArgs) -> Result<()> {
     if !args.plan {
         crate::signals::install(prm_format::check_destination(&args.output)?);
     }
+    if let Some(report) = &args.report {
+        check_report(report, (!args.plan).then_some(args.output.as_path()))?;
+    }
     let mut progress = Progress::new(args.quiet);
     let started = Instant::now();
 
@@ -307,11 +313,7 @@ pub fn run(args: &BakeArgs) -> Result<()> {
     if args.plan {
         if let Some(path) = &args.report {
             // The same shape as a bake's report, which nests them under "params".
-            std::fs::write(
-                path,
-                serde_json::to_string_pretty(&serde_json::json!({ "params": plan.params }))?,
-            )
-            .with_context(|| format!("writing {}", path.display()))?;
+            write_report(path, &serde_json::json!({ "params": plan.params }))?;
         }
         return Ok(());
     }
@@ -357,10 +359,77 @@ pub fn run(args: &BakeArgs) -> Result<()> {
         print_summary(&report);
     }
     if let Some(path) = &args.report {
-        std::fs::write(path, serde_json::to_string_pretty(&report)?)
-            .with_context(|| format!("writing {}", path.display()))?;
+        write_report(path, &report)?;
     }
     Ok(())
+}
+
+/// Refuses, before any work, a `--report` path that names the archive being written, a
+/// directory, or a file in a directory where none can be created (missing directories are
+/// created, as for the archive).
+fn check_report(report: &Path, archive: Option<&Path>) -> Result<()> {
+    if report.is_dir() {
+        bail!("--report {}: it is a directory", report.display());
+    }
+    if archive.is_some_and(|a| resolved(a) == resolved(report)) {
+        bail!(
+            "--report {}: it is the archive the bake writes (-o); name another file",
+            report.display()
+        );
+    }
+    let parent = report
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    let mut ancestor = Some(parent);
+    while let Some(d) = ancestor {
+        match std::fs::metadata(d) {
+            Ok(m) if m.is_dir() => break,
+            Ok(_) => bail!("--report {}: {} is not a directory", report.display(), d.display()),
+            Err(_) => ancestor = d.parent().filter(|p| !p.as_os_str().is_empty()),
+        }
+    }
+    if ancestor == Some(parent) {
+        // The directory exists: a file must be creatable in it.
+        let probe = parent.join(format!(".prm-bake-report-check-{}", std::process::id()));
+        std::fs::OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(&probe)
+            .with_context(|| {
+                format!(
+                    "--report {}: cannot create a file in {}",
+                    report.display(),
+                    parent.display()
+                )
+            })?;
+        let _ = std::fs::remove_file(&probe);
+    }
+    Ok(())
+}
+
+/// `path` with its directory's symbolic links and `..` resolved (the file itself too, when it
+/// exists), to compare two paths that may name one file.
+fn resolved(path: &Path) -> PathBuf {
+    if let Ok(p) = std::fs::canonicalize(path) {
+        return p;
+    }
+    let parent = path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    match (std::fs::canonicalize(parent), path.file_name()) {
+        (Ok(dir), Some(name)) => dir.join(name),
+        _ => std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf()),
+    }
+}
+
+/// Writes the report as JSON, creating missing directories.
+fn write_report(path: &Path, report: &impl serde::Serialize) -> Result<()> {
+    if let Some(dir) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
+    std::fs::write(path, serde_json::to_string_pretty(report)?).with_context(|| format!("writing {}", path.display()))
 }
 
 /// The parameters the bake will use, why, and the time it expects.

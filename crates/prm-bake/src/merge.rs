@@ -9,7 +9,9 @@ pub struct MergeArgs {
     /// The partial archives, one per shard, in any order.
     #[arg(required = true, value_name = "PARTS")]
     pub parts: Vec<PathBuf>,
-    /// The archive to write (replaced atomically; nothing is left behind on failure).
+    /// The archive to write (replaced atomically; nothing is left behind on failure; missing
+    /// directories are created). An existing file that is not an archive, or one of the parts,
+    /// is not replaced.
     #[arg(short, long, value_name = "OUT.prm")]
     pub output: PathBuf,
     /// The scene the parts were baked from: then the merged archive's accuracy is estimated as

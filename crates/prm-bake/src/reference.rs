@@ -88,6 +88,8 @@ pub fn run(args: &ReferenceArgs) -> Result<()> {
             args.output.display()
         );
     }
+    // Also before any tracing: the output's directory (created if missing) and the file.
+    check_output(&args.output)?;
     let scene = prm_scene::load(&args.scene).with_context(|| format!("cannot load scene {}", args.scene.display()))?;
     for w in &scene.report.warnings {
         eprintln!("warning: {w}");
@@ -234,16 +236,35 @@ pub fn run(args: &ReferenceArgs) -> Result<()> {
         report_noise(&est.variance, &est.mean);
         (w as usize, h as usize, est.mean)
     };
-    exr::prelude::write_rgb_file(&args.output, width, height, |x, y| {
-        let v = pixels[y * width + x];
-        (v.x, v.y, v.z)
-    })
-    .with_context(|| format!("cannot write {}", args.output.display()))?;
+    if let Some(dir) = args.output.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
+    let rgb: Vec<[f32; 3]> = pixels.iter().map(|v| v.to_array()).collect();
+    prm_scene::write_exr_rgb(&args.output, width, height, &rgb)?;
     eprintln!(
         "wrote {} ({width}x{height}) in {:.1?}",
         args.output.display(),
         start.elapsed()
     );
+    Ok(())
+}
+
+/// Refuses an output that cannot be written, before the long work: an existing directory or
+/// other non-file, or a path below a file. Missing directories are created when writing.
+fn check_output(output: &std::path::Path) -> Result<()> {
+    if let Ok(m) = std::fs::metadata(output) {
+        if !m.is_file() {
+            bail!("--output {}: it exists and is not a regular file", output.display());
+        }
+    }
+    let mut dir = output.parent();
+    while let Some(d) = dir.filter(|d| !d.as_os_str().is_empty()) {
+        match std::fs::metadata(d) {
+            Ok(m) if m.is_dir() => break,
+            Ok(_) => bail!("--output {}: {} is not a directory", output.display(), d.display()),
+            Err(_) => dir = d.parent(),
+        }
+    }
     Ok(())
 }
 
@@ -258,5 +279,27 @@ fn report_noise(variance: &[Vec3], mean: &[Vec3]) {
             m,
             100.0 * s / m
         );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// What the long render cannot write is refused before it: a directory, a path below a
+    /// file; a missing directory is created when writing, so it passes.
+    #[test]
+    fn unwritable_outputs_are_refused_before_rendering() {
+        let dir = std::env::temp_dir().join(format!("prm-bake-reference-output-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(dir.join("sub")).unwrap();
+        std::fs::write(dir.join("file"), b"x").unwrap();
+        let err = check_output(&dir.join("sub")).unwrap_err().to_string();
+        assert!(err.contains("not a regular file"), "{err}");
+        let err = check_output(&dir.join("file/a/b.exr")).unwrap_err().to_string();
+        assert!(err.contains("file is not a directory"), "{err}");
+        check_output(&dir.join("new/deeper/ref.exr")).unwrap();
+        check_output(&dir.join("ref.exr")).unwrap();
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

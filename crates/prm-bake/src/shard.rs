@@ -60,7 +60,7 @@ impl std::fmt::Display for Shard {
 impl std::str::FromStr for Shard {
     type Err = String;
 
-    /// `I/N` with `0 ≤ I < N`.
+    /// `I/N` with `0 ≤ I < N` and `N ≥ 2`.
     fn from_str(s: &str) -> Result<Shard, String> {
         let (i, n) = s
             .split_once('/')
@@ -73,6 +73,9 @@ impl std::str::FromStr for Shard {
         let (index, count) = (parse(i)?, parse(n)?);
         if count == 0 || index >= count {
             return Err(format!("`{s}`: the index must be 0 to N-1 (shards are counted from 0)"));
+        }
+        if count == 1 {
+            return Err(format!("`{s}`: one shard is the whole bake; leave out --shard"));
         }
         Ok(Shard { index, count })
     }
@@ -145,13 +148,40 @@ pub fn merge_checked(
     scene: &prm_scene::Scene,
     progress: &mut dyn crate::ProgressSink,
 ) -> Result<(Merged, prm_format::Accuracy), BakeError> {
-    merge_recording(parts, output, None)?;
-    let accuracy = crate::estimate_accuracy(scene, output, crate::EstimateSize::DEFAULT, progress)?;
+    // The scene first: a part of another scene is refused before anything is written.
+    if let Some(first) = parts.first() {
+        let part = Archive::open(first).map_err(|source| BakeError::Archive {
+            what: format!("opening {}", first.display()),
+            source,
+        })?;
+        if part.metadata().scene_fingerprint != scene.fingerprint() {
+            return Err(BakeError::InvalidParams(format!(
+                "{}: baked from other geometry than {}",
+                first.display(),
+                scene.source.display()
+            )));
+        }
+    }
+    // The unchecked merge is checked beside the output, under a temporary name, so that a
+    // failed check leaves the output as it was.
+    let scratch = Scratch(prm_format::scratch_path(output));
+    merge_recording(parts, &scratch.0, None)?;
+    let accuracy = crate::estimate_accuracy(scene, &scratch.0, crate::EstimateSize::DEFAULT, progress)?;
     accuracy
         .validate()
         .map_err(|e| BakeError::InvalidParams(format!("no estimate of {}: {e}", output.display())))?;
+    drop(scratch);
     let merged = merge_recording(parts, output, Some(accuracy.clone()))?;
     Ok((merged, accuracy))
+}
+
+/// A file removed when dropped.
+struct Scratch(PathBuf);
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_file(&self.0);
+    }
 }
 
 /// [`merge`] with `accuracy` as the merged archive's estimate.
@@ -164,6 +194,16 @@ fn merge_recording(
     let destination = prm_format::check_destination(output).map_err(BakeError::Destination)?;
     if parts.is_empty() {
         return Err(invalid("no parts to merge".to_string()));
+    }
+    // The output may not be one of the parts (resolved as the writer resolves it).
+    let same =
+        |p: &Path| std::fs::canonicalize(p).is_ok_and(|p| std::fs::canonicalize(&destination).is_ok_and(|d| d == p));
+    if let Some(p) = parts.iter().find(|p| same(p)) {
+        return Err(invalid(format!(
+            "the output {} is the part {}: name another file",
+            output.display(),
+            p.display()
+        )));
     }
     let mut opened = Vec::with_capacity(parts.len());
     for p in parts {
@@ -248,6 +288,7 @@ fn merge_recording(
         .iter()
         .map(|c| Cluster::new(c.first, c.count, c.centroid, c.mean_normal))
         .collect();
+    let made = crate::archive::MadeDirs::create(out_dir)?;
     let mut writer =
         ArchiveWriter::create(output, metadata, &atlas, &entries, &clusters).map_err(|source| BakeError::Archive {
             what: format!("starting {}", output.display()),
@@ -338,6 +379,7 @@ fn merge_recording(
         what: format!("finishing {}", output.display()),
         source,
     })?;
+    made.keep();
     Ok(Merged {
         shards: count,
         panes: clusters.len(),

@@ -492,8 +492,8 @@ fn failures_are_clean_and_leave_existing_archives_alone() {
     assert!(seconds < 5.0, "took {seconds} s");
 
     // An archive already at the output path survives failing bakes untouched.
-    let old = b"not really an archive, but somebody's file".to_vec();
-    std::fs::write(&out, &old).unwrap();
+    std::fs::copy(&baked().archive, &out).unwrap();
+    let old = std::fs::read(&out).unwrap();
     let bad_config = dir.join("missing.toml");
     let invalid_config = dir.join("invalid.toml");
     std::fs::write(&invalid_config, "entires = 3\n").unwrap();
@@ -514,6 +514,41 @@ fn failures_are_clean_and_leave_existing_archives_alone() {
         "{}",
         describe(&r)
     );
+
+    // Refused before any work, the files kept: an -o that names the scene (or any file that is
+    // not an archive), a --report that names the archive, a --report below a file.
+    let obj = dir.join("room.obj");
+    std::fs::copy(scene_path(), &obj).unwrap();
+    let obj_bytes = std::fs::read(&obj).unwrap();
+    let not_a_dir = dir.join("invalid.toml");
+    let under_file = not_a_dir.join("r.json");
+    for (args, expected) in [
+        (
+            vec!["bake", obj.to_str().unwrap(), "-o", obj.to_str().unwrap()],
+            "not a .prm archive",
+        ),
+        (
+            vec!["bake", scene, "-o", out_s, "--report", out_s],
+            "it is the archive the bake writes",
+        ),
+        (
+            vec!["bake", scene, "-o", out_s, "--report", under_file.to_str().unwrap()],
+            "not a directory",
+        ),
+    ] {
+        let t = Instant::now();
+        let r = run(&[&args[..], &["--backend", "cpu"]].concat());
+        assert_eq!(r.status.code(), Some(1), "{args:?}: {}", describe(&r));
+        assert!(
+            String::from_utf8_lossy(&r.stderr).contains(expected),
+            "{args:?}: {}",
+            describe(&r)
+        );
+        assert!(t.elapsed().as_secs_f64() < 5.0, "{args:?} was not refused up front");
+        assert_eq!(std::fs::read(&out).unwrap(), old, "{args:?} touched the archive");
+        assert_eq!(std::fs::read(&obj).unwrap(), obj_bytes, "{args:?} touched the scene");
+    }
+    std::fs::remove_file(&obj).unwrap();
     // Nothing else (no temporary files) is left behind.
     let mut names: Vec<String> = std::fs::read_dir(&dir)
         .unwrap()
@@ -586,7 +621,8 @@ fn dump_summarises_verifies_and_rejects_damage() {
 fn catchable_signals_during_a_bake_leave_no_temporary_file() {
     let dir = temp_dir("signals");
     let out = dir.join("x.prm");
-    std::fs::write(&out, b"old archive").unwrap();
+    // An earlier archive (a damaged one: the magic bytes, then anything) that each interrupted bake leaves as it was.
+    std::fs::write(&out, b"\x89PRM\r\n\x1a\nold archive").unwrap();
     let scene = scene_path();
     let temp_files = || -> Vec<PathBuf> {
         std::fs::read_dir(&dir)
@@ -639,7 +675,7 @@ fn catchable_signals_during_a_bake_leave_no_temporary_file() {
         assert_eq!(temp_files(), Vec::<PathBuf>::new(), "SIG{signal} left a temporary file");
         assert_eq!(
             std::fs::read(&out).unwrap(),
-            b"old archive",
+            b"\x89PRM\r\n\x1a\nold archive",
             "SIG{signal} touched the old archive"
         );
     }
@@ -867,6 +903,56 @@ fn shards_merge_into_the_single_bake_byte_for_byte() {
         );
         assert!(!out.exists(), "{args:?} left {}", out.display());
     }
+    // A merge checked against another scene, or written over one of its parts, fails before
+    // it writes: the output keeps its archive and nothing is left beside it.
+    let keep = dir.join("keep.prm");
+    std::fs::copy(&single, &keep).unwrap();
+    let other_scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/courtyard/courtyard.obj");
+    let before = std::fs::read_dir(&dir).unwrap().count();
+    for (args, expected) in [
+        (
+            vec![
+                "merge",
+                p0,
+                p1,
+                "-o",
+                keep.to_str().unwrap(),
+                "--scene",
+                other_scene.to_str().unwrap(),
+            ],
+            "other geometry",
+        ),
+        (vec!["merge", p0, p1, "-o", p0], "is the part"),
+    ] {
+        let r = run(&args);
+        assert_eq!(r.status.code(), Some(1), "{args:?}: {}", describe(&r));
+        assert!(
+            String::from_utf8_lossy(&r.stderr).contains(expected),
+            "{args:?}: {}",
+            describe(&r)
+        );
+    }
+    assert!(
+        std::fs::read(&keep).unwrap() == std::fs::read(&single).unwrap(),
+        "a failed merge replaced the output"
+    );
+    assert!(
+        Archive::open(&part0).unwrap().metadata().params.contains_key("shard"),
+        "the part was replaced"
+    );
+    assert_eq!(
+        std::fs::read_dir(&dir).unwrap().count(),
+        before,
+        "a failed merge left a file"
+    );
+
     let r = run(&["bake", scene_path().to_str().unwrap(), "-o", m, "--shard", "2/2"]);
     assert_eq!(r.status.code(), Some(2), "--shard 2/2 accepted: {}", describe(&r));
+    let r = run(&["bake", scene_path().to_str().unwrap(), "-o", m, "--shard", "0/1"]);
+    assert_eq!(r.status.code(), Some(2), "--shard 0/1 accepted: {}", describe(&r));
+    assert!(
+        String::from_utf8_lossy(&r.stderr).contains("whole bake"),
+        "{}",
+        describe(&r)
+    );
 }

@@ -43,7 +43,7 @@ use crate::encode::{EncodedPane, PaneEncoder};
 use crate::error::{Error, Result};
 use crate::filter::TileFilter;
 use crate::layout::{
-    checksum, compression, kind, Header, PutLe, SectionRecord, TileRecord, HEADER_SIZE, PANES_HEADER_SIZE,
+    checksum, compression, kind, Header, PutLe, SectionRecord, TileRecord, HEADER_SIZE, MAGIC, PANES_HEADER_SIZE,
     TEXEL_FORMAT_RGB9E5, TILE_RECORD_SIZE, VERSION_MAJOR,
 };
 use crate::metadata::Metadata;
@@ -129,7 +129,9 @@ fn describe_file_type(t: fs::FileType) -> &'static str {
             return "a socket";
         }
     }
-    if t.is_dir() {
+    if t.is_file() {
+        "a regular file"
+    } else if t.is_dir() {
         "a directory"
     } else if t.is_symlink() {
         "a symbolic link"
@@ -185,6 +187,31 @@ fn resolve_destination(given: &Path) -> Result<PathBuf> {
     ))
 }
 
+/// Refuses an existing `dest` that holds something other than an archive: a bake must not
+/// replace its own scene, a report or any file that a mistyped `-o` names. An empty file (as
+/// `mktemp` leaves) and an archive, damaged or not, may be replaced.
+fn refuse_foreign_file(dest: &Path) -> Result<()> {
+    let mut head = Vec::with_capacity(MAGIC.len());
+    match fs::File::open(dest) {
+        Ok(f) => {
+            f.take(MAGIC.len() as u64)
+                .read_to_end(&mut head)
+                .map_err(|e| destination_error(dest, "cannot read it", Some(e)))?;
+        }
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(()),
+        // Unreadable (permissions): the probe below says whether it can be replaced.
+        Err(_) => return Ok(()),
+    }
+    if head.is_empty() || MAGIC.starts_with(&head) {
+        return Ok(());
+    }
+    Err(destination_error(
+        dest,
+        "it exists and is not a .prm archive; refusing to replace it (remove it, or name another file)",
+        None,
+    ))
+}
+
 /// `.<name>.tmp-<pid>-<n>` in `dir`.
 fn temp_path_for(dir: &Path, name: &OsStr) -> PathBuf {
     dir.join(format!(
@@ -195,15 +222,30 @@ fn temp_path_for(dir: &Path, name: &OsStr) -> PathBuf {
     ))
 }
 
-/// The pid of a temporary file name `.<name>.tmp-<pid>-<n>` of destination `name`.
+/// The pid of a temporary file name `.<name>.tmp-<pid>-<n>` of destination `name`, or of a
+/// writer's temporary file for such a file (`.<temp name>.tmp-<pid>-<m>`, the same pid: a
+/// [`scratch_path`] being written).
 fn temp_file_pid(file: &str, name: &str) -> Option<u32> {
-    let rest = file.strip_prefix('.')?.strip_prefix(name)?.strip_prefix(".tmp-")?;
-    let (pid, n) = rest.split_once('-')?;
+    let (stem, last) = file.strip_prefix('.')?.rsplit_once(".tmp-")?;
+    let (pid, n) = last.split_once('-')?;
     let digits = |s: &str| !s.is_empty() && s.bytes().all(|b| b.is_ascii_digit());
     if !digits(pid) || !digits(n) {
         return None;
     }
-    pid.parse().ok()
+    let pid = pid.parse().ok()?;
+    (stem == name || temp_file_pid(stem, name) == Some(pid)).then_some(pid)
+}
+
+/// A fresh path beside `dest` named as the writer names its temporary files for `dest`, for an
+/// archive that a caller writes, reads and removes before writing `dest` itself (`prm-bake
+/// merge --scene` checks the merged archive there, so that a failed check leaves `dest`
+/// alone). [`own_temp_files`] lists it and the writer's own temporary file for it, so a
+/// signal handler that knows only `dest` removes them; a later write to `dest` sweeps them
+/// when their process has died. Symbolic links in `dest` are resolved as the writer does.
+pub fn scratch_path(dest: impl AsRef<Path>) -> PathBuf {
+    let dest = dest.as_ref();
+    let dest = resolve_destination(dest).unwrap_or_else(|_| dest.to_path_buf());
+    temp_path_for(&parent_dir(&dest), dest.file_name().unwrap_or(OsStr::new("archive")))
 }
 
 /// Removes the temporary files of destination `name` in `dir` left by
@@ -273,13 +315,16 @@ pub fn own_temp_files(path: impl AsRef<Path>) -> Vec<PathBuf> {
 /// returns the path the writer will replace (symbolic links resolved).
 ///
 /// Refuses ([`Error::Destination`]) a destination that exists and is not a
-/// regular file (directory, device, FIFO, socket), one whose nearest
+/// regular file (directory, device, FIFO, socket), a non-empty file that
+/// does not begin as an archive does (the scene, a report: anything a
+/// mistyped `-o` may name), one whose nearest
 /// existing ancestor is not a directory, and one whose directory exists but
 /// where no file can be created (checked by creating and removing a probe
 /// file named like the writer's temporary files). Missing directories are
 /// accepted: a caller may create them before [`ArchiveWriter::create`].
 pub fn check_destination(path: impl AsRef<Path>) -> Result<PathBuf> {
     let dest = resolve_destination(path.as_ref())?;
+    refuse_foreign_file(&dest)?;
     let name = dest
         .file_name()
         .ok_or_else(|| destination_error(&dest, "it has no file name", None))?
@@ -423,6 +468,7 @@ impl ArchiveWriter {
             return Err(Error::InvalidInput(format!("{} has no file name", given.display())));
         }
         let dest = resolve_destination(&given)?;
+        refuse_foreign_file(&dest)?;
         let file_name = dest
             .file_name()
             .ok_or_else(|| destination_error(&dest, "it has no file name", None))?

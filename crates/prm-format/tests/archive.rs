@@ -1381,7 +1381,7 @@ fn symlink_destination_is_written_through() {
     let dir = test_dir("symlink");
     let s = scene(16, 8, 2, 21);
     let target = dir.join("target.prm");
-    std::fs::write(&target, b"old").unwrap();
+    std::fs::write(&target, b"").unwrap();
     let link = dir.join("link.prm");
     std::os::unix::fs::symlink("target.prm", &link).unwrap();
     assert_eq!(check_destination(&link).unwrap(), dir.join("target.prm"));
@@ -1428,6 +1428,68 @@ fn directory_destination_is_refused_before_writing() {
     let err = check_destination(dir.join("file/c.prm")).unwrap_err();
     assert!(matches!(err, Error::Destination { .. }), "{err}");
     assert_eq!(dir_listing(&dir), vec!["file", "out.prm"]);
+}
+
+/// A mistyped `-o` naming the scene, a report or any other file is refused and the file kept;
+/// an empty file and an archive, even a damaged one, may be replaced.
+#[test]
+fn a_file_that_is_not_an_archive_is_not_replaced() {
+    let dir = test_dir("dest-foreign");
+    let s = scene(16, 8, 2, 24);
+    let scene_file = dir.join("room.obj");
+    std::fs::write(&scene_file, b"v 0 0 0\n").unwrap();
+    let err = check_destination(&scene_file).unwrap_err();
+    assert!(matches!(err, Error::Destination { .. }), "{err}");
+    assert!(
+        err.to_string().contains("room.obj") && err.to_string().contains("not a .prm archive"),
+        "{err}"
+    );
+    assert!(matches!(start_writer(&scene_file, &s), Err(Error::Destination { .. })));
+    assert_eq!(std::fs::read(&scene_file).unwrap(), b"v 0 0 0\n");
+
+    let empty = dir.join("empty.prm");
+    std::fs::write(&empty, b"").unwrap();
+    assert_eq!(check_destination(&empty).unwrap(), empty);
+    let damaged = dir.join("damaged.prm");
+    write_scene(&damaged, &s, WriterOptions::default());
+    let len = std::fs::metadata(&damaged).unwrap().len();
+    std::fs::OpenOptions::new()
+        .write(true)
+        .open(&damaged)
+        .unwrap()
+        .set_len(len / 2)
+        .unwrap();
+    assert_eq!(check_destination(&damaged).unwrap(), damaged);
+    // Cut inside the magic bytes: still the beginning of an archive.
+    std::fs::OpenOptions::new()
+        .write(true)
+        .open(&damaged)
+        .unwrap()
+        .set_len(3)
+        .unwrap();
+    assert_eq!(check_destination(&damaged).unwrap(), damaged);
+    write_scene(&damaged, &s, WriterOptions::default());
+    Archive::open(&damaged).unwrap().verify().unwrap();
+}
+
+/// A scratch archive beside a destination, and the writer's temporary file for it, are this
+/// process's temporary files of that destination.
+#[test]
+fn scratch_archives_count_as_temporary_files_of_their_destination() {
+    let dir = test_dir("dest-scratch");
+    let s = scene(16, 8, 2, 25);
+    let out = dir.join("out.prm");
+    let scratch = prm_format::scratch_path(&out);
+    assert_eq!(scratch.parent().unwrap(), dir);
+    let w = start_writer(&scratch, &s).unwrap();
+    let inner = w.temp_path().to_path_buf();
+    assert_eq!(prm_format::own_temp_files(&out), vec![inner.clone()]);
+    drop(w);
+    write_scene(&scratch, &s, WriterOptions::default());
+    assert_eq!(prm_format::own_temp_files(&out), vec![scratch.clone()]);
+    assert!(prm_format::own_temp_files(dir.join("other.prm")).is_empty());
+    std::fs::remove_file(&scratch).unwrap();
+    assert!(dir_listing(&dir).is_empty());
 }
 
 #[cfg(unix)]

@@ -11,8 +11,8 @@ pub enum SceneError {
     /// The extension is neither `.obj`, `.gltf` nor `.glb`.
     #[error("{0}: unsupported scene format (expected .obj, .gltf or .glb)")]
     UnsupportedFormat(PathBuf),
-    /// Reading the file failed.
-    #[error("{path}: {source}")]
+    /// Reading the file failed (the I/O error is the source: `{:#}` prints it once).
+    #[error("{path}: cannot read it")]
     Io {
         /// The file.
         path: PathBuf,
@@ -30,7 +30,7 @@ pub enum SceneError {
         message: String,
     },
     /// An external glTF buffer file (`.bin`) could not be read: names that file, not the scene.
-    #[error("{path}: buffer {buffer} of {scene} could not be read: {source}")]
+    #[error("{path}: buffer {buffer} of {scene} could not be read")]
     BufferFile {
         /// The buffer file the glTF refers to.
         path: PathBuf,

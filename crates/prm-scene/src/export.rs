@@ -49,8 +49,8 @@ use crate::Scene;
 /// Why a scene could not be exported.
 #[derive(Debug, thiserror::Error)]
 pub enum ExportError {
-    /// Creating, writing or renaming a file failed.
-    #[error("{path}: {source}")]
+    /// Creating, writing or renaming a file failed (the I/O error is the source).
+    #[error("{path}: cannot write it")]
     Io {
         /// The file being written.
         path: PathBuf,
@@ -679,6 +679,17 @@ mod tests {
         }
     }
 
+    /// The error and its sources as a binary prints them (`anyhow`'s `{:#}`).
+    fn anyhow_like(err: &dyn std::error::Error) -> String {
+        let mut s = err.to_string();
+        let mut source = err.source();
+        while let Some(e) = source {
+            s.push_str(&format!(": {e}"));
+            source = e.source();
+        }
+        s
+    }
+
     #[test]
     fn a_failing_write_leaves_no_file() {
         let dir = std::env::temp_dir().join(format!("prm-scene-export-atomic-{}", std::process::id()));
@@ -690,10 +701,10 @@ mod tests {
             Err(std::io::Error::other("disk full"))
         })
         .unwrap_err();
-        assert!(
-            err.to_string().contains("scene.glb") && err.to_string().contains("disk full"),
-            "{err}"
-        );
+        // The I/O error is the source, printed once by `{:#}`.
+        let chain = anyhow_like(&err);
+        assert!(chain.contains("scene.glb") && chain.contains("disk full"), "{chain}");
+        assert_eq!(chain.matches("disk full").count(), 1, "{chain}");
         assert_eq!(
             std::fs::read_dir(&dir).unwrap().count(),
             0,
