@@ -128,6 +128,17 @@ pub fn estimate_accuracy(
     if meta.scene_fingerprint != scene.fingerprint() {
         return refuse("baked from other geometry than this scene".into());
     }
+    let found = format!("{:016x}", scene.materials_fingerprint());
+    if let Some(baked) = meta.params.get("materials_fingerprint").and_then(|v| v.as_str()) {
+        if baked != found {
+            progress.warn(&format!(
+                "{}: the scene's materials differ from those the archive was baked with (materials \
+                 fingerprint {found}, baked {baked}): the estimate measures the old albedos' indirect \
+                 light against the new ones",
+                archive_path.display()
+            ));
+        }
+    }
     let number = |key: &str| meta.params.get(key).and_then(serde_json::Value::as_u64);
     let (Some(entry_count), Some(cluster_count), Some(top_k)) =
         (number("entries"), number("clusters"), number("top_k"))

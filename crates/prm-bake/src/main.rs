@@ -55,7 +55,9 @@ enum Command {
     Check(check::CheckArgs),
     /// Inspect a .prm archive: summary, JSON, full verification or EXR export of its panes.
     ///
-    /// Exit status 0 when the archive is good, 1 when it is damaged or the arguments are wrong.
+    /// Without --verify it reads the header, the section table and the metadata; --verify also
+    /// reads every pane and section and checks their checksums. Exit status 0 when what was
+    /// read is good, 1 when it is damaged or cannot be read, 2 when the arguments are wrong.
     Dump(dump::DumpArgs),
     /// Reference path tracer: ground-truth image or lightmap (EXR) under given lights.
     ///

@@ -389,6 +389,12 @@ const MIN_AUTO_TOP_K: usize = 32;
 /// cluster blended), four times its charts' 1024. It was once.
 const MAX_DOUBLINGS: usize = 2;
 
+/// The largest `vpl_disk_scale`: at the fewest entry points (1024) a scene is about
+/// √1024 = 32 entry-point radii across, so a disk of 1000 radii already covers any scene many
+/// times over; larger values only overflow the near field's disk (QA: 1e30 failed after the
+/// panes with an infinite disk).
+pub const MAX_VPL_DISK_SCALE: f32 = 1000.0;
+
 /// The VPL disk's radius multiplier (`vpl_disk_scale`) where the bake traces the near field and
 /// its hits fit [`NEAR_HIT_BUDGET`]: the panes then bound each VPL by a disk this many times
 /// the radius of its entry point's area `A/N`, with the kernel that completes the near field's
@@ -953,8 +959,11 @@ impl BakeParams {
         if !(8..=2048).contains(&self.face_resolution) {
             invalid!("face resolution {} is outside 8..=2048", self.face_resolution);
         }
-        if !(self.vpl_disk_scale >= 0.0 && self.vpl_disk_scale.is_finite()) {
-            invalid!("vpl_disk_scale {} must be a non-negative number", self.vpl_disk_scale);
+        if !(0.0..=MAX_VPL_DISK_SCALE).contains(&self.vpl_disk_scale) {
+            invalid!(
+                "vpl_disk_scale {} is outside 0..={MAX_VPL_DISK_SCALE} (entry-point radii)",
+                self.vpl_disk_scale
+            );
         }
         let memory_mib = self.clusters as f64 * texels_per_pane * 4.0 / (1024.0 * 1024.0);
         if memory_mib > self.memory_budget_mib {

@@ -563,6 +563,15 @@ pub fn bake(job: &BakeJob<'_>, renderer: Renderer<'_>, progress: &mut dyn Progre
         r = atlas.resolution
     );
     finish_phase(&mut timings, progress, Phase::Atlas, "atlas", t, &detail);
+    if atlas.stats.uncovered_triangles > 0 {
+        progress.warn(&format!(
+            "{} of {} triangles touch no lightmap texel (texel size {}): they get no indirect \
+             light; a smaller --texel-size or a larger --resolution gives them some",
+            atlas.stats.uncovered_triangles,
+            scene.triangles.len(),
+            atlas.stats.texel_size
+        ));
+    }
 
     let t = Instant::now();
     progress.phase_start(Phase::Bvh, 1);

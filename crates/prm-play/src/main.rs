@@ -283,6 +283,12 @@ fn run() -> Result<()> {
         }
         return Ok(());
     }
+    if args.out.exists() && !args.out.is_dir() {
+        anyhow::bail!(
+            "--out {}: it exists and is not a directory (--out names the directory the frames go to)",
+            args.out.display()
+        );
+    }
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
     let mut frames = Vec::new();
     let frame_count = args.frames.unwrap_or(1);

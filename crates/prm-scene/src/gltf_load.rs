@@ -108,14 +108,8 @@ pub(crate) fn load(path: &Path) -> Result<Scene, SceneError> {
                 .map_or_else(|| format!("material-{}", materials.len()), str::to_string),
             albedo: Vec3::new(f[0], f[1], f[2]),
             texture,
-            emission: {
-                let e = Vec3::from_array(m.emissive_factor()) * m.emissive_strength().unwrap_or(1.0);
-                if e.is_finite() && e.min_element() >= 0.0 {
-                    e
-                } else {
-                    Vec3::ZERO
-                }
-            },
+            // Negative or non-finite emission is refused, with a warning, in `finish_load`.
+            emission: Vec3::from_array(m.emissive_factor()) * m.emissive_strength().unwrap_or(1.0),
         });
     }
     let default_material = materials.len() as u32;

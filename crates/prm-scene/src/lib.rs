@@ -24,7 +24,7 @@ mod texture;
 pub use atlas::{barycentric, Atlas, AtlasParams, AtlasStats, ExitPoint, Sizing, EMPTY_TEXEL};
 pub use error::SceneError;
 pub use export::{read_exr_rgb, write_exr_rgb, write_gltf, ExportError};
-pub use scene::{Aabb, Camera, Light, LoadReport, Material, Scene, Triangle, RECT_MAX_HALF_ANGLE_DEG};
+pub use scene::{Aabb, Camera, Light, LoadReport, Material, Scene, Triangle, MAX_COORDINATE, RECT_MAX_HALF_ANGLE_DEG};
 pub use sky::{Sky, SkyMap, SkySource, MAX_SKY_MAP_SIDE};
 pub use spec::{parse_camera, parse_emitter_scale, parse_light, parse_size, resolve_emitter_scales, SpecError};
 pub use texture::Texture;

@@ -111,18 +111,8 @@ pub(crate) fn load(path: &Path) -> Result<Scene, SceneError> {
             (None, Some(kd)) => kd,
             (None, None) => DEFAULT_GREY,
         };
-        let emission = match m.emissive.map(Vec3::from_array) {
-            Some(ke) if ke.is_finite() && ke.min_element() >= 0.0 => ke,
-            Some(ke) => {
-                report.warnings.push(format!(
-                    "{}: material '{}' has Ke {ke} (negative or not finite); it does not emit",
-                    path.display(),
-                    m.name
-                ));
-                Vec3::ZERO
-            }
-            None => Vec3::ZERO,
-        };
+        // Negative or non-finite Ke is refused, with a warning, in `Scene::finish_load`.
+        let emission = m.emissive.map(Vec3::from_array).unwrap_or(Vec3::ZERO);
         scene_materials.push(Material {
             name: m.name.clone(),
             albedo,

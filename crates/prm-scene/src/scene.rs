@@ -226,7 +226,16 @@ pub struct LoadReport {
     /// copy hides nothing from a ray, but it doubles the face's share of area-sampled points, and
     /// a ray leaving the face from its surface meets the copy at once.
     pub duplicates_dropped: usize,
+    /// Triangles with a corner beyond ±[`MAX_COORDINATE`]; the load fails when there is one.
+    pub out_of_range: usize,
 }
+
+/// Largest vertex coordinate, in scene units (metres), that a scene may have. At 10⁹ the
+/// 32-bit positions the bake and the player work in are 64 units apart, so no surface detail
+/// survives; and the bake's sums over areas and squared distances overflow at about 10¹⁸
+/// (QA: a scene at 10¹⁸ failed in the near field with an infinite disk, one at 10³⁰ lost every
+/// triangle as degenerate). Real scenes stay within 10⁵ or so.
+pub const MAX_COORDINATE: f32 = 1e9;
 
 /// A loaded scene, flat and in world space.
 #[derive(Clone, Debug)]
@@ -384,6 +393,19 @@ impl Scene {
     /// Ends a loader's work: drops duplicate triangles, warns of the dropped degenerate and
     /// duplicate triangles, and fails when none is left.
     pub(crate) fn finish_load(mut self) -> Result<Scene, crate::SceneError> {
+        if self.report.out_of_range > 0 {
+            return Err(crate::SceneError::Malformed {
+                path: self.source.clone(),
+                line: None,
+                message: format!(
+                    "{} triangles have a corner beyond ±{MAX_COORDINATE:e} units, where 32-bit \
+                     positions keep no detail (scale the scene to metres)",
+                    self.report.out_of_range
+                ),
+            });
+        }
+        self.sanitize_materials();
+        self.sanitize_lights_and_cameras();
         let n = self.report.degenerate_dropped;
         if n > 0 {
             self.report
@@ -414,11 +436,95 @@ impl Scene {
         Ok(self)
     }
 
+    /// Albedos must lie in [0, 1] (a diffuse surface reflects at most what it receives: above
+    /// 1 the walks gain energy at every bounce) and emission must be finite and non-negative;
+    /// others are clamped (NaN to 0), with a warning naming the material.
+    fn sanitize_materials(&mut self) {
+        for m in &mut self.materials {
+            let a = m.albedo;
+            if !(a.is_finite() && a.min_element() >= 0.0 && a.max_element() <= 1.0) {
+                let clamped = Vec3::from_array(a.to_array().map(|c| if c.is_nan() { 0.0 } else { c.clamp(0.0, 1.0) }));
+                self.report.warnings.push(format!(
+                    "{}: material '{}' has albedo {a} outside [0, 1]; using {clamped}",
+                    self.source.display(),
+                    m.name
+                ));
+                m.albedo = clamped;
+            }
+            let e = m.emission;
+            if !(e.is_finite() && e.min_element() >= 0.0) {
+                self.report.warnings.push(format!(
+                    "{}: material '{}' has emission {e} (negative or not finite); it does not emit",
+                    self.source.display(),
+                    m.name
+                ));
+                m.emission = Vec3::ZERO;
+            }
+        }
+    }
+
+    /// Drops, with a warning, lights whose intensity is negative or not finite, or whose cone
+    /// or frustum is empty, and cameras with no field of view: the player and the reference
+    /// would show them as a black image.
+    fn sanitize_lights_and_cameras(&mut self) {
+        let source = self.source.display().to_string();
+        let mut warnings = Vec::new();
+        self.lights.retain(|l| {
+            let (power, shape_ok) = match *l {
+                Light::Point { intensity, .. } => (intensity, true),
+                Light::Spot { angle, intensity, .. } => (intensity, angle.is_finite() && angle > 0.0),
+                Light::Rect {
+                    half_angles, intensity, ..
+                } => (intensity, half_angles.iter().all(|a| a.is_finite() && *a > 0.0)),
+                Light::Directional { irradiance, .. } => (irradiance, true),
+            };
+            let power_ok = power.is_finite() && power.min_element() >= 0.0;
+            if !(shape_ok && power_ok) {
+                let (kind, at) = match *l {
+                    Light::Point { position, .. } => ("point light", format!(" at {position}")),
+                    Light::Spot { position, .. } => ("spot light", format!(" at {position}")),
+                    Light::Rect { position, .. } => ("rectangular spot light", format!(" at {position}")),
+                    Light::Directional { direction, .. } => ("directional light", format!(" along {direction}")),
+                };
+                let why = if power_ok {
+                    "its cone is empty".to_string()
+                } else {
+                    format!("its intensity {power} is negative or not finite")
+                };
+                warnings.push(format!("{source}: the {kind}{at} is left out: {why}"));
+            }
+            shape_ok && power_ok
+        });
+        self.cameras.retain(|c| {
+            let ok = c.fov_y_deg.is_finite()
+                && c.fov_y_deg > 0.0
+                && c.fov_y_deg < 180.0
+                && c.eye.is_finite()
+                && c.target.is_finite()
+                && c.eye != c.target;
+            if !ok {
+                warnings.push(format!(
+                    "{source}: a camera with field of view {}° at {} looking at {} is left out",
+                    c.fov_y_deg, c.eye, c.target
+                ));
+            }
+            ok
+        });
+        self.report.warnings.extend(warnings);
+    }
+
     /// Appends a triangle after validating it; returns false (and counts it) when degenerate.
     ///
     /// `area_eps` is the area below which a triangle counts as degenerate. Corner normals that are
     /// missing (zero) or point away from the geometric normal are replaced or flipped.
     pub(crate) fn push_triangle(&mut self, mut t: Triangle, area_eps: f32) -> bool {
+        if t.positions
+            .iter()
+            .any(|p| p.is_finite() && p.abs().max_element() > MAX_COORDINATE)
+        {
+            self.report.out_of_range += 1;
+            return false;
+        }
         let area = t.area();
         if area.is_nan() || area <= area_eps {
             self.report.degenerate_dropped += 1;

@@ -210,6 +210,21 @@ impl Sky {
                 return Ok(Sky::uniform(c));
             }
         }
+        // Numbers and commas only, but not three numbers: a mistyped colour, not a file.
+        let numeric = spec.contains(',')
+            && spec
+                .chars()
+                .all(|c| c.is_ascii_digit() || matches!(c, ',' | '.' | '-' | '+' | 'e' | 'E' | ' '));
+        if numeric && !Path::new(spec).exists() {
+            return Err(SceneError::Malformed {
+                path: spec.into(),
+                line: None,
+                message: format!(
+                    "a sky colour is three numbers R,G,B (this has {}); a sky map is a .hdr or .exr file",
+                    parts.len()
+                ),
+            });
+        }
         SkyMap::load(Path::new(spec)).map(Sky::from_map)
     }
 
@@ -349,6 +364,8 @@ mod tests {
         );
         assert!(Sky::parse("1,-1,2").is_err());
         assert!(matches!(Sky::parse("/no/such/sky.hdr"), Err(SceneError::NotFound(_))));
+        let err = Sky::parse("1,1").unwrap_err();
+        assert!(err.to_string().contains("three numbers R,G,B (this has 2)"), "{err}");
     }
 
     #[test]

@@ -372,6 +372,65 @@ fn tiny_gltf(dir: &Path) -> PathBuf {
     write(dir, "tiny.gltf", json)
 }
 
+/// Values no surface, light or camera can have are refused at load, with a warning naming them,
+/// instead of failing the bake after its panes or playing a black frame (QA, session 30).
+#[test]
+fn impossible_materials_lights_and_cameras_are_refused_at_load() {
+    let dir = scratch("sanitize");
+    write(
+        &dir,
+        "m.mtl",
+        "newmtl neg\nKd -1 0.5 0.5\nnewmtl nan\nKd nan 0.5 2\nnewmtl hot\nKd 0.5 0.5 0.5\nKe -1 0 0\n",
+    );
+    let tri = |m: &str, z: f32| format!("usemtl {m}\nv 0 0 {z}\nv 1 0 {z}\nv 0 1 {z}\nf -3 -2 -1\n");
+    let obj = write(
+        &dir,
+        "m.obj",
+        &format!(
+            "mtllib m.mtl\n{}{}{}",
+            tri("neg", 0.0),
+            tri("nan", 1.0),
+            tri("hot", 2.0)
+        ),
+    );
+    let scene = prm_scene::load(&obj).unwrap();
+    let albedo = |name: &str| scene.materials.iter().find(|m| m.name == name).unwrap().albedo;
+    assert_eq!(albedo("neg"), Vec3::new(0.0, 0.5, 0.5));
+    assert_eq!(albedo("nan"), Vec3::new(0.0, 0.5, 1.0));
+    assert!(scene.materials.iter().all(|m| m.emission == Vec3::ZERO));
+    let warned = |what: &str| scene.report.warnings.iter().any(|w| w.contains(what));
+    assert!(
+        warned("'neg' has albedo") && warned("'nan' has albedo") && warned("'hot' has emission"),
+        "{:?}",
+        scene.report.warnings
+    );
+
+    // Beyond ±MAX_COORDINATE: an error, not triangles dropped as degenerate.
+    let far = write(
+        &dir,
+        "far.obj",
+        "v 0 0 0\nv 1e18 0 0\nv 0 1e18 0\nf 1 2 3\nv 0 0 1\nv 1 0 1\nv 0 1 1\nf 4 5 6\n",
+    );
+    let err = prm_scene::load(&far).unwrap_err().to_string();
+    assert!(err.contains("1 triangles have a corner beyond ±1e9"), "{err}");
+
+    // A spot light of negative intensity and a camera of no field of view are left out.
+    let good = tiny_gltf(&dir);
+    let text = std::fs::read_to_string(&good).unwrap();
+    let bad = text
+        .replace("\"intensity\": 4", "\"intensity\": -4")
+        .replace("\"yfov\": 0.8", "\"yfov\": 0");
+    assert_ne!(bad, text);
+    let scene = prm_scene::load(&write(&dir, "bad.gltf", &bad)).unwrap();
+    assert!(scene.lights.is_empty() && scene.cameras.is_empty());
+    let warned = |what: &str| scene.report.warnings.iter().any(|w| w.contains(what));
+    assert!(
+        warned("the spot light at [0, 3, 0] is left out") && warned("field of view 0°"),
+        "{:?}",
+        scene.report.warnings
+    );
+}
+
 #[test]
 fn gltf_transforms_lights_cameras_and_lightmap_uvs() {
     let dir = scratch("gltf-tiny");

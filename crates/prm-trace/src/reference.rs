@@ -404,7 +404,11 @@ impl<'a> ReferenceTracer<'a> {
         }
         let forward = (camera.target - camera.eye).normalize_or_zero();
         if forward == Vec3::ZERO || !(camera.fov_y_deg > 0.0 && camera.fov_y_deg < 180.0) {
-            return Err(TraceError::InvalidParameter(format!("degenerate camera {camera:?}")));
+            return Err(TraceError::InvalidParameter(format!(
+                "degenerate camera: eye {} looking at {}, vertical field of view {}° (the eye and \
+                 the target must differ and the field of view lie in (0°, 180°))",
+                camera.eye, camera.target, camera.fov_y_deg
+            )));
         }
         let mut right = forward.cross(Vec3::Y);
         if right.length_squared() < 1e-12 {
