@@ -272,7 +272,7 @@ pub fn run(args: &BakeArgs) -> Result<()> {
         crate::signals::install(prm_format::check_destination(&args.output)?);
     }
     if let Some(report) = &args.report {
-        check_report(report, (!args.plan).then_some(args.output.as_path()))?;
+        check_report(report, (!args.plan).then_some(args.output.as_path()), &args.scene)?;
     }
     let mut progress = Progress::new(args.quiet);
     let started = Instant::now();
@@ -364,10 +364,10 @@ pub fn run(args: &BakeArgs) -> Result<()> {
     Ok(())
 }
 
-/// Refuses, before any work, a `--report` path that names the archive being written, a
-/// directory, or a file in a directory where none can be created (missing directories are
-/// created, as for the archive).
-fn check_report(report: &Path, archive: Option<&Path>) -> Result<()> {
+/// Refuses, before any work, a `--report` path that names the archive being written, the scene,
+/// an existing archive, a directory, or a file in a directory where none can be created
+/// (missing directories are created, as for the archive).
+fn check_report(report: &Path, archive: Option<&Path>, scene: &Path) -> Result<()> {
     if report.is_dir() {
         bail!("--report {}: it is a directory", report.display());
     }
@@ -376,6 +376,20 @@ fn check_report(report: &Path, archive: Option<&Path>) -> Result<()> {
             "--report {}: it is the archive the bake writes (-o); name another file",
             report.display()
         );
+    }
+    if resolved(scene) == resolved(report) {
+        bail!("--report {}: it is the scene; name another file", report.display());
+    }
+    let is_archive = || {
+        use std::io::Read;
+        let mut head = [0u8; prm_format::MAGIC.len()];
+        std::fs::File::open(report)
+            .and_then(|mut f| f.read_exact(&mut head))
+            .is_ok()
+            && head == prm_format::MAGIC
+    };
+    if std::fs::metadata(report).is_ok_and(|m| m.is_file()) && is_archive() {
+        bail!("--report {}: it is a .prm archive; name another file", report.display());
     }
     let parent = report
         .parent()

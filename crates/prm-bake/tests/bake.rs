@@ -522,6 +522,7 @@ fn failures_are_clean_and_leave_existing_archives_alone() {
     let obj_bytes = std::fs::read(&obj).unwrap();
     let not_a_dir = dir.join("invalid.toml");
     let under_file = not_a_dir.join("r.json");
+    let elsewhere = dir.join("elsewhere.prm");
     for (args, expected) in [
         (
             vec!["bake", obj.to_str().unwrap(), "-o", obj.to_str().unwrap()],
@@ -530,6 +531,21 @@ fn failures_are_clean_and_leave_existing_archives_alone() {
         (
             vec!["bake", scene, "-o", out_s, "--report", out_s],
             "it is the archive the bake writes",
+        ),
+        (
+            vec![
+                "bake",
+                obj.to_str().unwrap(),
+                "-o",
+                elsewhere.to_str().unwrap(),
+                "--report",
+                obj.to_str().unwrap(),
+            ],
+            "it is the scene",
+        ),
+        (
+            vec!["bake", scene, "-o", elsewhere.to_str().unwrap(), "--report", out_s],
+            "it is a .prm archive",
         ),
         (
             vec!["bake", scene, "-o", out_s, "--report", under_file.to_str().unwrap()],
