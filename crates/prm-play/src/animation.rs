@@ -48,17 +48,20 @@ use serde::Deserialize;
 use crate::PlayError;
 
 #[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
 struct FileKey {
     t: f32,
     spec: String,
 }
 
 #[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
 struct FileLight {
     keys: Vec<FileKey>,
 }
 
 #[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
 struct FileEmitter {
     name: String,
     keys: Vec<FileKey>,
@@ -314,6 +317,13 @@ impl Animation {
     pub fn emitter_scales_at(&self, names: &[&str], base: &[[f32; 3]], t: f32) -> Result<Vec<[f32; 3]>, String> {
         let mut out = base.to_vec();
         for (name, keys) in &self.emitters {
+            let (i, j, s) = locate(keys, t);
+            let scale = [0, 1, 2].map(|k| keys[i].1[k] + (keys[j].1[k] - keys[i].1[k]) * s);
+            // `*` scales every group, as `--emitter *=S` does.
+            if name == "*" {
+                out.iter_mut().for_each(|o| *o = scale);
+                continue;
+            }
             let g = names.iter().position(|n| n == name).ok_or_else(|| {
                 format!(
                     "the animation scales emitter {name:?}, which the archive does not have (its groups: {})",
@@ -324,8 +334,7 @@ impl Animation {
                     }
                 )
             })?;
-            let (i, j, s) = locate(keys, t);
-            out[g] = [0, 1, 2].map(|k| keys[i].1[k] + (keys[j].1[k] - keys[i].1[k]) * s);
+            out[g] = scale;
         }
         Ok(out)
     }
@@ -359,5 +368,30 @@ impl Animation {
                 lerp_light(&keys[i].1, &keys[j].1, s)
             })
             .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `[[emitter]] name = "*"` scales every group, as `--emitter *=S` does; unknown keys in any
+    /// table are refused (QA, session 30: only the top level and `[[sky]]` refused them).
+    #[test]
+    fn a_star_scales_every_group_and_unknown_keys_are_refused() {
+        let a = Animation::parse("[[emitter]]\nname = \"*\"\nkeys = [ { t = 0.0, spec = \"0.5\" } ]\n").unwrap();
+        let scales = a.emitter_scales_at(&["lamp", "glow"], &[[1.0; 3]; 2], 0.0).unwrap();
+        assert_eq!(scales, vec![[0.5; 3]; 2]);
+        for text in [
+            "[[camera]]\nt = 0.0\nspec = \"0,1,3:0,1,0:40\"\nfov = 3\n",
+            "[[light]]\nkeys = [ { t = 0.0, spec = \"point:0,1,0:1,1,1\", x = 1 } ]\n",
+            "[[light]]\nkeys = []\nspeed = 2\n",
+            "[[emitter]]\nname = \"lamp\"\nkeys = []\nscale = 2\n",
+        ] {
+            let err = Animation::parse(text)
+                .err()
+                .unwrap_or_else(|| panic!("accepted: {text}"));
+            assert!(err.contains("unknown field"), "{text}: {err}");
+        }
     }
 }

@@ -24,6 +24,19 @@ pub enum PlayError {
         /// The loader's reason.
         source: prm_scene::SceneError,
     },
+    /// The scene the archive records is not where it says (the archive was moved or copied).
+    #[error(
+        "cannot find the scene {path} that {archive} was baked from (its `source_scene`, relative \
+         to the archive); give it with --scene"
+    )]
+    SceneMoved {
+        /// The archive.
+        archive: PathBuf,
+        /// The scene file.
+        path: PathBuf,
+        /// The loader's reason.
+        source: prm_scene::SceneError,
+    },
     /// The archive was baked for other geometry.
     #[error(
         "archive {archive} was baked for another scene: its fingerprint is {expected:016x}, \

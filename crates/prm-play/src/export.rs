@@ -9,6 +9,9 @@ use prm_scene::{Camera, Light, Scene};
 
 use crate::{FrameInput, Mode, PlayError, Renderer};
 
+/// The files [`export`] writes into its directory.
+pub const FILES: [&str; 4] = ["indirect.exr", "irradiance.exr", "scene.gltf", "scene.bin"];
+
 /// What [`export`] wrote.
 #[derive(Clone, Debug)]
 pub struct Exported {
@@ -41,9 +44,9 @@ pub fn export(renderer: &mut Renderer, scene: &Scene, lights: &[Light], dir: &Pa
     let runtime = renderer.runtime();
     let res = runtime.lightmap_resolution() as usize;
     let out = Exported {
-        indirect: dir.join("indirect.exr"),
-        irradiance: dir.join("irradiance.exr"),
-        gltf: dir.join("scene.gltf"),
+        indirect: dir.join(FILES[0]),
+        irradiance: dir.join(FILES[1]),
+        gltf: dir.join(FILES[2]),
     };
     let export_err = |e: prm_scene::ExportError| PlayError::Export(e);
     prm_scene::write_exr_rgb(&out.indirect, res, res, &runtime.read_lightmap()?).map_err(export_err)?;

@@ -57,15 +57,50 @@ pub fn sky(
             "--sky {spec}: the archive has no sky transfer; bake it with `prm-bake bake --sky`"
         ));
     }
-    if !(intensity.is_finite() && intensity >= 0.0 && rotation_deg.is_finite()) {
-        return Err(format!(
-            "--sky-intensity {intensity} must be finite and ≥ 0, --sky-rotation {rotation_deg} finite"
-        ));
+    if !(intensity.is_finite() && intensity >= 0.0) {
+        return Err(format!("--sky-intensity {intensity} must be finite and ≥ 0"));
+    }
+    if !rotation_deg.is_finite() {
+        return Err(format!("--sky-rotation {rotation_deg} must be finite"));
     }
     let mut sky = prm_scene::Sky::parse(spec).map_err(|e| format!("--sky: {e}"))?;
     sky.intensity = intensity;
     sky.rotation = rotation_deg.to_radians();
     Ok(Some(sky))
+}
+
+/// A warning when `sky`'s order-2 projection rings: its irradiance on a surface facing some
+/// direction goes below zero (a map with a small bright spot, a sun painted into it). The run
+/// time clamps that light at zero; the warning says so and suggests the remedy. Sampled at 256
+/// directions (a Fibonacci sphere); `None` when the smallest irradiance is not below −0.1% of
+/// the largest.
+pub fn sky_ringing(sky: &prm_scene::Sky) -> Option<String> {
+    let sh = sky.sh();
+    let n = 256;
+    let (mut lo, mut hi) = (f32::INFINITY, 0.0f32);
+    for i in 0..n {
+        let y = 1.0 - 2.0 * (i as f32 + 0.5) / n as f32;
+        let r = (1.0 - y * y).max(0.0).sqrt();
+        let phi = i as f32 * std::f32::consts::PI * (3.0 - 5f32.sqrt());
+        let basis = prm_format::sh_basis([r * phi.cos(), y, r * phi.sin()]);
+        let e: [f32; 3] = std::array::from_fn(|k| {
+            (0..prm_format::SH_COEFFS)
+                .map(|c| prm_format::SH_COSINE_LOBE[c] * sh[c][k] * basis[c])
+                .sum()
+        });
+        for v in e {
+            lo = lo.min(v);
+            hi = hi.max(v);
+        }
+    }
+    (lo < -1e-3 * hi).then(|| {
+        format!(
+            "the sky's order-2 projection rings: facing away from its brightest part, its \
+             irradiance would be {:.1}% of the largest, negative; the player clamps it at zero. A \
+             sun painted into the map is better given as --light dir:... beside a sky without it",
+            100.0 * lo / hi
+        )
+    })
 }
 
 /// The scales of `groups` (the archive's emitter groups, [`prm_runtime::Runtime::emitters`])
@@ -100,9 +135,16 @@ pub fn open(archive: &Path, scene: Option<&Path>) -> Result<(FileArchive, Scene)
             real.parent().unwrap_or(Path::new(".")).join(rel)
         }
     };
-    let s = prm_scene::load(&scene_path).map_err(|source| PlayError::Scene {
-        path: scene_path.clone(),
-        source,
+    let s = prm_scene::load(&scene_path).map_err(|source| match source {
+        prm_scene::SceneError::NotFound(_) if scene.is_none() => PlayError::SceneMoved {
+            archive: archive.to_path_buf(),
+            path: scene_path.clone(),
+            source,
+        },
+        source => PlayError::Scene {
+            path: scene_path.clone(),
+            source,
+        },
     })?;
     let expected = a.metadata().scene_fingerprint;
     let found = s.fingerprint();
@@ -226,5 +268,26 @@ pub fn default_camera(scene: &Scene) -> Camera {
         eye: centre + glam::Vec3::new(0.0, 0.0, dist + b.extent().z * 0.5),
         target: centre,
         fov_y_deg: fov,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A uniform sky does not ring; a map dark but for a small bright patch (a sun painted in)
+    /// does, and is warned of (the run time clamps its negative light).
+    #[test]
+    fn a_sky_with_a_bright_spot_is_warned_of() {
+        assert_eq!(sky_ringing(&prm_scene::Sky::uniform(glam::Vec3::ONE)), None);
+        let spot = prm_scene::SkyMap::from_fn(64, 32, |d| {
+            if d.dot(glam::Vec3::new(0.0, 0.5, 0.866)) > 0.99 {
+                glam::Vec3::splat(50.0)
+            } else {
+                glam::Vec3::ZERO
+            }
+        });
+        let w = sky_ringing(&prm_scene::Sky::from_map(spot)).expect("a warning");
+        assert!(w.contains("rings") && w.contains("negative"), "{w}");
     }
 }

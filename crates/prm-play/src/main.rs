@@ -1,6 +1,6 @@
 //! `prm-play`: plays a baked `.prm` archive, in a window (orbit camera) or headless to EXR/PNG.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use clap::Parser;
@@ -98,9 +98,9 @@ struct Args {
     /// from the swapchain) when the window closes; headless, a copy of the last frame's PNG.
     #[arg(long, value_name = "FILE.png")]
     screenshot: Option<PathBuf>,
-    /// Write per-pass GPU times and frame times as JSON (with a still light, add
+    /// Write per-pass GPU times and frame times as JSON (headless only; with a still light, add
     /// `--gi-update every-frame` to time the indirect light's passes on every frame).
-    #[arg(long)]
+    #[arg(long, value_name = "FILE.json")]
     timings: Option<PathBuf>,
     /// Shadow-map resolution per view.
     #[arg(long, default_value_t = 512)]
@@ -117,7 +117,7 @@ struct Args {
     /// window): indirect.exr and irradiance.exr (direct + indirect, W/m² per lightmap texel) and
     /// scene.gltf + scene.bin with the lightmap UVs as TEXCOORD_1, for engines that take only
     /// baked lightmaps.
-    #[arg(long, value_name = "DIR")]
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["screenshot", "timings", "frames", "out", "probe_sphere"])]
     export: Option<PathBuf>,
     /// Exposure of the tone-mapped PNG (multiplies radiance before clamping and sRGB).
     #[arg(long, default_value_t = 1.0, value_parser = non_negative, allow_negative_numbers = true)]
@@ -147,6 +147,19 @@ fn main() -> std::process::ExitCode {
 
 fn run() -> Result<()> {
     let mut args = Args::parse();
+    if args.timings.is_some() && !args.headless {
+        bail!("--timings needs --headless: a window records no timings");
+    }
+    if let Some(p) = args
+        .screenshot
+        .as_ref()
+        .filter(|p| !p.extension().is_some_and(|e| e.eq_ignore_ascii_case("png")))
+    {
+        bail!(
+            "--screenshot {}: the screenshot is a PNG; name it FILE.png",
+            p.display()
+        );
+    }
     args.headless |= args.export.is_some();
     if args.headless {
         prm_gpu_kit::silence_wayland_probe();
@@ -155,6 +168,21 @@ fn run() -> Result<()> {
     let (mut archive, scene) = prm_play::open(&args.archive, args.scene.as_deref())?;
     if let Some(w) = prm_play::materials_warning(&archive, &scene) {
         eprintln!("warning: {w}");
+    }
+    // Before any frame: no output may be the archive or the scene, nor lie below a file.
+    let inputs = [args.archive.as_path(), scene.source.as_path()];
+    for (flag, path) in [("--timings", &args.timings), ("--screenshot", &args.screenshot)] {
+        if let Some(path) = path {
+            check_output(flag, path, &inputs)?;
+        }
+    }
+    if let Some(dir) = &args.export {
+        if dir.exists() && !dir.is_dir() {
+            bail!("--export {}: it exists and is not a directory", dir.display());
+        }
+        for name in prm_play::export::FILES {
+            check_output("--export", &dir.join(name), &inputs)?;
+        }
     }
     let top_k = args.top_k.unwrap_or_else(|| prm_play::archive_top_k(&archive));
     let base_camera = match &args.camera {
@@ -179,6 +207,9 @@ fn run() -> Result<()> {
         archive.sky().is_some(),
     )
     .map_err(anyhow::Error::msg)?;
+    if let Some(w) = sky.as_ref().and_then(prm_play::sky_ringing) {
+        eprintln!("warning: {w}");
+    }
     if sky.is_none() && animation.as_ref().is_some_and(|a| !a.sky.is_empty()) {
         bail!("the animation has sky keys, which animate a --sky: give one");
     }
@@ -322,16 +353,35 @@ fn run() -> Result<()> {
             let t = animation.as_ref().map_or(i as f32 / 30.0, |a| a.time(i));
             renderer.set_probe_sphere(Some(prm_play::ProbeSphere::orbit(&scene.bounds(), t)))?;
         }
-        let t = renderer.render(&FrameInput {
-            camera,
-            lights: &lights,
-            mode: args.mode,
-        })?;
+        let t = renderer
+            .render(&FrameInput {
+                camera,
+                lights: &lights,
+                mode: args.mode,
+            })
+            .with_context(|| {
+                format!(
+                    "rendering frame {i} at {width}x{height} with {} light(s), shadow maps of {}² texels \
+                     (--shadow-resolution), a sun's in {}² tiles (--sun-tiles)",
+                    lights.len(),
+                    args.shadow_resolution,
+                    args.sun_tiles
+                )
+            })?;
         let image = renderer.read_image()?;
+        let bad = image.rgb.iter().filter(|p| !p.iter().all(|v| v.is_finite())).count();
+        if bad > 0 {
+            eprintln!(
+                "warning: frame {i}: {bad} of {} pixels are not finite: a light's intensity or an \
+                 emitter's scale is beyond what 32-bit floats hold",
+                image.rgb.len()
+            );
+        }
         let stem = args.out.join(format!("frame{i:04}"));
         output::write_exr(&stem.with_extension("exr"), &image)?;
         output::write_png(&stem.with_extension("png"), &image, args.exposure)?;
         if let (Some(path), true) = (&args.screenshot, i + 1 == frame_count) {
+            create_parent(path)?;
             output::write_png(path, &image, args.exposure)?;
         }
         eprintln!("frame {i}: {:.2} ms", t.cpu_ms);
@@ -355,8 +405,52 @@ fn run() -> Result<()> {
                 "gpu_ms": f.gpu_ms.iter().map(|(k, v)| ((*k).to_string(), serde_json::json!(v))).collect::<serde_json::Map<_, _>>(),
             })).collect::<Vec<_>>(),
         });
+        create_parent(path)?;
         std::fs::write(path, serde_json::to_string_pretty(&json)?)
             .with_context(|| format!("writing {}", path.display()))?;
     }
     Ok(())
+}
+
+/// Refuses an output `path` (of option `flag`) that names one of `inputs` (the archive, the
+/// scene), is a directory, or lies below a file; a missing directory is created when writing.
+fn check_output(flag: &str, path: &Path, inputs: &[&Path]) -> Result<()> {
+    if path.is_dir() {
+        bail!("{flag} {}: it is a directory", path.display());
+    }
+    let resolved = |p: &Path| -> Option<PathBuf> {
+        let parent = p
+            .parent()
+            .filter(|d| !d.as_os_str().is_empty())
+            .unwrap_or(Path::new("."));
+        Some(std::fs::canonicalize(parent).ok()?.join(p.file_name()?))
+    };
+    let target = std::fs::canonicalize(path).ok().or_else(|| resolved(path));
+    if let Some(input) = inputs
+        .iter()
+        .find(|i| target.is_some() && std::fs::canonicalize(i).ok() == target)
+    {
+        bail!(
+            "{flag} {}: it is {}, which the player reads; name another file",
+            path.display(),
+            input.display()
+        );
+    }
+    let mut dir = path.parent();
+    while let Some(d) = dir.filter(|d| !d.as_os_str().is_empty()) {
+        match std::fs::metadata(d) {
+            Ok(m) if m.is_dir() => break,
+            Ok(_) => bail!("{flag} {}: {} is not a directory", path.display(), d.display()),
+            Err(_) => dir = d.parent(),
+        }
+    }
+    Ok(())
+}
+
+/// Creates `path`'s missing directories.
+fn create_parent(path: &Path) -> Result<()> {
+    match path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        Some(dir) => std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display())),
+        None => Ok(()),
+    }
 }

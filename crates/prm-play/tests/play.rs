@@ -988,6 +988,77 @@ fn cli_refuses_hostile_options_naming_them() {
     }
 }
 
+/// No output option may replace the archive or the scene the player reads (a QA sweep found
+/// `--timings` and `--export` overwriting them with exit 0), and options that cannot apply are
+/// refused: `--timings` in a window, `--export` with per-frame outputs.
+#[test]
+fn cli_outputs_never_replace_the_archive_or_the_scene() {
+    let dir = out_dir("outputs-vs-inputs");
+    let archive = dir.join("copy.prm");
+    std::fs::copy(cornell_archive(), &archive).unwrap();
+    let obj = dir.join("cornell-box.obj");
+    std::fs::copy(cornell_box_path().with_extension("obj"), &obj).unwrap();
+    std::fs::copy(cornell_box_path().with_extension("mtl"), obj.with_extension("mtl")).unwrap();
+    let export_dir = dir.join("exported");
+    std::fs::create_dir_all(&export_dir).unwrap();
+    let gltf = export_dir.join("scene.gltf");
+    let (a, o, g) = (archive.to_str().unwrap(), obj.to_str().unwrap(), gltf.to_str().unwrap());
+    let before = |p: &Path| std::fs::read(p).unwrap();
+    let (archive_bytes, obj_bytes) = (before(&archive), before(&obj));
+    let play = |args: &[&str]| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_prm-play"))
+            .args(args)
+            .output()
+            .unwrap()
+    };
+    let cases: &[(&[&str], &str)] = &[
+        (
+            &[a, "--scene", o, "--headless", "--timings", a],
+            "which the player reads",
+        ),
+        (
+            &[a, "--scene", o, "--headless", "--timings", o],
+            "which the player reads",
+        ),
+        (&[a, "--scene", o, "--headless", "--screenshot", o], "name it FILE.png"),
+        (
+            &[a, "--scene", g, "--export", export_dir.to_str().unwrap()],
+            "which the player reads",
+        ),
+        (&[a, "--scene", o, "--timings", "t.json"], "--timings needs --headless"),
+    ];
+    // The glTF scene of the export case: the export writes scene.gltf into its directory.
+    std::fs::copy(cornell_box_path(), &gltf).unwrap();
+    let gltf_bytes = before(&gltf);
+    for (args, expected) in cases {
+        let out = play(args);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{args:?}:\n{stderr}");
+        assert!(
+            stderr.contains(expected),
+            "{args:?}: expected `{expected}` in:\n{stderr}"
+        );
+    }
+    let out = play(&[
+        a,
+        "--scene",
+        o,
+        "--export",
+        export_dir.to_str().unwrap(),
+        "--frames",
+        "2",
+    ]);
+    assert_eq!(
+        out.status.code(),
+        Some(2),
+        "--export with --frames: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(before(&archive), archive_bytes, "the archive was replaced");
+    assert_eq!(before(&obj), obj_bytes, "the scene was replaced");
+    assert_eq!(before(&gltf), gltf_bytes, "the glTF scene was replaced");
+}
+
 /// A scene without lights (the OBJ Cornell box carries none) is not played black in silence:
 /// the player warns, says how to add a light, and places one.
 #[test]

@@ -202,9 +202,11 @@ impl BakedLights {
         {
             for (t, (d, i)) in direct.iter_mut().zip(indirect.iter_mut()).enumerate() {
                 let (sd, si) = sky.irradiance(t, &self.sky_coeffs);
+                // A sky with a small bright spot (a sun in the map) rings in the order-2
+                // basis: its light goes negative away from the spot. No light is negative.
                 (0..3).for_each(|k| {
-                    d[k] += sd[k];
-                    i[k] += si[k];
+                    d[k] += sd[k].max(0.0);
+                    i[k] += si[k].max(0.0);
                 });
             }
         }

@@ -25,7 +25,7 @@ pub use atlas::{barycentric, Atlas, AtlasParams, AtlasStats, ExitPoint, Sizing, 
 pub use error::SceneError;
 pub use export::{read_exr_rgb, write_exr_rgb, write_gltf, ExportError};
 pub use scene::{Aabb, Camera, Light, LoadReport, Material, Scene, Triangle, MAX_COORDINATE, RECT_MAX_HALF_ANGLE_DEG};
-pub use sky::{Sky, SkyMap, SkySource, MAX_SKY_MAP_SIDE};
+pub use sky::{Sky, SkyMap, SkySource, MAX_SKY_MAP_SIDE, MIN_SKY_MAP};
 pub use spec::{parse_camera, parse_emitter_scale, parse_light, parse_size, resolve_emitter_scales, SpecError};
 pub use texture::Texture;
 
