@@ -23,7 +23,8 @@ struct Args {
     /// Image size, WxH.
     #[arg(long, default_value = "1024x768")]
     size: String,
-    /// Camera `EX,EY,EZ:TX,TY,TZ:FOV_DEG` (default: the scene's first, or a view of its bounds).
+    /// Camera `EX,EY,EZ:TX,TY,TZ:FOV_DEG` (default: the scene's first, or a view into its bounds
+    /// from the side it is open on, from inside when it is closed all round).
     #[arg(long)]
     camera: Option<String>,
     /// Light spec, repeatable: `point:X,Y,Z:R,G,B` (W/sr), `spot:X,Y,Z:DX,DY,DZ:ANGLE_DEG:R,G,B`
@@ -187,7 +188,7 @@ fn run() -> Result<()> {
     let top_k = args.top_k.unwrap_or_else(|| prm_play::archive_top_k(&archive));
     let base_camera = match &args.camera {
         Some(s) => prm_scene::parse_camera(s)?,
-        None => prm_play::default_camera(&scene),
+        None => prm_play::viewer_camera(&scene),
     };
     let base_lights = if args.lights.is_empty() {
         scene.lights.clone()
@@ -397,7 +398,9 @@ fn run() -> Result<()> {
             },
             "size": [width, height],
             "mode": format!("{:?}", args.mode).to_lowercase(),
-            "top_k": top_k,
+            // The clusters blended: K, or every cluster when K is larger.
+            "top_k": top_k.min(renderer.cluster_count()),
+            "top_k_requested": top_k,
             "residual_groups": renderer.runtime().group_count(),
             "clusters": renderer.cluster_count(),
             "frames": frames.iter().map(|f| serde_json::json!({
