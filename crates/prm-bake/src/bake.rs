@@ -391,35 +391,7 @@ fn check_report(report: &Path, archive: Option<&Path>, scene: &Path) -> Result<(
     if std::fs::metadata(report).is_ok_and(|m| m.is_file()) && is_archive() {
         bail!("--report {}: it is a .prm archive; name another file", report.display());
     }
-    let parent = report
-        .parent()
-        .filter(|p| !p.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
-    let mut ancestor = Some(parent);
-    while let Some(d) = ancestor {
-        match std::fs::metadata(d) {
-            Ok(m) if m.is_dir() => break,
-            Ok(_) => bail!("--report {}: {} is not a directory", report.display(), d.display()),
-            Err(_) => ancestor = d.parent().filter(|p| !p.as_os_str().is_empty()),
-        }
-    }
-    if ancestor == Some(parent) {
-        // The directory exists: a file must be creatable in it.
-        let probe = parent.join(format!(".prm-bake-report-check-{}", std::process::id()));
-        std::fs::OpenOptions::new()
-            .write(true)
-            .create_new(true)
-            .open(&probe)
-            .with_context(|| {
-                format!(
-                    "--report {}: cannot create a file in {}",
-                    report.display(),
-                    parent.display()
-                )
-            })?;
-        let _ = std::fs::remove_file(&probe);
-    }
-    Ok(())
+    prm_format::check_output_directory(report).map_err(|why| anyhow::anyhow!("--report {}: {why}", report.display()))
 }
 
 /// `path` with its directory's symbolic links and `..` resolved (the file itself too, when it

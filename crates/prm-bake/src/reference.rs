@@ -257,15 +257,7 @@ fn check_output(output: &std::path::Path) -> Result<()> {
             bail!("--output {}: it exists and is not a regular file", output.display());
         }
     }
-    let mut dir = output.parent();
-    while let Some(d) = dir.filter(|d| !d.as_os_str().is_empty()) {
-        match std::fs::metadata(d) {
-            Ok(m) if m.is_dir() => break,
-            Ok(_) => bail!("--output {}: {} is not a directory", output.display(), d.display()),
-            Err(_) => dir = d.parent(),
-        }
-    }
-    Ok(())
+    prm_format::check_output_directory(output).map_err(|why| anyhow::anyhow!("--output {}: {why}", output.display()))
 }
 
 /// Prints the RMS standard error relative to the mean value.
@@ -297,7 +289,7 @@ mod tests {
         let err = check_output(&dir.join("sub")).unwrap_err().to_string();
         assert!(err.contains("not a regular file"), "{err}");
         let err = check_output(&dir.join("file/a/b.exr")).unwrap_err().to_string();
-        assert!(err.contains("file is not a directory"), "{err}");
+        assert!(err.contains("file is a regular file, not a directory"), "{err}");
         check_output(&dir.join("new/deeper/ref.exr")).unwrap();
         check_output(&dir.join("ref.exr")).unwrap();
         std::fs::remove_dir_all(&dir).unwrap();

@@ -74,4 +74,6 @@ pub use rgb9e5::{
 pub use sections::{AtlasSection, Cluster, Entry};
 pub use sh::{sh_basis, sh_rotate_y, SH_COEFFS};
 pub use sky::SkyTransfer;
-pub use writer::{check_destination, own_temp_files, scratch_path, ArchiveWriter, WriterOptions};
+pub use writer::{
+    check_destination, check_output_directory, own_temp_files, scratch_path, ArchiveWriter, WriterOptions,
+};

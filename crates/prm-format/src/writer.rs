@@ -329,8 +329,28 @@ pub fn check_destination(path: impl AsRef<Path>) -> Result<PathBuf> {
         .file_name()
         .ok_or_else(|| destination_error(&dest, "it has no file name", None))?
         .to_os_string();
-    let dir = parent_dir(&dest);
-    let mut ancestor = dir.as_path();
+    check_directory(&parent_dir(&dest), &name).map_err(|(reason, source)| destination_error(&dest, reason, source))?;
+    Ok(dest)
+}
+
+/// Checks, before any work, that an output file other than an archive (an image, a report)
+/// can be created at `path` as far as its directory goes: the nearest existing ancestor of the
+/// directory must be a directory, and where the directory exists a file must be creatable in
+/// it (a probe file, removed at once). Missing directories pass: the caller creates them. The
+/// error is the reason, naming the directory; the caller names the option and the path.
+pub fn check_output_directory(path: impl AsRef<Path>) -> std::result::Result<(), String> {
+    let path = path.as_ref();
+    let name = path.file_name().unwrap_or(OsStr::new("output"));
+    check_directory(&parent_dir(path), name).map_err(|(reason, source)| match source {
+        Some(e) => format!("{reason}: {e}"),
+        None => reason,
+    })
+}
+
+/// The checks of [`check_output_directory`] for a file `name` in `dir`: the reason and the OS
+/// error, if any.
+fn check_directory(dir: &Path, name: &OsStr) -> std::result::Result<(), (String, Option<std::io::Error>)> {
+    let mut ancestor = dir;
     loop {
         match fs::metadata(ancestor) {
             Ok(m) if m.is_dir() => break,
@@ -340,32 +360,34 @@ pub fn check_destination(path: impl AsRef<Path>) -> Result<PathBuf> {
                     ancestor.display(),
                     describe_file_type(m.file_type())
                 );
-                return Err(destination_error(&dest, reason, None));
+                return Err((reason, None));
             }
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => match ancestor.parent() {
-                Some(p) if !p.as_os_str().is_empty() => ancestor = p,
-                _ => return Ok(dest),
-            },
-            Err(e) => {
-                let reason = format!("cannot inspect {}", ancestor.display());
-                return Err(destination_error(&dest, reason, Some(e)));
+            // Not found, or below a file (ENOTDIR): the ancestor above says which.
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    std::io::ErrorKind::NotFound | std::io::ErrorKind::NotADirectory
+                ) =>
+            {
+                match ancestor.parent() {
+                    Some(p) if !p.as_os_str().is_empty() => ancestor = p,
+                    _ => return Ok(()),
+                }
             }
+            Err(e) => return Err((format!("cannot inspect {}", ancestor.display()), Some(e))),
         }
     }
     if ancestor != dir {
-        return Ok(dest); // the directory is still to be created
+        return Ok(()); // the directory is still to be created
     }
-    let probe = temp_path_for(&dir, &name);
+    let probe = temp_path_for(dir, name);
     match OpenOptions::new().write(true).create_new(true).open(&probe) {
         Ok(f) => {
             drop(f);
             let _ = fs::remove_file(&probe);
-            Ok(dest)
+            Ok(())
         }
-        Err(e) => {
-            let reason = format!("cannot create a file in {}", dir.display());
-            Err(destination_error(&dest, reason, Some(e)))
-        }
+        Err(e) => Err((format!("cannot create a file in {}", dir.display()), Some(e))),
     }
 }
 

@@ -439,15 +439,7 @@ fn check_output(flag: &str, path: &Path, inputs: &[&Path]) -> Result<()> {
             input.display()
         );
     }
-    let mut dir = path.parent();
-    while let Some(d) = dir.filter(|d| !d.as_os_str().is_empty()) {
-        match std::fs::metadata(d) {
-            Ok(m) if m.is_dir() => break,
-            Ok(_) => bail!("{flag} {}: {} is not a directory", path.display(), d.display()),
-            Err(_) => dir = d.parent(),
-        }
-    }
-    Ok(())
+    prm_format::check_output_directory(path).map_err(|why| anyhow::anyhow!("{flag} {}: {why}", path.display()))
 }
 
 /// Creates `path`'s missing directories.
