@@ -475,7 +475,7 @@ const ENTRIES_PER_CLUSTER: usize = 8;
 const WALKS_IN_ALL: usize = 65536;
 
 /// Most walks per entry point where the cluster cap cuts the automatic entry points (below):
-/// those it keeps walk towards twice [`WALKS_IN_ALL`] in all, up to this many each, as far as
+/// those it keeps walk towards twice `WALKS_IN_ALL` in all, up to this many each, as far as
 /// the time budget allows. The cap cuts the large scenes, whose charts want 15360–16384 entry
 /// points and whose 512² panes fit 205 clusters: the fireplace room, Sponza and Sibenik keep
 /// 3072, and their walk noise is then the largest share of the error that is left. Measured on
@@ -485,7 +485,7 @@ const WALKS_IN_ALL: usize = 65536;
 /// | walks per entry | 4×4 error | energy | bake s |
 /// | ---: | ---: | ---: | ---: |
 /// | 16 (the cap of [`auto_walks_per_entry`], before session 29) | 5.58% / 6.32% / 6.29% | 1.024 / 1.042 / 0.975 | 110 |
-/// | 22 (about [`WALKS_IN_ALL`] in all) | 5.34% / 6.04% / | 1.020 / 1.038 / | 145 |
+/// | 22 (about `WALKS_IN_ALL` in all) | 5.34% / 6.04% / | 1.020 / 1.038 / | 145 |
 /// | **32** | 5.32% / 5.75% / 5.98% | 1.021 / 1.033 / 0.980 | 208 |
 ///
 /// The shape error moves less (seed 2: 5.56% → 5.47%) than the error: the walks take out part
@@ -498,7 +498,7 @@ const WALKS_IN_ALL: usize = 65536;
 /// `prm_runtime::RuntimeOptions::DEFAULT_NORMAL_OFFSET`), which more walks do not reduce.
 const CAPPED_WALKS: u32 = 32;
 
-/// The automatic walks per entry point: enough for about [`WALKS_IN_ALL`], 1 to 16.
+/// The automatic walks per entry point: enough for about `WALKS_IN_ALL`, 1 to 16.
 fn auto_walks_per_entry(entries: usize) -> u32 {
     WALKS_IN_ALL.div_ceil(entries.max(1)).clamp(1, 16) as u32
 }
@@ -536,10 +536,10 @@ impl BakeParams {
     ///
     /// Automatic rules (preset `default`, each overridable):
     /// - atlas: the atlas's own automatic size (about 12 texels per triangle, 256 to 4096 a side),
-    ///   shrunk until [`AUTO_ATLAS_PANES`] (256) panes fit the run-time memory budget;
+    ///   shrunk until `AUTO_ATLAS_PANES` (256) panes fit the run-time memory budget;
     /// - entries: 4 per chart (charts are the scene's distinct flat pieces), 1024 to 16384, a
     ///   multiple of 256, and (applied after the time budget below, at the atlas it leaves, the
-    ///   walks per entry then rising towards twice [`WALKS_IN_ALL`], at most [`CAPPED_WALKS`] (32)
+    ///   walks per entry then rising towards twice `WALKS_IN_ALL`, at most `CAPPED_WALKS` (32)
     ///   each, as far as the budget allows)
     ///   no more than 16 per cluster the bake can have (`--clusters`, or the most the memory and
     ///   archive budgets allow; not below 1024). Applied before the budget's shrinking, it let
@@ -558,19 +558,19 @@ impl BakeParams {
     ///   clusters (410, the same 3072 entries; 410 MiB of panes with `memory_budget_mib =
     ///   512`): 9.30 / 12.15 % (seeds 0 and 2; energy 0.985 / 0.928) for the same bake, so the
     ///   memory budget's cap on the clusters is not what holds the room at 9–13 %;
-    /// - walks per entry: enough for about [`WALKS_IN_ALL`] (65536) walks in all, 1 to 16;
+    /// - walks per entry: enough for about `WALKS_IN_ALL` (65536) walks in all, 1 to 16;
     /// - then, while `cost` expects the bake to take longer than the time budget,
     ///   fewer walks, fewer entries (down to 1024) or a smaller atlas (down to 128²), whichever is
     ///   furthest above its floor;
     /// - then, where neither the time budget nor the cap cut anything and the budget allows it,
-    ///   twice the entry points, up to [`MAX_DOUBLINGS`] (2) times, at most 16384 and at most
-    ///   [`ENTRIES_PER_CLUSTER`] per cluster the budgets allow, the walks per entry falling to
-    ///   keep about [`WALKS_IN_ALL`]. One doubling was the largest step down the
+    ///   twice the entry points, up to `MAX_DOUBLINGS` (2) times, at most 16384 and at most
+    ///   `ENTRIES_PER_CLUSTER` per cluster the budgets allow, the walks per entry falling to
+    ///   keep about `WALKS_IN_ALL`. One doubling was the largest step down the
     ///   accuracy-against-speed front (`cargo xtask eval --full`, lightmap error, mean of three
     ///   lights): the Cornell box 0.131 → 0.111 for a bake of 2.7 → 4.4 s, CornellBox-Sphere
     ///   0.125 → 0.114 (9.5 → 13.7 s), chairs 0.120 → 0.107 (13.6 → 24.3 s); where the budgets
     ///   cap the clusters more entries only crowd them (above);
-    /// - clusters: entries / [`ENTRIES_PER_CLUSTER`] (8), 32 to 1024, then as many as the
+    /// - clusters: entries / `ENTRIES_PER_CLUSTER` (8), 32 to 1024, then as many as the
     ///   memory budget (the clusters' panes and the residual groups' summed ones, up to one per
     ///   4 clusters, at most `prm_format::RESIDUAL_GROUPS`) and the archive budget allow (archive estimate: 1.5 bytes per covered texel
     ///   per pane, the measured RGB9E5 + filter + zstd rate on smooth panes, doubled for safety).

@@ -12,7 +12,7 @@ pub const LINEAR_GROUP_SIZE: u32 = 64;
 const LINEAR_GROUPS_X: u32 = 65_535;
 
 /// The workgroups of a dispatch of `invocations` one-dimensional items, 64 per group: one row
-/// while it fits one dimension, else rows of [`LINEAR_GROUPS_X`] groups, so that any count a
+/// while it fits one dimension, else rows of `LINEAR_GROUPS_X` groups, so that any count a
 /// storage buffer can hold dispatches at once (a large atlas's near field has millions of items,
 /// more than 65 535 × 64). The shader numbers an item `gid.x + gid.y × 64 × num_workgroups.x`
 /// and returns past the count (`linear_index` in `shaders/runtime/shared.wgsl`).

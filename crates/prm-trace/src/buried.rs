@@ -10,7 +10,7 @@
 //!
 //! A point is buried when at least [`BURIED_BACK_FRACTION`] of [`BURIED_RAYS`] cosine rays from
 //! it meet a back face first (at any distance: inside a closed box every face is a back face).
-//! A buried exit moves to the nearest of a [`SUB`]² grid of points of its texel on its own
+//! A buried exit moves to the nearest of a `SUB`² grid of points of its texel on its own
 //! triangle that is not buried; it stays where it is when there is none (a texel wholly under
 //! the box, which nothing sees).
 //!
@@ -25,8 +25,8 @@
 //! the bilinear lookups of the visible pixels beside it fetch it: a dark seam along every contact
 //! (a window frame on a wall, a sofa on the floor). When it is shut in, every one of its rays
 //! meeting a back face, it takes the point (normal, albedo, triangle) of the nearest exit of its
-//! chart within [`NEIGHBOUR_REACH`] texels that is not buried, faces within [`NEIGHBOUR_COS`] and
-//! stands within [`NEIGHBOUR_PLANE`] texels of its plane, and so holds that neighbour's light,
+//! chart within `NEIGHBOUR_REACH` texels that is not buried, faces within `NEIGHBOUR_COS` and
+//! stands within `NEIGHBOUR_PLANE` texels of its plane, and so holds that neighbour's light,
 //! as a gutter texel holds its source's. Measured on the fireplace room (image space as
 //! `cargo xtask eval --targets` measures it, the default bake's sizes, seed 0): of 120,695 exit
 //! points 10,631 are buried, 1,071 move within their texel and 2,315 take a neighbour's point;

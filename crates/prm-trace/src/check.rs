@@ -189,7 +189,7 @@ fn fades(weights: &[Vec3], cluster_energy: &[Vec3], top_k: usize, fade_band: f32
 }
 
 /// The weights the run time blends without residual groups, on the CPU (prm-runtime's rank
-/// and select passes with `residual_groups: 0`): the top K faded ([`fades`]), and all kept
+/// and select passes with `residual_groups: 0`): the top K faded (`fades`), and all kept
 /// weights scaled by `Σ_all score / Σ_kept score · fade`; the others get 0. With `top_k ≥` the
 /// cluster count the weights are returned as they are.
 pub fn select_top_k(weights: &[Vec3], cluster_energy: &[Vec3], top_k: usize, fade_band: f32) -> Vec<Vec3> {
@@ -203,7 +203,7 @@ pub fn select_top_k(weights: &[Vec3], cluster_energy: &[Vec3], top_k: usize, fad
 }
 
 /// The weights the run time blends with residual groups (prm-runtime's select pass with
-/// `group_of`, from [`prm_format::residual_groups`]): the top K faded ([`fades`]) and not
+/// `group_of`, from [`prm_format::residual_groups`]): the top K faded (`fades`) and not
 /// scaled, and for every group `g` the weight of its summed pane, `Σ_{c∈g} w_c ⊙ e_c ⊙ (1 −
 /// fade_c) / E_g` per channel (0 where `E_g`, the group pane's energy, is 0). Returns the
 /// clusters' weights and the groups'; with `top_k ≥` the cluster count, the weights as they
