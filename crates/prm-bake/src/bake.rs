@@ -368,16 +368,13 @@ pub fn run(args: &BakeArgs) -> Result<()> {
 /// an existing archive, a directory, or a file in a directory where none can be created
 /// (missing directories are created, as for the archive).
 fn check_report(report: &Path, archive: Option<&Path>, scene: &Path) -> Result<()> {
-    if report.is_dir() {
-        bail!("--report {}: it is a directory", report.display());
-    }
-    if archive.is_some_and(|a| resolved(a) == resolved(report)) {
+    if archive.is_some_and(|a| prm_format::same_destination(a, report)) {
         bail!(
             "--report {}: it is the archive the bake writes (-o); name another file",
             report.display()
         );
     }
-    if resolved(scene) == resolved(report) {
+    if prm_format::same_destination(scene, report) {
         bail!("--report {}: it is the scene; name another file", report.display());
     }
     let is_archive = || {
@@ -391,23 +388,7 @@ fn check_report(report: &Path, archive: Option<&Path>, scene: &Path) -> Result<(
     if std::fs::metadata(report).is_ok_and(|m| m.is_file()) && is_archive() {
         bail!("--report {}: it is a .prm archive; name another file", report.display());
     }
-    prm_format::check_output_directory(report).map_err(|why| anyhow::anyhow!("--report {}: {why}", report.display()))
-}
-
-/// `path` with its directory's symbolic links and `..` resolved (the file itself too, when it
-/// exists), to compare two paths that may name one file.
-fn resolved(path: &Path) -> PathBuf {
-    if let Ok(p) = std::fs::canonicalize(path) {
-        return p;
-    }
-    let parent = path
-        .parent()
-        .filter(|p| !p.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
-    match (std::fs::canonicalize(parent), path.file_name()) {
-        (Ok(dir), Some(name)) => dir.join(name),
-        _ => std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf()),
-    }
+    prm_format::check_output_path(report).map_err(|why| anyhow::anyhow!("--report {}: {why}", report.display()))
 }
 
 /// Writes the report as JSON, creating missing directories.

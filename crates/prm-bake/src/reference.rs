@@ -252,12 +252,7 @@ pub fn run(args: &ReferenceArgs) -> Result<()> {
 /// Refuses an output that cannot be written, before the long work: an existing directory or
 /// other non-file, or a path below a file. Missing directories are created when writing.
 fn check_output(output: &std::path::Path) -> Result<()> {
-    if let Ok(m) = std::fs::metadata(output) {
-        if !m.is_file() {
-            bail!("--output {}: it exists and is not a regular file", output.display());
-        }
-    }
-    prm_format::check_output_directory(output).map_err(|why| anyhow::anyhow!("--output {}: {why}", output.display()))
+    prm_format::check_output_path(output).map_err(|why| anyhow::anyhow!("--output {}: {why}", output.display()))
 }
 
 /// Prints the RMS standard error relative to the mean value.

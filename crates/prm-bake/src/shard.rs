@@ -195,10 +195,8 @@ fn merge_recording(
     if parts.is_empty() {
         return Err(invalid("no parts to merge".to_string()));
     }
-    // The output may not be one of the parts (resolved as the writer resolves it).
-    let same =
-        |p: &Path| std::fs::canonicalize(p).is_ok_and(|p| std::fs::canonicalize(&destination).is_ok_and(|d| d == p));
-    if let Some(p) = parts.iter().find(|p| same(p)) {
+    // The output may not be one of the parts.
+    if let Some(p) = parts.iter().find(|p| prm_format::same_destination(p, &destination)) {
         return Err(invalid(format!(
             "the output {} is the part {}: name another file",
             output.display(),

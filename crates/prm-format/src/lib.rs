@@ -75,5 +75,5 @@ pub use sections::{AtlasSection, Cluster, Entry};
 pub use sh::{sh_basis, sh_rotate_y, SH_COEFFS};
 pub use sky::SkyTransfer;
 pub use writer::{
-    check_destination, check_output_directory, own_temp_files, scratch_path, ArchiveWriter, WriterOptions,
+    check_destination, check_output_path, own_temp_files, same_destination, scratch_path, ArchiveWriter, WriterOptions,
 };

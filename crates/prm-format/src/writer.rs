@@ -187,6 +187,21 @@ fn resolve_destination(given: &Path) -> Result<PathBuf> {
     ))
 }
 
+/// Whether `a` and `b` name the same file as destinations: symbolic links resolved as the
+/// writer resolves them, then the path made canonical (for a file still to be created, its
+/// directory's path, with the file name). Binaries use it to refuse an output that is one of
+/// their inputs (the scene, a part of a merge, the archive a report would replace).
+pub fn same_destination(a: impl AsRef<Path>, b: impl AsRef<Path>) -> bool {
+    let key = |p: &Path| -> Option<PathBuf> {
+        let p = resolve_destination(p).unwrap_or_else(|_| p.to_path_buf());
+        match fs::canonicalize(&p) {
+            Ok(c) => Some(c),
+            Err(_) => Some(fs::canonicalize(parent_dir(&p)).ok()?.join(p.file_name()?)),
+        }
+    };
+    matches!((key(a.as_ref()), key(b.as_ref())), (Some(x), Some(y)) if x == y)
+}
+
 /// Refuses an existing `dest` that holds something other than an archive: a bake must not
 /// replace its own scene, a report or any file that a mistyped `-o` names. An empty file (as
 /// `mktemp` leaves) and an archive, damaged or not, may be replaced.
@@ -334,12 +349,21 @@ pub fn check_destination(path: impl AsRef<Path>) -> Result<PathBuf> {
 }
 
 /// Checks, before any work, that an output file other than an archive (an image, a report)
-/// can be created at `path` as far as its directory goes: the nearest existing ancestor of the
-/// directory must be a directory, and where the directory exists a file must be creatable in
-/// it (a probe file, removed at once). Missing directories pass: the caller creates them. The
-/// error is the reason, naming the directory; the caller names the option and the path.
-pub fn check_output_directory(path: impl AsRef<Path>) -> std::result::Result<(), String> {
+/// can be written at `path`: what exists there must be a regular file (not a directory, a
+/// device or a FIFO), the nearest existing ancestor of its directory must be a directory, and
+/// where the directory exists a file must be creatable in it (a probe file, removed at once).
+/// Missing directories pass: the caller creates them. The error is the reason; the caller
+/// names the option and the path.
+pub fn check_output_path(path: impl AsRef<Path>) -> std::result::Result<(), String> {
     let path = path.as_ref();
+    if let Ok(m) = fs::metadata(path) {
+        if !m.is_file() {
+            return Err(format!(
+                "it is {}, not a regular file",
+                describe_file_type(m.file_type())
+            ));
+        }
+    }
     let name = path.file_name().unwrap_or(OsStr::new("output"));
     check_directory(&parent_dir(path), name).map_err(|(reason, source)| match source {
         Some(e) => format!("{reason}: {e}"),
@@ -347,7 +371,7 @@ pub fn check_output_directory(path: impl AsRef<Path>) -> std::result::Result<(),
     })
 }
 
-/// The checks of [`check_output_directory`] for a file `name` in `dir`: the reason and the OS
+/// The directory checks of [`check_output_path`] for a file `name` in `dir`: the reason and the OS
 /// error, if any.
 fn check_directory(dir: &Path, name: &OsStr) -> std::result::Result<(), (String, Option<std::io::Error>)> {
     let mut ancestor = dir;

@@ -1472,6 +1472,22 @@ fn a_file_that_is_not_an_archive_is_not_replaced() {
     Archive::open(&damaged).unwrap().verify().unwrap();
 }
 
+/// Two paths name one destination when they reach one file: through `..`, through a symbolic
+/// link, or (not yet created) through the same directory.
+#[cfg(unix)]
+#[test]
+fn same_destination_sees_through_paths_and_links() {
+    let dir = test_dir("same-destination");
+    std::fs::create_dir_all(dir.join("sub")).unwrap();
+    std::fs::write(dir.join("a.prm"), b"").unwrap();
+    std::os::unix::fs::symlink("a.prm", dir.join("link.prm")).unwrap();
+    assert!(same_destination(dir.join("a.prm"), dir.join("sub/../a.prm")));
+    assert!(same_destination(dir.join("link.prm"), dir.join("a.prm")));
+    assert!(same_destination(dir.join("new.prm"), dir.join("sub/../new.prm")));
+    assert!(!same_destination(dir.join("new.prm"), dir.join("a.prm")));
+    assert!(!same_destination(dir.join("sub/new.prm"), dir.join("new.prm")));
+}
+
 /// A scratch archive beside a destination, and the writer's temporary file for it, are this
 /// process's temporary files of that destination.
 #[test]

@@ -416,30 +416,17 @@ fn run() -> Result<()> {
 }
 
 /// Refuses an output `path` (of option `flag`) that names one of `inputs` (the archive, the
-/// scene), is a directory, or lies below a file; a missing directory is created when writing.
+/// scene), is not a regular file, or lies below a file; a missing directory is created when
+/// writing.
 fn check_output(flag: &str, path: &Path, inputs: &[&Path]) -> Result<()> {
-    if path.is_dir() {
-        bail!("{flag} {}: it is a directory", path.display());
-    }
-    let resolved = |p: &Path| -> Option<PathBuf> {
-        let parent = p
-            .parent()
-            .filter(|d| !d.as_os_str().is_empty())
-            .unwrap_or(Path::new("."));
-        Some(std::fs::canonicalize(parent).ok()?.join(p.file_name()?))
-    };
-    let target = std::fs::canonicalize(path).ok().or_else(|| resolved(path));
-    if let Some(input) = inputs
-        .iter()
-        .find(|i| target.is_some() && std::fs::canonicalize(i).ok() == target)
-    {
+    if let Some(input) = inputs.iter().find(|i| prm_format::same_destination(i, path)) {
         bail!(
             "{flag} {}: it is {}, which the player reads; name another file",
             path.display(),
             input.display()
         );
     }
-    prm_format::check_output_directory(path).map_err(|why| anyhow::anyhow!("{flag} {}: {why}", path.display()))
+    prm_format::check_output_path(path).map_err(|why| anyhow::anyhow!("{flag} {}: {why}", path.display()))
 }
 
 /// Creates `path`'s missing directories.

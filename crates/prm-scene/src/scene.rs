@@ -181,6 +181,18 @@ pub struct Camera {
     pub fov_y_deg: f32,
 }
 
+impl Camera {
+    /// Whether it can render: finite, the eye apart from the target, and a vertical field of
+    /// view in (0°, 180°) (what `--camera` accepts).
+    pub fn is_valid(&self) -> bool {
+        self.eye.is_finite()
+            && self.target.is_finite()
+            && self.eye != self.target
+            && self.fov_y_deg > 0.0
+            && self.fov_y_deg < 180.0
+    }
+}
+
 /// Axis-aligned bounding box.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Aabb {
@@ -496,12 +508,7 @@ impl Scene {
             shape_ok && power_ok
         });
         self.cameras.retain(|c| {
-            let ok = c.fov_y_deg.is_finite()
-                && c.fov_y_deg > 0.0
-                && c.fov_y_deg < 180.0
-                && c.eye.is_finite()
-                && c.target.is_finite()
-                && c.eye != c.target;
+            let ok = c.is_valid();
             if !ok {
                 warnings.push(format!(
                     "{source}: a camera with field of view {}° at {} looking at {} is left out",

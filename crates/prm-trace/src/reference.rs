@@ -403,7 +403,7 @@ impl<'a> ReferenceTracer<'a> {
             return Err(TraceError::InvalidParameter("image size must be positive".into()));
         }
         let forward = (camera.target - camera.eye).normalize_or_zero();
-        if forward == Vec3::ZERO || !(camera.fov_y_deg > 0.0 && camera.fov_y_deg < 180.0) {
+        if forward == Vec3::ZERO || !camera.is_valid() {
             return Err(TraceError::InvalidParameter(format!(
                 "degenerate camera: eye {} looking at {}, vertical field of view {}° (the eye and \
                  the target must differ and the field of view lie in (0°, 180°))",
