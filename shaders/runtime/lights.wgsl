@@ -144,7 +144,11 @@ fn direct_irradiance_disk(p: vec3<f32>, n: vec3<f32>, disk: f32) -> vec3<f32> {
 // light_irradiance_ng).
 fn direct_irradiance_ng(p: vec3<f32>, ng: vec3<f32>, n: vec3<f32>, disk: f32) -> vec3<f32> {
     var e = vec3<f32>(0.0);
-    for (var i = 0u; i < frame.light_count; i++) {
+    // The bound also reads the lights buffer's length: a loop bounded by a uniform alone is
+    // specialised by lavapipe to the uniform's value, and with two lights that specialisation
+    // is redone, and its memory kept, on every draw (3 MB a frame).
+    let count = min(frame.light_count, arrayLength(&lights));
+    for (var i = 0u; i < count; i++) {
         e += light_irradiance_ng(i, p, ng, n, disk);
     }
     return e;
