@@ -20,19 +20,17 @@
 //! (everything lit), the CPU a BVH of a box 9 km away from every ray.
 //!
 //! **The geometric normal.** The CPU counts a light only when it is above both the shading normal
-//! `n` and the geometric normal `ng`; the GPU took `n` alone. The CPU is right: a light below the
-//! geometric plane is behind the surface itself, and the shadow map cannot see that (the surface
-//! is the nearest thing to the light along that ray, so the receiver passes the depth test, and
-//! the normal offset along `n` pushes it towards the light). On the grid below (ng tilted ±10°
-//! from n on two thirds of the inputs), the `n`-only function differed from the CPU on
-//! 2200 of the 32760 inputs with `ng ≠ n` (the light leaks through, up to 0.087 of its value
-//! before the cosine, i.e. `cos θ` up to sin 5°); `light_irradiance_ng` agrees on all 49140. The GPU now
-//! has `light_irradiance_ng` / `direct_irradiance_ng`, which test both normals and agree with the
-//! CPU everywhere; `light_irradiance_disk` and `direct_irradiance_disk` take `ng = n`, which is
-//! exact for the weights pass (an entry point's normal is its triangle's geometric normal) and
-//! agrees with the CPU there. prm-play's shading still calls `direct_irradiance` with its
-//! interpolated normal only (it has no geometric normal at hand): it keeps the leak, which the
-//! test below counts.
+//! `n` and the geometric normal `ng`: a light below the geometric plane is behind the surface
+//! itself, and the shadow map cannot see that (the surface is the nearest thing to the light
+//! along that ray, so the receiver passes the depth test, and the normal offset along `n` pushes
+//! it towards the light). On the grid below (ng tilted ±10° from n on two thirds of the inputs),
+//! an `n`-only function differs from the CPU on 2200 of the 32760 inputs with `ng ≠ n` (the light
+//! leaks through, up to 0.087 of its value before the cosine, i.e. `cos θ` up to sin 5°);
+//! `light_irradiance_ng` / `direct_irradiance_ng` test both normals and agree on all 49140.
+//! `light_irradiance_disk` and `direct_irradiance_disk` take `ng = n`, which is exact for the
+//! weights pass (an entry point's normal is its triangle's geometric normal). prm-play's shading
+//! calls `direct_irradiance` with its interpolated normal only (it has no geometric normal at
+//! hand): it keeps the leak, which the test below counts.
 
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;

@@ -37,8 +37,8 @@ fn probes_bake_play_and_match_the_reference() {
     let config = prm_bake::BakeConfig {
         // Measured (this light, 61 probes, reference noise 2.9%), through the panes: 2048
         // entries in 64 clusters 21.7% (energy 0.934), 8192 in 256 8.2% (1.007), 8192 in 1024
-        // 5.7% (1.008): the entries' point sampling of the direct light, as on the surfaces
-        // (#11). Along the rays the lightmap's light matters instead.
+        // 5.7% (1.008): the entries' point sampling of the direct light, as on the surfaces.
+        // Along the rays the lightmap's light matters instead.
         entries: Some(8192),
         clusters: Some(256),
         resolution: Some(64),

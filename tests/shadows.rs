@@ -179,8 +179,8 @@ fn shadow_maps_agree_with_shadow_rays_for_every_light_kind() {
 /// The light a sun's tiled shadow map lets through, summed over the entry points, against
 /// shadow rays: on the bundled courtyard (walls and an arcade open to the sky) under a low sun,
 /// which grazes the walls, and a high one, at the player's default shadow settings. Measured:
-/// 1.0002 and 1.0022 (with the normal offset of before session 29, 1.5 texels: 1.0045 and
-/// 1.0009; the offset's leak shows on larger scenes, `RuntimeOptions::DEFAULT_NORMAL_OFFSET`).
+/// 1.0002 and 1.0022 (with a normal offset of 1.5 texels: 1.0045 and 1.0009; the offset's leak
+/// shows on larger scenes, `RuntimeOptions::DEFAULT_NORMAL_OFFSET`).
 /// One map of 128² (no tiles) lets through 1.063 and 1.014, one of 256² 1.023 and 1.007: light
 /// leaking past coarse shadows fails here.
 #[test]

@@ -247,8 +247,8 @@ fn no_light_leaks_through_a_shut_door() {
         100.0 * bmean / a
     );
     assert!(na > 0 && nb > 0);
-    // Measured 0.38%; 1.27% before clusters were split by visibility (k-means had put the floors
-    // on both sides of the wall into one cluster). The bound is 1%.
+    // Measured 0.38% (1.27% if k-means puts the floors on both sides of the wall into one
+    // cluster, which splitting clusters by visibility prevents). The bound is 1%.
     assert!(
         bmean <= 0.01 * a,
         "room B gets {:.3}% of room A's indirect light",

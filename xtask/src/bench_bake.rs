@@ -1,5 +1,5 @@
-//! `cargo xtask bench-bake`: wall time of the bakes issue #12 sets targets for, beside the
-//! paper's 8.5 s and the figures measured before the native CPU renderer.
+//! `cargo xtask bench-bake`: wall time of the bakes that have bake-time targets, beside the
+//! paper's 8.5 s and the figures of the Vulkan renderer on lavapipe (main at 2b215ab).
 //!
 //! Each case is baked once by the release `prm-bake` with `--report`; the table gives the bake's
 //! own total time (scene load to archive written), its pane rendering time, the shadow rays and
@@ -19,9 +19,9 @@ struct Case {
     /// Relative to the workspace root.
     scene: &'static str,
     args: &'static [&'static str],
-    /// Issue #12's target, seconds.
+    /// The bake-time target, seconds.
     target_s: f64,
-    /// Measured on main at 2b215ab, before the native CPU renderer (lavapipe; issue #12).
+    /// Measured on main at 2b215ab with the Vulkan renderer on lavapipe.
     before: &'static str,
 }
 

@@ -9,7 +9,7 @@
 //! (`cargo run --release -p prm-trace --example residual_panes`, 2048 exit points, the bake
 //! check's three lights): chairs (240 clusters, K = 32) 23.7% scaled, 12.3% with 4 residual
 //! groups, 22.3% with K = 36 scaled (the same 36 panes), 10.4% with every cluster; the bundled
-//! Cornell box (64 clusters) 14.3% → 13.6%, CornellBox-Sphere 12.8% → 11.9%. One group (the sum
+//! Cornell box (64 clusters) 13.6% (14.3% scaled), CornellBox-Sphere 11.9% (12.8%). One group (the sum
 //! of every pane) gave 15.2% on chairs, 16 groups 12.1%.
 //!
 //! The groups are a function of the archive's cluster table alone (k-means of the clusters'

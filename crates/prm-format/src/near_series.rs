@@ -143,10 +143,10 @@ impl DeeperOperator {
     /// the limit's 5.9 and the reference's 3.0: the panes leak light into the gap, and the limit
     /// multiplies it). In image space two gathers and the tail (7.08%) come closer to the
     /// reference than the limit (7.16%). Capping the factor per texel by the frame's own
-    /// geometric rate (`r/(1 − r)`, `r` the last term over the one before, session 27) only
-    /// lowered the energy everywhere (`cargo xtask eval --targets`: the fireplace room 1.024 →
-    /// 1.019, its shape error 5.1% → 5.2%; McGuire's box 0.988 → 0.987, 2.53% → 2.56%), and the
-    /// rate alone, uncapped, is too noisy (the fireplace room 5.5% → 11.5%), so neither was kept.
+    /// geometric rate (`r/(1 − r)`, `r` the last term over the one before) only costs energy
+    /// (`cargo xtask eval --targets`: 0.5% on the fireplace room, 0.1% on McGuire's box, shape
+    /// errors no better), and the rate alone, uncapped, is too noisy (it doubles the fireplace
+    /// room's error), so the factor is not capped.
     pub fn series_tail(&self, gathers: u32, apply: impl Fn(Option<&[[f32; 3]]>) -> Vec<[f32; 3]>) -> Vec<[f32; 3]> {
         let n = self.len();
         if gathers == 0 {

@@ -8,14 +8,14 @@
 //! at `p × quads + (q − first)`), as many quads as keep the chunk within the device's storage
 //! binding (128 MiB on lavapipe), and the pass dispatches once per chunk over the quads it
 //! lights. So the pane count is bounded by memory only, not by `max_texture_array_layers`
-//! (2048 on lavapipe: an unclustered bake of 4096 entry points used to be refused).
+//! (2048 on lavapipe, which would refuse an unclustered bake of 4096 entry points).
 //!
 //! Measured on lavapipe (McGuire's CornellBox-Original, its default archive, 512 clusters, K =
 //! 128 + 64 groups; `prm-play --headless --size 1024x768 --frames 12 --timings --gi-update every-frame`, medians,
 //! the three builds interleaved): the `gi` frame took 86–102 ms (direct light alone 29 ms) with
 //! the panes in an `rgb9e5ufloat` texture array read one texel per invocation, 65–74 ms with the
-//! array read four texels per invocation, and **54–64 ms** as here: the blend itself went from
-//! about 50 ms to about 17 ms. Four texels share each kept cluster's weight load and come in one
+//! array read four texels per invocation, and **54–64 ms** as here: the blend itself about 17 ms
+//! against about 50 ms. Four texels share each kept cluster's weight load and come in one
 //! 16-byte load; eight per invocation were no faster (62–67 ms).
 
 use prm_gpu_kit::{linear_workgroups, pipeline, ComputePass, PassTimer};

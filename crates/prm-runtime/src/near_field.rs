@@ -4,7 +4,7 @@
 //! shadow maps, times albedo/π), then every exit point's share of what the panes' VPL disk bound
 //! removes, summed along its near rays into the near lightmap the blend adds. The panes' depth-0
 //! VPLs sample the entry points' direct light with a bounded falloff, which leaves inner edges
-//! and contacts too dark (issue #11); this gathers that light back.
+//! and contacts too dark; this gathers that light back.
 //! Archives of format 1.8 bound the deeper VPLs by a disk as large, and two more passes after
 //! the blend gather their share back from the blended lightmap itself
 //! (`near_indirect_radiance.wgsl`, `near_indirect.wgsl`), once per

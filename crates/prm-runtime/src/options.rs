@@ -220,46 +220,21 @@ impl RuntimeOptions {
     pub const DEFAULT_NEAR_BOUNCES: u32 = 2;
 
     /// Shadow texels a shadow lookup moves its point along the normal. Moved out of its
-    /// surface, a point near a shadow's edge looks past the occluder's rim, so the offset
-    /// widens every lit area by about its length times the tangent of the light's angle: at 1.5
-    /// (until session 29) Sponza's high sun lit 7% too much direct light. The offset also kept
-    /// grazing light from shadowing its own surface (acne); the depth tolerance now does that,
-    /// growing with the same tangent (`lights.wgsl`, `DEPTH_BIAS_MAX_SLOPE`). Measured on the
-    /// eval's archives (direct light, 512×384, 512² views, against the same frame with 4096²
-    /// views; energy / error), first with the constant depth tolerance of before:
-    ///
-    /// | scene, light | 1.5 | 1.0 | 0.5 | 0.25 | 0 | **0.5, sloped tolerance** |
-    /// | --- | ---: | ---: | ---: | ---: | ---: | ---: |
-    /// | McGuire's box, under the ceiling | 1.002 / 3.2% | 1.001 / 1.5% | 1.000 / 0.4% | 0.996 / 1.2% | 0.985 / 2.5% | 1.000 / 0.3% |
-    /// | McGuire's box, near the red wall | 1.002 / 1.3% | 1.002 / 1.2% | 1.000 / 0.6% | | | 1.000 / 0.6% |
-    /// | CornellBox-Sphere | 1.001 / 3.9% | | 1.000 / 2.2% | 0.999 / 0.7% | | 1.000 / 2.2% |
-    /// | chairs | 1.004 / 5.8% | 1.003 / 4.9% | 1.001 / 3.7% | 1.000 / 3.4% | 0.998 / 3.8% | 1.001 / 3.7% |
-    /// | fireplace room, lamp | 1.005 / 8.3% | 1.004 / 7.6% | 1.004 / 6.9% | | | 1.004 / 6.9% |
-    /// | Sponza, high sun (4² tiles) | 1.072 / 24.6% | 1.049 / 19.1% | 1.019 / 12.6% | 0.982 / 11.3% | 0.896 / 16.6% | 1.026 / 13.6% |
-    ///
-    /// Below 0.5 surfaces shadow themselves (energy under 1), and at 0.5 with the constant
-    /// tolerance so did the bundled Cornell box's tall block under its ceiling light (a moiré
-    /// on the face it grazes; `cornell_box_matches_golden` in `crates/prm-play/tests/play.rs`
-    /// failed), which the sloped tolerance removes. Scaling the offset by the sine of the
-    /// light's angle instead left Sponza at 1.048 with 1.0. Sponza's indirect light under the
-    /// `cargo xtask eval --sky` sun (192×144, 4×4 error) 13.39% → 11.80% (energy 1.078 →
-    /// 1.042), under sky and sun 10.50% → 9.34% (seed 1 8.66% → 8.17%), its full image 10.07%
-    /// → 6.31%: the weights and the near field's direct share read the same lookups.
+    /// surface, a point near a shadow's edge looks past the occluder's rim, so the offset widens
+    /// every lit area by about its length times the tangent of the light's angle; acne is left to
+    /// the depth tolerance, which grows with the same tangent (`lights.wgsl`,
+    /// `DEPTH_BIAS_MAX_SLOPE`). Measured on the eval's archives (direct light, 512×384, 512²
+    /// views, against the same frame with 4096² views): at 0.5 energy within 0.4% of 1 everywhere
+    /// but Sponza's high sun (1.026; 1.072 at 1.5), and below 0.5 surfaces shadow themselves. The
+    /// indirect light reads the same lookups: `cargo xtask eval --sky` measures it on Sponza.
     pub const DEFAULT_NORMAL_OFFSET: f32 = 0.5;
 
     /// Tiles on a side of a directional light's shadow map. Measured on Sponza under a high sun
     /// (`cargo xtask eval --sky`'s view, 192×144, 512² per view; direct light against the
-    /// difference of the full and indirect 1024-path references, 4×4 error): one map over the
-    /// bounding sphere (8 cm texels) 23.5% off with energy 1.114, light leaking through thin
-    /// geometry; 2², 4² and 8² tiles 20.0%, 13.1% (1.075) and 8.3% (1.041). Whole frames at
-    /// 1024×768 on lavapipe (`prm-play --timings --gi-update every-frame`, two runs): 417–450 ms with one map, 461–474
-    /// with 4², 615 with 8² (each tile is a pass over the scene). Measured again in session 22
-    /// on the eval's default Sponza bake (same view; the 256-path full reference less the
-    /// indirect one): 4² tiles of 512² 13.2% off, of 1024² 8.4%, of 2048² 5.8%, the indirect
-    /// light 15.73%, 15.68%, 16.02% (energy 0.998, 0.981, 0.952: less light leaks past shadow
-    /// edges into the entry irradiance); whole frames at 1024×768 (medians of 10, two runs)
-    /// 524–527 ms, 570–580 ms with 1024² views and 650–662 ms with 8² tiles of 512². Larger
-    /// views are the cheaper way to sharper sun shadows than more tiles, but
+    /// references, 4×4 error): one map over the bounding sphere 23.5% off, light leaking through
+    /// thin geometry; 2², 4² and 8² tiles 20.0%, 13.1% and 8.3%, for whole 1024×768 frames on
+    /// lavapipe of 417–450, 461–474 and 615 ms (`prm-play --timings --gi-update every-frame`).
+    /// Larger views sharpen sun shadows more cheaply than more tiles (4² of 1024²: 8.4%), but
     /// `shadow_resolution` is shared with the point lights' cube faces, which would pay four
     /// times their fill too.
     pub const DEFAULT_SUN_TILES: u32 = 4;

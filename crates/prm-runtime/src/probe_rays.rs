@@ -5,7 +5,7 @@
 //! emission times their group's scale), then every probe's irradiance
 //! coefficients summed along its rays. The probes so see the surfaces' light of the frame, as
 //! the lightmap holds it, instead of the panes' VPLs, which sample the direct light at the
-//! entry points only (issue #11).
+//! entry points only.
 
 use prm_format::{probe_ray_direction, sh_basis, ProbeRays, SH_COEFFS, SH_COSINE_LOBE};
 use prm_gpu_kit::{linear_workgroups, pipeline, ComputePass, PassTimer};

@@ -245,7 +245,7 @@ pub struct LoadReport {
 /// Largest vertex coordinate, in scene units (metres), that a scene may have. At 10⁹ the
 /// 32-bit positions the bake and the player work in are 64 units apart, so no surface detail
 /// survives; and the bake's sums over areas and squared distances overflow at about 10¹⁸
-/// (QA: a scene at 10¹⁸ failed in the near field with an infinite disk, one at 10³⁰ lost every
+/// (a scene at 10¹⁸ would fail in the near field with an infinite disk, one at 10³⁰ lose every
 /// triangle as degenerate). Real scenes stay within 10⁵ or so.
 pub const MAX_COORDINATE: f32 = 1e9;
 

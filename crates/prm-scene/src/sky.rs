@@ -22,7 +22,7 @@ pub const MAX_SKY_MAP_SIDE: usize = 16384;
 
 /// Smallest accepted map, width × height. The projection's midpoint rule samples each texel at
 /// its centre: with fewer columns than the basis has azimuthal frequencies, or rows too few for
-/// its polar ones, a constant map does not project to a constant (QA, session 30: 1×1 lit 7×
+/// its polar ones, a constant map does not project to a constant (1×1 lights 7×
 /// too bright, 2×1 10× too dark, 1×2 3× too bright; 8×4 and larger within 1%).
 pub const MIN_SKY_MAP: (usize, usize) = (8, 4);
 
@@ -176,7 +176,7 @@ impl Sky {
 
     /// A sky from an environment map (module docs for its orientation).
     pub fn from_map(map: SkyMap) -> Sky {
-        // Summed in f64: an 8192×4096 map's 33 M terms summed in f32 lost 15% (QA, session 30).
+        // Summed in f64: an 8192×4096 map's 33 M terms summed in f32 loses 15%.
         let mut sum = [[0.0f64; 3]; SH_COEFFS];
         let cell = std::f64::consts::TAU / map.width as f64 * std::f64::consts::PI / map.height as f64;
         for row in 0..map.height {

@@ -3,54 +3,26 @@
 //! check places itself.
 //!
 //! **Lights** ([`check_lights`]): the first [`CHECK_LIGHTS`] of [`CANDIDATES`] (fractions of the
-//! scene's bounds, the first one high and central, the next two low and off-centre on opposite
-//! sides) that are neither inside geometry ([`crate::probes::is_inside`]) nor closer than
-//! [`CLEARANCE`] of the bounds' diagonal to a surface. Nothing about the scene's own lights is
-//! known at bake time, so the check lights it as a user would first try.
+//! scene's bounds, as a user would first try) neither inside geometry
+//! ([`crate::probes::is_inside`]) nor closer than [`CLEARANCE`] of the bounds' diagonal to a surface.
 //!
-//! **The archive's side** ([`check_accuracy`]): each entry's direct irradiance ray-cast with the
-//! run time's disk bound ([`entry_irradiance`]), each cluster weighed by its members' pane
-//! energy ([`energy_weight`]), the top K kept and faded like prm-runtime's rank and select
-//! passes, the rest of the light carried by the residual groups' summed panes
-//! ([`select_with_residuals`], [`prm_format::residual_groups`]; or the kept ones scaled up,
-//! [`select_top_k`], for a player without groups), and the panes summed at the sampled exit
-//! points, each pane with its share of the near field's deeper series and the near field's
-//! direct share with its own ([`crate::NearPlay`]: the player's gathers and tail, on the CPU).
-//! The run time's shadow maps are not modelled: the error budget (`cargo xtask eval --budget`,
-//! session 28) measured ray-cast against shadow-mapped light (the entry points' and the near
-//! field's) within 0.1 points on the boxes and 2 points on chairs, at exit points next to edges.
+//! **The archive's side** ([`check_accuracy`]): entries' direct irradiance ray-cast with the run
+//! time's disk bound ([`entry_irradiance`]), clusters weighed by pane energy ([`energy_weight`]),
+//! the top K kept and faded and the rest carried by the residual groups ([`select_with_residuals`],
+//! [`select_top_k`] for a player without groups), and the near field's shares added as the player
+//! adds them ([`crate::NearPlay`]). Shadow maps are not modelled: ray-cast and shadow-mapped light
+//! agree within 0.1 points on the boxes and 2 points on chairs (`cargo xtask eval --budget`).
 //!
 //! **The reference** is [`ReferenceTracer::indirect_at_exits`] with [`CheckParams::paths`] paths
-//! per point, its random streams keyed by the bake's seed, [`CHECK_STREAM`] and the light, apart
-//! from the walks' and the sky's. Its own noise `Σ var` (the variance of each point's mean, from
-//! its passes) is removed from both sums of the relative error: a noisy reference `r̂` has
-//! `E|p − r̂|² = |p − r|² + Σ var` and `E|r̂|² = |r|² + Σ var`, so
-//! `(Σ|p − r̂|² − Σ var) / (Σ|r̂|² − Σ var)` estimates the squared error without the noise's
-//! bias, and a cheap reference costs only the estimate's spread.
+//! per point, its streams keyed by the bake's seed, [`CHECK_STREAM`] and the light. Its own noise
+//! `Σ var` is removed from both sums: `(Σ|p − r̂|² − Σ var) / (Σ|r̂|² − Σ var)` estimates the
+//! squared error without the noise's bias.
 //!
-//! **How much** ([`CheckParams::DEFAULT`], 512 points × 512 paths × 3 lights). Measured in
-//! session 28 with release binaries of default bakes, against the same check of the same
-//! archive at 4096 points × 1024 paths ("truth"; `prm-bake bake SCENE --accuracy-points 4096
-//! --accuracy-paths 1024`, the panes do not depend on the check), other draws of the sample from
-//! `--accuracy-points` near the default:
-//!
-//! | scene | truth | 1024 × 64 (until session 28) | 1024 × 256 | **512 × 512** | check s / bake s |
-//! | --- | --- | --- | --- | --- | --- |
-//! | bundled Cornell box (glTF) | 2.4 ± 0.2% | 0.0 ± 4.1 | 2.1 ± 1.9, 2.0 ± 1.8, 0.4 ± 1.9 | 1.5 ± 1.5, 1.4 ± 1.3, 2.5 ± 1.1 | 0.26 / 21.7 |
-//! | McGuire's CornellBox-Original (`Ke` = 0) | 2.3 ± 0.1% | 2.5 ± 1.7 | 0.9 ± 1.0, 1.3 ± 1.1 | 2.5 ± 0.4, 1.8 ± 0.7, 1.4 ± 0.7 | 0.28 / 22.1 |
-//! | chairs (bundled glTF) | 4.6 ± 0.2% | 3.3 ± 1.7 | | 5.0 ± 0.7 | 0.43 / 76.8 |
-//! | CornellBox-Sphere (`Ke` = 0) | 2.1 ± 0.3% | 2.2 ± 2.3 | | | 0.12 (1024 × 64) / 32.4 |
-//! | fireplace room | 14.9 ± 2.7% | 9.5 ± 3.2 | 13.3 ± 1.8, 11.6 ± 1.3 | 11.2 ± 1.4, 10.5 ± 0.8 | 0.93 / 116 |
-//!
-//! Today's bakes are 2–5% off at their exit points where they were 10–13% when the default was
-//! chosen (1024 × 64, session 13), and a reference of 64 paths is then 16–25% noisy: removing
-//! noise four to ten times the error left estimates of 0.0 ± 4.1. At four times that cost, 512
-//! points × 512 paths resolves them (1.2–1.3% of the boxes' bakes, under 1% of the others').
-//! Where a few points carry most of a light's error (the fireplace room's second light, 23.5 ±
-//! 7.9% true, its other two 10.5% and 10.7%) a sample of 512 rarely meets them, and the
-//! estimate reads like the other lights (10.9 ± 1.8%): the standard error is of the sample, and
-//! cannot show what it did not draw. The error budget's even-stride measurement of the bakes as
-//! played on the GPU (`cargo xtask eval --budget`, one light each) is the other yardstick.
+//! **How much** ([`CheckParams::DEFAULT`], 512 points × 512 paths × 3 lights): against the same
+//! check at 4096 × 1024 (`prm-bake bake SCENE --accuracy-points 4096 --accuracy-paths 1024`) it
+//! reads the boxes' 2.3–2.4% within about a point, for 1.2–1.3% of their bake time. A sample of
+//! 512 rarely meets the few points that carry most of one light's error (the fireplace room's
+//! 14.9% reads 10.5–11.2%); `cargo xtask eval --budget` measures the bakes as played on the GPU.
 
 use glam::Vec3;
 use prm_format::{Accuracy, LightAccuracy};

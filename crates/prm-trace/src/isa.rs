@@ -11,10 +11,10 @@
 //!
 //! Measured with a whole build for x86-64-v3 (`RUSTFLAGS="-C target-cpu=x86-64-v3"`, release,
 //! chairs `--preset paper --backend cpu`, two runs each, `perf`): shadow rays (`occluded_cached`)
-//! 16 % fewer cycles, the kernel (`sum_exit`) 29 % fewer, pane rendering 6.7 s → 5.9 s. The
-//! per-call choice below keeps most of that without building the binary for one CPU: chairs'
-//! pane rendering 7.0 s → 6.2 s (mean of three alternating runs against the previous binary),
-//! Sibenik at 5120 entries, 135 clusters, 704², one walk: 62.8 s → 56.8 s a bake, archives
+//! 16 % fewer cycles, the kernel (`sum_exit`) 29 % fewer, pane rendering 5.9 s against 6.7 s.
+//! The per-call choice below keeps most of that without building the binary for one CPU: chairs'
+//! pane rendering 6.2 s against 7.0 s for the baseline alone (mean of three alternating runs),
+//! Sibenik at 5120 entries, 135 clusters, 704², one walk: 56.8 s a bake against 62.8 s, archives
 //! identical byte for byte. obvhs's traversal methods are functions of their own, built for the
 //! baseline: called from an AVX2 variant they gained nothing (measured: the same 7.0 s), so the
 //! variants expand obvhs's `traverse!` macro themselves (`bvh.rs`).

@@ -3,90 +3,26 @@
 //! have removed light, so that the run time gathers that light back from the surfaces' direct
 //! light of the frame.
 //!
-//! The bound loses most at inner edges and contacts (`vpl.rs`: exit points on a concave edge
-//! get about half of what they should). The depth-0 VPLs, one per entry point standing for the
-//! area `A/N`, carry the entry points' direct light; what the disk `R² = A/(N·π)` removes
-//! around them is `∫ L_direct(ω) · R²/(r² + R²) cos θ dω`, which the run time knows at every
-//! texel each frame. Rays are kept while `R²/(r² + R²) ≥ prm_format::NEAR_MIN_WEIGHT`, so they
-//! are at most `R·√15 ≈ 3.9 R` long and cheap: 0.17 s for the 43k exits of the Cornell box at
-//! 64 rays.
+//! The bound loses most at inner edges and contacts (exit points on a concave edge get about half
+//! of what they should). The depth-0 VPLs, one per entry point standing for the area `A/N`, carry
+//! the entry points' direct light; what the disk `R² = A/(N·π)` removes around them is
+//! `∫ L_direct(ω) · R²/(r² + R²) cos θ dω`, which the run time knows at every texel each frame.
+//! Rays are kept while `R²/(r² + R²) ≥ prm_format::NEAR_MIN_WEIGHT`, so they are at most
+//! `R·√15 ≈ 3.9 R` long and cheap: 0.17 s for the 43k exits of the Cornell box at [`NEAR_RAYS`].
+//! The deeper VPLs take their entry point's disk ([`crate::DeepDisk::Entry`]), so one set of rays
+//! gathers both shares: the player adds `π/M · Σ I_g · R²/(r² + R²)` for the radiance `I_g` of the
+//! lightmap's indirect light at the gather point. Beyond the cut the panes keep `1/r²`
+//! (`VplBound::Near`) and the section's weights are rescaled to match (`NearField::complement`),
+//! so the two sum to `1/r²` and no light is lost at any disk size.
 //!
-//! Measured (`RAYS=64 MINW=16 cargo run --release -p prm-trace --example near_field -- SCENE
-//! ARCHIVE FX FY FZ`: default bakes, every cluster blended on the CPU with ray-cast entry
-//! irradiance, 2048 exit points against the reference at 1024 paths with its noise removed;
-//! "edges" are the exit points a cosine ray from which meets a surface within 1.5 texels):
+//! An exit point's rays are one Owen-scrambled Sobol set ([`sobol2`], scrambled per exit point),
+//! stratified over the hemisphere, and leave from just off the surface ([`Bvh::spawn`]), so that a
+//! coplanar copy of the exit's triangle is not met at once as a back face. Gather points stay at
+//! their texel's exit point.
 //!
-//! | case | played | + near field, direct | + direct and indirect | edges: played → direct |
-//! | --- | ---: | ---: | ---: | ---: |
-//! | Cornell box, light under the ceiling | 8.48% (energy 0.982) | **7.53%** (0.990) | 7.65% | 29.0 → 22.3% |
-//! | Cornell box, light low near the red wall | 13.08% (0.954) | **10.53%** (0.967) | 10.13% | 33.8 → 20.0% |
-//! | CornellBox-Sphere, under the ceiling | 8.60% (0.983) | **7.50%** (0.992) | 7.19% | 25.1 → 17.8% |
-//! | chairs, above the chairs | 8.23% (0.993) | **7.52%** (1.000) | 8.67% | 21.2 → 18.9% |
-//!
-//! A cut-off of 1/1024 instead of `NEAR_MIN_WEIGHT` = 1/16 keeps six times the rays (1.9 M
-//! against 243 k on the Cornell box) for 0.1–0.2 points (7.44%, 10.30%; 1/64: 7.54%, 10.40%).
-//! 32, 64, 128 and 256 rays give the same errors within 0.1 point on the red-wall case, so the
-//! default is [`NEAR_RAYS`] = 64. A whole final gather from the texels instead of the panes is
-//! too noisy per texel at any affordable count (17% at 64 rays, 8.9% at 256 on the first case).
-//!
-//! The deeper VPLs (format 1.8). With the disk of the area one walk stands for, `A/(N·W)`,
-//! gathering their share from the lightmap's indirect light helped the boxes a little and hurt
-//! chairs by 1.2 points (the table's last column but one), and their small disks spiked (the
-//! local error of issue #11). The bake now gives them their entry point's disk
-//! ([`crate::DeepDisk::Entry`]), the same `R²`, so one set of rays gathers both shares and the
-//! player adds `π/M · Σ I_g · R²/(r² + R²)` for the radiance `I_g` of the lightmap's indirect
-//! light at the gather point. Measured on McGuire's CornellBox-Original (`Ke` = 0, today's
-//! default bake; the same example at `0.5 0.865 0.5` and `0.1 0.2 0.5` of the bounds, played +
-//! both shares): 3.86% → **3.29%** (energy 1.012 → 1.009) and 5.74% → **5.12%** (0.994 →
-//! 0.990); in image space (`cargo xtask eval --targets`'s cases,
-//! 4×4 error and local error) the boxes 4.1% / 4.6% → 3.6% / 4.2%, local 22× / 15× → 9× / 10×,
-//! CornellBox-Sphere 3.7% → 3.4%, chairs 4.6% → 4.2%, the fireplace room's 120 s bake 14.5% →
-//! 12.0% (energy 0.957 → 0.979, local 4.8× → 3.6×).
-//!
-//! The cut (format 1.9). Rays whose weight falls under `NEAR_MIN_WEIGHT` are not kept, so what
-//! the disk removes beyond them was lost: up to a sixteenth of every VPL's light at those
-//! distances, more of the whole the larger the disk (the fireplace room at four times the
-//! radius: energy 0.964). The bake now renders the panes with `VplBound::Near`, which keeps
-//! `1/r²` beyond the cut and `1/(r² + R²)` scaled by `1/(1 − w₀)` inside it, and the section's
-//! weights are cut and rescaled to match (`NearField::complement`): the two sum to `1/r²`.
-//! Measured in image space (seed 1, the fireplace room's 120 s sizes; McGuire's box): at the old
-//! radius 12.27% → 12.57% (energy 0.993 → 1.000), at four times 11.40% → 10.81% (0.964 →
-//! 0.988); McGuire's red-wall light at twice the radius 5.33% (energy 0.970, session 18, the
-//! old kernel) → 3.98% (0.986). That freed the disk's size (`prm-bake`'s
-//! `NEAR_FIELD_DISK_SCALE`, where the tables are: 3 from session 19, 8 since the player sums
-//! the near field's series in session 25).
-//!
-//! An exit point's rays are one Owen-scrambled Sobol set ([`sobol2`], scrambled per exit
-//! point), which stratifies them over the hemisphere; they were independent draws until session
-//! 27. Where the disks are large the near field is most of a final gather (Sponza's 7 m disks
-//! reach 27 m), and its noise was as large as the panes': between two seeds' default `--sky`
-//! bakes of the Dabrovic Sponza under `cargo xtask eval --sky`'s sun, the near field's direct
-//! share differed by 6.5% of the reference's norm (the panes by 5.9%, the deeper share by
-//! 3.1%); stratified, 4.0% (deeper share 2.5%). Indirect error (4×4), seeds 0 and 1: Sponza's
-//! sun 13.69% → 13.23% and 11.35% → 10.70%, sky and sun 10.70% → 10.36% and 9.06% → 8.58%;
-//! the fireplace room's default bake (`--targets`' lamp) 6.04% → 5.52% and 6.68% → 6.25%
-//! (`cargo xtask eval compare` of each archive played against the eval's reference).
-//!
-//! Rays leave from just off the surface ([`Bvh::spawn`]), as the walks' and the reference's do.
-//! They used to leave from the exit point itself, ignoring its own triangle only, so a coplanar
-//! copy of that triangle was met at once, as a back face, and every ray of the exit was lost:
-//! McGuire's boxes list two faces twice (the tall block's front, which showed dark blotches
-//! one texel wide at its foot), and a two-sided wall's far side would have been met as a front
-//! face at distance zero. With this and the duplicates dropped at load
-//! ([`prm_scene::LoadReport::duplicates_dropped`]), that box's two lights went from 3.60% /
-//! 5.37% and 3.96% / 5.41% (4×4 and full resolution) to 3.41% / 5.13% and **3.05% / 4.67%**.
-//!
-//! Gather points stay at their texel's exit point, though the rays that reach a texel do not
-//! end at its centre. Measured on Dabrovic Sponza under the eval's sun (`cargo run --release -p
-//! prm-trace --example near_hits -- SCENE 512 2816 dir:-0.25,-0.9,0.35:6,5.6,5 OUT.bin`, every
-//! exit's direct share ray-cast at each hit against at its gather point): the two agree over
-//! the exits that take under half their light from the near field (0.991) but the gather points
-//! give 5.5% and 11.6% more where it brings 70–90% and over 90% (the rays end in the corner of
-//! the texel they reach, shadowed more than its centre). Moving every gather point to the hit
-//! nearest its hits' weighted centroid brings those to 0.996 and 1.017 on the CPU (and the rest
-//! to 0.953), but the played lightmap's near-dominated texels only from 1.10–1.13 to 1.06–1.11
-//! of the reference and Sponza's image errors not at all (seeds 0–2: 23.18, 15.59, 21.83%
-//! against 23.03, 15.67, 21.51%), so it was not kept.
+//! Measured by `cargo xtask eval --targets` (indirect light, 4×4 error): the fireplace room's
+//! default bake under its lamp is 5.5% and 6.3% off at seeds 0 and 1; per exit point on the CPU,
+//! `cargo run --release -p prm-trace --example near_field -- SCENE ARCHIVE FX FY FZ`.
 
 use glam::Vec3;
 use prm_format::{NearExit, NearField, NearHit, NEAR_MIN_WEIGHT};

@@ -13,10 +13,10 @@
 //! player shows. The second and later gathers reach texels far from the checked ones (the
 //! whole atlas, in the end), which is why the model runs over every exit record.
 //!
-//! Until session 28 the check added the direct share and one gather of the panes' light only:
-//! it left out the deeper share of the direct share and every gather after the first, most of
-//! the near field's light where the disks are large, and estimated the fireplace room's default
-//! bake at 38.7% (energy 0.76–0.79) where the player's lightmap is 15–16% off.
+//! The deeper share of the direct share and the gathers after the first are most of the near
+//! field's light where the disks are large: a check that took the direct share and one gather
+//! only estimated the fireplace room's default bake at 38.7% (energy 0.76–0.79) where the
+//! player's lightmap is 15–16% off.
 
 use glam::Vec3;
 use prm_format::{DeeperOperator, NearField};

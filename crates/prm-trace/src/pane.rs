@@ -9,8 +9,8 @@
 //! [`Panes::combine`]).
 //!
 //! Two evaluators, on one kernel (the VPLs in blocks of 64, structure of arrays, so that the
-//! unoccluded term vectorises: the Cornell box's exact panes took 28.0 s with one VPL at a
-//! time, 23.3 s now):
+//! unoccluded term vectorises: the Cornell box's exact panes take 23.3 s, against 28.0 s with
+//! one VPL at a time):
 //! * [`evaluate_panes`]: one shadow ray per exit point and VPL, over any list of exit points. The
 //!   exact yardstick for every other renderer.
 //! * [`evaluate_atlas_panes`]: over an atlas, sharing shadow rays between neighbouring texels
@@ -38,20 +38,12 @@
 //! | | **4** | **59 M** | **10.2 s** | **2.7 % (13.0 %)** | 1.0025 |
 //! | | 8 | 42 M | 8.3 s | 5.4 % (36.6 %) | 1.0036 |
 //!
-//! Before the lattice was anchored per chart (one lattice over the whole atlas; a small chart
-//! then had most of its texels without a corner on their own chart, and they cast all their
-//! rays), step 4 took 46 M rays and 5.2 s at 0.59 % on the Cornell box, 80 M rays and 13.3 s at
-//! 2.4 % on chairs: anchoring saves 26–30 % of the rays, and on chairs costs 0.3 points of
-//! difference (without the halved step for narrow charts: 55 M rays, 3.3 %). For scale,
-//! lavapipe's depth-map panes (`--backend vulkan`) differ from exact by 1.8 % on the Cornell box
-//! and by 10.7 % on chairs (energy 1.046): the shared visibility is closer to exact than the GPU
-//! path. Step 4 is the default: step 8 saves 19 % of chairs' time for 2.7 points more
-//! difference, since a shadow narrower than the coarse lattice is lost. Chairs' time is mostly
-//! shadow rays (82 % before anchoring, `perf`). A slow (spatial split) build or a BVH2 did not
-//! trace them faster. An occluder cache per VPL (each ray first tries the triangle that blocked
-//! that VPL's last ray, [`Bvh::occluded_cached`]; same answers) took chairs' exact panes from
-//! 32.1 s to 28.7 s and step 4 from 13.8 s to 13.3 s (one run each, before anchoring): the
-//! lattice already shares most of the rays a cache would save.
+//! Step 4 is the default: step 8 saves 19 % of chairs' time for 2.7 points more difference,
+//! since a shadow narrower than the coarse lattice is lost. For scale, lavapipe's depth-map panes
+//! (`--backend vulkan`) differ from exact by 1.8 % on the Cornell box and by 10.7 % on chairs
+//! (energy 1.046): the shared visibility is closer to exact than the GPU path. Chairs' time is
+//! mostly shadow rays; the lattice already shares most of the rays an occluder cache per VPL
+//! ([`Bvh::occluded_cached`]) would save.
 //!
 //! Work is parallel over exit points (tiles of the atlas); each exit point sums its VPLs in a
 //! fixed order and the work items are fixed by the atlas alone, so the result does not depend on

@@ -32,7 +32,7 @@
 //! | 1024 × 8, 2 | 1.8% | 26.7% (0.856) |
 //!
 //! So order 2 costs 2%, and the rest is the panes' own estimator: it falls with the entry points
-//! (the point sampling of the direct light, issue #11) and not with the walks. A smaller disk
+//! (the point sampling of the direct light) and not with the walks. A smaller disk
 //! bound would lose less energy here, but the probes keep the panes' bound, so that a probe and
 //! a surface beside it agree.
 

@@ -16,20 +16,18 @@
 //! ray hitting the back of a surface ends the path. Vertices use geometric normals; the exit point
 //! uses its own (shading) normal for the first cosine, as the pane evaluator does, and so does a
 //! pixel's first visible point (its direct light and its first indirect cosine), as the player
-//! shades it. Until session 23 pixels used the geometric normal there: on the fireplace room
-//! (smooth-shaded, the targets' lamp) the two images differ by 0.97% after the 4×4 downsample and
-//! 2.96% at full resolution, on the flat-shaded Sponza and Cornell boxes by nothing that matters
-//! (0.10%); the fireplace room's default bakes played 9.30, 9.45, 12.96% off the old image and
-//! 9.23, 9.38, 12.90% off the new one.
+//! shades it. On the smooth-shaded fireplace room (the targets' lamp) the image with the
+//! geometric normal there differs by 0.97% after the 4×4 downsample and 2.96% at full
+//! resolution; on the flat-shaded Sponza and Cornell boxes by 0.10%.
 //!
 //! Images: one pinhole ray per pixel centre per pass (right-handed, +Y up, vertical FOV, row 0 at
 //! the top). The radiance is `ρ(x)/π · (E_dir(x) + E_ind(x))` at the first visible point `x`, or
 //! only `ρ(x)/π · E_ind(x)` with [`ImageMode::IndirectOnly`]; back faces and misses are black.
 //! The first visible point is taken a spawn offset ([`Bvh::epsilon`]) back along the camera ray,
 //! so a pixel centre that falls on the edge where two surfaces meet leaves from in front of both
-//! (from the edge itself, the rays towards the second surface slipped past it: McGuire's box at
-//! the targets' camera, square to its floor-wall edges, had a diagonal of such pixels at about
-//! 0.4 of the wall beside them, the largest local error of that image).
+//! (from the edge itself, the rays towards the second surface would slip past it: McGuire's box
+//! at the targets' camera, square to its floor-wall edges, would show a diagonal of such pixels
+//! at about 0.4 of the wall beside them, the largest local error of that image).
 //!
 //! Progressive: each pass adds `samples_per_pass` independent paths per texel/pixel; the pass
 //! means are combined with Welford's algorithm, giving the mean and the variance of the mean

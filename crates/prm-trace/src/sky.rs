@@ -14,9 +14,9 @@
 //! The first rays of an exit point's paths, over all passes, are one Owen-scrambled Sobol set
 //! (scrambled per exit point) rather than independent draws: the direct part, the sky's
 //! visibility, is then stratified over the hemisphere. Measured on the Dabrovic Sponza's default
-//! `--sky` bake under `cargo xtask eval --sky`'s blue sky (seed 0): the full image 4.33% →
-//! 3.74% off the reference; the indirect light, whose noise lies in the later bounces and the
-//! panes, 6.21% → 6.30%.
+//! `--sky` bake under `cargo xtask eval --sky`'s blue sky (seed 0): the full image 3.74% off the
+//! reference (4.33% with independent draws); the indirect light, whose noise lies in the later
+//! bounces and the panes, 6.30% (6.21%).
 
 use glam::Vec3;
 use prm_format::{sh_basis, SkyTransfer, SH_COEFFS};
@@ -29,17 +29,17 @@ use crate::{Bvh, Rng, TraceError};
 
 /// Least cosine between two exit points' normals for [`smooth_transfer`] to average them
 /// (about 26°: creases such as a wall meeting the floor stay sharp). Measured with the bake's
-/// 256 paths (`cargo xtask eval --sky`, indirect image error after a 4×4 downsample, before →
-/// after smoothing both parts): the Dabrovic Sponza under a uniform sky 18.1% → 14.9% (energy
-/// 0.967 → 0.973; 1024 paths unsmoothed gave 12.9%), our courtyard under a turned map 4.1% →
-/// 3.5%, and with a low sun 7.0% → 6.9%: its noise falls by more than the blur costs. The direct
+/// 256 paths (`cargo xtask eval --sky`, indirect image error after a 4×4 downsample, both parts
+/// smoothed, unsmoothed in parentheses): the Dabrovic Sponza under a uniform sky 14.9% (18.1%;
+/// 1024 paths unsmoothed 12.9%), our courtyard under a turned map 3.5% (4.1%), and with a low
+/// sun 6.9% (7.0%): its noise falls by more than the blur costs. The direct
 /// part is left alone: it holds the sky's shadows, and on `tests/sky.rs`'s coarse 48² atlas
-/// smoothing it took its per-texel error from 3.8% to 5.9% (the full images of the eval moved by
+/// smoothing it makes its per-texel error 5.9% instead of 3.8% (the full images of the eval moved by
 /// less than 0.1 point either way).
 pub const SKY_SMOOTH_MIN_COS: f32 = 0.9;
 
 /// Texels on each side of an exit point that [`smooth_transfer`] averages: 2, a 5 × 5
-/// neighbourhood. Measured (session 21, the bake's 256 paths, the indirect image against
+/// neighbourhood. Measured with the bake's 256 paths (the indirect image against
 /// `prm-bake reference --indirect-only` at 1024 paths, 4×4 downsample): the Dabrovic Sponza
 /// under a uniform sky (`--time-budget 60`, the eval's camera) 3 × 3: 11.09%, **5 × 5: 9.20%**,
 /// 7 × 7: 9.87%, Gaussian weights of σ = 1.5 texels over 7 × 7: 9.52%, of σ = 1 over 5 × 5:

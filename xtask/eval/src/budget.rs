@@ -390,7 +390,7 @@ pub fn run(bin: &Path, cache: &Path, root: &Path) -> Result<String> {
             ));
         }
         // One pane per entry point must fit prm-bake's default run-time memory budget (256 MiB
-        // of RGB9E5 panes; the player has no cap of its own on the pane count since session 23).
+        // of RGB9E5 panes; the player has no cap of its own on the pane count).
         let pane_mib = f64::from(auto.resolution).powi(2) * 4.0 / (1024.0 * 1024.0);
         let unclustered_fits = f64::from(auto.entries) * pane_mib <= 256.0;
         if unclustered_fits {

@@ -8,7 +8,7 @@
 //! - local error: the largest error over 8×8-pixel windows (full resolution), divided by the
 //!   whole image's (blotches and spikes), with where that window is and how bright its
 //!   reference is against the image's: a window at a few percent of the image's brightness
-//!   is relative noise, one on a line of single pixels is geometry (session 24: McGuire's right
+//!   is relative noise, one on a line of single pixels is geometry (McGuire's right
 //!   wall meets the floor on the image diagonal, through pixel centres, which the rasterizer
 //!   gives to the wall and the tracer to the floor).
 

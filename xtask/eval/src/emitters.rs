@@ -1,5 +1,5 @@
 //! `cargo xtask eval --emitters`: emissive surfaces against the reference tracer, at default
-//! bake settings (issue #15's targets), and what a change of an emitter's scale costs a frame.
+//! bake settings (its accuracy targets), and what a change of an emitter's scale costs a frame.
 //!
 //! Cases, each baked with `prm-bake bake SCENE` and played with `prm-play --headless` (no
 //! punctual light), against `prm-bake reference --emitters` at the same camera and scales:

@@ -332,29 +332,9 @@ fn file_stamp(path: &Path) -> String {
     }
 }
 
-/// Part of every cached bake's key: bumped whenever what a bake writes for the same arguments
-/// changes, so that the eval never measures a stale archive. 2: `--backend auto` renders on the
-/// native CPU evaluator when the only adapter is a software rasterizer. 3: its shared-visibility
-/// lattice is anchored per chart. 4: emissive materials are baked (format 1.2 emitters section). 5: `--sky`
-/// bakes the sky's transfer (f16), its indirect part smoothed over 3 × 3 texels. 7: automatic entry
-/// points stop at 16 per cluster the budgets allow, and the bake times of the AVX2 variants. 8: twice
-/// the automatic entry points (32 per cluster) where nothing cuts them; probe rays (format 1.6). 9:
-/// the near field (format 1.7). 10: 8 entry points per cluster, the memory budget keeping room
-/// for the residual groups (16 by default, after `prm_format::RESIDUAL_GROUPS`). 11: about 65536
-/// walks in all, the entry points doubled up to twice, the top K from the blend's texel budget
-/// and 64 residual groups. 12: the automatic atlas leaves room for 256 panes (was 128). 13: the
-/// deeper VPLs take their entry point's disk, whose near field the player gathers back (format
-/// 1.8). 14: disks three times the radius, whose kernel completes the near field's cut weights
-/// (format 1.9). 15: duplicate triangles dropped at load, near rays from just off the surface,
-/// buried exit points moved within their texel. 16: the sky's indirect transfer smoothed over
-/// 5 × 5 texels of one chart. 17: `--sky` alone takes its paths per texel from the time budget.
-/// 18: buried exit points that cannot move within their texel take a coplanar neighbour's point.
-/// 19: VPL disks eight entry-point radii where the near hits fit one binding (the player sums
-/// the near field's series). 20: each exit point's near rays, and the first rays of its sky
-/// paths, one scrambled Sobol set. 21: the bake's accuracy estimate plays the near field's
-/// series as the player does (the panes and sections as before; the estimate in the metadata).
-/// 22: where the cluster cap cuts the automatic entry points, those kept walk up to 32 times.
-const BAKE_EPOCH: u32 = 22;
+/// Part of every cached bake's key: bump it when what a bake writes for the same arguments
+/// changes, so cached bakes are redone and the eval never measures a stale archive.
+const CACHE_VERSION: u32 = 23;
 
 /// A case's label as a file name: spaces and punctuation as dashes.
 pub fn case_name(label: &str) -> String {
@@ -375,7 +355,7 @@ pub fn bake_case(bin: &Path, cache: &Path, label: &str, scene: &Path, args: &[St
 }
 
 /// Runs `prm-bake bake` for `spec` (extra arguments `extra`), or reuses the cached result under
-/// `cache` keyed by [`BAKE_EPOCH`], the scene file, the arguments and the config.
+/// `cache` keyed by [`CACHE_VERSION`], the scene file, the arguments and the config.
 pub fn bake(
     bin: &Path,
     cache: &Path,
@@ -385,7 +365,7 @@ pub fn bake(
     plan_only: bool,
 ) -> Result<Baked> {
     let key_text = format!(
-        "{BAKE_EPOCH}|{}|{}|{}|{}|{}",
+        "{CACHE_VERSION}|{}|{}|{}|{}|{}",
         scene.path.display(),
         file_stamp(&scene.path),
         args.join(" "),

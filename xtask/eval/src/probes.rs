@@ -1,5 +1,5 @@
 //! `cargo xtask eval --probes`: the irradiance probes against the reference tracer at the probe
-//! positions (issue #15's target: within 10%), at default bake settings and beside a larger
+//! positions (the target: within 10%), at default bake settings and beside a larger
 //! bake, and what the probes cost the bake and a frame.
 //!
 //! Each case is baked with `prm-bake bake SCENE --probes` (the default 512-cell budget), played

@@ -53,9 +53,8 @@ fn load(path: &Path) -> Result<Reference> {
     })
 }
 
-/// Changes whenever the tracer's camera images do, so that cached image references are traced
-/// again (2: a pixel centre on the edge between two surfaces leaves from in front of both; 3: a
-/// pixel's visible point takes its light about its shading normal).
+/// Part of every cached image reference's key: bump it when the tracer's camera images change,
+/// so cached image references are traced again.
 pub const IMAGE_EPOCH: u32 = 3;
 
 /// What identifies `scene` (loaded from `path`) in the cache keys: its path, geometry and
@@ -120,8 +119,8 @@ impl<'a> Tracer<'a> {
         light: &Light,
         spp: u32,
     ) -> Result<Reference> {
-        // Keyed by the exit points themselves: the bake's rules for them change (buried ones
-        // moved, session 20; shut-in ones given a neighbour's point, session 24).
+        // Keyed by the exit points themselves, so that a change to the bake's rules for them
+        // (buried ones moved, shut-in ones given a neighbour's point) is never read stale.
         let mut h = std::collections::hash_map::DefaultHasher::new();
         for x in exits {
             for v in x.position.to_array().into_iter().chain(x.normal.to_array()) {

@@ -1,4 +1,4 @@
-//! `cargo xtask eval --sky`: the sky (and a sun) against the reference tracer (issue #15's
+//! `cargo xtask eval --sky`: the sky (and a sun) against the reference tracer (its accuracy
 //! targets), and what a change of the sky costs a frame.
 //!
 //! Cases, each baked with `prm-bake bake SCENE --sky` and played with `prm-play --headless
@@ -7,8 +7,8 @@
 //!   under a smooth environment map (written here: bright towards one side of the horizon and
 //!   the zenith) turned by 40°, without a sun;
 //! - the Dabrovic Sponza (`../shared/scenes`) under the uniform sky and a high sun, baked at the
-//!   default settings as issue #15's target asks (about 300 s of the 600 s budget with the 1024
-//!   sky paths the budget gives; until session 22 this eval baked it with `--time-budget 60`),
+//!   default settings as the target asks (about 300 s of the 600 s budget with the 1024 sky
+//!   paths the budget gives),
 //!   once more with `--seed 1` to show how far the seed moves it, and once more with
 //!   `--sky-paths 256` to show the sky paths' noise.
 //!
@@ -240,8 +240,7 @@ pub fn run(bake_bin: &Path, cache: &Path, root: &Path, out: &Path) -> Result<Str
                 ),
             ],
         });
-        // The same bake with another seed: how much of the error the seed moves (Sponza's
-        // sky and sun 10.70% and 9.06% with seeds 0 and 1 before session 27).
+        // The same bake with another seed: how much of the error the seed moves.
         cases.push(Case {
             name: "sponza, --seed 1",
             scene: cases[1].scene.clone(),

@@ -1,4 +1,4 @@
-//! `cargo xtask eval --targets`: issue #11's accuracy targets, measured as
+//! `cargo xtask eval --targets`: the accuracy targets, measured as
 //! `../shared/notes/metrics.md` defines them, on the default bakes.
 //!
 //! Every case is the default bake (`prm-bake bake SCENE`, release; `--time-budget` where the
@@ -15,7 +15,7 @@
 //! points, without the downsample; recorded in the archive) and the `gi`/`direct` frame-time ratio at 1024×768 (median of interleaved frames on one renderer, as
 //! `cargo bench -p prm-play --bench frame` does). Each cell names its target and whether it is
 //! met. The fireplace room's default bake is made twice, with seeds 0 and 1: its error moves by
-//! half a point with the seed (6.04% and 6.68% before session 27's stratified near rays).
+//! half a point with the seed.
 
 use anyhow::{Context, Result};
 use std::fmt::Write as _;
@@ -29,7 +29,7 @@ use crate::sky::{reference_image, Playback};
 /// whose references' noise (1.1% and 1.0% after the downsample) is under a fifth of the error
 /// measured there, as `metrics.md` asks.
 const SPP: u32 = 1024;
-/// Paths per pixel of the boxes' references. At 1024 their noise was 1.6–2.0% after the
+/// Paths per pixel of the boxes' references. At 1024 their noise is 1.6–2.0% after the
 /// downsample against errors of 4–9%, and at full resolution 6.5–7.8%, which alone would break
 /// the 8% target there; 8 times the paths cut it by √8.
 const BOX_SPP: u32 = 8192;
