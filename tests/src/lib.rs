@@ -183,6 +183,14 @@ impl Agreement {
             "{name}: {} inputs ({} not zero), largest relative difference {:.3e} at {}",
             self.inputs, self.nonzero, self.worst_relative.0, self.worst_relative.1
         );
+        // Two outputs that are zero everywhere agree but test nothing: at least a tenth of the
+        // inputs must be lit on one side.
+        assert!(
+            self.inputs > 0 && self.nonzero * 10 >= self.inputs,
+            "{name}: only {} of {} inputs are not zero: the comparison tests almost nothing",
+            self.nonzero,
+            self.inputs
+        );
         assert!(
             self.failures.is_empty(),
             "{name}: {} of {} inputs differ, first ones:\n{}",

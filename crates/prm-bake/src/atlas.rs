@@ -48,6 +48,9 @@ pub fn run(args: &AtlasArgs) -> Result<()> {
     let t1 = Instant::now();
     let atlas = Atlas::build(&scene, &params).context("building the lightmap atlas")?;
     let atlas_s = t1.elapsed().as_secs_f64();
+    if let Some(w) = atlas.coverage_warning(scene.triangles.len()) {
+        eprintln!("warning: {w}");
+    }
     if let Some(png) = &args.png {
         draw_charts(&atlas)
             .save(png)
@@ -92,28 +95,36 @@ pub fn run(args: &AtlasArgs) -> Result<()> {
             "warnings": scene.report.warnings,
             "seconds": { "load": load_s, "atlas": atlas_s },
         });
-        println!("{}", serde_json::to_string_pretty(&out)?);
+        outln!("{}", serde_json::to_string_pretty(&out)?);
         return Ok(());
     }
     let e = bounds.extent();
-    println!("scene        {}", scene.source.display());
-    println!(
+    outln!("scene        {}", scene.source.display());
+    outln!(
         "triangles    {} ({} degenerate, {} duplicates dropped)",
         scene.triangles.len(),
         scene.report.degenerate_dropped,
         scene.report.duplicates_dropped
     );
-    println!(
+    outln!(
         "materials    {} ({} textures)",
         scene.materials.len(),
         scene.textures.len()
     );
-    println!("area         {:.4} square units", scene.area());
-    println!(
+    outln!("area         {:.4} square units", scene.area());
+    outln!(
         "bounds       [{:.3} {:.3} {:.3}] .. [{:.3} {:.3} {:.3}] (extent {:.3} x {:.3} x {:.3})",
-        bounds.min.x, bounds.min.y, bounds.min.z, bounds.max.x, bounds.max.y, bounds.max.z, e.x, e.y, e.z
+        bounds.min.x,
+        bounds.min.y,
+        bounds.min.z,
+        bounds.max.x,
+        bounds.max.y,
+        bounds.max.z,
+        e.x,
+        e.y,
+        e.z
     );
-    println!(
+    outln!(
         "lights       {} point, {} spot, {} directional; {} cameras",
         lights["point"],
         lights["spot"],
@@ -121,10 +132,10 @@ pub fn run(args: &AtlasArgs) -> Result<()> {
         scene.cameras.len()
     );
     if !emissive.is_empty() {
-        println!("emitters     {} (emissive materials)", emissive.join(", "));
+        outln!("emitters     {} (emissive materials)", emissive.join(", "));
     }
-    println!("fingerprint  {:016x}", scene.fingerprint());
-    println!(
+    outln!("fingerprint  {:016x}", scene.fingerprint());
+    outln!(
         "atlas        {r}x{r}, texel size {:.4}, {} charts{}",
         s.texel_size,
         s.charts,
@@ -135,25 +146,29 @@ pub fn run(args: &AtlasArgs) -> Result<()> {
         },
         r = s.resolution
     );
-    println!(
+    outln!(
         "texels       {} covered ({:.1}% utilisation), {} gutter texels dilated",
         s.covered_texels,
         100.0 * s.utilization,
         s.dilated_texels
     );
-    println!(
+    outln!(
         "per triangle min {}, median {} exit texels; {} triangles own none, {} touch none",
-        s.texels_per_triangle_min, s.texels_per_triangle_median, s.triangles_without_exit, s.uncovered_triangles
+        s.texels_per_triangle_min,
+        s.texels_per_triangle_median,
+        s.triangles_without_exit,
+        s.uncovered_triangles
     );
     if s.overlapping_texels > 0 || s.shared_texels > 0 {
-        println!(
+        outln!(
             "overlaps     {} folded texels, {} texels shared by charts",
-            s.overlapping_texels, s.shared_texels
+            s.overlapping_texels,
+            s.shared_texels
         );
     }
-    println!("time         load {load_s:.3} s, atlas {atlas_s:.3} s");
+    outln!("time         load {load_s:.3} s, atlas {atlas_s:.3} s");
     if let Some(png) = &args.png {
-        println!("charts drawn {}", png.display());
+        outln!("charts drawn {}", png.display());
     }
     Ok(())
 }

@@ -1,6 +1,6 @@
 //! `prm-bake bake`: arguments → parameters → backend → [`prm_bake::bake`] → summary and report.
 
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
 use prm_bake::params::plural;
 use prm_bake::{AtlasSize, BakeConfig, BakeJob, BakeParams, Plan, Preset, Renderer, Shard};
 use prm_gpu::{Backend, GpuContext};
@@ -63,20 +63,20 @@ pub struct BakeArgs {
     /// Named parameter set; `default` derives sizes from the scene and the budgets.
     #[arg(long, value_enum)]
     pub preset: Option<PresetArg>,
-    /// Entry points sampled on the surfaces.
-    #[arg(long)]
+    /// Entry points sampled on the surfaces (at least 1).
+    #[arg(long, value_parser = at_least_one())]
     pub entries: Option<usize>,
     /// Clusters of entry points, one pane each (equal to --entries: no clustering).
-    #[arg(long)]
+    #[arg(long, value_parser = at_least_one())]
     pub clusters: Option<usize>,
-    /// Atlas and pane resolution (texels on a side).
-    #[arg(long, conflicts_with = "texel_size")]
+    /// Atlas and pane resolution (texels on a side, 8 to 8192).
+    #[arg(long, conflicts_with = "texel_size", value_parser = clap::value_parser!(u32).range(8..=8192))]
     pub resolution: Option<u32>,
     /// Atlas texel size in scene units (instead of --resolution).
     #[arg(long)]
     pub texel_size: Option<f32>,
-    /// Random walks from every entry point.
-    #[arg(long)]
+    /// Random walks from every entry point (at least 1).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..))]
     pub paths_per_entry: Option<u32>,
     /// Seed of every random choice; the same seed gives the same archive.
     #[arg(long)]
@@ -84,7 +84,7 @@ pub struct BakeArgs {
     /// Clusters blended per frame at run time (recorded in the archive for the player). Default:
     /// as many as 192 panes of 256² texels a frame allow, less the residual groups (64 at most),
     /// at least 32; K = 128 at 256²
-    #[arg(long)]
+    #[arg(long, value_parser = at_least_one())]
     pub top_k: Option<usize>,
     /// Longest bake, in seconds, that the automatic sizes (preset `default`) may plan for; they
     /// shrink to fit it (default 600). Explicit sizes are never changed.
@@ -151,6 +151,11 @@ pub struct BakeArgs {
     /// backend. Example: --shard 0/4 on the first of four machines.
     #[arg(long, value_name = "I/N", value_parser = parse_shard)]
     pub shard: Option<Shard>,
+}
+
+/// A count of at least 1 (`--entries`, `--clusters`, `--top-k`).
+fn at_least_one() -> clap::builder::RangedU64ValueParser<usize> {
+    clap::builder::RangedU64ValueParser::new().range(1..)
 }
 
 fn parse_shard(s: &str) -> Result<Shard, String> {
@@ -310,6 +315,17 @@ pub fn run(args: &BakeArgs) -> Result<()> {
     };
     let plan = Plan::for_renderer(&config, &scene, &renderer)?;
     print_plan(&plan.params, &progress);
+    if let Some(shard) = args.shard.filter(|s| s.index as usize >= plan.params.clusters) {
+        progress.warn(&format!(
+            "shard {shard} holds no clusters: the plan has {} cluster{}, so shards {}..{} are empty \
+             (a part without panes; use at most --shard I/{})",
+            plan.params.clusters,
+            plural(plan.params.clusters),
+            plan.params.clusters,
+            shard.count,
+            plan.params.clusters
+        ));
+    }
     if args.plan {
         if let Some(path) = &args.report {
             // The same shape as a bake's report, which nests them under "params".
@@ -369,13 +385,13 @@ pub fn run(args: &BakeArgs) -> Result<()> {
 /// (missing directories are created, as for the archive).
 fn check_report(report: &Path, archive: Option<&Path>, scene: &Path) -> Result<()> {
     if archive.is_some_and(|a| prm_format::same_destination(a, report)) {
-        bail!(
+        crate::refuse!(
             "--report {}: it is the archive the bake writes (-o); name another file",
             report.display()
         );
     }
     if prm_format::same_destination(scene, report) {
-        bail!("--report {}: it is the scene; name another file", report.display());
+        crate::refuse!("--report {}: it is the scene; name another file", report.display());
     }
     let is_archive = || {
         use std::io::Read;
@@ -386,9 +402,10 @@ fn check_report(report: &Path, archive: Option<&Path>, scene: &Path) -> Result<(
             && head == prm_format::MAGIC
     };
     if std::fs::metadata(report).is_ok_and(|m| m.is_file()) && is_archive() {
-        bail!("--report {}: it is a .prm archive; name another file", report.display());
+        crate::refuse!("--report {}: it is a .prm archive; name another file", report.display());
     }
-    prm_format::check_output_path(report).map_err(|why| anyhow::anyhow!("--report {}: {why}", report.display()))
+    prm_format::check_output_path(report)
+        .map_err(|why| anyhow::Error::new(crate::Refused(format!("--report {}: {why}", report.display()))))
 }
 
 /// Writes the report as JSON, creating missing directories.
@@ -426,12 +443,12 @@ fn print_plan(params: &BakeParams, progress: &Progress) {
 
 /// The summary on stdout: the archive and the timing breakdown.
 fn print_summary(r: &Report) {
-    println!(
+    outln!(
         "wrote {} ({:.2} MiB)",
         r.output.display(),
         r.archive_bytes as f64 / (1024.0 * 1024.0)
     );
-    println!("timing breakdown:");
+    outln!("timing breakdown:");
     for (name, key) in [
         ("scene load", "load"),
         ("atlas", "atlas"),
@@ -452,12 +469,12 @@ fn print_summary(r: &Report) {
         {
             continue;
         }
-        println!("  {name:<20} {:>9.3} s", r.timings.get(key).copied().unwrap_or(0.0));
+        outln!("  {name:<20} {:>9.3} s", r.timings.get(key).copied().unwrap_or(0.0));
     }
     if let Some(b) = r.peak_rss_bytes {
-        println!("peak memory: {:.0} MiB", b as f64 / (1024.0 * 1024.0));
+        outln!("peak memory: {:.0} MiB", b as f64 / (1024.0 * 1024.0));
     }
     if let Some(a) = &r.accuracy {
-        println!("estimated accuracy: {}", prm_bake::accuracy_line(a));
+        outln!("estimated accuracy: {}", prm_bake::accuracy_line(a));
     }
 }

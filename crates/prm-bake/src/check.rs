@@ -32,7 +32,7 @@ pub struct CheckArgs {
 /// `prm-bake check`.
 pub fn run(args: &CheckArgs) -> Result<()> {
     if args.accuracy_points == 0 || args.accuracy_paths == 0 {
-        anyhow::bail!("--accuracy-points and --accuracy-paths must be at least 1");
+        crate::refuse!("--accuracy-points and --accuracy-paths must be at least 1");
     }
     let scene = prm_scene::load(&args.scene).with_context(|| format!("cannot load scene {}", args.scene.display()))?;
     let mut progress = Progress::new(args.quiet);
@@ -47,7 +47,7 @@ pub fn run(args: &CheckArgs) -> Result<()> {
         .with_context(|| format!("checking {} against {}", args.archive.display(), args.scene.display()))?;
     accuracy.validate().map_err(|e| anyhow::anyhow!("no estimate: {e}"))?;
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&accuracy)?);
+        outln!("{}", serde_json::to_string_pretty(&accuracy)?);
     } else {
         crate::dump::write_accuracy(&mut std::io::stdout().lock(), "estimated accuracy: ", &accuracy)?;
     }

@@ -28,6 +28,12 @@ pub struct DumpArgs {
 
 /// Runs `prm-bake dump`.
 pub fn run(args: &DumpArgs) -> Result<()> {
+    if let Some(dir) = args.export_exr.as_ref().filter(|d| d.exists() && !d.is_dir()) {
+        crate::refuse!(
+            "--export-exr {}: it exists and is not a directory (--export-exr names the directory the EXR files go to)",
+            dir.display()
+        );
+    }
     let mut archive =
         Archive::open(&args.file).with_context(|| format!("cannot open archive {}", args.file.display()))?;
     let report = if args.verify {

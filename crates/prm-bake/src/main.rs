@@ -1,6 +1,15 @@
 //! `prm-bake`: bakes Precomputed Radiance Maps (through the `prm_bake` library) and inspects
 //! scenes and archives.
 
+/// `println!` that stops printing quietly when standard output is closed (`prm-bake atlas x.obj
+/// | head -1`): the command still finishes and exits as it would have.
+macro_rules! outln {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stdout().lock(), $($arg)*);
+    }};
+}
+
 mod atlas;
 mod bake;
 mod check;
@@ -19,7 +28,7 @@ use std::process::ExitCode;
 /// random walks from sampled entry points, and stores, per cluster of entry points, the indirect
 /// irradiance that unit irradiance on the cluster causes at every exit point.
 #[derive(Parser)]
-#[command(name = "prm-bake", version, about, long_about = None)]
+#[command(name = "prm-bake", version, about, long_about = None, after_help = EXIT_STATUS)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -34,6 +43,7 @@ enum Command {
     /// direct and indirect light the player scales at run time (prm-play --emitter); --sky also
     /// bakes the sky's transfer, so that any sky lights the archive (prm-play --sky).
     /// Example: prm-bake bake scenes/cornell-box/cornell-box.gltf -o out/cornell-box.prm
+    #[command(after_help = EXIT_STATUS)]
     Bake(Box<bake::BakeArgs>),
     /// Join the partial archives of a sharded bake (`bake --shard I/N`) into one archive.
     ///
@@ -41,10 +51,12 @@ enum Command {
     /// repeated shard. CPU-baked shards merge into exactly the bytes a single bake writes; with
     /// --scene the merged archive's accuracy is checked and recorded as a single bake's is.
     /// Example: prm-bake merge part-0.prm part-1.prm -o out/scene.prm --scene scene.obj
+    #[command(after_help = EXIT_STATUS)]
     Merge(merge::MergeArgs),
     /// Load a scene (OBJ or glTF), build its lightmap atlas and print statistics.
     ///
     /// Example: prm-bake atlas scenes/cornell-box/cornell-box.obj --resolution 256 --png charts.png
+    #[command(after_help = EXIT_STATUS)]
     Atlas(atlas::AtlasArgs),
     /// Estimate an archive's accuracy as a bake's last step does: its indirect light, played
     /// as prm-play plays it, against the reference path tracer under three test lights.
@@ -52,17 +64,20 @@ enum Command {
     /// For a merged sharded bake (whose shards skip the check) or at another size than the
     /// bake's. Needs the scene the archive was baked from; refuses another.
     /// Example: prm-bake check scenes/cornell-box/cornell-box.gltf out/cornell-box.prm
+    #[command(after_help = EXIT_STATUS)]
     Check(check::CheckArgs),
     /// Inspect a .prm archive: summary, JSON, full verification or EXR export of its panes.
     ///
     /// Without --verify it reads the header, the section table and the metadata; --verify also
-    /// reads every pane and section and checks their checksums. Exit status 0 when what was
-    /// read is good, 1 when it is damaged or cannot be read, 2 when the arguments are wrong.
+    /// reads every pane and section and checks their checksums: exit status 1 when the archive
+    /// is damaged or cannot be read.
+    #[command(after_help = EXIT_STATUS)]
     Dump(dump::DumpArgs),
     /// Reference path tracer: ground-truth image or lightmap (EXR) under given lights.
     ///
     /// Example: prm-bake reference scenes/cornell-box/cornell-box.obj
     /// --light point:0.278,0.5,0.2795:0.2347,0.1566,0.0418 --spp 256 -o ref.exr
+    #[command(after_help = EXIT_STATUS)]
     Reference(reference::ReferenceArgs),
 }
 
@@ -82,8 +97,65 @@ fn main() -> ExitCode {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e:#}");
-            ExitCode::FAILURE
+            ExitCode::from(exit_status(&e))
         }
+    }
+}
+
+/// The exit statuses, as `--help` states them.
+const EXIT_STATUS: &str = "Exit status: 0 success; 2 the command was refused before any work (a wrong argument \
+or parameter, an output that may not be written, a path that is no scene file: nothing was written); 1 a failure \
+during the work (an unreadable or damaged input, the GPU).";
+
+/// An argument refused before any work: exit status 2.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct Refused(pub String);
+
+/// Returns early with a [`Refused`] error (exit status 2) from a `format!` message.
+macro_rules! refuse {
+    ($($arg:tt)*) => {
+        return Err(anyhow::Error::new(crate::Refused(format!($($arg)*))))
+    };
+}
+pub(crate) use refuse;
+
+/// The exit status of a failed command: 2 when it was refused before any work (a wrong argument,
+/// parameters the bake cannot do, an output that may not be written, a scene path that names no
+/// scene file: nothing was written), 1 when work failed (an input that cannot be read, a
+/// damaged archive, the GPU). Clap's own refusals exit 2 as well.
+fn exit_status(e: &anyhow::Error) -> u8 {
+    use prm_bake::BakeError;
+    use prm_scene::SceneError;
+    let refused = e.chain().any(|c| {
+        c.is::<Refused>()
+            || matches!(
+                c.downcast_ref::<BakeError>(),
+                Some(
+                    BakeError::InvalidParams(_)
+                        | BakeError::OverLimit(_)
+                        | BakeError::ConfigParse { .. }
+                        | BakeError::Destination(_)
+                )
+            )
+            || matches!(
+                c.downcast_ref::<prm_format::Error>(),
+                Some(prm_format::Error::Destination { .. })
+            )
+            || matches!(
+                c.downcast_ref::<SceneError>(),
+                Some(
+                    SceneError::NotFound(_)
+                        | SceneError::IsDirectory(_)
+                        | SceneError::Stdin
+                        | SceneError::UnsupportedFormat(_)
+                )
+            )
+    });
+    if refused {
+        2
+    } else {
+        1
     }
 }
 
@@ -104,6 +176,53 @@ mod tests {
         assert_eq!(sky(&["--sky", "--sky-paths", "64"]), (Some(true), Some(64)));
         assert_eq!(sky(&[]), (None, None));
         assert!(Cli::try_parse_from(["prm-bake", "bake", "s.obj", "-o", "o.prm", "--sky-paths", "64"]).is_err());
+    }
+
+    /// Values refused before any work exit 2 with clap's message naming the option, and
+    /// negative coordinates are values (`reference --camera -1,...`).
+    #[test]
+    fn bad_values_are_refused_up_front_with_status_2() {
+        let bake = |extra: &[&str]| {
+            Cli::try_parse_from([&["prm-bake", "bake", "s.obj", "-o", "o.prm"][..], extra].concat()).map(|_| ())
+        };
+        for args in [
+            &["--top-k", "0"][..],
+            &["--entries", "0"],
+            &["--clusters", "0"],
+            &["--resolution", "1"],
+            &["--paths-per-entry", "0"],
+        ] {
+            let e = bake(args).unwrap_err();
+            assert_eq!(e.exit_code(), 2, "{args:?}: {e}");
+            assert!(e.to_string().contains(args[0]), "{args:?}: {e}");
+        }
+        let reference = |extra: &[&str]| Cli::try_parse_from([&["prm-bake", "reference", "s.obj"][..], extra].concat());
+        if let Err(e) = reference(&[
+            "--camera",
+            "-1,0.5,-2:0,0.5,0:40",
+            "--light",
+            "point:-1,1,-1:1,1,1",
+            "-o",
+            "r.exr",
+        ]) {
+            panic!("negative coordinates: {e}");
+        }
+        let e = reference(&["--size", "-5x5"]).map(|_| ()).unwrap_err();
+        assert!(
+            e.to_string().contains("--size") && !e.to_string().contains("unexpected argument"),
+            "{e}"
+        );
+    }
+
+    /// Refusals of arguments and parameters exit 2; failures of the work exit 1.
+    #[test]
+    fn exit_status_tells_refusals_from_failures() {
+        let params = prm_bake::BakeError::InvalidParams("--entries must be at least 1".into());
+        assert_eq!(exit_status(&anyhow::Error::new(params).context("planning")), 2);
+        assert_eq!(exit_status(&anyhow::Error::new(Refused("--report".into()))), 2);
+        let missing = prm_scene::SceneError::NotFound("x.obj".into());
+        assert_eq!(exit_status(&anyhow::Error::new(missing)), 2);
+        assert_eq!(exit_status(&anyhow::anyhow!("the GPU was lost")), 1);
     }
 
     /// `--probes` alone takes the library's cell budget; `--probes N` takes N.

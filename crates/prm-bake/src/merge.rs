@@ -27,7 +27,14 @@ pub struct MergeArgs {
 pub fn run(args: &MergeArgs) -> Result<()> {
     // As for a bake: SIGINT, SIGTERM and SIGHUP remove the temporary file.
     crate::signals::install(prm_format::check_destination(&args.output)?);
-    let context = || format!("merging {} parts into {}", args.parts.len(), args.output.display());
+    let context = || {
+        format!(
+            "merging {} part{} into {}",
+            args.parts.len(),
+            prm_bake::params::plural(args.parts.len()),
+            args.output.display()
+        )
+    };
     let merged = match &args.scene {
         None => prm_bake::merge(&args.parts, &args.output).with_context(context)?,
         Some(path) => {
@@ -40,7 +47,7 @@ pub fn run(args: &MergeArgs) -> Result<()> {
         }
     };
     if !args.quiet {
-        println!(
+        outln!(
             "wrote {} ({} panes from {} shards, {:.2} MiB)",
             args.output.display(),
             merged.panes,

@@ -209,6 +209,9 @@ struct PresetValues {
     paths: u32,
     top_k: usize,
     face: u32,
+    /// The run-time memory budget the preset's panes need, MiB, when the configuration gives
+    /// none (`None`: [`DEFAULT_MEMORY_BUDGET_MIB`]).
+    memory_budget_mib: Option<f64>,
 }
 
 fn preset_values(p: Preset) -> Option<PresetValues> {
@@ -220,6 +223,7 @@ fn preset_values(p: Preset) -> Option<PresetValues> {
             paths: 1,
             top_k: 16,
             face: 64,
+            memory_budget_mib: None,
         }),
         Preset::Paper => Some(PresetValues {
             entries: 4096,
@@ -228,6 +232,7 @@ fn preset_values(p: Preset) -> Option<PresetValues> {
             paths: 1,
             top_k: 32,
             face: 128,
+            memory_budget_mib: None,
         }),
         Preset::High => Some(PresetValues {
             entries: 16384,
@@ -236,10 +241,15 @@ fn preset_values(p: Preset) -> Option<PresetValues> {
             paths: 2,
             top_k: 64,
             face: 256,
+            // 1024 panes of 512² RGB9E5 texels.
+            memory_budget_mib: Some(1024.0),
         }),
         Preset::Default => None,
     }
 }
+
+/// The most texels a pane may have: an 8192² atlas.
+const MAX_ATLAS_TEXELS: f64 = 8192.0 * 8192.0;
 
 /// Default budgets.
 pub const DEFAULT_ARCHIVE_BUDGET_MIB: f64 = 512.0;
@@ -386,60 +396,26 @@ const MIN_AUTO_TOP_K: usize = 32;
 
 /// How many times the automatic entry points double where the time budget allows (below):
 /// McGuire's box low near the red wall wants 4096 entry points (4.7%, 7.0% with 2048, every
-/// cluster blended), four times its charts' 1024. It was once.
+/// cluster blended), four times its charts' 1024.
 const MAX_DOUBLINGS: usize = 2;
 
 /// The largest `vpl_disk_scale`: at the fewest entry points (1024) a scene is about
 /// √1024 = 32 entry-point radii across, so a disk of 1000 radii already covers any scene many
-/// times over; larger values only overflow the near field's disk (QA: 1e30 failed after the
+/// times over; larger values only overflow the near field's disk (1e30 would fail after the
 /// panes with an infinite disk).
 pub const MAX_VPL_DISK_SCALE: f32 = 1000.0;
 
 /// The VPL disk's radius multiplier (`vpl_disk_scale`) where the bake traces the near field and
-/// its hits fit [`NEAR_HIT_BUDGET`]: the panes then bound each VPL by a disk this many times
-/// the radius of its entry point's area `A/N`, with the kernel that completes the near field's
-/// cut weights (format 1.9, `prm_trace::VplBound::Near`), and the near field gathers back, from
-/// the texels' light of the frame, what the disk removes within about `3.9 ×` that radius. A
-/// larger disk moves more of the light from the entry points' point samples to the gather,
-/// whose noise is per texel rather than per entry point.
-///
-/// Session 19 measured 1 to 4 with one gather of the deeper share (image space, indirect light,
-/// 4×4 error; seed 1 for the fireplace room's 120 s sizes and Sponza's 60 s plan under the sun
-/// of `cargo xtask eval --sky`; McGuire's box under the ceiling / low near the red wall with the
-/// energy of the second): 1: 3.71% / 3.93% (0.989), 12.57%, 22.69% (the 1.8 kernel); 2: 3.57% /
-/// 3.98% (0.986), 11.24%, 19.62%; 3: 3.66% / 4.37% (0.983), 10.92%, 17.88%; 4: 3.83% / 4.91%
-/// (0.978), 10.81%, 16.64%. 4 took the red-wall light's energy outside the ±2% of issue #11,
-/// so 3. With the series of the player's near field (two gathers and the tail, session 25) the
-/// energy no longer falls with the disk, and larger disks win everywhere (default bakes, seed
-/// 0; McGuire's box against a reference of session 20, the fireplace room against the eval's;
-/// `cargo xtask eval --targets` for 3 → 8):
-///
-/// | scale | McGuire's box, 4×4 (full res.) | fireplace room, default | Sponza, sun |
-/// | ---: | ---: | ---: | ---: |
-/// | 2 | | 7.66% | |
-/// | 3 | 3.14% (5.08%) / 2.94% (4.66%) | 7.08% | 15.94% |
-/// | 4 | 2.99% (5.01%) / 2.66% (4.57%) | 6.76% | |
-/// | 6 | 2.76% (4.93%) / 2.44% (4.74%) | 6.35% | |
-/// | **8** | 2.65% (4.94%) / 2.43% (5.17%) | **6.06%** | **13.68%** |
-/// | 12 | 2.55% (5.14%) / 2.72% (6.31%) | | |
-///
-/// Past 8 the full-resolution error grows (the gather's 64 rays a texel show), and the near
-/// field holds more hits: the fireplace room's 9.8 M rays instead of 7.0 M at 3, its `gi` frame
-/// on lavapipe (with the second gather) 1.63 times its direct light instead of 1.37. Without
-/// the near field (`--near-rays 0`) the scale stays 1: nothing gives back what a larger disk
-/// removes. The measurements are of automatic plans, which take 1024 entry points or more; with
-/// few entry points set by hand the disks grow with their radius (256 on the Cornell box: 40 cm
-/// in a 55 cm box, and the bake's own estimate 28% at K = 1 and K = all alike, before the
-/// estimate played the near field's series in session 28), so the tests' small bakes set 3.
-/// The played image does not suffer from them: McGuire's box (`Ke` = 0) with `--entries 256
-/// --clusters 64`, played at `--targets`' camera and lights against its references (session
-/// 27, stratified near rays), scale 1: 7.49% / 13.28%, 3: 4.76% / 6.76%, 4: 3.95% / 4.93%, 8:
-/// **3.16% / 2.35%**.
+/// its hits fit [`NEAR_HIT_BUDGET`]: the panes bound each VPL by a disk this many times the
+/// radius of its entry point's area `A/N`, and the near field gathers back what the disk
+/// removes, so a larger disk moves light from the entry points' point samples to the gather.
+/// Measured by `cargo xtask eval --targets` (default bakes, 4×4 error): the fireplace room 6.06%
+/// at 8 against 6.76% at 4 and 7.08% at 3, McGuire's box 2.65% / 2.43%; past 8 the
+/// full-resolution error grows. Without the near field (`--near-rays 0`) the scale is 1.
 pub const NEAR_FIELD_DISK_SCALE: f32 = 8.0;
 
-/// The scale where the near field's hits could pass [`NEAR_HIT_BUDGET`]: session 19's choice
-/// (above), whose smaller reach keeps fewer hits (a 1024² fireplace room played at 3). Also the
-/// scale of a bake whose probes are lit through the panes (`--probe-rays 0`): a probe has no
+/// The scale where the near field's hits could pass [`NEAR_HIT_BUDGET`], whose smaller reach
+/// keeps fewer hits (a 1024² fireplace room plays at 3). Also the scale of a bake whose probes are lit through the panes (`--probe-rays 0`): a probe has no
 /// near field, and the disks take its light (`cargo xtask eval --probes`, the panes' column,
 /// default Cornell box: 23.2%, energy 0.881, at 3; 45.9%, 0.681, at 8).
 pub const NEAR_FIELD_DISK_SCALE_LARGE: f32 = 3.0;
@@ -452,51 +428,52 @@ pub const NEAR_FIELD_DISK_SCALE_LARGE: f32 = 3.0;
 /// by hand passes it even at [`NEAR_FIELD_DISK_SCALE_LARGE`].
 pub const NEAR_HIT_BUDGET: u64 = 1 << 24;
 
-/// Entry points per cluster of the automatic cluster count. Measured in image space
-/// (`cargo xtask eval --targets`, 4×4 error, K = 32 and 64 residual groups; the default 16 give
-/// 7.5%, 9.1%, 6.0% and 7.5% on the four cases below, `prm_format::RESIDUAL_GROUPS`): McGuire's box with
-/// 2048 entry points had 64 clusters (32 per cluster) at 6.9% with every cluster blended
-/// (light under the ceiling) and 21.3% (low near the red wall: a cluster's members lit and in
-/// shadow share one weight, so the lit ones' light leaves from the shadowed ones' panes); 256
-/// clusters (8 per cluster) 5.2% and 9.2%, and 1024 clusters 5.4% and 7.1%. Blended as played,
-/// 8 per cluster: 6.4% and 9.2%, CornellBox-Sphere 4.9% (6.8% before), chairs (960 clusters)
-/// 6.3% (7.4%). The bake's time follows the VPL count, not the clusters; the panes' memory and
-/// archive follow the clusters (the budgets cap them).
+/// Entry points per cluster of the automatic cluster count. Measured by `cargo xtask eval
+/// --targets` (4×4 error, every cluster blended): McGuire's box with 2048 entry points, light
+/// under the ceiling / low near the red wall, 6.9% / 21.3% at 32 per cluster (a cluster's lit and
+/// shadowed members share one weight), 5.2% / 9.2% at 8 and 5.4% / 7.1% at 2. The bake's time
+/// follows the VPL count, not the clusters; the panes' memory and archive follow the clusters
+/// (the budgets cap them).
 const ENTRIES_PER_CLUSTER: usize = 8;
 
-/// Walks in all that the automatic walks per entry point aim at. Measured in image space
-/// (`cargo xtask eval --targets`'s cases, 4×4 error, every cluster blended, 8 entry points per
-/// cluster): McGuire's box under the ceiling light, 2048 entry points with 8, 16, 32 and 64
-/// walks each, 5.1%, 4.4%, 3.9% and 3.4%; 4096 with 16, 3.4%. Low near the red wall the
-/// entry points count instead: 9.1%, 7.0%, 7.1%, 7.3% with 2048 and 4.7% with 4096 (1024 with
-/// 32 walks: 13.1%). CornellBox-Sphere, 2048 with 8 against 4096 with 16: 4.5% → 2.8%; chairs,
-/// 7680 with 3 against 7680 with 8: 5.5% → 4.1%. The bake's time follows the walks: 6.4 s →
-/// 24 s on McGuire's box, 13 → 33 s on CornellBox-Sphere, 34 → 89 s on chairs. It was 8192.
+/// Walks in all that the automatic walks per entry point aim at. Measured by `cargo xtask eval
+/// --targets` (4×4 error, every cluster blended, 8 entry points per cluster): McGuire's box under
+/// the ceiling light, 2048 entry points with 8, 16, 32 and 64 walks each, 5.1%, 4.4%, 3.9% and
+/// 3.4%; CornellBox-Sphere at 4096 × 16 2.8% (4.5% at 2048 × 8), chairs at 7680 × 8 4.1% (5.5%
+/// at 7680 × 3). The bake's time follows the walks: 24 s on McGuire's box, 33 s on
+/// CornellBox-Sphere, 89 s on chairs.
 const WALKS_IN_ALL: usize = 65536;
 
 /// Most walks per entry point where the cluster cap cuts the automatic entry points (below):
-/// those it keeps walk towards twice `WALKS_IN_ALL` in all, up to this many each, as far as
-/// the time budget allows. The cap cuts the large scenes, whose charts want 15360–16384 entry
-/// points and whose 512² panes fit 205 clusters: the fireplace room, Sponza and Sibenik keep
-/// 3072, and their walk noise is then the largest share of the error that is left. Measured on
-/// the fireplace room's default plan (`cargo xtask eval --targets`' lamp and reference, 4×4
-/// error, seeds 0 / 1 / 2; the bake on the reference machine, shared):
-///
-/// | walks per entry | 4×4 error | energy | bake s |
-/// | ---: | ---: | ---: | ---: |
-/// | 16 (the cap of [`auto_walks_per_entry`], before session 29) | 5.58% / 6.32% / 6.29% | 1.024 / 1.042 / 0.975 | 110 |
-/// | 22 (about `WALKS_IN_ALL` in all) | 5.34% / 6.04% / | 1.020 / 1.038 / | 145 |
-/// | **32** | 5.32% / 5.75% / 5.98% | 1.021 / 1.033 / 0.980 | 208 |
-///
-/// The shape error moves less (seed 2: 5.56% → 5.47%) than the error: the walks take out part
-/// of the energy's bias and of the seeds' spread, and 32 is the first count tried that meets
-/// issue #11's 6% at all three seeds (`cargo xtask eval --targets`: 5.4% and 5.8%). The bake
-/// follows the walks (the panes' VPLs), within the 600 s default budget. Sponza's and Sibenik's
-/// plans rise alike, and Sponza does not gain (`cargo xtask eval --sky`, sky and sun, seeds 0 /
-/// 1: 10.38% / 8.49% → 10.50% / 8.66%, its bake 269 → 410 s): its error was then mostly
-/// systematic, the shadow lookups' leak of the sun's light (since mended:
-/// `prm_runtime::RuntimeOptions::DEFAULT_NORMAL_OFFSET`), which more walks do not reduce.
+/// those it keeps walk towards twice `WALKS_IN_ALL` in all, up to this many each, as far as the
+/// time budget allows (the fireplace room, Sponza and Sibenik keep 3072 of 15360–16384, and walk
+/// noise is then the largest share of their error). Measured by `cargo xtask eval --targets` on
+/// the fireplace room's default plan (4×4 error, seeds 0 / 1 / 2): 5.32% / 5.75% / 5.98% with a
+/// 208 s bake, against 5.58% / 6.32% / 6.29% and 110 s at 16; 32 is the first count tried under
+/// 6% at all three seeds. Sponza does not gain (`cargo xtask eval --sky`, sky and sun).
 const CAPPED_WALKS: u32 = 32;
+
+/// The smallest automatic atlas side that holds `charts` charts: every chart needs a texel and
+/// its gutters, a 3×3 block at the least, in whole steps of 32 texels.
+fn atlas_floor(charts: usize) -> u32 {
+    ((3.0 * (charts as f64).sqrt() / 32.0).ceil() as u32 * 32).max(32)
+}
+
+/// Why the automatic top K is `k`: the panes a frame blends less the residual groups, with the
+/// arithmetic only where it holds (when the groups take every pane, the floor decides).
+fn top_k_reason(k: usize, panes: usize, texels_per_pane: f64, groups: usize, clusters: usize) -> String {
+    let frame = format!("{panes} pane{} of {texels_per_pane:.0} texels a frame", plural(panes));
+    if k == clusters && k < panes.saturating_sub(groups).max(MIN_AUTO_TOP_K) {
+        format!("top K {k}: every cluster ({frame})")
+    } else if panes >= groups + MIN_AUTO_TOP_K {
+        format!("top K {k}: {frame} less {groups} residual groups")
+    } else {
+        format!(
+            "top K {k}: at least {MIN_AUTO_TOP_K} ({frame} leave {} beside {groups} residual groups)",
+            panes.saturating_sub(groups)
+        )
+    }
+}
 
 /// The automatic walks per entry point: enough for about `WALKS_IN_ALL`, 1 to 16.
 fn auto_walks_per_entry(entries: usize) -> u32 {
@@ -538,26 +515,15 @@ impl BakeParams {
     /// - atlas: the atlas's own automatic size (about 12 texels per triangle, 256 to 4096 a side),
     ///   shrunk until `AUTO_ATLAS_PANES` (256) panes fit the run-time memory budget;
     /// - entries: 4 per chart (charts are the scene's distinct flat pieces), 1024 to 16384, a
-    ///   multiple of 256, and (applied after the time budget below, at the atlas it leaves, the
-    ///   walks per entry then rising towards twice `WALKS_IN_ALL`, at most `CAPPED_WALKS` (32)
-    ///   each, as far as the budget allows)
-    ///   no more than 16 per cluster the bake can have (`--clusters`, or the most the memory and
-    ///   archive budgets allow; not below 1024). Applied before the budget's shrinking, it let
-    ///   Sponza under a 60 s budget trade clusters for atlas (128 at 608² instead of 240 at 512²:
-    ///   52.3 % from the reference instead of 42.4 %, `cargo xtask eval --budget`). Where the
-    ///   budgets cap the clusters, more entry points only crowd them: Sibenik (704², 135
-    ///   clusters at most) estimated its own error (`--accuracy-points`, three lights) at
-    ///   83/49/41 % with 2048 entries (128 clusters, 4 walks each, 62 s), 91/52/44 % with 4096,
-    ///   81/50/41 % with 8192 and 80/50/42 % with 16384 (1 walk, 198 s), standard errors
-    ///   2–7 points: the same, for three times the time, since pane rendering follows the VPL
-    ///   count, which the entry points' own VPLs raise. The fireplace room's 205 clusters of
-    ///   512², 14 walks per entry, played against the reference (image space, seeds 0, 1, 2):
-    ///   3072 entries 9.30 / 9.45 / 12.96 % (energy 0.990 / 1.010 / 0.919), 6144 entries 11.08
-    ///   / 11.31 / 9.68 % (0.966 / 0.957 / 0.972) for 1.8 times the bake: the seeds' spread
-    ///   narrows, their mean does not move, and the energy falls. The other way, twice the
-    ///   clusters (410, the same 3072 entries; 410 MiB of panes with `memory_budget_mib =
-    ///   512`): 9.30 / 12.15 % (seeds 0 and 2; energy 0.985 / 0.928) for the same bake, so the
-    ///   memory budget's cap on the clusters is not what holds the room at 9–13 %;
+    ///   multiple of 256, and no more than 16 per cluster the bake can have (`--clusters`, or the
+    ///   most the memory and archive budgets allow; not below 1024), applied after the time
+    ///   budget below, at the atlas it leaves, the walks per entry then rising towards twice
+    ///   `WALKS_IN_ALL`, at most `CAPPED_WALKS` (32) each, as far as the budget allows. Where the
+    ///   budgets cap the clusters, more entry points only crowd them: Sibenik's own error estimate
+    ///   (`--accuracy-points`, three lights) is the same at 2048 and 16384 entries, for three
+    ///   times the bake; applied before the time budget's shrinking, the cap would let Sponza
+    ///   under a 60 s budget trade clusters for atlas (52.3 % from the reference instead of
+    ///   42.4 %, `cargo xtask eval --budget`);
     /// - walks per entry: enough for about `WALKS_IN_ALL` (65536) walks in all, 1 to 16;
     /// - then, while `cost` expects the bake to take longer than the time budget,
     ///   fewer walks, fewer entries (down to 1024) or a smaller atlas (down to 128²), whichever is
@@ -565,16 +531,15 @@ impl BakeParams {
     /// - then, where neither the time budget nor the cap cut anything and the budget allows it,
     ///   twice the entry points, up to `MAX_DOUBLINGS` (2) times, at most 16384 and at most
     ///   `ENTRIES_PER_CLUSTER` per cluster the budgets allow, the walks per entry falling to
-    ///   keep about `WALKS_IN_ALL`. One doubling was the largest step down the
+    ///   keep about `WALKS_IN_ALL`. One doubling is the largest step down the
     ///   accuracy-against-speed front (`cargo xtask eval --full`, lightmap error, mean of three
-    ///   lights): the Cornell box 0.131 → 0.111 for a bake of 2.7 → 4.4 s, CornellBox-Sphere
-    ///   0.125 → 0.114 (9.5 → 13.7 s), chairs 0.120 → 0.107 (13.6 → 24.3 s); where the budgets
-    ///   cap the clusters more entries only crowd them (above);
+    ///   lights): the Cornell box 0.111 for a bake of 4.4 s (0.131, 2.7 s undoubled),
+    ///   CornellBox-Sphere 0.114, 13.7 s (0.125, 9.5 s), chairs 0.107, 24.3 s (0.120, 13.6 s);
+    ///   where the budgets cap the clusters more entries only crowd them (above);
     /// - clusters: entries / `ENTRIES_PER_CLUSTER` (8), 32 to 1024, then as many as the
     ///   memory budget (the clusters' panes and the residual groups' summed ones, up to one per
     ///   4 clusters, at most `prm_format::RESIDUAL_GROUPS`) and the archive budget allow (archive estimate: 1.5 bytes per covered texel
     ///   per pane, the measured RGB9E5 + filter + zstd rate on smooth panes, doubled for safety).
-    ///   It was entries / 16 (entries / 32 after the doubling) before the measurement there.
     pub fn resolve(
         config: &BakeConfig,
         scene: &Scene,
@@ -583,8 +548,12 @@ impl BakeParams {
         probe: impl Fn() -> Result<Atlas, BakeError>,
     ) -> Result<BakeParams, BakeError> {
         let preset = config.preset.unwrap_or(Preset::Default);
+        let fixed = preset_values(preset);
         let archive_budget_mib = config.archive_budget_mib.unwrap_or(DEFAULT_ARCHIVE_BUDGET_MIB);
-        let memory_budget_mib = config.memory_budget_mib.unwrap_or(DEFAULT_MEMORY_BUDGET_MIB);
+        let memory_budget_mib = config
+            .memory_budget_mib
+            .or(fixed.as_ref().and_then(|v| v.memory_budget_mib))
+            .unwrap_or(DEFAULT_MEMORY_BUDGET_MIB);
         let time_budget_s = config.time_budget_s.unwrap_or(DEFAULT_TIME_BUDGET_S);
         if !(archive_budget_mib > 0.0 && memory_budget_mib > 0.0 && time_budget_s > 0.0) {
             invalid!(
@@ -593,7 +562,6 @@ impl BakeParams {
             );
         }
         let mut reasons = Vec::new();
-        let fixed = preset_values(preset);
         let mut auto_resolution = None;
         let mut atlas = match (config.resolution, config.texel_size, &fixed) {
             (Some(r), _, _) => AtlasSize::Resolution(r),
@@ -603,8 +571,10 @@ impl BakeParams {
                 let auto = probe()?;
                 let mut r = auto.resolution;
                 let memory_texels = memory_budget_mib * 1024.0 * 1024.0 / 4.0;
-                while r > 64 && (AUTO_ATLAS_PANES as f64 * (r as f64).powi(2)) > memory_texels {
-                    r -= 64;
+                // Never below what the charts need: the bake would refuse that atlas.
+                let floor = atlas_floor(auto.stats.charts as usize).min(auto.resolution);
+                while r > floor.max(64) && (AUTO_ATLAS_PANES as f64 * (r as f64).powi(2)) > memory_texels {
+                    r = (r - 64).max(floor);
                 }
                 reasons.push(format!(
                     "atlas {r}² texels: {} triangles want about 12 texels each{}",
@@ -674,9 +644,8 @@ impl BakeParams {
         let estimate = |entries: usize, paths: u32, atlas: AtlasSize| {
             cost.bake_seconds(entries, paths, bounces_per_walk, utilization * texels(atlas), triangles)
         };
-        // Every chart needs a texel and its gutters: a 3×3 block at the least.
-        let atlas_floor = match auto_resolution {
-            Some(_) => ((3.0 * (probe()?.stats.charts as f64).sqrt() / 32.0).ceil() as u32 * 32).max(128),
+        let smallest_atlas = match auto_resolution {
+            Some(r) => atlas_floor(probe()?.stats.charts as usize).max(128).min(r),
             None => 128,
         };
         let planned = estimate(entries, paths_per_entry, atlas);
@@ -687,10 +656,10 @@ impl BakeParams {
             let fewer_entries = (auto_entries && entries > 1024)
                 .then(|| (((entries * 3 / 4) / 256 * 256).max(1024), paths_per_entry, atlas));
             let smaller_atlas = match atlas {
-                AtlasSize::Resolution(r) if auto_resolution.is_some() && r > atlas_floor => Some((
+                AtlasSize::Resolution(r) if auto_resolution.is_some() && r > smallest_atlas => Some((
                     entries,
                     paths_per_entry,
-                    AtlasSize::Resolution(((r * 7 / 8) / 32 * 32).max(atlas_floor)),
+                    AtlasSize::Resolution(((r * 7 / 8) / 32 * 32).max(smallest_atlas)),
                 )),
                 _ => None,
             };
@@ -791,11 +760,7 @@ impl BakeParams {
                 let groups = prm_format::residual_group_count(clusters, prm_format::RESIDUAL_GROUPS) as usize;
                 let panes = (BLEND_TEXELS / texels_per_pane) as usize;
                 let k = panes.saturating_sub(groups).max(MIN_AUTO_TOP_K);
-                reasons.push(format!(
-                    "top K {}: {panes} panes of {texels_per_pane:.0} texels a frame, less {groups} residual groups \
-                     (at least {MIN_AUTO_TOP_K})",
-                    k.min(clusters)
-                ));
+                reasons.push(top_k_reason(k.min(clusters), panes, texels_per_pane, groups, clusters));
                 k
             }
         }
@@ -953,7 +918,13 @@ impl BakeParams {
         }
         if let AtlasSize::TexelSize(s) = self.atlas {
             if !(s.is_finite() && s > 0.0) {
-                invalid!("texel size {s} must be a positive number");
+                invalid!("--texel-size {s} must be a positive number");
+            }
+            if texels_per_pane > MAX_ATLAS_TEXELS {
+                over_limit!(
+                    "--texel-size {s} gives about {texels_per_pane:.3e} texels, more than an 8192² atlas holds; \
+                     use a larger --texel-size"
+                );
             }
         }
         if !(8..=2048).contains(&self.face_resolution) {
@@ -969,10 +940,14 @@ impl BakeParams {
         if memory_mib > self.memory_budget_mib {
             over_limit!(
                 "{} panes of {:.0} texels need {memory_mib:.0} MiB at run time, over the {:.0} MiB memory budget; \
-                 use fewer --clusters, a lower --resolution, or raise memory_budget_mib",
+                 use fewer --clusters, {}, or raise memory_budget_mib",
                 self.clusters,
                 texels_per_pane,
-                self.memory_budget_mib
+                self.memory_budget_mib,
+                match self.atlas {
+                    AtlasSize::Resolution(_) => "a lower --resolution",
+                    AtlasSize::TexelSize(_) => "a larger --texel-size",
+                }
             );
         }
         Ok(())

@@ -70,10 +70,10 @@ pub const PROBE_SKY_PATHS: u32 = 4096;
 
 /// Rays per probe of the probe rays section (`--probe-rays`): the directions along which the
 /// run time gathers each probe's light from the surfaces' radiance of the frame. Measured
-/// (`cargo xtask eval --probes`, error against the reference at the probe positions, 2048 →
-/// 1024 rays): Cornell box 2.90 → 2.95%, with 8192 entries 2.98 → 3.01%, two rooms 3.52 →
-/// 3.54%, courtyard under the sky 0.94 → 0.99%; the hits take 4 bytes a ray (the default
-/// Cornell box's section: 2.1 → 1.2 MB stored), and the gather points, which cost the frame,
+/// (`cargo xtask eval --probes`, error against the reference at the probe positions, 2048 rays
+/// in parentheses): Cornell box 2.95% (2.90%), with 8192 entries 3.01% (2.98%), two rooms 3.54%
+/// (3.52%), courtyard under the sky 0.99% (0.94%); the hits take 4 bytes a ray (the default
+/// Cornell box's section: 1.2 MB stored, 2.1 MB at 2048), and the gather points, which cost the frame,
 /// stay about 42,000 either way.
 pub const PROBE_RAYS: u32 = 1024;
 
@@ -196,8 +196,8 @@ const PROBE_ENTRIES: usize = 256;
 const PROBE_WALKS: u32 = 4;
 
 /// VPLs per walk beyond the entry points' own, measured on a few walks. In scenes open to the sky
-/// walks escape, and the closed-scene expectation was 2.2× too high on the Cornell box, which
-/// made the plan expect twice the bake's time.
+/// walks escape, and a closed-scene expectation is 2.2× too high on the Cornell box, which would
+/// make the plan expect twice the bake's time.
 fn measured_bounces_per_walk(scene: &Scene) -> Result<f64, BakeError> {
     let bvh = Bvh::build(scene, &BvhParams::DEFAULT).map_err(trace("building the BVH"))?;
     let entries = prm_trace::sample_surface(
@@ -563,14 +563,8 @@ pub fn bake(job: &BakeJob<'_>, renderer: Renderer<'_>, progress: &mut dyn Progre
         r = atlas.resolution
     );
     finish_phase(&mut timings, progress, Phase::Atlas, "atlas", t, &detail);
-    if atlas.stats.uncovered_triangles > 0 {
-        progress.warn(&format!(
-            "{} of {} triangles touch no lightmap texel (texel size {}): they get no indirect \
-             light; a smaller --texel-size or a larger --resolution gives them some",
-            atlas.stats.uncovered_triangles,
-            scene.triangles.len(),
-            atlas.stats.texel_size
-        ));
+    if let Some(w) = atlas.coverage_warning(scene.triangles.len()) {
+        progress.warn(&w);
     }
 
     let t = Instant::now();

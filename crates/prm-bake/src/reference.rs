@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
 use glam::Vec3;
 use prm_scene::{AtlasParams, Light, Sizing};
 use prm_trace::{
@@ -21,8 +21,8 @@ pub struct ReferenceArgs {
     /// (W/sr inside a rectangular frustum along D with vertical U, half angles about D × U and
     /// U) or `dir:DX,DY,DZ:R,G,B` (W/m² on a surface facing the light).
     /// Repeatable; defaults to the scene's own lights.
-    #[arg(long = "light", value_name = "SPEC")]
-    pub lights: Vec<String>,
+    #[arg(long = "light", value_name = "SPEC", value_parser = parse_light, allow_hyphen_values = true)]
+    pub lights: Vec<Light>,
     /// Light the scene with its emissive surfaces too (OBJ `Ke`, glTF `emissiveFactor` ×
     /// `KHR_materials_emissive_strength`): area lights at their own radiance, one group per
     /// emissive material; the full image shows the emitters themselves. With it, the scene's
@@ -47,11 +47,13 @@ pub struct ReferenceArgs {
     pub sky_rotation: f32,
     /// Camera `EX,EY,EZ:TX,TY,TZ:FOV_DEG` (eye, target, vertical FOV; +Y up). Defaults to the
     /// scene's first camera.
-    #[arg(long, value_name = "SPEC", conflicts_with = "lightmap")]
-    pub camera: Option<String>,
+    #[arg(long, value_name = "SPEC", conflicts_with = "lightmap", value_parser = parse_camera,
+          allow_hyphen_values = true)]
+    pub camera: Option<prm_scene::Camera>,
     /// Image size for the camera, `WxH`.
-    #[arg(long, value_name = "WxH", default_value = "512x512", conflicts_with = "lightmap")]
-    pub size: String,
+    #[arg(long, value_name = "WxH", default_value = "512x512", conflicts_with = "lightmap", value_parser = parse_size,
+          allow_hyphen_values = true)]
+    pub size: (u32, u32),
     /// Write the irradiance at the exit points of the scene's lightmap atlas instead of a camera
     /// image (atlas-sized image, texel (x, y) at row y; gutter texels copy their source).
     #[arg(long)]
@@ -83,7 +85,7 @@ pub fn run(args: &ReferenceArgs) -> Result<()> {
     // Refused before any tracing: an image named `.png` that holds an EXR misleads every viewer.
     let is_exr = args.output.extension().is_some_and(|e| e.eq_ignore_ascii_case("exr"));
     if !is_exr {
-        bail!(
+        crate::refuse!(
             "--output {}: the reference is written as OpenEXR (linear radiance); name it FILE.exr",
             args.output.display()
         );
@@ -97,10 +99,7 @@ pub fn run(args: &ReferenceArgs) -> Result<()> {
     let lights: Vec<Light> = if args.lights.is_empty() {
         scene.lights.clone()
     } else {
-        args.lights
-            .iter()
-            .map(|s| parse_light(s).with_context(|| format!("bad --light {s:?}")))
-            .collect::<Result<_>>()?
+        args.lights.clone()
     };
     let emitters = if args.emitters {
         let e = Emitters::from_scene(&scene);
@@ -113,7 +112,7 @@ pub fn run(args: &ReferenceArgs) -> Result<()> {
         let unscaled = e.groups.len();
         let e = Emitters::with_scales(&scene, &scales)?;
         if unscaled == 0 {
-            bail!(
+            crate::refuse!(
                 "--emitters: {} has no emissive material (OBJ Ke, glTF emissiveFactor)",
                 args.scene.display()
             );
@@ -132,7 +131,7 @@ pub fn run(args: &ReferenceArgs) -> Result<()> {
         None => None,
         Some(spec) => {
             if !(args.sky_intensity.is_finite() && args.sky_intensity >= 0.0 && args.sky_rotation.is_finite()) {
-                bail!("--sky-intensity must be finite and ≥ 0 and --sky-rotation finite");
+                crate::refuse!("--sky-intensity must be finite and ≥ 0 and --sky-rotation finite");
             }
             let mut sky = prm_scene::Sky::parse(spec).with_context(|| format!("bad --sky {spec:?}"))?;
             sky.intensity = args.sky_intensity;
@@ -142,7 +141,7 @@ pub fn run(args: &ReferenceArgs) -> Result<()> {
     };
     if lights.is_empty() && emitters.is_empty() && sky.is_none() {
         let emissive = Emitters::from_scene(&scene).groups.len();
-        bail!(
+        crate::refuse!(
             "{} has no lights of its own; give at least one --light SPEC or a --sky{}",
             args.scene.display(),
             if emissive > 0 {
@@ -203,19 +202,19 @@ pub fn run(args: &ReferenceArgs) -> Result<()> {
         for &(gutter, source) in &atlas.dilation {
             img[gutter as usize] = img[source as usize];
         }
-        report_noise(&est.variance, &values);
+        report_noise(&est.variance, &values, args.spp);
         (r, r, img)
     } else {
-        let camera = match &args.camera {
-            Some(s) => parse_camera(s).with_context(|| format!("bad --camera {s:?}"))?,
-            None => *scene
-                .cameras
-                .first()
-                .with_context(|| format!("{} has no camera; give --camera SPEC", args.scene.display()))?,
+        let camera = match args.camera {
+            Some(c) => c,
+            None => match scene.cameras.first() {
+                Some(c) => *c,
+                None => crate::refuse!("{} has no camera; give --camera SPEC", args.scene.display()),
+            },
         };
-        let (w, h) = parse_size(&args.size).with_context(|| format!("bad --size {:?}", args.size))?;
+        let (w, h) = args.size;
         if w as u64 * h as u64 > MAX_PIXELS {
-            bail!(
+            crate::refuse!(
                 "--size {w}x{h} is {} pixels; the reference tracer renders at most {MAX_PIXELS} \
                  (8192x8192): it keeps a mean and a variance per pixel",
                 w as u64 * h as u64
@@ -233,7 +232,7 @@ pub fn run(args: &ReferenceArgs) -> Result<()> {
         let est = tracer
             .render(&camera, w, h, mode, &params, &mut progress)
             .context("reference rendering failed")?;
-        report_noise(&est.variance, &est.mean);
+        report_noise(&est.variance, &est.mean, args.spp);
         (w as usize, h as usize, est.mean)
     };
     if let Some(dir) = args.output.parent().filter(|d| !d.as_os_str().is_empty()) {
@@ -252,15 +251,18 @@ pub fn run(args: &ReferenceArgs) -> Result<()> {
 /// Refuses an output that cannot be written, before the long work: an existing directory or
 /// other non-file, or a path below a file. Missing directories are created when writing.
 fn check_output(output: &std::path::Path) -> Result<()> {
-    prm_format::check_output_path(output).map_err(|why| anyhow::anyhow!("--output {}: {why}", output.display()))
+    prm_format::check_output_path(output)
+        .map_err(|why| anyhow::Error::new(crate::Refused(format!("--output {}: {why}", output.display()))))
 }
 
 /// Prints the RMS standard error relative to the mean value.
-fn report_noise(variance: &[Vec3], mean: &[Vec3]) {
+fn report_noise(variance: &[Vec3], mean: &[Vec3], spp: u32) {
     let n = mean.len().max(1) as f64;
     let m = mean.iter().map(|v| v.element_sum() as f64).sum::<f64>() / n;
     let s = (variance.iter().map(|v| v.element_sum() as f64).sum::<f64>() / n).sqrt();
-    if m > 0.0 {
+    if m > 0.0 && spp < 2 {
+        eprintln!("mean value {m:.5} (channel sum); one sample per pixel gives no standard error (--spp 2 or more)");
+    } else if m > 0.0 {
         eprintln!(
             "mean value {:.5} (channel sum), RMS standard error {:.2}% of it",
             m,

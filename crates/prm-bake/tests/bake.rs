@@ -276,7 +276,7 @@ fn bake_is_byte_identical_across_runs_and_threads_and_quiet_is_silent() {
 /// Without a Vulkan driver (`VK_ICD_FILENAMES` naming nothing): `auto` passes over Vulkan and
 /// OpenGL (whose GLSL cannot load from depth textures, or which is not installed) and bakes on
 /// the CPU, saying so; an explicit `--backend vulkan` or `gl` stops with exit 1 and the driver
-/// to install. Never a panic (exit 101): the QA sweep's first run panicked on GL here.
+/// to install. Never a panic (exit 101), on GL as on any other backend.
 #[test]
 fn without_a_vulkan_driver_auto_bakes_on_the_cpu_and_explicit_backends_fail_cleanly() {
     let dir = temp_dir("no-vulkan");
@@ -325,8 +325,8 @@ fn without_a_vulkan_driver_auto_bakes_on_the_cpu_and_explicit_backends_fail_clea
     }
 }
 
-/// Limits are checked before any work, naming the option: the QA sweep found each of these
-/// accepted (or, for the reference's size, aborting on allocation).
+/// Limits are checked before any work, naming the option: none of these is accepted, and the
+/// reference's size never aborts on allocation.
 #[test]
 fn limits_are_refused_up_front() {
     let dir = temp_dir("limits");
@@ -357,7 +357,7 @@ fn limits_are_refused_up_front() {
         (plan(&["--clusters", "2000000", "--entries", "4000000"]), "--clusters"),
         (reference(&["--spp", "0"]), "--spp"),
         (reference(&["--size", "16384x16384"]), "--size"),
-        // An EXR under another name: the QA sweep's `-o x.png` wrote one silently.
+        // An EXR under another name: `-o x.png` must not write one silently.
         (
             [
                 "reference",
@@ -376,8 +376,9 @@ fn limits_are_refused_up_front() {
     for (args, option) in cases {
         let r = run(&args);
         let stderr = String::from_utf8_lossy(&r.stderr);
-        // 1: our own error; 2: clap's usage error. Never 0, never a panic's 101.
-        assert!(matches!(r.status.code(), Some(1 | 2)), "{args:?}: {}", describe(&r));
+        // 2: refused before any work, by clap or by our own checks. Never 0 or 1, never a
+        // panic's 101.
+        assert_eq!(r.status.code(), Some(2), "{args:?}: {}", describe(&r));
         assert!(
             stderr.contains(option),
             "{args:?}: the error should name {option}:\n{stderr}"
@@ -464,8 +465,7 @@ fn failures_are_clean_and_leave_existing_archives_alone() {
     );
     assert!(!out.exists(), "no archive after a failed bake");
 
-    // More clusters than entries: refused before any work.
-    let t = Instant::now();
+    // More clusters than entries: refused before any work (exit status 2).
     let r = run(&[
         "bake",
         scene,
@@ -478,8 +478,7 @@ fn failures_are_clean_and_leave_existing_archives_alone() {
         "--backend",
         "vulkan",
     ]);
-    let seconds = t.elapsed().as_secs_f64();
-    assert!(!r.status.success(), "{}", describe(&r));
+    assert_eq!(r.status.code(), Some(2), "{}", describe(&r));
     let stderr = String::from_utf8_lossy(&r.stderr);
     assert!(stderr.contains("clusters"), "{}", describe(&r));
     assert!(
@@ -488,8 +487,6 @@ fn failures_are_clean_and_leave_existing_archives_alone() {
         describe(&r)
     );
     assert!(!out.exists());
-    eprintln!("--clusters 100 --entries 10 refused in {seconds:.2} s");
-    assert!(seconds < 5.0, "took {seconds} s");
 
     // An archive already at the output path survives failing bakes untouched.
     std::fs::copy(&baked().archive, &out).unwrap();
@@ -552,15 +549,19 @@ fn failures_are_clean_and_leave_existing_archives_alone() {
             "not a directory",
         ),
     ] {
-        let t = Instant::now();
         let r = run(&[&args[..], &["--backend", "cpu"]].concat());
-        assert_eq!(r.status.code(), Some(1), "{args:?}: {}", describe(&r));
+        // Exit status 2: refused before any work (no scene loaded, no phase started).
+        assert_eq!(r.status.code(), Some(2), "{args:?}: {}", describe(&r));
+        assert!(
+            !String::from_utf8_lossy(&r.stderr).contains("atlas"),
+            "{args:?}: {}",
+            describe(&r)
+        );
         assert!(
             String::from_utf8_lossy(&r.stderr).contains(expected),
             "{args:?}: {}",
             describe(&r)
         );
-        assert!(t.elapsed().as_secs_f64() < 5.0, "{args:?} was not refused up front");
         assert_eq!(std::fs::read(&out).unwrap(), old, "{args:?} touched the archive");
         assert_eq!(std::fs::read(&obj).unwrap(), obj_bytes, "{args:?} touched the scene");
     }
@@ -718,7 +719,7 @@ fn destinations_are_checked_before_work_and_symlinks_written_through() {
     ] {
         let r = run(&[&["bake", scene, "-o", dest.to_str().unwrap()][..], &small[..]].concat());
         let stderr = String::from_utf8_lossy(&r.stderr);
-        assert_eq!(r.status.code(), Some(1), "-o {}: {}", dest.display(), describe(&r));
+        assert_eq!(r.status.code(), Some(2), "-o {}: {}", dest.display(), describe(&r));
         assert!(
             stderr.contains(what),
             "-o {}: the error should say it is a {what}:\n{stderr}",
@@ -821,7 +822,7 @@ fn check_repeats_the_bake_s_own_estimate() {
         (vec![scene, &p, "--accuracy-paths", "0"], "at least 1"),
     ] {
         let r = run(&[&["check"][..], &args, &["--quiet"]].concat());
-        assert_eq!(r.status.code(), Some(1), "{args:?}: {}", describe(&r));
+        assert_eq!(r.status.code(), Some(2), "{args:?}: {}", describe(&r));
         assert!(
             String::from_utf8_lossy(&r.stderr).contains(expected),
             "{args:?}: {}",
@@ -912,7 +913,7 @@ fn shards_merge_into_the_single_bake_byte_for_byte() {
         let out = dir.join("refused.prm");
         let r = run(&[&["merge"][..], &args, &["-o", out.to_str().unwrap()]].concat());
         let stderr = String::from_utf8_lossy(&r.stderr);
-        assert_eq!(r.status.code(), Some(1), "{args:?}: {}", describe(&r));
+        assert_eq!(r.status.code(), Some(2), "{args:?}: {}", describe(&r));
         assert!(
             stderr.contains(expected),
             "{args:?}: expected `{expected}` in:\n{stderr}"
@@ -941,7 +942,7 @@ fn shards_merge_into_the_single_bake_byte_for_byte() {
         (vec!["merge", p0, p1, "-o", p0], "is the part"),
     ] {
         let r = run(&args);
-        assert_eq!(r.status.code(), Some(1), "{args:?}: {}", describe(&r));
+        assert_eq!(r.status.code(), Some(2), "{args:?}: {}", describe(&r));
         assert!(
             String::from_utf8_lossy(&r.stderr).contains(expected),
             "{args:?}: {}",
@@ -968,6 +969,122 @@ fn shards_merge_into_the_single_bake_byte_for_byte() {
     assert_eq!(r.status.code(), Some(2), "--shard 0/1 accepted: {}", describe(&r));
     assert!(
         String::from_utf8_lossy(&r.stderr).contains("whole bake"),
+        "{}",
+        describe(&r)
+    );
+}
+
+/// Small command-line conventions: a closed standard output ends a listing quietly, paths
+/// that name no scene file say what they name, a shard that holds no cluster says so, `dump`
+/// refuses an EXR directory that is a file before printing anything, and messages count right.
+#[test]
+fn command_line_conventions() {
+    let dir = temp_dir("conventions");
+    let scene = scene_path();
+    let scene = scene.to_str().unwrap();
+
+    // `prm-bake atlas scene | head -1`: the reader is gone before the first line is written.
+    let mut child = Command::new(BIN)
+        .args(["atlas", scene])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take());
+    let out = child.wait_with_output().unwrap();
+    assert!(out.status.success(), "{}", describe(&out));
+    assert!(
+        !String::from_utf8_lossy(&out.stderr).contains("panicked"),
+        "{}",
+        describe(&out)
+    );
+
+    // A directory and `-` are named as such, refused before any work.
+    for (path, expected) in [(dir.to_str().unwrap(), "is a directory"), ("-", "standard input")] {
+        for command in ["atlas", "bake"] {
+            let r =
+                run(&[command, path, "-o", dir.join("x.prm").to_str().unwrap()]
+                    [..if command == "atlas" { 2 } else { 4 }]);
+            assert_eq!(r.status.code(), Some(2), "{command} {path}: {}", describe(&r));
+            assert!(
+                String::from_utf8_lossy(&r.stderr).contains(expected),
+                "{}",
+                describe(&r)
+            );
+        }
+    }
+
+    // Shard 99 of 100 of a 64-cluster plan renders nothing: a warning says so.
+    let r = run(&[
+        "bake",
+        scene,
+        "-o",
+        dir.join("x.prm").to_str().unwrap(),
+        "--preset",
+        "preview",
+        "--shard",
+        "99/100",
+        "--plan",
+    ]);
+    assert!(r.status.success(), "{}", describe(&r));
+    let stderr = String::from_utf8_lossy(&r.stderr);
+    assert!(stderr.contains("shard 99/100 holds no clusters"), "{}", describe(&r));
+
+    // `dump --export-exr FILE`: refused before the summary is printed.
+    let file = dir.join("not-a-dir");
+    std::fs::write(&file, b"x").unwrap();
+    let r = run(&[
+        "dump",
+        baked().archive.to_str().unwrap(),
+        "--export-exr",
+        file.to_str().unwrap(),
+    ]);
+    assert_eq!(r.status.code(), Some(2), "{}", describe(&r));
+    assert!(
+        r.stdout.is_empty(),
+        "nothing printed before the refusal: {}",
+        describe(&r)
+    );
+    assert!(
+        String::from_utf8_lossy(&r.stderr).contains("not a directory"),
+        "{}",
+        describe(&r)
+    );
+
+    // A merge of one part counts it as one.
+    let r = run(&[
+        "merge",
+        baked().archive.to_str().unwrap(),
+        "-o",
+        dir.join("merged.prm").to_str().unwrap(),
+    ]);
+    assert_eq!(r.status.code(), Some(2), "{}", describe(&r));
+    assert!(
+        String::from_utf8_lossy(&r.stderr).contains("merging 1 part into"),
+        "{}",
+        describe(&r)
+    );
+
+    // One sample per pixel has no standard error to report.
+    let exr = dir.join("ref.exr");
+    let r = run(&[
+        "reference",
+        scene,
+        "--light",
+        "point:0.278,0.5,0.28:1,1,1",
+        "--camera",
+        "0.28,0.27,-0.8:0.28,0.27,0.28:40",
+        "--size",
+        "8x8",
+        "--spp",
+        "1",
+        "-o",
+        exr.to_str().unwrap(),
+    ]);
+    assert!(r.status.success(), "{}", describe(&r));
+    let stderr = String::from_utf8_lossy(&r.stderr);
+    assert!(
+        !stderr.contains("standard error 0.00%") && stderr.contains("no standard error"),
         "{}",
         describe(&r)
     );

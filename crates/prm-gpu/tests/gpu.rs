@@ -106,6 +106,13 @@ mod panes {
             atlas.exits.len()
         );
         assert!(gpu.data.iter().all(|v| v.is_finite()));
+        // Measured: per-cluster relative RMSE 0.0125, energy ratio 0.9992–0.9993.
+        assert!(all < 0.016, "GPU vs CPU per-cluster relative RMSE {all}");
+        let ratio = sum_gpu / sum_cpu;
+        assert!(
+            (ratio - glam::Vec3::ONE).abs().max_element() < 0.002,
+            "GPU / CPU energy {ratio}"
+        );
         // The sum over clusters (the unclustered irradiance field) is what the player shows.
         let total = |p: &prm_trace::Panes| p.combine(&vec![glam::Vec3::ONE; p.clusters]);
         let summed = relative_rmse(&total(&gpu), &total(&cpu));
@@ -122,15 +129,17 @@ mod panes {
                 );
             }
         }
-        assert!(summed < 0.02, "GPU vs CPU relative RMSE {summed}");
+        // Measured 0.0108.
+        assert!(summed < 0.014, "GPU vs CPU relative RMSE {summed}");
 
         // Entry energies: in entry order on both sides, and each cluster's members sum to its
         // pane's energy.
         assert_eq!(gpu.entry_energy.len(), entries.len());
         let energy_err = relative_rmse(&gpu.entry_energy, &cpu.entry_energy);
         eprintln!("entry energies, GPU vs CPU: relative RMSE {energy_err:.4}");
+        // Measured 0.0014.
         assert!(
-            energy_err < 0.05,
+            energy_err < 0.003,
             "entry energies GPU vs CPU: relative RMSE {energy_err}"
         );
         for (c, members) in clustering.members.iter().enumerate() {
@@ -324,9 +333,14 @@ mod furnace {
             assert!(inner.max < 0.10, "{name}: max error {}", inner.max);
             // Same estimator, same VPL bound; only the visibility differs (depth maps vs shadow
             // rays), and in a convex box everything is visible.
+            // Measured 0.0033 / 0.0009 per cluster and 0.0004 summed (identity / k-means).
             assert!(
-                rmse_sum_inner < 0.02,
+                rmse_sum_inner < 0.002,
                 "{name}: GPU vs CPU relative RMSE {rmse_sum_inner}"
+            );
+            assert!(
+                rmse_panes < 0.005,
+                "{name}: GPU vs CPU per-cluster relative RMSE {rmse_panes}"
             );
         }
     }

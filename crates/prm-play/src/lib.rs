@@ -179,21 +179,40 @@ pub fn materials_warning<R: std::io::Read + std::io::Seek>(archive: &Archive<R>,
 /// The light the player places in a scene that has none: a white point light on the vertical
 /// axis of the bounds, a quarter of the height below the top, bright enough (intensity = the
 /// squared half-diagonal, in W/sr) for about 1 W/m² at half the diagonal's distance.
+///
+/// A flat scene (a ground plane, a wall, a single triangle) has no inside to light: the light
+/// stands half the half-diagonal off its plane, on the side its surfaces face.
 pub fn default_light(scene: &Scene) -> Light {
     let b = scene.bounds();
     let centre = (b.min + b.max) * 0.5;
     let half = (b.diagonal() * 0.5).max(1e-3);
-    // A flat scene (a ground plane) has no height to go below: light it from a quarter of the
-    // diagonal above.
-    let y = if b.extent().y > 1e-3 * b.diagonal() {
-        b.max.y - 0.25 * b.extent().y
-    } else {
-        b.max.y + 0.5 * half
+    let position = match flat_side(scene) {
+        Some(n) => centre + n * (0.5 * half),
+        None => glam::Vec3::new(centre.x, b.max.y - 0.25 * b.extent().y, centre.z),
     };
     Light::Point {
-        position: glam::Vec3::new(centre.x, y, centre.z),
+        position,
         intensity: glam::Vec3::splat(half * half),
     }
+}
+
+/// For a flat scene (its bounds thinner than a thousandth of their diagonal along an axis), the
+/// unit axis on the side its surfaces face (area-weighted normals; +axis when they cancel).
+fn flat_side(scene: &Scene) -> Option<glam::Vec3> {
+    let b = scene.bounds();
+    let e = b.extent();
+    let axis = if e.x <= e.y && e.x <= e.z {
+        glam::Vec3::X
+    } else if e.y <= e.z {
+        glam::Vec3::Y
+    } else {
+        glam::Vec3::Z
+    };
+    if e.dot(axis) > 1e-3 * b.diagonal() {
+        return None;
+    }
+    let facing: f32 = scene.triangles.iter().map(|t| t.area() * t.normal().dot(axis)).sum();
+    Some(if facing < 0.0 { -axis } else { axis })
 }
 
 /// `light` as a `--light` spec.
@@ -278,8 +297,8 @@ pub fn default_camera(scene: &Scene) -> Camera {
 /// how much of it a wall covers: the area of the triangles lying within 2% of the extent from
 /// that side's plane and facing along its axis, over the side's area. From outside the least
 /// covered side, when less than half of it is covered, the camera sees in: a Cornell box from
-/// its open front, any object or open scene from +Z as [`default_camera`] does (QA, session 30: the Cornell box
-/// OBJ was seen from behind its back wall). A scene closed on every side (a room) is seen from
+/// its open front, any object or open scene from +Z as [`default_camera`] does (a fixed +Z view
+/// sees the Cornell box OBJ from behind its back wall). A scene closed on every side (a room) is seen from
 /// inside, just within its least covered side.
 ///
 /// [`default_camera`] stays the fixed view from +Z that the eval's and the tests' measurements
@@ -289,6 +308,19 @@ pub fn viewer_camera(scene: &Scene) -> Camera {
         return *c;
     }
     let b = scene.bounds();
+    if let Some(n) = flat_side(scene) {
+        // A flat scene is seen from the side its surfaces face, tilted a little (edge-on it
+        // would cover no pixel).
+        let tilt = if n.y.abs() > 0.5 { glam::Vec3::Z } else { glam::Vec3::Y };
+        let fov: f32 = 45.0;
+        let dist = b.diagonal() * 0.5 / (fov.to_radians() * 0.5).tan() * 1.1;
+        let centre = (b.min + b.max) * 0.5;
+        return Camera {
+            eye: centre + (2.0 * n + tilt).normalize() * dist,
+            target: centre,
+            fov_y_deg: fov,
+        };
+    }
     let (centre, extent) = ((b.min + b.max) * 0.5, b.extent());
     let sides = [glam::Vec3::Z, glam::Vec3::NEG_Z, glam::Vec3::X, glam::Vec3::NEG_X];
     // A side's area: the product of the other two extents (zero for a flat scene's edges).
@@ -380,6 +412,53 @@ mod tests {
             0,
         )];
         assert!(viewer_camera(&one).eye.z > 0.0);
+    }
+
+    /// A flat scene without lights or camera (a floor quad at y = 0, one triangle in z = 0, one
+    /// facing -X) is seen from the side it faces, not edge-on, and the placed light stands off
+    /// its plane on that side, so the first frame is lit and visible.
+    #[test]
+    fn a_flat_scene_is_seen_and_lit_from_the_side_it_faces() {
+        let v = glam::Vec3::new;
+        let load =
+            |rel: &str| prm_scene::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes").join(rel)).unwrap();
+        let mut base = load("cornell-box/cornell-box.obj");
+        base.cameras.clear();
+        base.lights.clear();
+        let floor = [
+            prm_scene::Triangle::flat([v(-1.0, 0.0, -1.0), v(-1.0, 0.0, 1.0), v(1.0, 0.0, 1.0)], 0),
+            prm_scene::Triangle::flat([v(-1.0, 0.0, -1.0), v(1.0, 0.0, 1.0), v(1.0, 0.0, -1.0)], 0),
+        ];
+        let upright = [prm_scene::Triangle::flat(
+            [v(0.0, 0.0, 0.0), v(1.0, 0.0, 0.0), v(0.0, 1.0, 0.0)],
+            0,
+        )];
+        let facing_back = [prm_scene::Triangle::flat(
+            [v(0.0, 0.0, 0.0), v(0.0, 0.0, 1.0), v(0.0, 1.0, 0.0)],
+            0,
+        )];
+        for triangles in [&floor[..], &upright[..], &facing_back[..]] {
+            let mut scene = base.clone();
+            scene.triangles = triangles.to_vec();
+            let n = triangles[0].normal();
+            let centre = {
+                let b = scene.bounds();
+                (b.min + b.max) * 0.5
+            };
+            let c = viewer_camera(&scene);
+            let forward = (c.target - c.eye).normalize();
+            assert!(
+                forward.dot(n) < -0.5,
+                "not edge-on, from the front: {c:?} for normal {n}"
+            );
+            let Light::Point { position, .. } = default_light(&scene) else {
+                panic!("a point light")
+            };
+            assert!(
+                (position - centre).dot(n) > 0.1,
+                "off the plane, in front: {position} for normal {n}"
+            );
+        }
     }
 
     /// A uniform sky does not ring; a map dark but for a small bright patch (a sun painted in)

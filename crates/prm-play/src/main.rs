@@ -2,14 +2,20 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
 use clap::Parser;
 use prm_play::animation::Animation;
 use prm_play::{output, FrameInput, Mode, PlayOptions, Renderer, RuntimeOptions};
 
+/// The exit statuses, as `--help` states them.
+const EXIT_STATUS: &str = "Exit status: 0 success; 2 the command was refused before any frame (a wrong argument, an \
+output that may not be written, an option beyond the device's limits); 1 a failure during the work (an unreadable \
+or damaged archive or scene, the GPU, writing a frame).";
+
 /// Real-time global illumination from a Precomputed Radiance Map.
 #[derive(Parser, Debug)]
 #[command(name = "prm-play", version, after_help = prm_play::window::CONTROLS)]
+#[command(after_long_help = EXIT_STATUS)]
 struct Args {
     /// The baked archive.
     archive: PathBuf,
@@ -21,18 +27,19 @@ struct Args {
     #[arg(long)]
     headless: bool,
     /// Image size, WxH.
-    #[arg(long, default_value = "1024x768")]
-    size: String,
+    #[arg(long, default_value = "1024x768", value_name = "WxH", value_parser = prm_scene::parse_size,
+          allow_hyphen_values = true)]
+    size: (u32, u32),
     /// Camera `EX,EY,EZ:TX,TY,TZ:FOV_DEG` (default: the scene's first, or a view into its bounds
     /// from the side it is open on, from inside when it is closed all round).
-    #[arg(long)]
-    camera: Option<String>,
+    #[arg(long, value_name = "SPEC", value_parser = prm_scene::parse_camera, allow_hyphen_values = true)]
+    camera: Option<prm_scene::Camera>,
     /// Light spec, repeatable: `point:X,Y,Z:R,G,B` (W/sr), `spot:X,Y,Z:DX,DY,DZ:ANGLE_DEG:R,G,B`
     /// (cone half angle), `rect:X,Y,Z:DX,DY,DZ:UX,UY,UZ:HALF_X_DEG,HALF_Y_DEG:R,G,B` (a
     /// rectangular spot along D with vertical U), `dir:DX,DY,DZ:R,G,B` (W/m²). Default: the
     /// scene's lights.
-    #[arg(long = "light")]
-    lights: Vec<String>,
+    #[arg(long = "light", value_name = "SPEC", value_parser = prm_scene::parse_light, allow_hyphen_values = true)]
+    lights: Vec<prm_scene::Light>,
     /// Scale an emitter group (one per emissive material of the bake, listed by `prm-bake dump`):
     /// `NAME=S` or `NAME=R,G,B`, repeatable, `*` for every group; 0 turns a group off. Default: 1.
     #[arg(long = "emitter", value_name = "NAME=SCALE")]
@@ -99,16 +106,19 @@ struct Args {
     /// from the swapchain) when the window closes; headless, a copy of the last frame's PNG.
     #[arg(long, value_name = "FILE.png")]
     screenshot: Option<PathBuf>,
-    /// Write per-pass GPU times and frame times as JSON (headless only; with a still light, add
+    /// Write per-pass GPU times, frame times and the resident memory after each frame as JSON
+    /// (headless only; with a still light, add
     /// `--gi-update every-frame` to time the indirect light's passes on every frame).
     #[arg(long, value_name = "FILE.json")]
     timings: Option<PathBuf>,
-    /// Shadow-map resolution per view.
-    #[arg(long, default_value_t = 512)]
+    /// Shadow-map resolution per view (16 to 8192, and at most the device's largest texture).
+    #[arg(long, default_value_t = 512,
+          value_parser = clap::value_parser!(u32).range(16..=prm_runtime::MAX_SHADOW_RESOLUTION as i64))]
     shadow_resolution: u32,
     /// A directional light's shadow map is this many tiles on a side, each a view of
     /// --shadow-resolution² texels over the scene's bounding sphere (1 to 8)
-    #[arg(long, default_value_t = prm_play::RuntimeOptions::DEFAULT_SUN_TILES)]
+    #[arg(long, default_value_t = prm_play::RuntimeOptions::DEFAULT_SUN_TILES,
+          value_parser = clap::value_parser!(u32).range(1..=prm_runtime::MAX_SUN_TILES as i64))]
     sun_tiles: u32,
     /// Fade band: kept clusters scoring within (1 + band) × the first dropped cluster's score are
     /// faded by a smoothstep (0: hard cut).
@@ -134,44 +144,204 @@ fn non_negative(s: &str) -> Result<f32, String> {
     }
 }
 
-/// Prints an error as `error: ` and its chain on one line, exit 1 (as `prm-bake` does), rather
-/// than `main`'s default `Error: ` debug dump with a backtrace.
+/// Prints an error as `error: ` and its chain on one line (as `prm-bake` does), rather than
+/// `main`'s default `Error: ` debug dump with a backtrace, and exits with [`exit_status`].
 fn main() -> std::process::ExitCode {
     match run() {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e:#}");
-            std::process::ExitCode::FAILURE
+            std::process::ExitCode::from(exit_status(&e))
         }
+    }
+}
+
+/// An argument refused before any work: exit status 2.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+struct Refused(String);
+
+/// Returns early with a [`Refused`] error (exit status 2) from a `format!` message.
+macro_rules! refuse {
+    ($($arg:tt)*) => {
+        return Err(anyhow::Error::new(Refused(format!($($arg)*))))
+    };
+}
+
+/// The exit status of a failed run: 2 when it was refused before any frame (a wrong argument,
+/// an output that may not be written, an option beyond the device's limits, an animation file
+/// that does not parse), 1 when the work failed (an unreadable or damaged archive or scene, the
+/// GPU, writing a frame). Clap's own refusals exit 2 as well.
+fn exit_status(e: &anyhow::Error) -> u8 {
+    use prm_play::PlayError;
+    let refused = e.chain().any(|c| {
+        c.is::<Refused>()
+            || matches!(
+                c.downcast_ref::<PlayError>(),
+                Some(PlayError::Option { .. } | PlayError::Animation { .. })
+            )
+            || matches!(
+                c.downcast_ref::<prm_runtime::RuntimeError>(),
+                Some(prm_runtime::RuntimeError::Option { .. } | prm_runtime::RuntimeError::TooManyLights { .. })
+            )
+    });
+    if refused {
+        2
+    } else {
+        1
     }
 }
 
 fn run() -> Result<()> {
     let mut args = Args::parse();
+    check_arguments(&args)?;
+    args.headless |= args.export.is_some();
+    if args.headless {
+        prm_gpu_kit::silence_wayland_probe();
+    }
+    let (mut archive, scene) = prm_play::open(&args.archive, args.scene.as_deref())?;
+    if let Some(w) = prm_play::materials_warning(&archive, &scene) {
+        eprintln!("warning: {w}");
+    }
+    check_outputs(&args, &scene.source)?;
+    let animation = args.animation.as_deref().map(Animation::load).transpose()?;
+    let emitter_infos: Vec<prm_runtime::EmitterInfo> = archive.emitters().iter().map(Into::into).collect();
+    let emitter_scales = prm_play::emitter_scales(&emitter_infos, &args.emitters).map_err(refused)?;
+    let sky = prm_play::sky(
+        args.sky.as_deref(),
+        args.sky_intensity,
+        args.sky_rotation,
+        archive.sky().is_some(),
+    )
+    .map_err(refused)?;
+    if let Some(w) = sky.as_ref().and_then(prm_play::sky_ringing) {
+        eprintln!("warning: {w}");
+    }
+    if sky.is_none() && animation.as_ref().is_some_and(|a| !a.sky.is_empty()) {
+        refuse!("the animation has sky keys, which animate a --sky: give one");
+    }
+    let lit_by_emitters = emitter_scales.iter().flatten().any(|&s| s > 0.0) || sky.is_some();
+    let play = Play {
+        camera: args.camera.unwrap_or_else(|| prm_play::viewer_camera(&scene)),
+        lights: base_lights(&args, &scene, lit_by_emitters, animation.as_ref()),
+        top_k: args.top_k.unwrap_or_else(|| prm_play::archive_top_k(&archive)),
+        animation,
+        emitter_scales,
+        sky,
+    };
+    let runtime = runtime_options(&args, play.top_k);
+    let (width, height) = args.size;
+    if !args.headless {
+        return prm_play::window::run(prm_play::window::WindowConfig {
+            scene,
+            archive,
+            options: PlayOptions {
+                width,
+                height,
+                runtime,
+                timestamps: false,
+            },
+            camera: play.camera,
+            lights: play.lights,
+            animation: play.animation,
+            mode: args.mode,
+            exposure: args.exposure,
+            frames: args.frames,
+            screenshot: args.screenshot,
+            emitter_scales: play.emitter_scales,
+            sky: play.sky,
+            probe_sphere: args.probe_sphere,
+        })
+        .with_context(|| format!("playing {} in a window", args.archive.display()));
+    }
+    let ctx = prm_play::open_vulkan()?;
+    eprintln!("GPU: {}", ctx.describe());
+    let opts = PlayOptions {
+        width,
+        height,
+        runtime,
+        timestamps: args.timings.is_some(),
+    };
+    let mut renderer = Renderer::new(ctx, &scene, &mut archive, opts)
+        .with_context(|| format!("playing {}", args.archive.display()))?;
+    let emitter_names: Vec<&str> = emitter_infos.iter().map(|g| g.name.as_str()).collect();
+    if let Some(a) = play.animation.as_ref().filter(|a| !a.emitters.is_empty()) {
+        // Names checked before any frame.
+        a.emitter_scales_at(&emitter_names, &play.emitter_scales, 0.0)
+            .map_err(refused)
+            .with_context(|| format!("in {}", args.animation.clone().unwrap_or_default().display()))?;
+    }
+    if !play.emitter_scales.is_empty() {
+        renderer.set_emitter_scales(&play.emitter_scales)?;
+    }
+    if let Some(sky) = &play.sky {
+        renderer.set_sky(sky)?;
+    }
+    if let Some(dir) = &args.export {
+        let lights = match &play.animation {
+            Some(a) if !a.lights.is_empty() => a.lights_at(a.time(0)),
+            _ => play.lights.clone(),
+        };
+        let e = prm_play::export::export(&mut renderer, &scene, &lights, dir)
+            .with_context(|| format!("exporting lightmaps to {}", dir.display()))?;
+        for p in [&e.indirect, &e.irradiance, &e.gltf] {
+            eprintln!("wrote {}", p.display());
+        }
+        return Ok(());
+    }
+    if args.timings.is_some() && !renderer.has_timestamps() {
+        eprintln!("note: this device has no timestamp queries; --timings records CPU frame times only");
+    }
+    let frames = play_headless(&args, &play, &scene, &emitter_names, &mut renderer)?;
+    if let Some(path) = &args.timings {
+        write_timings(path, &args, &renderer, play.top_k, &frames)?;
+    }
+    Ok(())
+}
+
+/// What the frames play, from the arguments and the scene: the camera and lights when the
+/// animation does not drive them, K, the animation, the emitter scales and the sky.
+struct Play {
+    camera: prm_scene::Camera,
+    lights: Vec<prm_scene::Light>,
+    top_k: u32,
+    animation: Option<Animation>,
+    emitter_scales: Vec<[f32; 3]>,
+    sky: Option<prm_scene::Sky>,
+}
+
+/// A `refuse!` from a message: an argument refused before any frame (exit status 2).
+fn refused(message: String) -> anyhow::Error {
+    anyhow::Error::new(Refused(message))
+}
+
+/// The checks of the arguments alone, before any file is read.
+fn check_arguments(args: &Args) -> Result<()> {
     if args.timings.is_some() && !args.headless {
-        bail!("--timings needs --headless: a window records no timings");
+        refuse!("--timings needs --headless: a window records no timings");
     }
     if let Some(p) = args
         .screenshot
         .as_ref()
         .filter(|p| !p.extension().is_some_and(|e| e.eq_ignore_ascii_case("png")))
     {
-        bail!(
+        refuse!(
             "--screenshot {}: the screenshot is a PNG; name it FILE.png",
             p.display()
         );
     }
-    args.headless |= args.export.is_some();
-    if args.headless {
-        prm_gpu_kit::silence_wayland_probe();
+    if args.headless && args.export.is_none() && args.out.exists() && !args.out.is_dir() {
+        refuse!(
+            "--out {}: it exists and is not a directory (--out names the directory the frames go to)",
+            args.out.display()
+        );
     }
-    let (width, height) = prm_scene::parse_size(&args.size)?;
-    let (mut archive, scene) = prm_play::open(&args.archive, args.scene.as_deref())?;
-    if let Some(w) = prm_play::materials_warning(&archive, &scene) {
-        eprintln!("warning: {w}");
-    }
-    // Before any frame: no output may be the archive or the scene, nor lie below a file.
-    let inputs = [args.archive.as_path(), scene.source.as_path()];
+    Ok(())
+}
+
+/// Before any frame: no output may be the archive or the scene (`scene`), nor lie below a file.
+fn check_outputs(args: &Args, scene: &Path) -> Result<()> {
+    let inputs = [args.archive.as_path(), scene];
     for (flag, path) in [("--timings", &args.timings), ("--screenshot", &args.screenshot)] {
         if let Some(path) = path {
             check_output(flag, path, &inputs)?;
@@ -179,57 +349,45 @@ fn run() -> Result<()> {
     }
     if let Some(dir) = &args.export {
         if dir.exists() && !dir.is_dir() {
-            bail!("--export {}: it exists and is not a directory", dir.display());
+            refuse!("--export {}: it exists and is not a directory", dir.display());
         }
         for name in prm_play::export::FILES {
             check_output("--export", &dir.join(name), &inputs)?;
         }
     }
-    let top_k = args.top_k.unwrap_or_else(|| prm_play::archive_top_k(&archive));
-    let base_camera = match &args.camera {
-        Some(s) => prm_scene::parse_camera(s)?,
-        None => prm_play::viewer_camera(&scene),
-    };
-    let base_lights = if args.lights.is_empty() {
+    Ok(())
+}
+
+/// The lights of frames the animation does not light: `--light`, else the scene's, else (when
+/// nothing else lights the scene) a placed light, with a warning that says where.
+fn base_lights(
+    args: &Args,
+    scene: &prm_scene::Scene,
+    lit_by_emitters: bool,
+    animation: Option<&Animation>,
+) -> Vec<prm_scene::Light> {
+    let lights = if args.lights.is_empty() {
         scene.lights.clone()
     } else {
-        args.lights
-            .iter()
-            .map(|s| prm_scene::parse_light(s))
-            .collect::<Result<Vec<_>, _>>()?
+        args.lights.clone()
     };
-    let animation = args.animation.as_deref().map(Animation::load).transpose()?;
-    let emitter_infos: Vec<prm_runtime::EmitterInfo> = archive.emitters().iter().map(Into::into).collect();
-    let emitter_scales = prm_play::emitter_scales(&emitter_infos, &args.emitters).map_err(anyhow::Error::msg)?;
-    let sky = prm_play::sky(
-        args.sky.as_deref(),
-        args.sky_intensity,
-        args.sky_rotation,
-        archive.sky().is_some(),
-    )
-    .map_err(anyhow::Error::msg)?;
-    if let Some(w) = sky.as_ref().and_then(prm_play::sky_ringing) {
-        eprintln!("warning: {w}");
+    if !lights.is_empty() || lit_by_emitters || animation.is_some_and(|a| !a.lights.is_empty()) {
+        return lights;
     }
-    if sky.is_none() && animation.as_ref().is_some_and(|a| !a.sky.is_empty()) {
-        bail!("the animation has sky keys, which animate a --sky: give one");
-    }
-    let lit_by_emitters = emitter_scales.iter().flatten().any(|&s| s > 0.0) || sky.is_some();
-    let base_lights =
-        if base_lights.is_empty() && !lit_by_emitters && animation.as_ref().is_none_or(|a| a.lights.is_empty()) {
-            // A black frame helps nobody: light the scene, and say where and how to choose.
-            let light = prm_play::default_light(&scene);
-            eprintln!(
-                "warning: the scene has no lights of its own and no --light was given; placing {} \
-             (pass --light SPEC to choose, e.g. --light {}; in a window, arrows and PageUp/PageDown move it)",
-                prm_play::describe_light(&light),
-                prm_play::light_spec(&light)
-            );
-            vec![light]
-        } else {
-            base_lights
-        };
-    let runtime = RuntimeOptions {
+    // A black frame helps nobody: light the scene, and say where and how to choose.
+    let light = prm_play::default_light(scene);
+    eprintln!(
+        "warning: the scene has no lights of its own and no --light was given; placing {} \
+         (pass --light SPEC to choose, e.g. --light {}; in a window, arrows and PageUp/PageDown move it)",
+        prm_play::describe_light(&light),
+        prm_play::light_spec(&light)
+    );
+    vec![light]
+}
+
+/// The run time's options from the arguments.
+fn runtime_options(args: &Args, top_k: u32) -> RuntimeOptions {
+    RuntimeOptions {
         top_k,
         residual_groups: args.residual_groups,
         shadow_resolution: args.shadow_resolution,
@@ -252,106 +410,49 @@ fn run() -> Result<()> {
             prm_play::GiUpdate::OnChange
         },
         ..Default::default()
-    };
-    if !args.headless {
-        return prm_play::window::run(prm_play::window::WindowConfig {
-            scene,
-            archive,
-            options: PlayOptions {
-                width,
-                height,
-                runtime,
-                timestamps: false,
-            },
-            camera: base_camera,
-            lights: base_lights,
-            animation,
-            mode: args.mode,
-            exposure: args.exposure,
-            frames: args.frames,
-            screenshot: args.screenshot,
-            emitter_scales,
-            sky,
-            probe_sphere: args.probe_sphere,
-        })
-        .with_context(|| format!("playing {} in a window", args.archive.display()));
     }
-    let ctx = prm_play::open_vulkan()?;
-    eprintln!("GPU: {}", ctx.describe());
-    let opts = PlayOptions {
-        width,
-        height,
-        runtime,
-        timestamps: args.timings.is_some(),
-    };
-    let mut renderer = Renderer::new(ctx, &scene, &mut archive, opts)
-        .with_context(|| format!("playing {}", args.archive.display()))?;
-    let emitter_names: Vec<&str> = emitter_infos.iter().map(|g| g.name.as_str()).collect();
-    let animated_emitters = animation.as_ref().is_some_and(|a| !a.emitters.is_empty());
-    if let Some(a) = animation.as_ref().filter(|_| animated_emitters) {
-        // Names checked before any frame.
-        a.emitter_scales_at(&emitter_names, &emitter_scales, 0.0)
-            .map_err(anyhow::Error::msg)
-            .with_context(|| format!("in {}", args.animation.clone().unwrap_or_default().display()))?;
-    }
-    if !emitter_scales.is_empty() {
-        renderer.set_emitter_scales(&emitter_scales)?;
-    }
-    if let Some(sky) = &sky {
-        renderer.set_sky(sky)?;
-    }
-    if args.timings.is_some() && !renderer.has_timestamps() {
-        eprintln!("note: this device has no timestamp queries; --timings records CPU frame times only");
-    }
-    if let Some(dir) = &args.export {
-        let lights = match &animation {
-            Some(a) if !a.lights.is_empty() => a.lights_at(a.time(0)),
-            _ => base_lights.clone(),
-        };
-        let e = prm_play::export::export(&mut renderer, &scene, &lights, dir)
-            .with_context(|| format!("exporting lightmaps to {}", dir.display()))?;
-        for p in [&e.indirect, &e.irradiance, &e.gltf] {
-            eprintln!("wrote {}", p.display());
-        }
-        return Ok(());
-    }
-    if args.out.exists() && !args.out.is_dir() {
-        anyhow::bail!(
-            "--out {}: it exists and is not a directory (--out names the directory the frames go to)",
-            args.out.display()
-        );
-    }
+}
+
+/// Renders `--frames` frames into `--out` (and the last one to `--screenshot`); returns each
+/// frame's timings and the resident memory after it.
+fn play_headless(
+    args: &Args,
+    play: &Play,
+    scene: &prm_scene::Scene,
+    emitter_names: &[&str],
+    renderer: &mut Renderer,
+) -> Result<Vec<(prm_play::FrameTimings, Option<u64>)>> {
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
     let mut frames = Vec::new();
     let frame_count = args.frames.unwrap_or(1);
+    let animation = play.animation.as_ref();
     for i in 0..frame_count {
-        let (camera, lights) = match &animation {
+        let (camera, lights) = match animation {
             Some(a) => {
                 let t = a.time(i);
                 let lights = if a.lights.is_empty() {
-                    base_lights.clone()
+                    play.lights.clone()
                 } else {
                     a.lights_at(t)
                 };
-                (a.camera_at(t).unwrap_or(base_camera), lights)
+                (a.camera_at(t).unwrap_or(play.camera), lights)
             }
-            None => (base_camera, base_lights.clone()),
+            None => (play.camera, play.lights.clone()),
         };
-        if let Some(a) = animation.as_ref().filter(|_| animated_emitters) {
+        if let Some(a) = animation.filter(|a| !a.emitters.is_empty()) {
             let scales = a
-                .emitter_scales_at(&emitter_names, &emitter_scales, a.time(i))
+                .emitter_scales_at(emitter_names, &play.emitter_scales, a.time(i))
                 .map_err(anyhow::Error::msg)?;
             renderer.set_emitter_scales(&scales)?;
         }
         if let Some(s) = animation
-            .as_ref()
-            .zip(sky.as_ref())
+            .zip(play.sky.as_ref())
             .and_then(|(a, s)| a.sky_state_at(s, a.time(i)))
         {
             renderer.set_sky(&s)?;
         }
         if args.probe_sphere {
-            let t = animation.as_ref().map_or(i as f32 / 30.0, |a| a.time(i));
+            let t = animation.map_or(i as f32 / 30.0, |a| a.time(i));
             renderer.set_probe_sphere(Some(prm_play::ProbeSphere::orbit(&scene.bounds(), t)))?;
         }
         let t = renderer
@@ -362,57 +463,74 @@ fn run() -> Result<()> {
             })
             .with_context(|| {
                 format!(
-                    "rendering frame {i} at {width}x{height} with {} light(s), shadow maps of {}² texels \
+                    "rendering frame {i} at {}x{} with {} light(s), shadow maps of {}² texels \
                      (--shadow-resolution), a sun's in {}² tiles (--sun-tiles)",
+                    args.size.0,
+                    args.size.1,
                     lights.len(),
                     args.shadow_resolution,
                     args.sun_tiles
                 )
             })?;
         let image = renderer.read_image()?;
-        let bad = image.rgb.iter().filter(|p| !p.iter().all(|v| v.is_finite())).count();
-        if bad > 0 {
-            eprintln!(
-                "warning: frame {i}: {bad} of {} pixels are not finite: a light's intensity or an \
-                 emitter's scale is beyond what 32-bit floats hold",
-                image.rgb.len()
-            );
-        }
-        let stem = args.out.join(format!("frame{i:04}"));
-        output::write_exr(&stem.with_extension("exr"), &image)?;
-        output::write_png(&stem.with_extension("png"), &image, args.exposure)?;
-        if let (Some(path), true) = (&args.screenshot, i + 1 == frame_count) {
-            create_parent(path)?;
-            output::write_png(path, &image, args.exposure)?;
-        }
+        write_frame(args, i, i + 1 == frame_count, &image)?;
         eprintln!("frame {i}: {:.2} ms", t.cpu_ms);
-        frames.push(t);
+        frames.push((t, resident_bytes()));
     }
-    if let Some(path) = &args.timings {
-        let json = serde_json::json!({
-            "gpu_timestamps": renderer.has_timestamps(),
-            "note": if renderer.has_timestamps() {
-                "gpu_ms: per-pass GPU time from timestamp queries; cpu_ms: wall time from recording to GPU completion"
-            } else {
-                "no timestamp queries on this device: cpu_ms only (wall time from recording to GPU completion)"
-            },
-            "size": [width, height],
-            "mode": format!("{:?}", args.mode).to_lowercase(),
-            // The clusters blended: K, or every cluster when K is larger.
-            "top_k": top_k.min(renderer.cluster_count()),
-            "top_k_requested": top_k,
-            "residual_groups": renderer.runtime().group_count(),
-            "clusters": renderer.cluster_count(),
-            "frames": frames.iter().map(|f| serde_json::json!({
-                "cpu_ms": f.cpu_ms,
-                "gpu_ms": f.gpu_ms.iter().map(|(k, v)| ((*k).to_string(), serde_json::json!(v))).collect::<serde_json::Map<_, _>>(),
-            })).collect::<Vec<_>>(),
-        });
+    Ok(frames)
+}
+
+/// Writes frame `i` as EXR and PNG into `--out`, and the last one to `--screenshot`; warns of
+/// pixels that are not finite.
+fn write_frame(args: &Args, i: u32, last: bool, image: &prm_play::Image) -> Result<()> {
+    let bad = image.rgb.iter().filter(|p| !p.iter().all(|v| v.is_finite())).count();
+    if bad > 0 {
+        eprintln!(
+            "warning: frame {i}: {bad} of {} pixels are not finite: a light's intensity or an \
+             emitter's scale is beyond what 32-bit floats hold",
+            image.rgb.len()
+        );
+    }
+    let stem = args.out.join(format!("frame{i:04}"));
+    output::write_exr(&stem.with_extension("exr"), image)?;
+    output::write_png(&stem.with_extension("png"), image, args.exposure)?;
+    if let (Some(path), true) = (&args.screenshot, last) {
         create_parent(path)?;
-        std::fs::write(path, serde_json::to_string_pretty(&json)?)
-            .with_context(|| format!("writing {}", path.display()))?;
+        output::write_png(path, image, args.exposure)?;
     }
     Ok(())
+}
+
+/// Writes `--timings`: per-pass GPU times, frame times and the resident memory after each frame.
+fn write_timings(
+    path: &Path,
+    args: &Args,
+    renderer: &Renderer,
+    top_k: u32,
+    frames: &[(prm_play::FrameTimings, Option<u64>)],
+) -> Result<()> {
+    let json = serde_json::json!({
+        "gpu_timestamps": renderer.has_timestamps(),
+        "note": if renderer.has_timestamps() {
+            "gpu_ms: per-pass GPU time from timestamp queries; cpu_ms: wall time from recording to GPU completion"
+        } else {
+            "no timestamp queries on this device: cpu_ms only (wall time from recording to GPU completion)"
+        },
+        "size": [args.size.0, args.size.1],
+        "mode": format!("{:?}", args.mode).to_lowercase(),
+        // The clusters blended: K, or every cluster when K is larger.
+        "top_k": top_k.min(renderer.cluster_count()),
+        "top_k_requested": top_k,
+        "residual_groups": renderer.runtime().group_count(),
+        "clusters": renderer.cluster_count(),
+        "frames": frames.iter().map(|(f, rss)| serde_json::json!({
+            "cpu_ms": f.cpu_ms,
+            "gpu_ms": f.gpu_ms.iter().map(|(k, v)| ((*k).to_string(), serde_json::json!(v))).collect::<serde_json::Map<_, _>>(),
+            "rss_bytes": rss,
+        })).collect::<Vec<_>>(),
+    });
+    create_parent(path)?;
+    std::fs::write(path, serde_json::to_string_pretty(&json)?).with_context(|| format!("writing {}", path.display()))
 }
 
 /// Refuses an output `path` (of option `flag`) that names one of `inputs` (the archive, the
@@ -420,13 +538,22 @@ fn run() -> Result<()> {
 /// writing.
 fn check_output(flag: &str, path: &Path, inputs: &[&Path]) -> Result<()> {
     if let Some(input) = inputs.iter().find(|i| prm_format::same_destination(i, path)) {
-        bail!(
+        refuse!(
             "{flag} {}: it is {}, which the player reads; name another file",
             path.display(),
             input.display()
         );
     }
-    prm_format::check_output_path(path).map_err(|why| anyhow::anyhow!("{flag} {}: {why}", path.display()))
+    prm_format::check_output_path(path).map_err(|why| refused(format!("{flag} {}: {why}", path.display())))
+}
+
+/// The process's resident memory after a frame (`VmRSS` in `/proc/self/status`; Linux only),
+/// recorded per frame by `--timings`.
+fn resident_bytes() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmRSS:"))?;
+    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib * 1024)
 }
 
 /// Creates `path`'s missing directories.
@@ -434,5 +561,67 @@ fn create_parent(path: &Path) -> Result<()> {
     match path.parent().filter(|d| !d.as_os_str().is_empty()) {
         Some(dir) => std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display())),
         None => Ok(()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(args: &[&str]) -> Result<Args, clap::Error> {
+        Args::try_parse_from([&["prm-play", "a.prm"][..], args].concat())
+    }
+
+    /// Values that start with a minus sign (most scenes need negative coordinates) are values,
+    /// not unknown options; a negative size is refused as a size.
+    #[test]
+    fn negative_numbers_are_values() {
+        let a = parse(&[
+            "--camera",
+            "-1.5,1.2,2.5:-0.5,0,0:40",
+            "--light",
+            "point:-1,2,-3:1,1,1",
+            "--light",
+            "dir:-0.3,-1,0.2:2,2,2",
+        ])
+        .unwrap();
+        assert_eq!(a.camera.unwrap().eye, glam::Vec3::new(-1.5, 1.2, 2.5));
+        assert_eq!(a.lights.len(), 2);
+        let e = parse(&["--size", "-5x5"]).unwrap_err().to_string();
+        assert!(e.contains("--size") && !e.contains("unexpected argument"), "{e}");
+    }
+
+    /// Every value refused before any work exits 2 with clap's message naming the option;
+    /// among them those that used to fail only once the GPU had started.
+    #[test]
+    fn bad_values_are_refused_up_front_with_status_2() {
+        for args in [
+            &["--size", "0x0"][..],
+            &["--shadow-resolution", "8"],
+            &["--sun-tiles", "0"],
+            &["--frames", "0"],
+            &["--top-k", "0"],
+            &["--exposure", "-1"],
+            &["--near-bounces", "1000"],
+            &["--camera", "0,0,0:0,0,0:40"],
+            &["--light", "point:0,0,0"],
+        ] {
+            let e = parse(args).map(|_| ()).unwrap_err();
+            assert_eq!(e.exit_code(), 2, "{args:?}: {e}");
+            assert!(e.to_string().contains(args[0]), "{args:?} names the option: {e}");
+        }
+    }
+
+    /// Refusals raised while checking the arguments exit 2; failures during the work exit 1.
+    #[test]
+    fn exit_status_tells_refusals_from_failures() {
+        assert_eq!(exit_status(&anyhow::Error::new(Refused("bad".into()))), 2);
+        let option = prm_play::PlayError::Option {
+            option: "--shadow-resolution",
+            message: "too large".into(),
+        };
+        assert_eq!(exit_status(&anyhow::Error::new(option).context("playing")), 2);
+        let failed = prm_play::PlayError::Window("lost".into());
+        assert_eq!(exit_status(&anyhow::Error::new(failed)), 1);
     }
 }

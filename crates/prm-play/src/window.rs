@@ -6,6 +6,7 @@
 //! swapchain image itself when the surface allows copies), so the mode can be tested under Xvfb.
 
 use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -13,7 +14,7 @@ use glam::{Quat, Vec3};
 use prm_scene::{Camera, Light, Scene};
 use winit::application::ApplicationHandler;
 use winit::event::{ElementState, MouseButton, MouseScrollDelta, WindowEvent};
-use winit::event_loop::{ActiveEventLoop, EventLoop};
+use winit::event_loop::{ActiveEventLoop, ControlFlow, EventLoop};
 use winit::keyboard::{Key, NamedKey};
 use winit::window::{Window, WindowId};
 
@@ -266,6 +267,9 @@ struct App {
     presented: u32,
     /// Smoothed interval between presented frames, milliseconds.
     frame_ms: Option<f32>,
+    /// Set by SIGINT, SIGTERM or SIGHUP: close as the window's close button does, once a frame
+    /// was presented (so `--screenshot` has one to save).
+    stop: Arc<AtomicBool>,
 }
 
 impl App {
@@ -509,6 +513,15 @@ impl App {
 }
 
 impl ApplicationHandler for App {
+    fn about_to_wait(&mut self, event_loop: &ActiveEventLoop) {
+        if self.stop.load(Ordering::Relaxed) && (self.presented > 0 || self.gpu.is_none()) {
+            event_loop.exit();
+        } else {
+            // Wake now and then to see the signal flag while no frame is asked for.
+            event_loop.set_control_flow(ControlFlow::WaitUntil(Instant::now() + SIGNAL_POLL));
+        }
+    }
+
     fn resumed(&mut self, event_loop: &ActiveEventLoop) {
         if let Err(e) = self.start(event_loop) {
             self.error = Some(e);
@@ -574,8 +587,24 @@ impl ApplicationHandler for App {
     }
 }
 
-/// Opens a window and plays until it is closed (or `config.frames` frames were presented), then
-/// writes `config.screenshot`. Fails with a clear error when no display is available (use
+/// How often the idle event loop wakes to see whether a signal asked it to close.
+const SIGNAL_POLL: std::time::Duration = std::time::Duration::from_millis(50);
+
+/// A flag that SIGINT, SIGTERM and SIGHUP set instead of ending the process; a second signal of
+/// the same kind ends it at once (exit status 1).
+fn stop_on_signals() -> Result<Arc<AtomicBool>, PlayError> {
+    use signal_hook::consts::{SIGHUP, SIGINT, SIGTERM};
+    let flag = Arc::new(AtomicBool::new(false));
+    for signal in [SIGINT, SIGTERM, SIGHUP] {
+        signal_hook::flag::register_conditional_shutdown(signal, 1, Arc::clone(&flag))
+            .and_then(|_| signal_hook::flag::register(signal, Arc::clone(&flag)))
+            .map_err(|e| PlayError::Window(format!("cannot handle signal {signal}: {e}")))?;
+    }
+    Ok(flag)
+}
+
+/// Opens a window and plays until it is closed, `config.frames` frames were presented or SIGINT,
+/// SIGTERM or SIGHUP arrives, then writes `config.screenshot`. Fails with a clear error when no display is available (use
 /// headless mode then).
 pub fn run(config: WindowConfig) -> Result<(), PlayError> {
     let no_display =
@@ -589,6 +618,7 @@ pub fn run(config: WindowConfig) -> Result<(), PlayError> {
     let distance = offset.length().max(1e-3);
     let dir = offset / distance;
     let screenshot = config.screenshot.clone();
+    let stop = stop_on_signals()?;
     let mut app = App {
         lights: config.lights.clone(),
         user_lights: false,
@@ -617,6 +647,7 @@ pub fn run(config: WindowConfig) -> Result<(), PlayError> {
         last: Instant::now(),
         presented: 0,
         frame_ms: None,
+        stop,
         config: Some(config),
     };
     event_loop.run_app(&mut app).map_err(|e| no_display(e.to_string()))?;

@@ -883,6 +883,92 @@ fn window_mode_under_xvfb_presents_frames() {
     );
 }
 
+/// The process whose command line holds `marker` (a path unique to one run), once it exists.
+fn pid_with_arg(marker: &Path, limit: std::time::Duration) -> u32 {
+    let started = std::time::Instant::now();
+    let marker = marker.to_str().unwrap().as_bytes();
+    loop {
+        for entry in std::fs::read_dir("/proc").unwrap().flatten() {
+            let Ok(pid) = entry.file_name().to_string_lossy().parse::<u32>() else {
+                continue;
+            };
+            let cmdline = std::fs::read(entry.path().join("cmdline")).unwrap_or_default();
+            let exe_is_player = cmdline
+                .split(|&b| b == 0)
+                .next()
+                .is_some_and(|a| a.ends_with(b"prm-play"));
+            if exe_is_player && cmdline.windows(marker.len()).any(|w| w == marker) {
+                return pid;
+            }
+        }
+        assert!(started.elapsed() < limit, "no prm-play process after {limit:?}");
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+}
+
+/// Whether process `pid` has a handler for `signal` (its bit in `SigCgt` of `/proc/PID/status`).
+fn catches(pid: u32, signal: u32) -> bool {
+    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).unwrap_or_default();
+    status
+        .lines()
+        .find_map(|l| l.strip_prefix("SigCgt:"))
+        .and_then(|mask| u64::from_str_radix(mask.trim(), 16).ok())
+        .is_some_and(|mask| mask & (1 << (signal - 1)) != 0)
+}
+
+/// SIGINT, SIGTERM and SIGHUP close the window as its close button does: the last presented
+/// frame is saved to `--screenshot` and the player exits 0.
+#[test]
+fn window_keeps_the_screenshot_on_signals() {
+    let dir = out_dir("window-signals");
+    for (name, signal) in [("INT", 2), ("TERM", 15), ("HUP", 1)] {
+        let shot = dir.join(format!("signal-{name}.png"));
+        let _ = std::fs::remove_file(&shot);
+        let mut cmd = std::process::Command::new("xvfb-run");
+        cmd.args(["-a", "-s", "-screen 0 640x480x24"])
+            .arg(env!("CARGO_BIN_EXE_prm-play"))
+            .arg(cornell_archive())
+            .args(["--size", "96x72", "--top-k", "8", "--screenshot"])
+            .arg(&shot);
+        let mut child = cmd
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .expect("xvfb-run (apt-get install xvfb xauth)");
+        let limit = std::time::Duration::from_secs(120);
+        let pid = pid_with_arg(&shot, limit);
+        let started = std::time::Instant::now();
+        while !catches(pid, signal) {
+            assert!(started.elapsed() < limit, "prm-play never handles SIG{name}");
+            std::thread::sleep(std::time::Duration::from_millis(50));
+        }
+        let killed = std::process::Command::new("kill")
+            .args([format!("-{name}"), pid.to_string()])
+            .status()
+            .unwrap();
+        assert!(killed.success());
+        let closed = std::time::Instant::now();
+        let status = loop {
+            if let Some(status) = child.try_wait().unwrap() {
+                break status;
+            }
+            if closed.elapsed() > limit {
+                let _ = child.kill();
+                panic!("SIG{name}: the window did not close within {limit:?}");
+            }
+            std::thread::sleep(std::time::Duration::from_millis(50));
+        };
+        let mut stderr = String::new();
+        std::io::Read::read_to_string(&mut child.stderr.take().unwrap(), &mut stderr).unwrap();
+        assert!(status.success(), "SIG{name}: {status:?}\n{stderr}");
+        let img = image::open(&shot)
+            .unwrap_or_else(|e| panic!("SIG{name}: screenshot {}: {e}\n{stderr}", shot.display()))
+            .to_rgb8();
+        assert_eq!(img.dimensions(), (96, 72));
+        assert!(img.as_raw().iter().any(|&b| b > 20), "SIG{name}: a blank screenshot");
+    }
+}
+
 /// Window keys move the selected light relative to the view; a directional light turns.
 #[test]
 fn light_keys_move_and_turn_lights() {
@@ -955,8 +1041,8 @@ fn play_cli(dir: &Path, args: &[&str]) -> std::process::Output {
 }
 
 /// Options out of range, or beyond the device, are refused before any GPU allocation with a
-/// message naming the option (and, for sizes, the device limit), exit 1, never a panic inside
-/// wgpu (which is exit 101). Found by a QA sweep: each of these used to panic or pass silently.
+/// message naming the option (and, for sizes, the device limit), exit 2, never a panic inside
+/// wgpu (which is exit 101).
 #[test]
 fn cli_refuses_hostile_options_naming_them() {
     let dir = out_dir("hostile-options");
@@ -978,8 +1064,7 @@ fn cli_refuses_hostile_options_naming_them() {
     for (args, option, limit) in cases {
         let out = play_cli(&dir, args);
         let stderr = String::from_utf8_lossy(&out.stderr);
-        assert!(!out.status.success(), "{args:?} was accepted:\n{stderr}");
-        assert_ne!(out.status.code(), Some(101), "{args:?} panicked:\n{stderr}");
+        assert_eq!(out.status.code(), Some(2), "{args:?}: not refused up front:\n{stderr}");
         assert!(!stderr.contains("panicked"), "{args:?} panicked:\n{stderr}");
         assert!(
             stderr.contains(option) && stderr.contains(limit),
@@ -988,8 +1073,8 @@ fn cli_refuses_hostile_options_naming_them() {
     }
 }
 
-/// No output option may replace the archive or the scene the player reads (a QA sweep found
-/// `--timings` and `--export` overwriting them with exit 0), and options that cannot apply are
+/// No output option may replace the archive or the scene the player reads (not `--timings`, not
+/// `--export`, and not with exit 0), and options that cannot apply are
 /// refused: `--timings` in a window, `--export` with per-frame outputs.
 #[test]
 fn cli_outputs_never_replace_the_archive_or_the_scene() {
@@ -1033,7 +1118,8 @@ fn cli_outputs_never_replace_the_archive_or_the_scene() {
     for (args, expected) in cases {
         let out = play(args);
         let stderr = String::from_utf8_lossy(&out.stderr);
-        assert_eq!(out.status.code(), Some(1), "{args:?}:\n{stderr}");
+        // Refused before any frame: exit status 2.
+        assert_eq!(out.status.code(), Some(2), "{args:?}:\n{stderr}");
         assert!(
             stderr.contains(expected),
             "{args:?}: expected `{expected}` in:\n{stderr}"
@@ -1142,9 +1228,9 @@ fn cli_warns_when_materials_changed_since_the_bake() {
 /// the reference's): v = 0 at the bottom row, each texture at its own size in a layer that a
 /// larger texture sizes. The back wall gets a 1 × 2 texture, red on top and blue below, with
 /// v = 1 at the ceiling; the floor an 8 × 8 one, so the wall's texture fills only a corner of
-/// its layer. Found by `cargo xtask eval --targets`: the player sampled every texture upside down
-/// (the fireplace room's floor planks, 15.8% → 14.5% once fixed) and stretched smaller textures
-/// to the largest one's size by nearest resampling.
+/// its layer. A texture sampled upside down, or a smaller texture stretched to the largest one's
+/// size, would fail here (and shows in `cargo xtask eval --targets` on the fireplace room's floor
+/// planks).
 #[test]
 fn textures_read_as_the_baker_reads_them() {
     let dir = out_dir("textures");

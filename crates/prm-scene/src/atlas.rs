@@ -148,6 +148,18 @@ struct Chart {
 }
 
 impl Atlas {
+    /// The warning for triangles that touch no texel and so get no indirect light (`None` when
+    /// every triangle touches one); `triangles` is the scene's count.
+    pub fn coverage_warning(&self, triangles: usize) -> Option<String> {
+        (self.stats.uncovered_triangles > 0).then(|| {
+            format!(
+                "{} of {triangles} triangles touch no lightmap texel (texel size {}): they get no indirect \
+                 light; a smaller --texel-size or a larger --resolution gives them some",
+                self.stats.uncovered_triangles, self.stats.texel_size
+            )
+        })
+    }
+
     /// Builds the atlas of `scene`.
     pub fn build(scene: &Scene, params: &AtlasParams) -> Result<Atlas, SceneError> {
         if params.gutter > 64 {

@@ -8,6 +8,12 @@ pub enum SceneError {
     /// The scene file does not exist.
     #[error("{0}: no such file")]
     NotFound(PathBuf),
+    /// The path names a directory.
+    #[error("{0}: is a directory; give the scene file (.obj, .gltf or .glb) inside it")]
+    IsDirectory(PathBuf),
+    /// The path is `-`: scenes are files (an OBJ names its `.mtl`, a glTF its buffers).
+    #[error("reading a scene from standard input is not supported; give the scene file's path")]
+    Stdin,
     /// The extension is neither `.obj`, `.gltf` nor `.glb`.
     #[error("{0}: unsupported scene format (expected .obj, .gltf or .glb)")]
     UnsupportedFormat(PathBuf),

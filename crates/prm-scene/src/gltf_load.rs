@@ -22,6 +22,27 @@ use crate::scene::{area_epsilon, Aabb, Camera, Light, LoadReport, Material, Scen
 use crate::texture::Texture;
 use crate::SceneError;
 
+/// The glTF extensions the loader reads; any other one the file uses is named in a warning.
+const READ_EXTENSIONS: [&str; 2] = ["KHR_lights_punctual", "KHR_materials_emissive_strength"];
+
+/// One warning per extension in `extensionsUsed` that the loader does not read.
+fn ignored_extensions(path: &Path, document: &gltf::Document) -> Vec<String> {
+    document
+        .extensions_used()
+        .filter(|e| !READ_EXTENSIONS.contains(e))
+        .map(|e| {
+            let effect = match e {
+                "KHR_texture_transform" => "textures are sampled with their coordinates untransformed",
+                _ => "what it adds is ignored",
+            };
+            format!(
+                "{}: uses the glTF extension {e}, which the loader does not read: {effect}",
+                path.display()
+            )
+        })
+        .collect()
+}
+
 pub(crate) fn load(path: &Path) -> Result<Scene, SceneError> {
     let malformed = |message: String| SceneError::Malformed {
         path: path.to_path_buf(),
@@ -44,6 +65,7 @@ pub(crate) fn load(path: &Path) -> Result<Scene, SceneError> {
     check_views(path, &document, &buffers)?;
 
     let mut report = LoadReport::default();
+    report.warnings.extend(ignored_extensions(path, &document));
     // Images are decoded lazily, once each, only when a material uses them.
     let mut textures = Vec::new();
     let mut image_ids: HashMap<usize, Option<u32>> = HashMap::new();

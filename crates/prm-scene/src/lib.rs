@@ -48,8 +48,14 @@ pub fn load(path: &Path) -> Result<Scene, SceneError> {
         .and_then(|e| e.to_str())
         .map(|e| e.to_ascii_lowercase())
         .unwrap_or_default();
+    if path.as_os_str() == "-" {
+        return Err(SceneError::Stdin);
+    }
     if !path.exists() {
         return Err(SceneError::NotFound(path.to_path_buf()));
+    }
+    if path.is_dir() {
+        return Err(SceneError::IsDirectory(path.to_path_buf()));
     }
     match ext.as_str() {
         "obj" => obj::load(path),

@@ -166,7 +166,7 @@ struct CornellSetup {
 /// Cornell box with its README point light: PRM (direct irradiance at entry points × panes)
 /// against the reference path tracer at the exit points. Returns (bias, relative RMSE, reference
 /// relative noise) of the clustered PRM.
-fn cornell_comparison(setup: &CornellSetup) -> (f64, f64, f64) {
+fn cornell_comparison(setup: &CornellSetup) -> (Vec<Clustered>, f64) {
     let scene = prm_scene::load(&scene_path("scenes/cornell-box/cornell-box.obj")).unwrap();
     let light = parse_light("point:0.278,0.5,0.2795:0.2347,0.1566,0.0418").unwrap();
     let atlas = Atlas::build(
@@ -205,7 +205,7 @@ fn cornell_comparison(setup: &CornellSetup) -> (f64, f64, f64) {
     )
     .unwrap()
     .combine(&irradiance);
-    let mut result = (0.0, 0.0, ref_noise);
+    let mut result = Vec::new();
     for (name, clustering) in [
         ("identity", Clustering::identity(&entries)),
         (
@@ -265,9 +265,21 @@ fn cornell_comparison(setup: &CornellSetup) -> (f64, f64, f64) {
             setup.reference.passes,
             setup.reference.samples_per_pass,
         );
-        result = (bias, rel_rmse, ref_noise);
+        result.push(Clustered {
+            name,
+            bias,
+            rmse: rel_rmse,
+        });
     }
-    result
+    (result, ref_noise)
+}
+
+/// One clustering's result in [`cornell_comparison`]: the mean bias and the relative RMSE
+/// against the reference.
+struct Clustered {
+    name: &'static str,
+    bias: f64,
+    rmse: f64,
 }
 
 /// Runs [`cornell_comparison`] (4096 entries, 256 clusters, a reference of `passes` ×
@@ -275,23 +287,27 @@ fn cornell_comparison(setup: &CornellSetup) -> (f64, f64, f64) {
 /// the reference's noise plus `prm_error` in quadrature (PRM's own error: VPL noise, the bound,
 /// degenerate exit points on chart borders).
 fn check_cornell(atlas_resolution: u32, passes: u32, samples_per_pass: u32, max_bias: f64, prm_error: f64) {
-    let (bias, rmse, noise) = cornell_comparison(&CornellSetup {
+    let (results, noise) = cornell_comparison(&CornellSetup {
         atlas_resolution,
         entries: 4096,
         clusters: 256,
         reference: reference_params(passes, samples_per_pass, 11),
     });
-    assert!(bias.abs() < max_bias, "bias {bias}");
-    assert!(
-        rmse * rmse < noise * noise + prm_error * prm_error,
-        "relative RMSE {rmse} vs reference noise {noise}"
-    );
+    assert_eq!(results.len(), 2, "identity and k-means clusterings");
+    for Clustered { name, bias, rmse } in results {
+        assert!(bias.abs() < max_bias, "{name}: bias {bias}");
+        assert!(
+            rmse * rmse < noise * noise + prm_error * prm_error,
+            "{name}: relative RMSE {rmse} vs reference noise {noise}"
+        );
+    }
 }
 
+/// Measured (seeded, so the same on every machine): bias +0.0089 (identity) and +0.0071
+/// (k-means); error beyond the reference's 9.3% noise 0.118 and 0.115. The bounds sit just above.
 #[test]
 fn cornell_panes_match_reference() {
-    // See the heavy variant for tighter numbers.
-    check_cornell(32, 4, 128, 0.05, 0.2);
+    check_cornell(32, 4, 128, 0.015, 0.13);
 }
 
 /// The same comparison at higher sample counts (about 15 s in release).

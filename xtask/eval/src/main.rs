@@ -118,7 +118,7 @@ impl Row {
 
 fn usage() -> ! {
     eprintln!(
-        "usage: cargo xtask eval [--quick|--full|--budget|--targets|--emitters|--sky|--probes] [--out DIR]\n       cargo xtask eval compare TEST.exr REFERENCE.exr   (error, energy, shape and local error as ../shared/notes/metrics.md defines them)\n\n  --quick   Cornell box, a handful of settings, small references (CI; dev-profile binaries); default\n  --full    all scenes and sweeps (release binaries; the README's charts)\n  --budget  the error budget of the default bake, one idealised stage at a time (release; the README's budget table)\n  --targets issue #11's targets as ../shared/notes/metrics.md measures them: default bakes of McGuire's boxes, chairs and the fireplace room against the reference in image space, bake time and the gi/direct frame ratio (release)\n  --emitters emissive surfaces (McGuire's CornellBox-Original by its own lamp, two lamps in our Cornell box) against the reference, and the frame cost of a scale change (release)\n  --sky     the sky and a sun (our courtyard; Sponza) against the reference, and the frame cost of turning the sky (release)\n  --probes  irradiance probes (our Cornell box, two rooms) against the reference at the probe positions, and their cost (release)\n  --out DIR output directory (default target/eval-quick, eval-full, eval-budget, eval-targets, eval-emitters, eval-sky or eval-probes)\n\nBakes and references are cached under target/eval/ (delete it to start over)."
+        "usage: cargo xtask eval [--quick|--full|--budget|--targets|--emitters|--sky|--probes] [--out DIR]\n       cargo xtask eval compare TEST.exr REFERENCE.exr   (error, energy, shape and local error as ../shared/notes/metrics.md defines them)\n\n  --quick   Cornell box, a handful of settings, small references (CI; dev-profile binaries); default\n  --full    all scenes and sweeps (release binaries; the README's charts)\n  --budget  the error budget of the default bake, one idealised stage at a time (release; the README's budget table)\n  --targets the accuracy targets as ../shared/notes/metrics.md measures them: default bakes of McGuire's boxes, chairs and the fireplace room against the reference in image space, bake time and the gi/direct frame ratio (release)\n  --emitters emissive surfaces (McGuire's CornellBox-Original by its own lamp, two lamps in our Cornell box) against the reference, and the frame cost of a scale change (release)\n  --sky     the sky and a sun (our courtyard; Sponza) against the reference, and the frame cost of turning the sky (release)\n  --probes  irradiance probes (our Cornell box, two rooms) against the reference at the probe positions, and their cost (release)\n  --out DIR output directory (default target/eval-quick, eval-full, eval-budget, eval-targets, eval-emitters, eval-sky or eval-probes)\n\nBakes and references are cached under target/eval/ (delete it to start over)."
     );
     std::process::exit(2);
 }
@@ -130,9 +130,17 @@ fn target_dir(root: &Path) -> PathBuf {
         .unwrap_or_else(|| root.join("target"))
 }
 
-fn main() -> Result<()> {
+/// Exit status 0 on success, 2 for arguments it does not know (before any work), 1 when the
+/// evaluation fails: one `error:` line with its causes, never a backtrace.
+fn main() -> std::process::ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    run(&args)
+    match run(&args) {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            std::process::ExitCode::FAILURE
+        }
+    }
 }
 
 fn run(args: &[String]) -> Result<()> {
@@ -519,6 +527,35 @@ fn evaluate_scene(mode: Mode, bin: &Path, cache: &Path, spec: &SceneSpec) -> Res
     Ok(rows)
 }
 
+/// The commit and the machine the figures were measured on, for the summary's head: the
+/// commit (with `+changes` when the tree differs from it), the CPU and its cores.
+fn provenance() -> String {
+    let git = |args: &[&str]| {
+        std::process::Command::new("git")
+            .args(args)
+            .output()
+            .ok()
+            .filter(|o| o.status.success())
+            .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string())
+    };
+    let commit = git(&["rev-parse", "--short=12", "HEAD"]).unwrap_or_else(|| "an unknown commit".into());
+    let changed = git(&["status", "--porcelain", "--untracked-files=no"]).is_some_and(|s| !s.is_empty());
+    let cpu = std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|c| {
+            c.lines().find_map(|l| {
+                l.strip_prefix("model name")
+                    .map(|m| m.trim_start_matches([' ', '\t', ':']).to_string())
+            })
+        })
+        .unwrap_or_else(|| "an unknown CPU".into());
+    let cores = std::thread::available_parallelism().map_or(0, |n| n.get());
+    format!(
+        "Measured at commit `{commit}`{} on {cpu}, {cores} cores; frames on the Vulkan device the player found.",
+        if changed { " (+changes)" } else { "" }
+    )
+}
+
 /// The README material: presets table and the automatic choice against the Pareto fronts.
 fn summary(rows: &[Row], mode: Mode, seconds: f64) -> String {
     let mut s = String::new();
@@ -528,6 +565,7 @@ fn summary(rows: &[Row], mode: Mode, seconds: f64) -> String {
         if mode == Mode::Full { "full" } else { "quick" },
         seconds
     );
+    let _ = writeln!(s, "{}\n", provenance());
     let mut scenes: Vec<&str> = Vec::new();
     for r in rows {
         if !scenes.contains(&r.scene.as_str()) {

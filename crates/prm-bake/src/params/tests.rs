@@ -192,14 +192,16 @@ fn automatic_entries_follow_the_clusters() {
         .reasons
         .iter()
         .any(|r| r.contains("at most 16 for each of the 100 clusters given")));
-    // A memory budget that caps the clusters (the atlas stops shrinking at 64²) caps the entries.
+    // A memory budget that caps the clusters (the atlas stops shrinking at 96², what the 913
+    // charts need) caps the entries: 16 per cluster, never below 1024.
     let tight = BakeConfig {
         memory_budget_mib: Some(2.0),
         ..Default::default()
     };
     let q = resolve(&tight, &scene, probe(&scene)).unwrap();
-    assert!(q.entries < 3840 && q.entries >= 1024, "{q:?}");
-    assert!(q.entries / 16 <= q.clusters + 16, "{q:?}");
+    assert_eq!(q.atlas, AtlasSize::Resolution(96), "{q:?}");
+    assert!(q.entries < 3840, "{q:?}");
+    assert_eq!(q.entries, (q.clusters * 16 / 256 * 256).max(1024), "{q:?}");
 }
 
 #[test]
@@ -222,4 +224,77 @@ fn probes_lit_through_the_panes_keep_the_smaller_disks() {
     assert_eq!(scale(Some(64), Some(0), None), NEAR_FIELD_DISK_SCALE_LARGE);
     // Without the near field the disks stay one radius whatever the probes.
     assert_eq!(scale(Some(64), Some(0), Some(0)), 1.0);
+}
+
+/// Every named preset plans on the bundled Cornell box with the default budgets: `high`
+/// brings the memory budget its 1024 panes of 512² texels need.
+#[test]
+fn every_preset_works_as_shipped() {
+    let scene = cornell();
+    for preset in [Preset::Preview, Preset::Default, Preset::Paper, Preset::High] {
+        let cfg = BakeConfig {
+            preset: Some(preset),
+            ..Default::default()
+        };
+        let p = resolve(&cfg, &scene, probe(&scene)).unwrap_or_else(|e| panic!("{preset:?}: {e}"));
+        if preset == Preset::High {
+            assert_eq!(p.memory_budget_mib, 1024.0);
+        }
+    }
+}
+
+/// A texel size far too small is refused naming `--texel-size`, not the options it was not
+/// given.
+#[test]
+fn a_tiny_texel_size_names_texel_size() {
+    let scene = cornell();
+    let cfg = BakeConfig {
+        texel_size: Some(1e-9),
+        ..Default::default()
+    };
+    let e = resolve(&cfg, &scene, probe(&scene)).unwrap_err().to_string();
+    assert!(e.contains("--texel-size") && !e.contains("--resolution"), "{e}");
+}
+
+/// The automatic top K's reason states arithmetic that holds, also when the residual groups
+/// outnumber the panes a frame blends.
+#[test]
+fn the_top_k_reason_adds_up() {
+    let r = top_k_reason(32, 48, 262144.0, 51, 1024);
+    assert!(!r.contains("less 51"), "{r}");
+    assert!(r.contains("at least 32"), "{r}");
+    let r = top_k_reason(128, 192, 65536.0, 64, 512);
+    assert!(r.contains("192 panes") && r.contains("less 64"), "{r}");
+    let r = top_k_reason(20, 192, 65536.0, 5, 20);
+    assert!(r.contains("every cluster"), "{r}");
+}
+
+/// A scene of many small charts under a tight memory budget: the automatic atlas stops
+/// shrinking at the size that holds every chart, so the bake can build the atlas the plan
+/// promises.
+#[test]
+fn the_planned_atlas_holds_every_chart() {
+    let dir = std::env::temp_dir().join(format!("prm-bake-charts-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    // 40,000 separate triangles (one chart each) over a 10 m square.
+    let mut obj = String::new();
+    for i in 0..40_000 {
+        let (x, z) = ((i % 200) as f32 * 0.05, (i / 200) as f32 * 0.05);
+        obj.push_str(&format!("v {x} 0 {z}\nv {} 0 {z}\nv {x} 0 {}\n", x + 0.03, z + 0.03));
+        obj.push_str(&format!("f {} {} {}\n", 3 * i + 1, 3 * i + 3, 3 * i + 2));
+    }
+    let path = dir.join("charts.obj");
+    std::fs::write(&path, obj).unwrap();
+    let scene = prm_scene::load(&path).unwrap();
+    let cfg = BakeConfig {
+        memory_budget_mib: Some(64.0),
+        ..Default::default()
+    };
+    let p = resolve(&cfg, &scene, probe(&scene)).unwrap();
+    let AtlasSize::Resolution(r) = p.atlas else {
+        panic!("an automatic resolution")
+    };
+    let sizing = prm_scene::AtlasParams::with_sizing(prm_scene::Sizing::Resolution(r));
+    Atlas::build(&scene, &sizing).unwrap_or_else(|e| panic!("the plan's {r}² atlas: {e}"));
+    std::fs::remove_dir_all(&dir).unwrap();
 }
