@@ -439,6 +439,15 @@ fn print_plan(params: &BakeParams, progress: &Progress) {
         "  expected: about {:.0} s on the reference machine with this renderer (time budget {:.0} s)",
         params.estimated_seconds, params.time_budget_s
     ));
+    if let AtlasSize::Resolution(r) = params.atlas {
+        let groups = prm_format::residual_group_count(params.clusters, prm_format::RESIDUAL_GROUPS) as usize;
+        let mib = (params.clusters + groups) as f64 * (r as f64).powi(2) * 4.0 / (1024.0 * 1024.0);
+        progress.say(&format!(
+            "  footprint: panes {mib:.1} MiB resident on the GPU ({} clusters + {groups} residual groups × {r}² \
+             texels × 4 B; memory budget {:.0} MiB)",
+            params.clusters, params.memory_budget_mib
+        ));
+    }
 }
 
 /// The summary on stdout: the archive and the timing breakdown.

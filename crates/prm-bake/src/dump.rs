@@ -70,6 +70,27 @@ pub fn run(args: &DumpArgs) -> Result<()> {
     Ok(())
 }
 
+/// What an archive needs resident on the GPU as the player loads it by default: every pane
+/// and residual group at 4 bytes a texel, and the near field's records and hits.
+fn resident_line<R: Read + Seek>(archive: &Archive<R>) -> String {
+    let mib = |b: u64| b as f64 / (1024.0 * 1024.0);
+    let clusters = archive.pane_count();
+    let groups = prm_format::residual_group_count(clusters, prm_format::RESIDUAL_GROUPS) as usize;
+    let texels = (archive.atlas().resolution as u64).pow(2);
+    let panes = (clusters + groups) as u64 * texels * 4;
+    let near = archive.near_field().map_or(0, |n| {
+        (n.exits.len() * std::mem::size_of::<prm_format::NearExit>()
+            + n.hits.len() * std::mem::size_of::<prm_format::NearHit>()) as u64
+    });
+    format!(
+        "{:.1} MiB on the GPU: panes {:.1} MiB ({clusters} clusters + {groups} residual groups × {texels} texels × 4 B), \
+         near field {:.1} MiB",
+        mib(panes + near),
+        mib(panes),
+        mib(near)
+    )
+}
+
 fn hex(v: u64) -> String {
     format!("{v:016x}")
 }
@@ -295,6 +316,7 @@ pub fn write_summary<W: Write, R: Read + Seek>(
         r = atlas.resolution,
         t = atlas.tile_size,
     )?;
+    writeln!(out, "resident     {}", resident_line(archive))?;
     writeln!(
         out,
         "entries      {}{}",
@@ -305,6 +327,27 @@ pub fn write_summary<W: Write, R: Read + Seek>(
             " (no pane energies: cluster weights are the members' mean; re-bake for 1.1)"
         }
     )?;
+    write_contents(out, archive)?;
+    write_sections(out, archive)?;
+    write_parameters(out, archive)?;
+    write_panes(out, archive)?;
+    if let Some(r) = report {
+        writeln!(
+            out,
+            "\nverify       OK: {} sections ({}) hashed, {} panes decoded, {} tiles decompressed, {} omitted, cluster energy/peak match",
+            r.sections,
+            human_bytes(r.bytes_hashed),
+            r.panes,
+            r.stored_tiles,
+            r.omitted_tiles
+        )?;
+    }
+    Ok(())
+}
+
+/// The optional sections' lines: emitters, sky, probes, near field, clusters and the accuracy estimate.
+fn write_contents<W: Write, R: Read + Seek>(out: &mut W, archive: &Archive<R>) -> std::io::Result<()> {
+    let meta = archive.metadata();
     for g in archive.emitters() {
         let [r, gr, b] = g.radiance;
         let [er, eg, eb] = rgb_sum(&g.direct);
@@ -385,7 +428,12 @@ pub fn write_summary<W: Write, R: Read + Seek>(
         None => writeln!(out, "accuracy     not estimated by the bake")?,
         Some(a) => write_accuracy(out, "accuracy     ", a)?,
     }
+    Ok(())
+}
 
+/// The section table and the pane tiles' storage.
+fn write_sections<W: Write, R: Read + Seek>(out: &mut W, archive: &Archive<R>) -> std::io::Result<()> {
+    let info = archive.info();
     writeln!(out, "\nsections")?;
     let w = info.sections.iter().map(|s| s.name.len()).max().unwrap_or(0).max(8);
     writeln!(
@@ -418,7 +466,12 @@ pub fn write_summary<W: Write, R: Read + Seek>(
         human_bytes(info.pane_texel_bytes),
         ratio(info.pane_texel_bytes, info.stored_tile_bytes)
     )?;
+    Ok(())
+}
 
+/// The bake parameters and timings the metadata records.
+fn write_parameters<W: Write, R: Read + Seek>(out: &mut W, archive: &Archive<R>) -> std::io::Result<()> {
+    let meta = archive.metadata();
     writeln!(out, "\nbake parameters")?;
     if meta.params.is_empty() {
         writeln!(out, "  (none)")?;
@@ -438,7 +491,11 @@ pub fn write_summary<W: Write, R: Read + Seek>(
     if meta.timings.len() > 1 {
         writeln!(out, "  {:<20} {total:>10.3} s", "(sum)")?;
     }
+    Ok(())
+}
 
+/// One line per pane: its cluster's size, energy and peak.
+fn write_panes<W: Write, R: Read + Seek>(out: &mut W, archive: &Archive<R>) -> std::io::Result<()> {
     writeln!(out, "\npanes")?;
     writeln!(
         out,
@@ -452,17 +509,6 @@ pub fn write_summary<W: Write, R: Read + Seek>(
             out,
             "  {i:>6} {:>7}  {:>10} {:>10} {:>10}  {:>10} {:>10} {:>10}",
             c.count, e[0], e[1], e[2], p[0], p[1], p[2]
-        )?;
-    }
-    if let Some(r) = report {
-        writeln!(
-            out,
-            "\nverify       OK: {} sections ({}) hashed, {} panes decoded, {} tiles decompressed, {} omitted, cluster energy/peak match",
-            r.sections,
-            human_bytes(r.bytes_hashed),
-            r.panes,
-            r.stored_tiles,
-            r.omitted_tiles
         )?;
     }
     Ok(())

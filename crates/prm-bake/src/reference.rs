@@ -172,68 +172,9 @@ pub fn run(args: &ReferenceArgs) -> Result<()> {
         eprintln!("pass {pass}/{passes} ({:.1?})", start.elapsed());
     };
     let (width, height, pixels) = if args.lightmap {
-        let sizing = match args.resolution {
-            Some(r) => Sizing::Resolution(r),
-            None => Sizing::Auto,
-        };
-        let atlas =
-            prm_trace::bake_atlas(&scene, &bvh, &AtlasParams::with_sizing(sizing)).context("cannot build the atlas")?;
-        eprintln!(
-            "atlas {0}x{0}, {1} exit points; {2} passes x {3} paths",
-            atlas.resolution,
-            atlas.exits.len(),
-            params.passes,
-            params.samples_per_pass
-        );
-        let est = tracer
-            .indirect_at_exits(&atlas.exits, &params, &mut progress)
-            .context("reference tracing failed")?;
-        let mut values = est.mean;
-        if !args.indirect_only {
-            for (v, d) in values.iter_mut().zip(tracer.direct_at_exits(&atlas.exits)) {
-                *v += d;
-            }
-        }
-        let r = atlas.resolution as usize;
-        let mut img = vec![Vec3::ZERO; r * r];
-        for (x, v) in atlas.exits.iter().zip(&values) {
-            img[x.texel as usize] = *v;
-        }
-        for &(gutter, source) in &atlas.dilation {
-            img[gutter as usize] = img[source as usize];
-        }
-        report_noise(&est.variance, &values, args.spp);
-        (r, r, img)
+        trace_lightmap(args, &scene, &bvh, &tracer, &params, &mut progress)?
     } else {
-        let camera = match args.camera {
-            Some(c) => c,
-            None => match scene.cameras.first() {
-                Some(c) => *c,
-                None => crate::refuse!("{} has no camera; give --camera SPEC", args.scene.display()),
-            },
-        };
-        let (w, h) = args.size;
-        if w as u64 * h as u64 > MAX_PIXELS {
-            crate::refuse!(
-                "--size {w}x{h} is {} pixels; the reference tracer renders at most {MAX_PIXELS} \
-                 (8192x8192): it keeps a mean and a variance per pixel",
-                w as u64 * h as u64
-            );
-        }
-        let mode = if args.indirect_only {
-            ImageMode::IndirectOnly
-        } else {
-            ImageMode::Full
-        };
-        eprintln!(
-            "image {w}x{h}; {} passes x {} paths",
-            params.passes, params.samples_per_pass
-        );
-        let est = tracer
-            .render(&camera, w, h, mode, &params, &mut progress)
-            .context("reference rendering failed")?;
-        report_noise(&est.variance, &est.mean, args.spp);
-        (w as usize, h as usize, est.mean)
+        render_image(args, &scene, &tracer, &params, &mut progress)?
     };
     if let Some(dir) = args.output.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
@@ -246,6 +187,89 @@ pub fn run(args: &ReferenceArgs) -> Result<()> {
         start.elapsed()
     );
     Ok(())
+}
+
+/// `--lightmap`: the irradiance at every exit point of the scene's atlas, gutters filled from
+/// their sources; returns the image's size and texels.
+fn trace_lightmap(
+    args: &ReferenceArgs,
+    scene: &prm_scene::Scene,
+    bvh: &Bvh,
+    tracer: &ReferenceTracer,
+    params: &ReferenceParams,
+    progress: &mut dyn FnMut(u32, u32),
+) -> Result<(usize, usize, Vec<Vec3>)> {
+    let sizing = match args.resolution {
+        Some(r) => Sizing::Resolution(r),
+        None => Sizing::Auto,
+    };
+    let atlas =
+        prm_trace::bake_atlas(scene, bvh, &AtlasParams::with_sizing(sizing)).context("cannot build the atlas")?;
+    eprintln!(
+        "atlas {0}x{0}, {1} exit points; {2} passes x {3} paths",
+        atlas.resolution,
+        atlas.exits.len(),
+        params.passes,
+        params.samples_per_pass
+    );
+    let est = tracer
+        .indirect_at_exits(&atlas.exits, params, progress)
+        .context("reference tracing failed")?;
+    let mut values = est.mean;
+    if !args.indirect_only {
+        for (v, d) in values.iter_mut().zip(tracer.direct_at_exits(&atlas.exits)) {
+            *v += d;
+        }
+    }
+    let r = atlas.resolution as usize;
+    let mut img = vec![Vec3::ZERO; r * r];
+    for (x, v) in atlas.exits.iter().zip(&values) {
+        img[x.texel as usize] = *v;
+    }
+    for &(gutter, source) in &atlas.dilation {
+        img[gutter as usize] = img[source as usize];
+    }
+    report_noise(&est.variance, &values, args.spp);
+    Ok((r, r, img))
+}
+
+/// The camera image (`--camera`, else the scene's first camera); returns its size and pixels.
+fn render_image(
+    args: &ReferenceArgs,
+    scene: &prm_scene::Scene,
+    tracer: &ReferenceTracer,
+    params: &ReferenceParams,
+    progress: &mut dyn FnMut(u32, u32),
+) -> Result<(usize, usize, Vec<Vec3>)> {
+    let camera = match args.camera {
+        Some(c) => c,
+        None => match scene.cameras.first() {
+            Some(c) => *c,
+            None => crate::refuse!("{} has no camera; give --camera SPEC", args.scene.display()),
+        },
+    };
+    let (w, h) = args.size;
+    if w as u64 * h as u64 > MAX_PIXELS {
+        crate::refuse!(
+            "--size {w}x{h} is {} pixels; the reference tracer renders at most {MAX_PIXELS} \
+             (8192x8192): it keeps a mean and a variance per pixel",
+            w as u64 * h as u64
+        );
+    }
+    let mode = if args.indirect_only {
+        ImageMode::IndirectOnly
+    } else {
+        ImageMode::Full
+    };
+    eprintln!(
+        "image {w}x{h}; {} passes x {} paths",
+        params.passes, params.samples_per_pass
+    );
+    let est = tracer
+        .render(&camera, w, h, mode, params, progress)
+        .context("reference rendering failed")?;
+    report_noise(&est.variance, &est.mean, args.spp);
+    Ok((w as usize, h as usize, est.mean))
 }
 
 /// Refuses an output that cannot be written, before the long work: an existing directory or

@@ -581,6 +581,13 @@ fn dump_summarises_verifies_and_rejects_damage() {
     let path = archive.to_str().unwrap();
     let r = run(&["dump", path]);
     assert!(r.status.success(), "{}", describe(&r));
+    // What the archive needs resident on the GPU, panes and near field apart.
+    let stdout = String::from_utf8_lossy(&r.stdout);
+    let resident = stdout.lines().find(|l| l.starts_with("resident")).unwrap_or_default();
+    assert!(
+        resident.contains("MiB on the GPU: panes") && resident.contains("near field"),
+        "{resident}"
+    );
     assert!(
         String::from_utf8_lossy(&r.stdout).contains("near field"),
         "{}",
@@ -1029,6 +1036,12 @@ fn command_line_conventions() {
     assert!(r.status.success(), "{}", describe(&r));
     let stderr = String::from_utf8_lossy(&r.stderr);
     assert!(stderr.contains("shard 99/100 holds no clusters"), "{}", describe(&r));
+    // The plan states the panes' footprint: 64 clusters + 16 residual groups of 128² texels.
+    assert!(
+        stderr.contains("footprint: panes 5.0 MiB resident on the GPU (64 clusters + 16 residual groups"),
+        "{}",
+        describe(&r)
+    );
 
     // `dump --export-exr FILE`: refused before the summary is printed.
     let file = dir.join("not-a-dir");

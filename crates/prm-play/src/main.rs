@@ -106,8 +106,9 @@ struct Args {
     /// from the swapchain) when the window closes; headless, a copy of the last frame's PNG.
     #[arg(long, value_name = "FILE.png")]
     screenshot: Option<PathBuf>,
-    /// Write per-pass GPU times, frame times and the resident memory after each frame as JSON
-    /// (headless only; with a still light, add
+    /// Write per-pass GPU times, frame times, the resident memory after each frame, the run
+    /// time's GPU memory by part and the bytes its passes read an update as JSON (headless
+    /// only; with a still light, add
     /// `--gi-update every-frame` to time the indirect light's passes on every frame).
     #[arg(long, value_name = "FILE.json")]
     timings: Option<PathBuf>,
@@ -501,7 +502,8 @@ fn write_frame(args: &Args, i: u32, last: bool, image: &prm_play::Image) -> Resu
     Ok(())
 }
 
-/// Writes `--timings`: per-pass GPU times, frame times and the resident memory after each frame.
+/// Writes `--timings`: per-pass GPU times, frame times and the resident memory after each frame,
+/// the run time's GPU memory by part and the bytes its indirect-light passes read an update.
 fn write_timings(
     path: &Path,
     args: &Args,
@@ -523,6 +525,12 @@ fn write_timings(
         "top_k_requested": top_k,
         "residual_groups": renderer.runtime().group_count(),
         "clusters": renderer.cluster_count(),
+        // The run time's GPU memory by part (bytes, from the allocator's report), and what its
+        // indirect-light passes read on every update.
+        "gpu_memory": renderer.runtime().gpu_memory().map(|parts| {
+            parts.iter().map(|p| (p.name.to_string(), serde_json::json!(p.bytes))).collect::<serde_json::Map<_, _>>()
+        }),
+        "gi_bytes_read_per_update": renderer.runtime().gi_bytes_read(),
         "frames": frames.iter().map(|(f, rss)| serde_json::json!({
             "cpu_ms": f.cpu_ms,
             "gpu_ms": f.gpu_ms.iter().map(|(k, v)| ((*k).to_string(), serde_json::json!(v))).collect::<serde_json::Map<_, _>>(),

@@ -108,6 +108,8 @@ pub(crate) struct BlendPass {
     chunks: Vec<(wgpu::BindGroup, [u32; 3])>,
     /// The chunks' constants and lit quads, which the bind groups name (kept alive here).
     _buffers: Vec<wgpu::Buffer>,
+    /// Quads the blend reads of every selected pane: the lit ones.
+    pub lit_quads: u64,
 }
 
 /// What the blend writes and adds besides the panes.
@@ -183,6 +185,7 @@ impl BlendPass {
             pass,
             chunks,
             _buffers: buffers,
+            lit_quads: counts.iter().map(|&n| n as u64).sum(),
         }
     }
 

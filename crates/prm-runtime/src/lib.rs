@@ -52,6 +52,7 @@ mod baked;
 mod blend;
 mod irradiance;
 mod lights;
+mod memory;
 mod near_field;
 mod options;
 mod probe_rays;
@@ -69,6 +70,7 @@ use prm_scene::{Aabb, Light, Scene};
 pub use baked::EmitterInfo;
 pub use irradiance::DILATE_STEPS;
 pub use lights::{look_to, orthographic, perspective, shadow_views, SPOT_SINGLE_VIEW_MAX_DEG};
+pub use memory::{MemoryPart, MEMORY_PARTS};
 pub use options::{
     archive_top_k, GiUpdate, NearLight, NearTail, ProbeLight, RuntimeError, RuntimeOptions, MAX_NEAR_BOUNCES,
     MAX_SHADOW_RESOLUTION, MAX_SUN_TILES,
@@ -877,6 +879,38 @@ impl Runtime {
     /// cluster).
     pub fn group_count(&self) -> u32 {
         self.group_count
+    }
+
+    /// The run time's GPU memory by part ([`MEMORY_PARTS`]), from the device's allocator
+    /// report: what was allocated for the run time's labels, padding included. `None` where the
+    /// backend gives no report (wgpu's Vulkan and DirectX 12 backends do).
+    pub fn gpu_memory(&self) -> Option<Vec<MemoryPart>> {
+        self.device.generate_allocator_report().map(|r| memory::by_part(&r))
+    }
+
+    /// Bytes the indirect light's passes read on every update, from the sizes of what they
+    /// bind: the weights read every entry and cluster; the blend reads the lit quads of the
+    /// top K clusters' and the residual groups' panes; the near field reads its exit records
+    /// and hits once per gather (one, plus [`RuntimeOptions::near_bounces`] for the deeper
+    /// share). Texture reads (shadow maps, lightmaps) and the probes are not counted. `None`
+    /// where the backend gives no allocator report.
+    pub fn gi_bytes_read(&self) -> Option<u64> {
+        let report = self.device.generate_allocator_report()?;
+        let bytes = |label: &str| -> u64 {
+            report
+                .allocations
+                .iter()
+                .filter(|a| a.name == label)
+                .map(|a| a.size)
+                .sum()
+        };
+        let panes = (self.options.top_k.min(self.cluster_count) + self.group_count) as u64 * self.blend.lit_quads * 16;
+        let gathers = match &self.near {
+            Some(_) => 1 + self.options.near_bounces as u64,
+            None => 0,
+        };
+        let near = gathers * (bytes("prm near exits") + bytes("prm near hits"));
+        Some(bytes("prm entries") + bytes("prm clusters") + panes + near)
     }
 
     /// Changes the number of clusters kept, from the next [`Runtime::update`] on.

@@ -289,3 +289,33 @@ fn a_shard_of_a_bake_is_refused() {
         "{e}"
     );
 }
+
+/// The run time's GPU memory by part: the panes' part holds every pane and residual group at
+/// 4 bytes a texel (and little more), the lightmap its RGBA32F texels, and the bytes an update
+/// reads cover the selected panes' lit quads.
+#[test]
+fn gpu_memory_is_reported_by_part() {
+    let ctx = gpu();
+    let (scene, mut a) = archive("memory");
+    let texels = (a.atlas().resolution as u64).pow(2);
+    let opts = RuntimeOptions::for_archive(&a);
+    let mut rt = Runtime::new(&ctx.device, &ctx.queue, &mut a, &scene, opts).unwrap();
+    frame(&ctx, &mut rt, &[point(0.28, 0.45, 0.28)], Shadows::Own);
+    let parts = rt.gpu_memory().expect("Vulkan reports its allocations");
+    assert_eq!(parts.len(), prm_runtime::MEMORY_PARTS.len());
+    let part = |name: &str| parts.iter().find(|p| p.name == name).unwrap().bytes;
+    let panes = (rt.cluster_count() + rt.group_count()) as u64 * texels * 4;
+    assert!(
+        part("panes") >= panes && part("panes") <= panes + panes / 10 + (1 << 20),
+        "panes {} for {panes} bytes of texels",
+        part("panes")
+    );
+    assert!(part("lightmap") >= texels * 16, "lightmap {}", part("lightmap"));
+    assert!(part("shadow maps") > 0 && part("weights") > 0);
+    let read = rt.gi_bytes_read().unwrap();
+    let k = rt.options().top_k.min(rt.cluster_count()) as u64;
+    assert!(
+        read > 0 && read <= (k + rt.group_count() as u64) * texels * 4 + (64 << 20),
+        "{read}"
+    );
+}
