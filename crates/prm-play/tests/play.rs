@@ -1183,10 +1183,21 @@ fn cli_names_a_damaged_archive() {
         .arg(&scene)
         .arg("--out")
         .arg(&dir)
+        // One clear message whatever the environment asks of panics.
+        .env("RUST_BACKTRACE", "1")
         .output()
         .unwrap();
     let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success(), "a damaged archive played:\n{stderr}");
+    assert_eq!(out.status.code(), Some(1), "a damaged archive played:\n{stderr}");
+    assert!(
+        !stderr.contains("backtrace") && !stderr.contains("panicked"),
+        "{stderr}"
+    );
+    assert_eq!(
+        stderr.lines().filter(|l| l.starts_with("error:")).count(),
+        1,
+        "{stderr}"
+    );
     assert!(
         stderr.contains("damaged.prm"),
         "the error should name the file:\n{stderr}"

@@ -66,13 +66,22 @@ impl kit::Vertex for Vertex {
         &wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3, 2 => Float32x2, 3 => Float32x3];
 }
 
-fn main() -> Result<()> {
+fn main() -> std::process::ExitCode {
+    // Headless: no stray "XDG_RUNTIME_DIR is invalid" lines from wgpu's window-system probe.
+    prm_gpu_kit::silence_wayland_probe();
     let args: Vec<PathBuf> = std::env::args_os().skip(1).map(PathBuf::from).collect();
     let Some(archive_path) = args.first() else {
-        bail!("usage: embed ARCHIVE.prm [OUT.png]");
+        eprintln!("usage: embed ARCHIVE.prm [OUT.png]");
+        return std::process::ExitCode::from(2);
     };
     let out = args.get(1).cloned().unwrap_or_else(|| PathBuf::from("embed.png"));
-    run(archive_path, &out)
+    match run(archive_path, &out) {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            std::process::ExitCode::FAILURE
+        }
+    }
 }
 
 /// Plays `archive_path` for one frame and writes the shaded image to `out`.
