@@ -440,8 +440,8 @@ fn print_plan(params: &BakeParams, progress: &Progress) {
         params.estimated_seconds, params.time_budget_s
     ));
     if let AtlasSize::Resolution(r) = params.atlas {
-        let groups = prm_format::residual_group_count(params.clusters, prm_format::RESIDUAL_GROUPS) as usize;
-        let mib = (params.clusters + groups) as f64 * (r as f64).powi(2) * 4.0 / (1024.0 * 1024.0);
+        let groups = prm_format::residual_group_count(params.clusters, prm_format::RESIDUAL_GROUPS);
+        let mib = prm_bake::params::resident_pane_bytes(params.clusters, r) as f64 / (1024.0 * 1024.0);
         progress.say(&format!(
             "  footprint: panes {mib:.1} MiB resident on the GPU ({} clusters + {groups} residual groups × {r}² \
              texels × 4 B; memory budget {:.0} MiB)",

@@ -77,7 +77,7 @@ fn resident_line<R: Read + Seek>(archive: &Archive<R>) -> String {
     let clusters = archive.pane_count();
     let groups = prm_format::residual_group_count(clusters, prm_format::RESIDUAL_GROUPS) as usize;
     let texels = (archive.atlas().resolution as u64).pow(2);
-    let panes = (clusters + groups) as u64 * texels * 4;
+    let panes = prm_bake::params::resident_pane_bytes(clusters, archive.atlas().resolution);
     let near = archive.near_field().map_or(0, |n| {
         (n.exits.len() * std::mem::size_of::<prm_format::NearExit>()
             + n.hits.len() * std::mem::size_of::<prm_format::NearHit>()) as u64

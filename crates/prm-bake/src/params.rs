@@ -453,6 +453,13 @@ const WALKS_IN_ALL: usize = 65536;
 /// 6% at all three seeds. Sponza does not gain (`cargo xtask eval --sky`, sky and sun).
 const CAPPED_WALKS: u32 = 32;
 
+/// Bytes the player keeps resident for the panes of `clusters` clusters in a `resolution`²
+/// atlas: every pane and residual group's summed pane at 4 bytes (RGB9E5) a texel.
+pub fn resident_pane_bytes(clusters: usize, resolution: u32) -> u64 {
+    let groups = prm_format::residual_group_count(clusters, prm_format::RESIDUAL_GROUPS) as u64;
+    (clusters as u64 + groups) * u64::from(resolution).pow(2) * 4
+}
+
 /// The smallest automatic atlas side that holds `charts` charts: every chart needs a texel and
 /// its gutters, a 3×3 block at the least, in whole steps of 32 texels.
 fn atlas_floor(charts: usize) -> u32 {
@@ -563,6 +570,9 @@ impl BakeParams {
         }
         let mut reasons = Vec::new();
         let mut auto_resolution = None;
+        // The smallest atlas the time budget may shrink an automatic one to: what its charts
+        // need, at least 128².
+        let mut smallest_atlas = 128;
         let mut atlas = match (config.resolution, config.texel_size, &fixed) {
             (Some(r), _, _) => AtlasSize::Resolution(r),
             (None, Some(s), _) => AtlasSize::TexelSize(s),
@@ -586,6 +596,7 @@ impl BakeParams {
                     }
                 ));
                 auto_resolution = Some(r);
+                smallest_atlas = floor.max(128).min(r);
                 AtlasSize::Resolution(r)
             }
         };
@@ -643,10 +654,6 @@ impl BakeParams {
         let triangles = scene.triangles.len() as f64;
         let estimate = |entries: usize, paths: u32, atlas: AtlasSize| {
             cost.bake_seconds(entries, paths, bounces_per_walk, utilization * texels(atlas), triangles)
-        };
-        let smallest_atlas = match auto_resolution {
-            Some(r) => atlas_floor(probe()?.stats.charts as usize).max(128).min(r),
-            None => 128,
         };
         let planned = estimate(entries, paths_per_entry, atlas);
         let mut estimated_seconds = planned;

@@ -308,20 +308,20 @@ pub fn viewer_camera(scene: &Scene) -> Camera {
         return *c;
     }
     let b = scene.bounds();
+    let (centre, extent) = ((b.min + b.max) * 0.5, b.extent());
+    // From outside: far enough that a 45° view holds the bounding sphere.
+    let fov: f32 = 45.0;
+    let dist = b.diagonal() * 0.5 / (fov.to_radians() * 0.5).tan() * 1.1;
     if let Some(n) = flat_side(scene) {
         // A flat scene is seen from the side its surfaces face, tilted a little (edge-on it
         // would cover no pixel).
         let tilt = if n.y.abs() > 0.5 { glam::Vec3::Z } else { glam::Vec3::Y };
-        let fov: f32 = 45.0;
-        let dist = b.diagonal() * 0.5 / (fov.to_radians() * 0.5).tan() * 1.1;
-        let centre = (b.min + b.max) * 0.5;
         return Camera {
             eye: centre + (2.0 * n + tilt).normalize() * dist,
             target: centre,
             fov_y_deg: fov,
         };
     }
-    let (centre, extent) = ((b.min + b.max) * 0.5, b.extent());
     let sides = [glam::Vec3::Z, glam::Vec3::NEG_Z, glam::Vec3::X, glam::Vec3::NEG_X];
     // A side's area: the product of the other two extents (zero for a flat scene's edges).
     let face = |a: glam::Vec3| {
@@ -358,8 +358,6 @@ pub fn viewer_camera(scene: &Scene) -> Camera {
         });
     let depth = side.abs().dot(extent);
     if cover < 0.5 || depth <= 1e-6 * b.diagonal() {
-        let fov: f32 = 45.0;
-        let dist = b.diagonal() * 0.5 / (fov.to_radians() * 0.5).tan() * 1.1;
         return Camera {
             eye: centre + side * (dist + depth * 0.5),
             target: centre,

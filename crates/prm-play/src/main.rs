@@ -165,7 +165,7 @@ struct Refused(String);
 /// Returns early with a [`Refused`] error (exit status 2) from a `format!` message.
 macro_rules! refuse {
     ($($arg:tt)*) => {
-        return Err(anyhow::Error::new(Refused(format!($($arg)*))))
+        return Err(refused(format!($($arg)*)))
     };
 }
 
@@ -476,7 +476,9 @@ fn play_headless(
         let image = renderer.read_image()?;
         write_frame(args, i, i + 1 == frame_count, &image)?;
         eprintln!("frame {i}: {:.2} ms", t.cpu_ms);
-        frames.push((t, resident_bytes()));
+        // Read only for --timings: a file read on every frame otherwise.
+        let resident = args.timings.as_ref().and_then(|_| resident_bytes());
+        frames.push((t, resident));
     }
     Ok(frames)
 }

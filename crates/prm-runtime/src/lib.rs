@@ -892,25 +892,14 @@ impl Runtime {
     /// bind: the weights read every entry and cluster; the blend reads the lit quads of the
     /// top K clusters' and the residual groups' panes; the near field reads its exit records
     /// and hits once per gather (one, plus [`RuntimeOptions::near_bounces`] for the deeper
-    /// share). Texture reads (shadow maps, lightmaps) and the probes are not counted. `None`
-    /// where the backend gives no allocator report.
-    pub fn gi_bytes_read(&self) -> Option<u64> {
-        let report = self.device.generate_allocator_report()?;
-        let bytes = |label: &str| -> u64 {
-            report
-                .allocations
-                .iter()
-                .filter(|a| a.name == label)
-                .map(|a| a.size)
-                .sum()
-        };
+    /// share). Texture reads (shadow maps, lightmaps) and the probes are not counted.
+    pub fn gi_bytes_read(&self) -> u64 {
         let panes = (self.options.top_k.min(self.cluster_count) + self.group_count) as u64 * self.blend.lit_quads * 16;
-        let gathers = match &self.near {
-            Some(_) => 1 + self.options.near_bounces as u64,
-            None => 0,
-        };
-        let near = gathers * (bytes("prm near exits") + bytes("prm near hits"));
-        Some(bytes("prm entries") + bytes("prm clusters") + panes + near)
+        let near = self
+            .near
+            .as_ref()
+            .map_or(0, |n| (1 + self.options.near_bounces as u64) * n.bytes_per_gather);
+        self.buffers.entries.size() + self.buffers.clusters.size() + panes + near
     }
 
     /// Changes the number of clusters kept, from the next [`Runtime::update`] on.

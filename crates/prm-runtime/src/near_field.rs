@@ -25,6 +25,8 @@ pub(crate) struct NearFieldPass {
     indirect: Option<IndirectShare>,
     exit_count: u32,
     point_count: u32,
+    /// Bytes of the exit records and hits, which every gather reads.
+    pub bytes_per_gather: u64,
 }
 
 /// The deeper VPLs' share (format 1.8), after the blend: from a copy of its lightmap (`source`,
@@ -321,6 +323,7 @@ impl NearFieldPass {
             indirect,
             exit_count,
             point_count: near.points.len() as u32,
+            bytes_per_gather: exits_buf.size() + hits_buf.size(),
         }
     }
 
