@@ -250,6 +250,23 @@ def to_f32(x):
 
 # ------------------------------------------------------------------ reader
 
+def gather_points(section, raw, at, count, texels, groups):
+    """The `count` gather-point records of the near field or the probe rays from byte `at` of
+    `raw` (texel u32, position, normal, albedo, emission 3 f32 each, emitter group u32 or
+    0xFFFFFFFF), each checked: a texel of the atlas, finite values, albedo and emission not
+    negative, an emitter group that exists."""
+    points = []
+    for i in range(count):
+        rec = struct.unpack_from("<I12fI", raw, at + 56 * i)
+        if rec[0] >= texels or any(v != v or abs(v) == float("inf") for v in rec[1:13]) or min(rec[7:13]) < 0:
+            raise InvalidArchive(f"{section}: gather point outside the atlas or not finite")
+        if rec[13] != 0xFFFFFFFF and rec[13] >= groups:
+            raise InvalidArchive(f"{section}: gather point of an emitter group that does not exist")
+        points.append(dict(texel=rec[0], position=list(rec[1:4]), normal=list(rec[4:7]), albedo=list(rec[7:10]),
+                           emission=list(rec[10:13]), emitter=rec[13]))
+    return points
+
+
 class Reader:
     def __init__(self, data, verify=True):
         self.d = data
@@ -398,15 +415,7 @@ class Reader:
             raise InvalidArchive("near_field: indirect disk not between 0 and the disk")
         if len(raw) != 32 + 56 * g + 8 * e + 8 * h:
             raise InvalidArchive("near_field: raw size differs from what the header gives")
-        points = []
-        for i in range(g):
-            rec = struct.unpack_from("<I12fI", raw, 32 + 56 * i)
-            if rec[0] >= texels or any(v != v or abs(v) == float("inf") for v in rec[1:13]) or min(rec[7:13]) < 0:
-                raise InvalidArchive("near_field: gather point outside the atlas or not finite")
-            if rec[13] != 0xFFFFFFFF and rec[13] >= groups:
-                raise InvalidArchive("near_field: gather point of an emitter group that does not exist")
-            points.append(dict(texel=rec[0], position=list(rec[1:4]), normal=list(rec[4:7]), albedo=list(rec[7:10]),
-                               emission=list(rec[10:13]), emitter=rec[13]))
+        points = gather_points("near_field", raw, 32, g, texels, groups)
         at = 32 + 56 * g
         exits, last, end = [], -1, 0
         for i in range(e):
@@ -445,15 +454,7 @@ class Reader:
             raise InvalidArchive("probe_rays: probe count, resolution, ray count or point count out of range")
         if len(raw) != 32 + 56 * g + 4 * n * m:
             raise InvalidArchive("probe_rays: raw size differs from what the header gives")
-        points = []
-        for i in range(g):
-            rec = struct.unpack_from("<I12fI", raw, 32 + 56 * i)
-            if rec[0] >= texels or any(v != v or abs(v) == float("inf") for v in rec[1:13]) or min(rec[7:13]) < 0:
-                raise InvalidArchive("probe_rays: gather point outside the atlas or not finite")
-            if rec[13] != 0xFFFFFFFF and rec[13] >= groups:
-                raise InvalidArchive("probe_rays: gather point of an emitter group that does not exist")
-            points.append(dict(texel=rec[0], position=list(rec[1:4]), normal=list(rec[4:7]), albedo=list(rec[7:10]),
-                               emission=list(rec[10:13]), emitter=rec[13]))
+        points = gather_points("probe_rays", raw, 32, g, texels, groups)
         hits = list(struct.unpack_from(f"<{n * m}I", raw, 32 + 56 * g))
         if any(h >= g and h not in (RAY_SKY, RAY_BLOCKED) for h in hits):
             raise InvalidArchive("probe_rays: a ray ends at a gather point that does not exist")

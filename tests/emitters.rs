@@ -11,8 +11,8 @@ use glam::Vec3;
 use prm_format::{Archive, ArchiveWriter, Cluster};
 use prm_runtime::{Runtime, RuntimeOptions};
 use prm_scene::{AtlasParams, Sizing};
-use prm_tests::{bake_cpu, channel_sum as sum, gpu, rel_error, repo, temp_dir, unlit_frame};
-use prm_trace::{Bvh, BvhParams, Emitters, Lighting, ReferenceParams, ReferenceTracer};
+use prm_tests::{baked, channel_sum as sum, gpu, reference_indirect, rel_error, sized, unlit_frame, At};
+use prm_trace::{Bvh, BvhParams, Emitters, Lighting, ReferenceTracer};
 
 /// Atlas side of the test bake.
 const RESOLUTION: u32 = 64;
@@ -51,24 +51,19 @@ fn frame(
 
 #[test]
 fn two_emitter_groups_bake_scale_and_match_the_reference() {
-    let dir = temp_dir("emitters");
-    let scene_path = repo("scenes/cornell-box-lamps/cornell-box-lamps.obj");
-    let scene = prm_scene::load(&scene_path).unwrap();
-    let traced_path = dir.join("lamps.prm");
     let config = prm_bake::BakeConfig {
-        entries: Some(2048),
-        clusters: Some(128),
-        resolution: Some(RESOLUTION),
         paths_per_entry: Some(16),
-        seed: Some(3),
-        // No accuracy check (its estimate would make the archive 1.5) and no near field (1.7):
-        // this test is of the emitters' own sections.
-        accuracy_points: Some(0),
+        // No near field (1.7): this test is of the emitters' own sections.
         near_rays: Some(0),
-        ..Default::default()
+        ..sized(2048, 128, RESOLUTION, 3)
     };
-    bake_cpu(&scene, &scene_path, &config, &traced_path);
-    let panes_path = dir.join("lamps-panes.prm");
+    let (scene, traced_path) = baked(
+        "emitters",
+        "scenes/cornell-box-lamps/cornell-box-lamps.obj",
+        "lamps.prm",
+        &config,
+    );
+    let panes_path = traced_path.with_file_name("lamps-panes.prm");
     without_traced_indirect(&traced_path, &panes_path);
 
     let mut traced = Archive::open(&traced_path).unwrap();
@@ -153,14 +148,7 @@ fn two_emitter_groups_bake_scale_and_match_the_reference() {
     let atlas = prm_trace::bake_atlas(&scene, &bvh, &AtlasParams::with_sizing(Sizing::Resolution(RESOLUTION))).unwrap();
     let emitters = Emitters::from_scene(&scene);
     let tracer = ReferenceTracer::new(&scene, &bvh, Lighting::Lights(&[])).with_emitters(&emitters);
-    let params = ReferenceParams {
-        seed: 17,
-        ..ReferenceParams::with_spp(1024)
-    };
-    let indirect = tracer
-        .indirect_at_exits(&atlas.exits, &params, &mut |_, _| {})
-        .unwrap()
-        .mean;
+    let indirect = reference_indirect(&tracer, At::Exits(&atlas.exits), 1024, 17);
     // The tracer's direct light with 16× its own emitter samples: at 256 (its default, one
     // sample of either lamp at a time) its noise alone is 5% per texel here, twice the bake's
     // (256 samples of each group).

@@ -10,27 +10,18 @@ use glam::Vec3;
 use prm_format::Archive;
 use prm_runtime::{NearLight, NearTail, Runtime, RuntimeOptions, Shadows};
 use prm_scene::{AtlasParams, Light, Sizing};
-use prm_tests::{bake_cpu, channel_sum as sum, gpu, rel_error, repo, temp_dir};
-use prm_trace::{Bvh, BvhParams, Lighting, ReferenceParams, ReferenceTracer};
+use prm_tests::{baked, channel_sum as sum, gather_radiance, gpu, reference_indirect, rel_error, sized, At};
+use prm_trace::{Bvh, BvhParams, Lighting, ReferenceTracer};
 
 #[test]
 fn the_near_field_brings_the_edges_to_the_reference() {
-    let dir = temp_dir("near-field");
-    let scene_path = repo("scenes/cornell-box/cornell-box.obj");
-    let scene = prm_scene::load(&scene_path).unwrap();
-    let path = dir.join("box.prm");
     let config = prm_bake::BakeConfig {
-        entries: Some(2048),
-        clusters: Some(64),
-        resolution: Some(64),
-        seed: Some(3),
-        accuracy_points: Some(0),
         // The entry points' own radius, not the default three: at three every texel of this
         // small box lies in the near field, and the test checks that only near ones change.
         vpl_disk_scale: Some(1.0),
-        ..Default::default()
+        ..sized(2048, 64, 64, 3)
     };
-    bake_cpu(&scene, &scene_path, &config, &path);
+    let (scene, path) = baked("near-field", "scenes/cornell-box/cornell-box.obj", "box.prm", &config);
     let archive = Archive::open(&path).unwrap();
     assert_eq!(archive.info().minor, 9);
     let near = archive.near_field().expect("the bake traced the near field").clone();
@@ -97,15 +88,7 @@ fn the_near_field_brings_the_edges_to_the_reference() {
 
     // 2. What they gain is the CPU's sum along the near rays.
     let lights = [light];
-    let cpu_radiance: Vec<Vec3> = near
-        .points
-        .iter()
-        .map(|g| {
-            let (p, n) = (Vec3::from(g.position), Vec3::from(g.normal));
-            let e = prm_trace::direct_irradiance(&bvh, &lights, p, n, n, u32::MAX);
-            Vec3::from(g.albedo) / std::f32::consts::PI * e
-        })
-        .collect();
+    let cpu_radiance = gather_radiance(&bvh, &lights, &near.points, |_| Vec3::ZERO);
     let gpu_radiance: Vec<Vec3> = radiance[..near.points.len()].iter().map(|v| Vec3::from(*v)).collect();
     let e = rel_error(&gpu_radiance, &cpu_radiance);
     println!("near field: gather point radiance {e:.4} from the CPU's ray-cast direct light");
@@ -246,14 +229,8 @@ fn the_near_field_brings_the_edges_to_the_reference() {
         .filter_map(|x| atlas.exits.iter().find(|e| e.texel == x.texel).copied())
         .collect();
     assert!(exits.len() < near.exits.len(), "the gutter copies some near exits");
-    let params = ReferenceParams {
-        seed: 31,
-        ..ReferenceParams::with_spp(1024)
-    };
-    let reference = ReferenceTracer::new(&scene, &bvh, Lighting::Lights(&lights))
-        .indirect_at_exits(&exits, &params, &mut |_, _| {})
-        .unwrap()
-        .mean;
+    let tracer = ReferenceTracer::new(&scene, &bvh, Lighting::Lights(&lights));
+    let reference = reference_indirect(&tracer, At::Exits(&exits), 1024, 31);
     let at = |lm: &[[f32; 3]]| -> Vec<Vec3> { exits.iter().map(|x| Vec3::from(lm[x.texel as usize])).collect() };
     let (with, without) = (at(&on), at(&off));
     let (e_on, e_off) = (rel_error(&with, &reference), rel_error(&without, &reference));

@@ -7,22 +7,13 @@
 //! reference path tracer at the probe positions, for the six axis normals.
 
 use glam::Vec3;
-use prm_format::{sh_irradiance, Archive};
+use prm_format::Archive;
 use prm_runtime::{ProbeLight, Runtime, RuntimeOptions, Shadows};
 use prm_scene::Light;
-use prm_tests::{bake_cpu, channel_sum as sum, gpu, rel_error, repo, temp_dir};
-use prm_trace::{Bvh, BvhParams, Lighting, ReferenceParams, ReferenceTracer};
+use prm_tests::{assert_close, baked, gather_radiance, gpu, reference_indirect, rel_error, sized, At};
+use prm_trace::{Bvh, BvhParams, Lighting, ReferenceTracer};
 
-use prm_format::AXIS_NORMALS as NORMALS;
-
-/// Each probe's irradiance at the six normals, negative values clamped as `probe_volume.wgsl`
-/// does.
-fn at_normals(coeffs: &[[[f32; 3]; prm_format::SH_COEFFS]]) -> Vec<Vec3> {
-    coeffs
-        .iter()
-        .flat_map(|c| NORMALS.map(|n| Vec3::from(sh_irradiance(c, n)).max(Vec3::ZERO)))
-        .collect()
-}
+use prm_trace::probes::{axis_irradiance, axis_points};
 
 fn flat(c: &[[[f32; 3]; 9]]) -> Vec<Vec3> {
     c.iter().flatten().map(|v| Vec3::from(*v)).collect()
@@ -30,29 +21,19 @@ fn flat(c: &[[[f32; 3]; 9]]) -> Vec<Vec3> {
 
 #[test]
 fn probes_bake_play_and_match_the_reference() {
-    let dir = temp_dir("probes");
-    let scene_path = repo("scenes/cornell-box/cornell-box.obj");
-    let scene = prm_scene::load(&scene_path).unwrap();
-    let path = dir.join("box.prm");
     let config = prm_bake::BakeConfig {
         // Measured (this light, 61 probes, reference noise 2.9%), through the panes: 2048
         // entries in 64 clusters 21.7% (energy 0.934), 8192 in 256 8.2% (1.007), 8192 in 1024
         // 5.7% (1.008): the entries' point sampling of the direct light, as on the surfaces.
         // Along the rays the lightmap's light matters instead.
-        entries: Some(8192),
-        clusters: Some(256),
-        resolution: Some(64),
-        seed: Some(3),
         probes: Some(64),
         // VPL disks of three entry-point radii, not the plan's eight (its rule for a 64² atlas):
         // probes lit through the panes have no near field to give back what a disk takes, and
         // with eight radii (7 cm, half a probe cell) they measured 27.5%, energy 0.828.
         vpl_disk_scale: Some(prm_bake::params::NEAR_FIELD_DISK_SCALE_LARGE),
-        // No accuracy check (its estimate would be in the archive too).
-        accuracy_points: Some(0),
-        ..Default::default()
+        ..sized(8192, 256, 64, 3)
     };
-    bake_cpu(&scene, &scene_path, &config, &path);
+    let (scene, path) = baked("probes", "scenes/cornell-box/cornell-box.obj", "box.prm", &config);
     let archive = Archive::open(&path).unwrap();
     assert_eq!(archive.info().minor, 9, "the near field makes it 1.9");
     let probes = archive.probes().expect("the bake placed probes").clone();
@@ -119,15 +100,7 @@ fn probes_bake_play_and_match_the_reference() {
     let lightmap = rt.read_lightmap().unwrap();
     let bvh = Bvh::build(&scene, &BvhParams::DEFAULT).unwrap();
     let lights = [light];
-    let cpu_radiance: Vec<Vec3> = rays
-        .points
-        .iter()
-        .map(|g| {
-            let (p, n) = (Vec3::from(g.position), Vec3::from(g.normal));
-            let direct = prm_trace::direct_irradiance(&bvh, &lights, p, n, n, u32::MAX);
-            Vec3::from(g.albedo) / std::f32::consts::PI * (direct + Vec3::from(lightmap[g.texel as usize]))
-        })
-        .collect();
+    let cpu_radiance = gather_radiance(&bvh, &lights, &rays.points, |g| Vec3::from(lightmap[g.texel as usize]));
     let gpu_radiance: Vec<Vec3> = radiance.iter().map(|v| Vec3::from(*v)).collect();
     let e = rel_error(&gpu_radiance, &cpu_radiance);
     println!("probes: gather point radiance {e:.4} from the CPU's ray-cast direct light");
@@ -136,29 +109,12 @@ fn probes_bake_play_and_match_the_reference() {
     assert!(e < 1e-4, "probe coefficients {e:.2e} from the CPU's sum along the rays");
 
     // 3. Both against the reference tracer at the probe positions.
-    let points: Vec<(Vec3, Vec3)> = probes
-        .positions
-        .iter()
-        .flat_map(|p| NORMALS.map(|n| (Vec3::from(*p), Vec3::from(n))))
-        .collect();
-    let params = ReferenceParams {
-        seed: 29,
-        ..ReferenceParams::with_spp(4096)
-    };
-    let reference = ReferenceTracer::new(&scene, &bvh, Lighting::Lights(&lights))
-        .indirect_at_points(&points, &params, &mut |_, _| {})
-        .unwrap()
-        .mean;
+    let points = axis_points(&probes.positions);
+    let tracer = ReferenceTracer::new(&scene, &bvh, Lighting::Lights(&lights));
+    let reference = reference_indirect(&tracer, At::Points(&points), 4096, 29);
     for (name, coeffs, max_error) in [("panes", &panes, 0.11), ("rays", &gathered, 0.06)] {
-        let played = at_normals(coeffs);
-        let error = rel_error(&played, &reference);
-        let energy = sum(&played) / sum(&reference);
-        println!(
-            "probes through the {name}: {} probes, error {error:.4}, energy {energy:.4}",
-            probes.len()
-        );
-        assert!((energy - 1.0).abs() < 0.04, "{name}: energy {energy:.3}");
-        assert!(error < max_error, "{name}: error {error:.3}");
+        let what = format!("probes through the {name}, {} probes", probes.len());
+        assert_close(&what, &axis_irradiance(coeffs), &reference, max_error, 0.04);
     }
 }
 
@@ -168,20 +124,16 @@ fn probes_bake_play_and_match_the_reference() {
 /// at the probes included.
 #[test]
 fn emissive_surfaces_light_the_probes() {
-    let dir = temp_dir("probes-lamps");
-    let scene_path = repo("scenes/cornell-box-lamps/cornell-box-lamps.obj");
-    let scene = prm_scene::load(&scene_path).unwrap();
-    let path = dir.join("lamps.prm");
     let config = prm_bake::BakeConfig {
-        entries: Some(1024),
-        clusters: Some(64),
-        resolution: Some(48),
-        seed: Some(5),
         probes: Some(64),
-        accuracy_points: Some(0),
-        ..Default::default()
+        ..sized(1024, 64, 48, 5)
     };
-    bake_cpu(&scene, &scene_path, &config, &path);
+    let (scene, path) = baked(
+        "probes-lamps",
+        "scenes/cornell-box-lamps/cornell-box-lamps.obj",
+        "lamps.prm",
+        &config,
+    );
     let mut archive = Archive::open(&path).unwrap();
     let probes = archive.probes().expect("the bake placed probes").clone();
     let rays = archive.probe_rays().expect("the bake traced the probes' rays").clone();
@@ -219,37 +171,20 @@ fn emissive_surfaces_light_the_probes() {
 
     // Against the reference, both lamps at scale 1: indirect light plus the lamps' direct light.
     let played = play([[1.0; 3], [1.0; 3]]);
-    let played = at_normals(
+    let played = axis_irradiance(
         &played
             .chunks_exact(9)
             .map(|c| std::array::from_fn(|i| c[i].to_array()))
             .collect::<Vec<_>>(),
     );
     let bvh = Bvh::build(&scene, &BvhParams::DEFAULT).unwrap();
-    let points: Vec<(Vec3, Vec3)> = probes
-        .positions
-        .iter()
-        .flat_map(|p| NORMALS.map(|n| (Vec3::from(*p), Vec3::from(n))))
-        .collect();
+    let points = axis_points(&probes.positions);
     let emitters = prm_trace::Emitters::from_scene(&scene);
-    let params = ReferenceParams {
-        seed: 31,
-        ..ReferenceParams::with_spp(4096)
-    };
-    let indirect = ReferenceTracer::new(&scene, &bvh, Lighting::Lights(&[]))
-        .with_emitters(&emitters)
-        .indirect_at_points(&points, &params, &mut |_, _| {})
-        .unwrap()
-        .mean;
+    let tracer = ReferenceTracer::new(&scene, &bvh, Lighting::Lights(&[])).with_emitters(&emitters);
+    let indirect = reference_indirect(&tracer, At::Points(&points), 4096, 31);
     let direct = emitters.direct_at_points(&scene, &bvh, &points, 4096, 37);
     let reference: Vec<Vec3> = indirect.iter().zip(&direct).map(|(i, d)| *i + *d).collect();
-    let error = rel_error(&played, &reference);
-    let energy = sum(&played) / sum(&reference);
-    println!(
-        "probes by the lamps: {} probes, error {error:.4}, energy {energy:.4}",
-        probes.len()
-    );
-    assert!((energy - 1.0).abs() < 0.05, "energy {energy:.3}");
     // Measured: 61 probes, 7.2% (energy 0.982).
-    assert!(error < 0.11, "error {error:.3}");
+    let what = format!("probes by the lamps, {} probes", probes.len());
+    assert_close(&what, &played, &reference, 0.11, 0.05);
 }

@@ -8,8 +8,8 @@ use glam::Vec3;
 use prm_format::Archive;
 use prm_runtime::{ProbeLight, Runtime, RuntimeOptions};
 use prm_scene::{AtlasParams, Sizing, Sky, SkyMap};
-use prm_tests::{bake_cpu, channel_sum as sum, gpu, rel_error, repo, temp_dir, unlit_frame};
-use prm_trace::{Bvh, BvhParams, Lighting, ReferenceParams, ReferenceTracer};
+use prm_tests::{assert_close, baked, channel_sum as sum, gpu, reference_indirect, rel_error, sized, unlit_frame, At};
+use prm_trace::{Bvh, BvhParams, Lighting, ReferenceTracer};
 
 /// Atlas side of the test bake.
 const RESOLUTION: u32 = 48;
@@ -34,25 +34,15 @@ fn gradient_sky() -> Sky {
 
 #[test]
 fn sky_bakes_plays_and_matches_the_reference() {
-    let dir = temp_dir("sky");
-    let scene_path = repo("scenes/courtyard/courtyard.obj");
-    let scene = prm_scene::load(&scene_path).unwrap();
-    let path = dir.join("yard.prm");
     let config = prm_bake::BakeConfig {
-        entries: Some(256),
-        clusters: Some(16),
-        resolution: Some(RESOLUTION),
         paths_per_entry: Some(2),
-        seed: Some(5),
-        // No accuracy check (its estimate would make the archive 1.5).
-        accuracy_points: Some(0),
         // More paths than the command line's default, so that the comparison with the reference
         // below measures more than the two sides' noise.
         sky_paths: Some(4 * prm_bake::SKY_PATHS),
         probes: Some(64),
-        ..Default::default()
+        ..sized(256, 16, RESOLUTION, 5)
     };
-    bake_cpu(&scene, &scene_path, &config, &path);
+    let (scene, path) = baked("sky", "scenes/courtyard/courtyard.obj", "yard.prm", &config);
     let mut archive = Archive::open(&path).unwrap();
     assert_eq!(archive.info().minor, 9, "the near field makes it 1.9");
     let probes = archive.probes().expect("the bake placed probes").clone();
@@ -104,10 +94,6 @@ fn sky_bakes_plays_and_matches_the_reference() {
     assert_eq!(sum(&off), 0.0, "no light without a sky");
 
     // 2. Against the reference tracer under the same skies, at the exit points.
-    let params = ReferenceParams {
-        seed: 23,
-        ..ReferenceParams::with_spp(4096)
-    };
     // Measured (1024 paths per texel, the indirect part smoothed, against 4096, both at the
     // bake's exit points): uniform indirect 5.4% per texel (energy 0.9985), direct 3.9% (0.999);
     // the turned map 5.7% (0.995) and 4.1% (0.997). The per-texel errors are mostly the two
@@ -118,10 +104,7 @@ fn sky_bakes_plays_and_matches_the_reference() {
         ("map", gradient_sky(), 0.02, 0.085, 0.06),
     ] {
         let tracer = ReferenceTracer::new(&scene, &bvh, Lighting::Lights(&[])).with_sky(&sky);
-        let reference = tracer
-            .indirect_at_exits(&atlas.exits, &params, &mut |_, _| {})
-            .unwrap()
-            .mean;
+        let reference = reference_indirect(&tracer, At::Exits(&atlas.exits), 4096, 23);
         let reference_direct = tracer.sky_direct_at_exits(&atlas.exits, 1 << 14);
         let (ind, full) = frame(&ctx, &mut rt, &sky);
         let played_direct: Vec<Vec3> = full.iter().zip(&ind).map(|(f, i)| *f - *i).collect();
@@ -177,32 +160,21 @@ fn sky_bakes_plays_and_matches_the_reference() {
         e < 1e-5,
         "probe coefficients {e:.2e} from the CPU's sum of the sky transfer"
     );
-    let points: Vec<(Vec3, Vec3)> = probes
-        .positions
-        .iter()
-        .flat_map(|p| prm_format::AXIS_NORMALS.map(|n| (Vec3::from(*p), Vec3::from(n))))
-        .collect();
+    let points = prm_trace::probes::axis_points(&probes.positions);
     let tracer = ReferenceTracer::new(&scene, &bvh, Lighting::Lights(&[])).with_sky(&sky);
-    let indirect = tracer
-        .indirect_at_points(&points, &params, &mut |_, _| {})
-        .unwrap()
-        .mean;
+    let indirect = reference_indirect(&tracer, At::Points(&points), 4096, 23);
     let direct = tracer.sky_direct_at_points(&points, 1 << 14);
     let reference: Vec<Vec3> = direct.iter().zip(&indirect).map(|(d, i)| *d + *i).collect();
     // Measured: 32 probes (the rest inside the walls), along the rays error 1.6% (energy
     // 0.997), through the panes 3.1% (0.999).
     for (name, played, max_error) in [("rays", &gathered, 0.03), ("panes", &panes, 0.06)] {
-        let at_normals: Vec<Vec3> = played
-            .iter()
-            .flat_map(|c| prm_format::AXIS_NORMALS.map(|n| Vec3::from(prm_format::sh_irradiance(c, n)).max(Vec3::ZERO)))
-            .collect();
-        let error = rel_error(&at_normals, &reference);
-        let energy = sum(&at_normals) / sum(&reference);
-        println!(
-            "probes under the map, through the {name}: {} probes, error {error:.4}, energy {energy:.4}",
-            probes.len()
+        let what = format!("probes under the map, through the {name}, {} probes", probes.len());
+        assert_close(
+            &what,
+            &prm_trace::probes::axis_irradiance(played),
+            &reference,
+            max_error,
+            0.02,
         );
-        assert!((energy - 1.0).abs() < 0.02, "{name}: probe energy {energy:.3}");
-        assert!(error < max_error, "{name}: probe error {error:.3}");
     }
 }

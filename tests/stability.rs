@@ -7,7 +7,7 @@
 use std::path::{Path, PathBuf};
 
 use glam::Vec3;
-use prm_gpu::{GpuContext, PaneRenderParams};
+use prm_gpu::{GpuContext, PaneInputs, PaneRenderParams};
 use prm_scene::{Atlas, AtlasParams, Light, Scene, Sizing};
 use prm_trace::{
     Bvh, BvhParams, Clustering, EntryParams, Lighting, Panes, ReferenceParams, ReferenceTracer, SurfaceSample,
@@ -75,7 +75,13 @@ impl Bake {
             face_resolution: 128,
             ..PaneRenderParams::DEFAULT
         };
-        let (panes, _) = prm_gpu::render_panes(ctx, &scene, &atlas.exits, &vpls, &clustering, &params).unwrap();
+        let inputs = PaneInputs {
+            scene: &scene,
+            exits: &atlas.exits,
+            vpls: &vpls,
+            clustering: &clustering,
+        };
+        let (panes, _) = prm_gpu::render_panes(ctx, &inputs, &params).unwrap();
         Bake {
             scene,
             bvh,

@@ -1,8 +1,8 @@
 // prm-play shade pass: radiance of every pixel, albedo/π × (direct irradiance with shadows +
 // the baked direct irradiance of the emitters and the sky, and the indirect irradiance, bilinearly sampled from their
 // lightmaps) + the surface's own emission, linear HDR. Comes after the run
-// time's shared.wgsl and lights.wgsl (which use `frame`, `lights`, `views`, `shadow_maps`) and
-// play/camera.wgsl.
+// time's shared.wgsl, light_bindings.wgsl (bindings 0 to 3: `frame`, `lights`, `views`,
+// `shadow_maps`) and lights.wgsl, and play/camera.wgsl.
 
 struct Material {
     albedo: vec3<f32>,
@@ -18,10 +18,6 @@ struct Material {
     _pad2: u32,
 };
 
-@group(0) @binding(0) var<uniform> frame: Frame;
-@group(0) @binding(1) var<storage, read> lights: array<Light>;
-@group(0) @binding(2) var<storage, read> views: array<ShadowView>;
-@group(0) @binding(3) var shadow_maps: texture_depth_2d_array;
 @group(0) @binding(4) var<storage, read> materials: array<Material>;
 @group(0) @binding(5) var lightmap: texture_2d<f32>;
 @group(0) @binding(6) var textures: texture_2d_array<f32>;

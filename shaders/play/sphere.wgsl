@@ -1,7 +1,7 @@
 // prm-play probe sphere: a moving object lit by the probes, radiance = albedo/π × (direct
 // irradiance through the run time's shadow maps + the probe volume's indirect irradiance at the
-// sphere's centre for each normal). Comes after the run time's shared.wgsl, lights.wgsl and
-// probe_volume.wgsl, and play/camera.wgsl. The sphere casts no shadow and the scene's panes do
+// sphere's centre for each normal). Comes after the run time's shared.wgsl, light_bindings.wgsl
+// (bindings 0 to 3), lights.wgsl and probe_volume.wgsl, and play/camera.wgsl. The sphere casts no shadow and the scene's panes do
 // not see it: it receives light only.
 
 struct Sphere {
@@ -11,10 +11,6 @@ struct Sphere {
     _pad0: f32,
 };
 
-@group(0) @binding(0) var<uniform> frame: Frame;
-@group(0) @binding(1) var<storage, read> lights: array<Light>;
-@group(0) @binding(2) var<storage, read> views: array<ShadowView>;
-@group(0) @binding(3) var shadow_maps: texture_depth_2d_array;
 @group(0) @binding(4) var<uniform> camera: Camera;
 @group(0) @binding(5) var<uniform> sphere: Sphere;
 @group(0) @binding(6) var<uniform> probe_grid: ProbeGrid;

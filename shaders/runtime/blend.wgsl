@@ -54,7 +54,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
         if t >= size.x * size.y {
             break;
         }
-        let xy = vec2<i32>(i32(t % size.x), i32(t / size.x));
+        let xy = texel_xy(t, size.x);
         var sum = sums[j];
         if all(textureDimensions(emitted) == size) {
             sum += textureLoad(emitted, xy, 0).rgb;

@@ -2,12 +2,8 @@
 // from the lightmap) at every lightmap texel a triangle or its edge covers, for static-lightmap
 // export. Triangles (and, first, their edges as lines) are drawn in atlas space (lightmap UV →
 // clip space); alpha 1 marks a drawn texel.
-// Comes after shared.wgsl and lights.wgsl.
+// Comes after shared.wgsl, light_bindings.wgsl (bindings 0 to 3) and lights.wgsl.
 
-@group(0) @binding(0) var<uniform> frame: Frame;
-@group(0) @binding(1) var<storage, read> lights: array<Light>;
-@group(0) @binding(2) var<storage, read> views: array<ShadowView>;
-@group(0) @binding(3) var shadow_maps: texture_depth_2d_array;
 @group(0) @binding(4) var lightmap: texture_2d<f32>;
 
 struct VsOut {

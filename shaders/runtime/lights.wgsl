@@ -1,7 +1,8 @@
 // prm-runtime: the direct irradiance of a point from every light, with shadow-map visibility.
 // Shared by the passes that light points (weights.wgsl here, and an engine's or prm-play's
 // shading); comes after shared.wgsl. The including pass declares `frame: Frame`,
-// `lights: array<Light>`, `views: array<ShadowView>` and `shadow_maps: texture_depth_2d_array`.
+// `lights: array<Light>`, `views: array<ShadowView>` and `shadow_maps: texture_depth_2d_array`
+// (light_bindings.wgsl declares them as bindings 0 to 3 of group 0).
 
 // Linear depth (distance along the view axis) of a stored depth-buffer value.
 fn linear_depth(z: f32, v: ShadowView) -> f32 {

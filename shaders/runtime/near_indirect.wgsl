@@ -6,23 +6,17 @@
 // With `near.tail` (the last gather) it adds the rest of the share's series too: this sum less
 // the previous gather's (`previous` less `source`; `previous` is `source` itself after the first
 // gather), the series' last term, times the exit point's factor from near_field.rs's
-// `series_tail`. One invocation per exit point with near hits.
+// `series_tail`. One invocation per exit point with near hits (near_sum.wgsl's entry point,
+// which calls `sum_exit`); comes after shared.wgsl and near_sum.wgsl, which declares bindings
+// 0 to 3.
 
-@group(0) @binding(0) var<uniform> near: NearField;
-@group(0) @binding(1) var<storage, read> exits: array<NearExit>;
-@group(0) @binding(2) var<storage, read> hits: array<NearHit>;
-@group(0) @binding(3) var<storage, read> radiance: array<vec4<f32>>;
 @group(0) @binding(4) var source: texture_2d<f32>;
 @group(0) @binding(5) var lightmap: texture_storage_2d<rgba32float, write>;
 @group(0) @binding(6) var previous: texture_2d<f32>;
 @group(0) @binding(7) var<storage, read> tail: array<vec4<f32>>;
 
-@compute @workgroup_size(64)
-fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
-    let i = linear_index(gid, groups);
-    if i >= near.exits {
-        return;
-    }
+// Exit record `i`'s sum, added to the blend's value into the lightmap.
+fn sum_exit(i: u32) {
     let s = near_sum(i, true, textureDimensions(source).x);
     let base = textureLoad(source, s.xy, 0).rgb;
     var e = base + s.irradiance;

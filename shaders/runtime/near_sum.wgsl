@@ -1,7 +1,15 @@
-// prm-runtime near field sums, shared by near_field.wgsl and near_indirect.wgsl, which declare
-// `near`, `exits`, `hits` and `radiance`: exit record `i`'s π/M × Σ over its merged hits of their
-// weight (the direct share's R²/(r² + R²) summed, or with `deeper` the deeper VPLs'
-// R₁²/(r² + R₁²)) × the radiance of the gather point, and the record's texel.
+// prm-runtime near field sums, shared by near_field.wgsl and near_indirect.wgsl, which come
+// after it, bind their own resources from binding 4 and define `sum_exit(i)`, what the sum does
+// for exit record `i`: the entry point, one invocation per exit record with near hits, and
+// `near_sum`, exit record `i`'s π/M × Σ over its merged hits of their weight (the direct share's
+// R²/(r² + R²) summed, or with `deeper` the deeper VPLs' R₁²/(r² + R₁²)) × the radiance of the
+// gather point, and the record's texel.
+
+@group(0) @binding(0) var<uniform> near: NearField;
+@group(0) @binding(1) var<storage, read> exits: array<NearExit>;
+@group(0) @binding(2) var<storage, read> hits: array<NearHit>;
+// The gather points' radiance (near_radiance.wgsl or near_indirect_radiance.wgsl).
+@group(0) @binding(3) var<storage, read> radiance: array<vec4<f32>>;
 
 struct NearSum {
     irradiance: vec3<f32>,
@@ -20,5 +28,14 @@ fn near_sum(i: u32, deeper: bool, side: u32) -> NearSum {
         let w = unpack2x16float(hit.weights);
         e += select(w.x, w.y, deeper) * radiance[hit.point].rgb;
     }
-    return NearSum(e * near.scale, vec2<i32>(i32(x.texel % side), i32(x.texel / side)));
+    return NearSum(e * near.scale, texel_xy(x.texel, side));
+}
+
+@compute @workgroup_size(64)
+fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let i = linear_index(gid, groups);
+    if i >= near.exits {
+        return;
+    }
+    sum_exit(i);
 }

@@ -2,12 +2,9 @@
 // formats/prm.md §5.5) sends this frame, albedo/π × its irradiance: the lights' direct light
 // through the shadow maps, the indirect lightmap the blend just wrote and the emitters' and
 // sky's baked direct lightmap; plus, on an emissive surface, its emission times its group's
-// scale. One invocation per gather point; comes after shared.wgsl and lights.wgsl.
+// scale. One invocation per gather point; comes after shared.wgsl, light_bindings.wgsl (bindings
+// 0 to 3) and lights.wgsl.
 
-@group(0) @binding(0) var<uniform> frame: Frame;
-@group(0) @binding(1) var<storage, read> lights: array<Light>;
-@group(0) @binding(2) var<storage, read> views: array<ShadowView>;
-@group(0) @binding(3) var shadow_maps: texture_depth_2d_array;
 @group(0) @binding(4) var<storage, read> points: array<GatherPoint>;
 @group(0) @binding(5) var lightmap: texture_2d<f32>;
 // 1×1 and black without emitters or sky.
@@ -15,8 +12,6 @@
 @group(0) @binding(7) var<storage, read_write> radiance: array<vec4<f32>>;
 // Every emitter group's scale (rgb), at least one entry.
 @group(0) @binding(8) var<storage, read> scales: array<vec4<f32>>;
-
-const INV_PI: f32 = 0.31830988;
 
 @compute @workgroup_size(64)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
@@ -26,7 +21,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     }
     let g = points[i];
     let side = textureDimensions(lightmap).x;
-    let texel = vec2<i32>(i32(g.texel % side), i32(g.texel / side));
+    let texel = texel_xy(g.texel, side);
     var e = direct_irradiance(g.position, g.normal) + textureLoad(lightmap, texel, 0).rgb;
     if textureDimensions(baked_direct).x == side {
         e += textureLoad(baked_direct, texel, 0).rgb;

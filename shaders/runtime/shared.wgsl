@@ -145,6 +145,14 @@ fn linear_index(gid: vec3<u32>, groups: vec3<u32>) -> u32 {
     return gid.x + gid.y * groups.x * 64u;
 }
 
+// The texel `y·side + x` of a `side`-wide map (a lightmap's texel index) as (x, y).
+fn texel_xy(texel: u32, side: u32) -> vec2<i32> {
+    return vec2<i32>(i32(texel % side), i32(texel / side));
+}
+
+// 1/π: a diffuse surface sends albedo/π × its irradiance.
+const INV_PI: f32 = 0.31830988;
+
 // The counts of the probe rays (formats/prm.md §5.5).
 struct ProbeRays {
     probes: u32,

@@ -18,18 +18,38 @@ pub fn temp_dir(name: &str) -> PathBuf {
     dir
 }
 
-/// Bakes `scene` (loaded from `scene_path`) with `config` into `output` on the CPU renderer,
-/// through the library as `prm-bake bake` does.
-pub fn bake_cpu(scene: &prm_scene::Scene, scene_path: &Path, config: &prm_bake::BakeConfig, output: &Path) {
-    let plan = prm_bake::Plan::new(config, scene).expect("a valid plan");
+/// A bake configuration that fixes the sizes a test depends on: entry points, clusters, atlas
+/// resolution and seed; with no accuracy check (the tests measure the played light against the
+/// reference themselves, and its estimate would be in the archive too). Everything else is the
+/// plan's.
+pub fn sized(entries: usize, clusters: usize, resolution: u32, seed: u64) -> prm_bake::BakeConfig {
+    prm_bake::BakeConfig {
+        accuracy_points: Some(0),
+        entries: Some(entries),
+        clusters: Some(clusters),
+        resolution: Some(resolution),
+        seed: Some(seed),
+        ..Default::default()
+    }
+}
+
+/// Loads the repository's `scene` and bakes it with `config` on the CPU renderer, through the
+/// library as `prm-bake bake` does, into `archive` in a fresh scratch folder named for the test
+/// `name`: the scene and the archive's path.
+pub fn baked(name: &str, scene: &str, archive: &str, config: &prm_bake::BakeConfig) -> (prm_scene::Scene, PathBuf) {
+    let scene_path = repo(scene);
+    let loaded = prm_scene::load(&scene_path).expect("a bundled scene loads");
+    let output = temp_dir(name).join(archive);
+    let plan = prm_bake::Plan::new(config, &loaded).expect("a valid plan");
     let job = prm_bake::BakeJob {
-        scene,
-        scene_path,
+        scene: &loaded,
+        scene_path: &scene_path,
         plan: &plan,
-        output,
+        output: &output,
         shard: None,
     };
     prm_bake::bake(&job, prm_bake::Renderer::Cpu, &mut prm_bake::NoProgress).expect("the bake");
+    (loaded, output)
 }
 
 /// ‖t − r‖ / ‖r‖ over every channel.
@@ -42,6 +62,57 @@ pub fn rel_error(t: &[glam::Vec3], r: &[glam::Vec3]) -> f64 {
 /// The sum of every channel.
 pub fn channel_sum(v: &[glam::Vec3]) -> f64 {
     v.iter().map(|x| x.element_sum() as f64).sum()
+}
+
+/// Every gather point's radiance as the CPU computes it: albedo / π × (its ray-cast direct
+/// irradiance under `lights` + `more` of it).
+pub fn gather_radiance(
+    bvh: &prm_trace::Bvh,
+    lights: &[prm_scene::Light],
+    points: &[prm_format::GatherPoint],
+    more: impl Fn(&prm_format::GatherPoint) -> glam::Vec3,
+) -> Vec<glam::Vec3> {
+    points
+        .iter()
+        .map(|g| {
+            let (p, n) = (glam::Vec3::from(g.position), glam::Vec3::from(g.normal));
+            let direct = prm_trace::direct_irradiance(bvh, lights, p, n, n, u32::MAX);
+            glam::Vec3::from(g.albedo) / std::f32::consts::PI * (direct + more(g))
+        })
+        .collect()
+}
+
+/// Where [`reference_indirect`] estimates the light.
+pub enum At<'a> {
+    /// At the atlas's exit points.
+    Exits(&'a [prm_scene::ExitPoint]),
+    /// At points (position, normal).
+    Points(&'a [(glam::Vec3, glam::Vec3)]),
+}
+
+/// The mean of `tracer`'s indirect irradiance `at` the exit points or points, about `spp` paths
+/// each, from `seed`.
+pub fn reference_indirect(tracer: &prm_trace::ReferenceTracer<'_>, at: At<'_>, spp: u32, seed: u64) -> Vec<glam::Vec3> {
+    let params = prm_trace::ReferenceParams {
+        seed,
+        ..prm_trace::ReferenceParams::with_spp(spp)
+    };
+    let estimate = match at {
+        At::Exits(exits) => tracer.indirect_at_exits(exits, &params, &mut |_, _| {}),
+        At::Points(points) => tracer.indirect_at_points(points, &params, &mut |_, _| {}),
+    };
+    estimate.unwrap().mean
+}
+
+/// `played` against `reference`: prints `what` with the relative error ([`rel_error`]) and the
+/// energy ratio (`Σ played / Σ reference` over every channel), then asserts the energy within
+/// `max_energy_off` of 1 and the error under `max_error`.
+pub fn assert_close(what: &str, played: &[glam::Vec3], reference: &[glam::Vec3], max_error: f64, max_energy_off: f64) {
+    let error = rel_error(played, reference);
+    let energy = channel_sum(played) / channel_sum(reference);
+    println!("{what}: error {error:.4}, energy {energy:.4}");
+    assert!((energy - 1.0).abs() < max_energy_off, "{what}: energy {energy:.3}");
+    assert!(error < max_error, "{what}: error {error:.3}");
 }
 
 /// Encodes and runs one frame of `rt` without punctual lights (its baked light as set) and

@@ -22,10 +22,8 @@ fn cargo_run(package: &str, args: &[&str]) -> Result<()> {
 pub fn run_eval(args: &[String]) -> Result<()> {
     let mut cmd = Command::new(env!("CARGO"));
     cmd.args(["run", "--quiet", "-p", "xtask-eval"]);
-    if args
-        .iter()
-        .any(|a| ["--full", "--budget", "--targets", "--emitters", "--sky", "--probes"].contains(&a.as_str()))
-    {
+    let release = ["--full", "--budget", "--targets", "--emitters", "--sky", "--probes"];
+    if args.first().is_some_and(|a| a == "experiment") || args.iter().any(|a| release.contains(&a.as_str())) {
         cmd.arg("--release");
     }
     let status = cmd

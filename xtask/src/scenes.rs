@@ -79,43 +79,58 @@ pub struct Bundle {
     pub readme: String,
 }
 
+impl Bundle {
+    /// A directory of one scene, its README written from the scene's [`Stats`].
+    fn one(
+        dir: &'static str,
+        summary: &'static str,
+        scene: SceneDesc,
+        enclosure: Enclosure,
+        readme: impl FnOnce(&Stats) -> String,
+    ) -> Bundle {
+        let readme = readme(&Stats::of(&scene));
+        Bundle {
+            dir,
+            summary,
+            scenes: vec![(scene, enclosure)],
+            readme,
+        }
+    }
+}
+
 pub fn bundles() -> Vec<Bundle> {
-    let cornell = cornell::scene();
-    let cornell_readme = cornell::readme(&Stats::of(&cornell));
-    let lamps = cornell::lamps_scene();
-    let lamps_readme = cornell::lamps_readme(&Stats::of(&lamps));
-    let yard = courtyard::scene();
-    let yard_readme = courtyard::readme(&Stats::of(&yard));
-    let chairs = chairs::scene();
-    let chairs_readme = chairs::readme(&Stats::of(&chairs));
     let open = two_rooms::scene(false);
     let closed = two_rooms::scene(true);
     let rooms_readme = two_rooms::readme(&Stats::of(&open), &Stats::of(&closed));
     vec![
-        Bundle {
-            dir: "cornell-box",
-            summary: "the Cornell box from its published measurements: colour bleeding, soft indirect light",
-            scenes: vec![(cornell, Enclosure::Open)],
-            readme: cornell_readme,
-        },
-        Bundle {
-            dir: "cornell-box-lamps",
-            summary: "the Cornell box lit by two small emissive ceiling lamps of different colours: emitter groups",
-            scenes: vec![(lamps, Enclosure::Open)],
-            readme: lamps_readme,
-        },
-        Bundle {
-            dir: "courtyard",
-            summary: "a yard open to the sky, walls and a block, no light of its own: sky light",
-            scenes: vec![(yard, Enclosure::Open)],
-            readme: yard_readme,
-        },
-        Bundle {
-            dir: "chairs",
-            summary: "a closed dining room, six chairs around a table, ~3,000 triangles: small thin parts, contact shadows",
-            scenes: vec![(chairs, Enclosure::Closed)],
-            readme: chairs_readme,
-        },
+        Bundle::one(
+            "cornell-box",
+            "the Cornell box from its published measurements: colour bleeding, soft indirect light",
+            cornell::scene(),
+            Enclosure::Open,
+            cornell::readme,
+        ),
+        Bundle::one(
+            "cornell-box-lamps",
+            "the Cornell box lit by two small emissive ceiling lamps of different colours: emitter groups",
+            cornell::lamps_scene(),
+            Enclosure::Open,
+            cornell::lamps_readme,
+        ),
+        Bundle::one(
+            "courtyard",
+            "a yard open to the sky, walls and a block, no light of its own: sky light",
+            courtyard::scene(),
+            Enclosure::Open,
+            courtyard::readme,
+        ),
+        Bundle::one(
+            "chairs",
+            "a closed dining room, six chairs around a table, ~3,000 triangles: small thin parts, contact shadows",
+            chairs::scene(),
+            Enclosure::Closed,
+            chairs::readme,
+        ),
         Bundle {
             dir: "two-rooms",
             summary: "two rooms sharing a 5 cm wall with a door (`two-rooms`) or a shut door (`two-rooms-closed`): light leaks",

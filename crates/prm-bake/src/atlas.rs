@@ -1,7 +1,7 @@
 //! `prm-bake atlas`: scene and lightmap-atlas statistics, optionally a picture of the charts.
 
 use anyhow::{Context, Result};
-use prm_scene::{Atlas, AtlasParams, Light, Sizing, EMPTY_TEXEL};
+use prm_scene::{Atlas, AtlasParams, Light, Scene, Sizing, EMPTY_TEXEL};
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -29,6 +29,31 @@ pub struct AtlasArgs {
 }
 
 pub fn run(args: &AtlasArgs) -> Result<()> {
+    let built = build(args)?;
+    if args.json {
+        outln!("{}", serde_json::to_string_pretty(&json_report(&built))?);
+        return Ok(());
+    }
+    print_scene(&built.scene);
+    print_atlas(&built);
+    outln!("time         load {:.3} s, atlas {:.3} s", built.load_s, built.atlas_s);
+    if let Some(png) = &args.png {
+        outln!("charts drawn {}", png.display());
+    }
+    Ok(())
+}
+
+/// A loaded scene, its atlas, and the seconds each took.
+struct Built {
+    scene: Scene,
+    atlas: Atlas,
+    load_s: f64,
+    atlas_s: f64,
+}
+
+/// Loads the scene and builds its atlas as `args` ask, warning on stderr, and draws the charts
+/// where asked.
+fn build(args: &AtlasArgs) -> Result<Built> {
     let t0 = Instant::now();
     let scene = prm_scene::load(&args.scene).with_context(|| format!("loading {}", args.scene.display()))?;
     let load_s = t0.elapsed().as_secs_f64();
@@ -56,48 +81,74 @@ pub fn run(args: &AtlasArgs) -> Result<()> {
             .save(png)
             .with_context(|| format!("writing {}", png.display()))?;
     }
+    Ok(Built {
+        scene,
+        atlas,
+        load_s,
+        atlas_s,
+    })
+}
 
-    let bounds = scene.bounds();
-    let count = |f: fn(&Light) -> bool| scene.lights.iter().filter(|l| f(l)).count();
-    let lights = serde_json::json!({
-        "point": count(|l| matches!(l, Light::Point { .. })),
-        "spot": count(|l| matches!(l, Light::Spot { .. })),
-        "directional": count(|l| matches!(l, Light::Directional { .. })),
-    });
-    let emissive = scene.emissive_materials();
-    let s = &atlas.stats;
-    if args.json {
-        let out = serde_json::json!({
-            "scene": scene.source,
-            "triangles": scene.triangles.len(),
-            "degenerate_dropped": scene.report.degenerate_dropped,
-            "duplicates_dropped": scene.report.duplicates_dropped,
-            "materials": scene.materials.len(),
-            "textures": scene.textures.len(),
-            "area": scene.area(),
-            "bounds": { "min": bounds.min.to_array(), "max": bounds.max.to_array() },
-            "lights": lights,
-            "emissive_materials": emissive,
-            "cameras": scene.cameras.len(),
-            "fingerprint": format!("{:016x}", scene.fingerprint()),
-            "lightmap_uvs_from_file": scene.lightmap_uvs.is_some(),
-            "charts": s.charts,
-            "resolution": s.resolution,
-            "texel_size": s.texel_size,
-            "utilization": s.utilization,
-            "covered_texels": s.covered_texels,
-            "dilated_texels": s.dilated_texels,
-            "uncovered_triangles": s.uncovered_triangles,
-            "triangles_without_exit": s.triangles_without_exit,
-            "texels_per_triangle": { "min": s.texels_per_triangle_min, "median": s.texels_per_triangle_median },
-            "overlapping_texels": s.overlapping_texels,
-            "shared_texels": s.shared_texels,
-            "warnings": scene.report.warnings,
-            "seconds": { "load": load_s, "atlas": atlas_s },
-        });
-        outln!("{}", serde_json::to_string_pretty(&out)?);
-        return Ok(());
+/// The scene's lights of each kind.
+struct LightCounts {
+    point: usize,
+    spot: usize,
+    directional: usize,
+}
+
+impl LightCounts {
+    fn of(scene: &Scene) -> LightCounts {
+        let count = |f: fn(&Light) -> bool| scene.lights.iter().filter(|l| f(l)).count();
+        LightCounts {
+            point: count(|l| matches!(l, Light::Point { .. })),
+            spot: count(|l| matches!(l, Light::Spot { .. })),
+            directional: count(|l| matches!(l, Light::Directional { .. })),
+        }
     }
+}
+
+/// The `--json` report: the scene's and the atlas's statistics in one object.
+fn json_report(built: &Built) -> serde_json::Value {
+    let (scene, s) = (&built.scene, &built.atlas.stats);
+    let bounds = scene.bounds();
+    let lights = LightCounts::of(scene);
+    serde_json::json!({
+        "scene": scene.source,
+        "triangles": scene.triangles.len(),
+        "degenerate_dropped": scene.report.degenerate_dropped,
+        "duplicates_dropped": scene.report.duplicates_dropped,
+        "materials": scene.materials.len(),
+        "textures": scene.textures.len(),
+        "area": scene.area(),
+        "bounds": { "min": bounds.min.to_array(), "max": bounds.max.to_array() },
+        "lights": {
+            "point": lights.point,
+            "spot": lights.spot,
+            "directional": lights.directional,
+        },
+        "emissive_materials": scene.emissive_materials(),
+        "cameras": scene.cameras.len(),
+        "fingerprint": format!("{:016x}", scene.fingerprint()),
+        "lightmap_uvs_from_file": scene.lightmap_uvs.is_some(),
+        "charts": s.charts,
+        "resolution": s.resolution,
+        "texel_size": s.texel_size,
+        "utilization": s.utilization,
+        "covered_texels": s.covered_texels,
+        "dilated_texels": s.dilated_texels,
+        "uncovered_triangles": s.uncovered_triangles,
+        "triangles_without_exit": s.triangles_without_exit,
+        "texels_per_triangle": { "min": s.texels_per_triangle_min, "median": s.texels_per_triangle_median },
+        "overlapping_texels": s.overlapping_texels,
+        "shared_texels": s.shared_texels,
+        "warnings": scene.report.warnings,
+        "seconds": { "load": built.load_s, "atlas": built.atlas_s },
+    })
+}
+
+/// Prints the scene's statistics: triangles, materials, extent, lights, emitters, fingerprint.
+fn print_scene(scene: &Scene) {
+    let bounds = scene.bounds();
     let e = bounds.extent();
     outln!("scene        {}", scene.source.display());
     outln!(
@@ -124,22 +175,29 @@ pub fn run(args: &AtlasArgs) -> Result<()> {
         e.y,
         e.z
     );
+    let lights = LightCounts::of(scene);
     outln!(
         "lights       {} point, {} spot, {} directional; {} cameras",
-        lights["point"],
-        lights["spot"],
-        lights["directional"],
+        lights.point,
+        lights.spot,
+        lights.directional,
         scene.cameras.len()
     );
+    let emissive = scene.emissive_materials();
     if !emissive.is_empty() {
         outln!("emitters     {} (emissive materials)", emissive.join(", "));
     }
     outln!("fingerprint  {:016x}", scene.fingerprint());
+}
+
+/// Prints the atlas's statistics: size, charts, coverage, texels per triangle, overlaps.
+fn print_atlas(built: &Built) {
+    let s = &built.atlas.stats;
     outln!(
         "atlas        {r}x{r}, texel size {:.4}, {} charts{}",
         s.texel_size,
         s.charts,
-        if scene.lightmap_uvs.is_some() {
+        if built.scene.lightmap_uvs.is_some() {
             " (lightmap UVs from the file)"
         } else {
             ""
@@ -166,11 +224,6 @@ pub fn run(args: &AtlasArgs) -> Result<()> {
             s.shared_texels
         );
     }
-    outln!("time         load {load_s:.3} s, atlas {atlas_s:.3} s");
-    if let Some(png) = &args.png {
-        outln!("charts drawn {}", png.display());
-    }
-    Ok(())
 }
 
 /// One colour per chart (hashed from its index); gutters at half brightness; empty texels black.

@@ -274,7 +274,7 @@ pub fn run(args: &BakeArgs) -> Result<()> {
     // can be created), follow a symlink to the file it names, and have SIGINT, SIGTERM and
     // SIGHUP remove the bake's temporary file.
     if !args.plan {
-        crate::signals::install(prm_format::check_destination(&args.output)?);
+        crate::signals::install(prm_scene::check_destination(&args.output)?);
     }
     if let Some(report) = &args.report {
         check_report(report, (!args.plan).then_some(args.output.as_path()), &args.scene)?;
@@ -384,13 +384,13 @@ pub fn run(args: &BakeArgs) -> Result<()> {
 /// an existing archive, a directory, or a file in a directory where none can be created
 /// (missing directories are created, as for the archive).
 fn check_report(report: &Path, archive: Option<&Path>, scene: &Path) -> Result<()> {
-    if archive.is_some_and(|a| prm_format::same_destination(a, report)) {
+    if archive.is_some_and(|a| prm_scene::same_destination(a, report)) {
         crate::refuse!(
             "--report {}: it is the archive the bake writes (-o); name another file",
             report.display()
         );
     }
-    if prm_format::same_destination(scene, report) {
+    if prm_scene::same_destination(scene, report) {
         crate::refuse!("--report {}: it is the scene; name another file", report.display());
     }
     let is_archive = || {
@@ -404,7 +404,7 @@ fn check_report(report: &Path, archive: Option<&Path>, scene: &Path) -> Result<(
     if std::fs::metadata(report).is_ok_and(|m| m.is_file()) && is_archive() {
         crate::refuse!("--report {}: it is a .prm archive; name another file", report.display());
     }
-    prm_format::check_output_path(report)
+    prm_scene::check_output_path(report)
         .map_err(|why| anyhow::Error::new(crate::Refused(format!("--report {}: {why}", report.display()))))
 }
 

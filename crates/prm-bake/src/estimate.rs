@@ -10,15 +10,16 @@
 //! recorded, to the bit (`tests/bake.rs`).
 
 use glam::Vec3;
-use prm_format::{Accuracy, Archive};
-use prm_scene::{Atlas, AtlasParams, Scene, Sizing};
-use prm_trace::{Bvh, BvhParams, CheckParams, Clustering, EntryParams, NearPlay, ReferenceParams, SurfaceSample};
+use prm_format::{Accuracy, Archive, Metadata};
+use prm_scene::{Atlas, Scene, Sizing};
+use prm_trace::{Bvh, CheckParams, Clustering, NearPlay, ReferenceParams, SurfaceSample};
 use rayon::prelude::*;
+use std::io::{Read, Seek};
 use std::path::Path;
 
 use crate::archive::archive_tables;
 use crate::params::AtlasSize;
-use crate::pipeline::{cluster_entries, trace};
+use crate::pipeline::{archive_error, cluster_entries, lightmap_atlas, sample_entries, scene_bvh};
 use crate::sink::{Phase, ProgressSink};
 use crate::BakeError;
 
@@ -115,92 +116,28 @@ pub fn estimate_accuracy(
     size: EstimateSize,
     progress: &mut dyn ProgressSink,
 ) -> Result<Accuracy, BakeError> {
-    let open_error = |what: &str, source| BakeError::Archive {
-        what: format!("{what} {}", archive_path.display()),
-        source,
-    };
-    let mut archive = Archive::open(archive_path).map_err(|e| open_error("opening", e))?;
-    let refuse = |why: String| Err(BakeError::InvalidParams(format!("{}: {why}", archive_path.display())));
-    let meta = archive.metadata().clone();
-    if meta.params.contains_key("shard") {
-        return refuse("a shard's partial archive; merge the shards first (prm-bake merge)".into());
-    }
-    if meta.scene_fingerprint != scene.fingerprint() {
-        return refuse("baked from other geometry than this scene".into());
-    }
-    let found = format!("{:016x}", scene.materials_fingerprint());
-    if let Some(baked) = meta.params.get("materials_fingerprint").and_then(|v| v.as_str()) {
-        if baked != found {
-            progress.warn(&format!(
-                "{}: the scene's materials differ from those the archive was baked with (materials \
-                 fingerprint {found}, baked {baked}): the estimate measures the old albedos' indirect \
-                 light against the new ones",
-                archive_path.display()
-            ));
-        }
-    }
-    let number = |key: &str| meta.params.get(key).and_then(serde_json::Value::as_u64);
-    let (Some(entry_count), Some(cluster_count), Some(top_k)) =
-        (number("entries"), number("clusters"), number("top_k"))
-    else {
-        return refuse("its metadata records no entry, cluster or top K count".into());
-    };
-    let sizing = match meta
-        .params
-        .get("atlas")
-        .map(|v| serde_json::from_value::<AtlasSize>(v.clone()))
-    {
-        Some(Ok(size)) => Sizing::from(size),
-        _ => return refuse("its metadata records no atlas size".into()),
-    };
+    let mut archive =
+        Archive::open(archive_path).map_err(archive_error(format!("opening {}", archive_path.display())))?;
+    let recorded = Recorded::read(scene, archive_path, archive.metadata(), progress)?;
     let params = CheckParams {
         exit_points: size.exit_points,
         paths: size.paths,
-        seed: meta.seed,
+        seed: recorded.seed,
     };
-
-    // What the bake made before its panes, made again.
-    let mut atlas = Atlas::build(scene, &AtlasParams::with_sizing(sizing)).map_err(|source| BakeError::Atlas {
-        what: "building the lightmap atlas",
-        source,
-    })?;
-    let bvh = Bvh::build(scene, &BvhParams::DEFAULT).map_err(trace("building the BVH"))?;
-    prm_trace::unbury_exits(scene, &bvh, &mut atlas);
-    let entries = prm_trace::sample_surface(
-        scene,
-        &EntryParams {
-            count: entry_count as usize,
-            seed: meta.seed,
-        },
-    )
-    .map_err(trace("sampling entry points"))?;
-    let clustering = cluster_entries(scene, &bvh, &entries, cluster_count as usize, meta.seed)?;
-    let (table_entries, table_clusters, atlas_section) = archive_tables(&atlas, &entries, &clustering);
-    let same_clusters = table_clusters.len() == archive.clusters().len()
-        && table_clusters
-            .iter()
-            .zip(archive.clusters())
-            .all(|(a, b)| (a.first, a.count) == (b.first, b.count));
-    if atlas_section.triangle_uvs != archive.atlas().triangle_uvs
-        || atlas_section.coverage != archive.atlas().coverage
-        || table_entries != archive.entries()
-        || !same_clusters
-    {
-        return refuse(
-            "its atlas, entry points or clusters differ from what its parameters make of this scene (another version of prm-bake?)"
-                .into(),
-        );
+    let remade = Remade::make(scene, &recorded)?;
+    if !remade.matches(&archive) {
+        return Err(refused(
+            archive_path,
+            "its atlas, entry points or clusters differ from what its parameters make of this scene (another version of prm-bake?)",
+        ));
     }
+    let atlas = &remade.atlas;
 
     let pane_energy: Vec<Vec3> = archive.clusters().iter().map(|c| Vec3::from(c.energy)).collect();
-    let order: Vec<u32> = clustering.members.iter().flatten().copied().collect();
-    let entry_energy = archive.entry_energy().map(|e| {
-        let mut sampled = vec![Vec3::ZERO; entries.len()];
-        for (&k, v) in order.iter().zip(e) {
-            sampled[k as usize] = Vec3::from(*v);
-        }
-        sampled
-    });
+    let order: Vec<u32> = remade.clustering.members.iter().flatten().copied().collect();
+    let entry_energy = archive
+        .entry_energy()
+        .map(|e| in_sampling_order(&order, e, remade.entries.len()));
     let groups = prm_format::residual_groups(
         archive.clusters(),
         prm_format::residual_group_count(archive.clusters().len(), prm_format::RESIDUAL_GROUPS),
@@ -211,27 +148,162 @@ pub fn estimate_accuracy(
         let texels: Vec<u32> = checked.iter().map(|&i| atlas.exits[i].texel).collect();
         NearPlay::new(n, &atlas.texel_exit, &texels, prm_trace::NEAR_GATHERS)
     });
+    let panes = read_checked_panes(&mut archive, archive_path, atlas, near.as_ref(), &checked)?;
+    let inputs = CheckInputs {
+        scene,
+        bvh: &remade.bvh,
+        atlas,
+        entries: &remade.entries,
+        clustering: &remade.clustering,
+        entry_energy: entry_energy.as_deref(),
+        pane_energy: &pane_energy,
+        groups: &groups,
+        top_k: recorded.top_k,
+        near: near.as_ref(),
+    };
+    check(&inputs, &checked, &panes, &params, progress)
+}
+
+/// The refusal of the archive at `archive_path`, saying `why`.
+fn refused(archive_path: &Path, why: &str) -> BakeError {
+    BakeError::InvalidParams(format!("{}: {why}", archive_path.display()))
+}
+
+/// What an archive's metadata records of the bake that made it, for making its tables again.
+struct Recorded {
+    entries: usize,
+    clusters: usize,
+    top_k: usize,
+    sizing: Sizing,
+    seed: u64,
+}
+
+impl Recorded {
+    /// Reads the metadata of the archive at `archive_path`; refuses a shard's partial archive,
+    /// another scene's, and metadata without the counts or the atlas size. Warns when the
+    /// scene's materials are not those baked.
+    fn read(
+        scene: &Scene,
+        archive_path: &Path,
+        meta: &Metadata,
+        progress: &mut dyn ProgressSink,
+    ) -> Result<Recorded, BakeError> {
+        if meta.params.contains_key("shard") {
+            return Err(refused(
+                archive_path,
+                "a shard's partial archive; merge the shards first (prm-bake merge)",
+            ));
+        }
+        if meta.scene_fingerprint != scene.fingerprint() {
+            return Err(refused(archive_path, "baked from other geometry than this scene"));
+        }
+        let found = format!("{:016x}", scene.materials_fingerprint());
+        if let Some(baked) = meta.params.get("materials_fingerprint").and_then(|v| v.as_str()) {
+            if baked != found {
+                progress.warn(&format!(
+                    "{}: the scene's materials differ from those the archive was baked with (materials \
+                     fingerprint {found}, baked {baked}): the estimate measures the old albedos' indirect \
+                     light against the new ones",
+                    archive_path.display()
+                ));
+            }
+        }
+        let number = |key: &str| meta.params.get(key).and_then(serde_json::Value::as_u64);
+        let (Some(entries), Some(clusters), Some(top_k)) = (number("entries"), number("clusters"), number("top_k"))
+        else {
+            return Err(refused(
+                archive_path,
+                "its metadata records no entry, cluster or top K count",
+            ));
+        };
+        let sizing = match meta
+            .params
+            .get("atlas")
+            .map(|v| serde_json::from_value::<AtlasSize>(v.clone()))
+        {
+            Some(Ok(size)) => Sizing::from(size),
+            _ => return Err(refused(archive_path, "its metadata records no atlas size")),
+        };
+        Ok(Recorded {
+            entries: entries as usize,
+            clusters: clusters as usize,
+            top_k: top_k as usize,
+            sizing,
+            seed: meta.seed,
+        })
+    }
+}
+
+/// What the bake made before its panes, made again from what the archive records.
+struct Remade {
+    atlas: Atlas,
+    bvh: Bvh,
+    entries: Vec<SurfaceSample>,
+    clustering: Clustering,
+}
+
+impl Remade {
+    /// The atlas (its buried exit points moved), the BVH, the entry points and their clusters.
+    fn make(scene: &Scene, recorded: &Recorded) -> Result<Remade, BakeError> {
+        let mut atlas = lightmap_atlas(scene, recorded.sizing)?;
+        let bvh = scene_bvh(scene)?;
+        prm_trace::unbury_exits(scene, &bvh, &mut atlas);
+        let entries = sample_entries(scene, recorded.entries, recorded.seed)?;
+        let clustering = cluster_entries(scene, &bvh, &entries, recorded.clusters, recorded.seed)?;
+        Ok(Remade {
+            atlas,
+            bvh,
+            entries,
+            clustering,
+        })
+    }
+
+    /// Whether `archive`'s atlas, entry and cluster tables are those made again.
+    fn matches<R: Read + Seek>(&self, archive: &Archive<R>) -> bool {
+        let (table_entries, table_clusters, atlas_section) =
+            archive_tables(&self.atlas, &self.entries, &self.clustering);
+        let same_clusters = table_clusters.len() == archive.clusters().len()
+            && table_clusters
+                .iter()
+                .zip(archive.clusters())
+                .all(|(a, b)| (a.first, a.count) == (b.first, b.count));
+        atlas_section.triangle_uvs == archive.atlas().triangle_uvs
+            && atlas_section.coverage == archive.atlas().coverage
+            && table_entries == archive.entries()
+            && same_clusters
+    }
+}
+
+/// Every pane of `archive` at the `checked` exit points of `atlas`, as the player shows them
+/// ([`checked_pane`]).
+fn read_checked_panes<R: Read + Seek>(
+    archive: &mut Archive<R>,
+    archive_path: &Path,
+    atlas: &Atlas,
+    near: Option<&NearPlay>,
+    checked: &[usize],
+) -> Result<Vec<Vec<Vec3>>, BakeError> {
     let mut panes = Vec::with_capacity(archive.pane_count());
     for c in 0..archive.pane_count() {
-        let pane = archive.read_pane(c).map_err(|e| open_error("reading a pane of", e))?;
+        let pane = archive
+            .read_pane(c)
+            .map_err(archive_error(format!("reading a pane of {}", archive_path.display())))?;
         let at_exits: Vec<Vec3> = atlas
             .exits
             .par_iter()
             .map(|e| Vec3::from(pane[e.texel as usize]))
             .collect();
-        panes.push(checked_pane(near.as_ref(), &checked, &at_exits));
+        panes.push(checked_pane(near, checked, &at_exits));
     }
-    let inputs = CheckInputs {
-        scene,
-        bvh: &bvh,
-        atlas: &atlas,
-        entries: &entries,
-        clustering: &clustering,
-        entry_energy: entry_energy.as_deref(),
-        pane_energy: &pane_energy,
-        groups: &groups,
-        top_k: top_k as usize,
-        near: near.as_ref(),
-    };
-    check(&inputs, &checked, &panes, &params, progress)
+    Ok(panes)
+}
+
+/// `energies` in the archive's entry `order` (cluster by cluster), put back in the sampling
+/// order of the `count` entry points.
+pub(crate) fn in_sampling_order(order: &[u32], energies: &[[f32; 3]], count: usize) -> Vec<Vec3> {
+    let mut sampled = vec![Vec3::ZERO; count];
+    for (&k, v) in order.iter().zip(energies) {
+        sampled[k as usize] = Vec3::from(*v);
+    }
+    sampled
 }

@@ -26,7 +26,7 @@ pub struct MergeArgs {
 /// `prm-bake merge`.
 pub fn run(args: &MergeArgs) -> Result<()> {
     // As for a bake: SIGINT, SIGTERM and SIGHUP remove the temporary file.
-    crate::signals::install(prm_format::check_destination(&args.output)?);
+    crate::signals::install(prm_scene::check_destination(&args.output)?);
     let context = || {
         format!(
             "merging {} part{} into {}",

@@ -453,17 +453,67 @@ const WALKS_IN_ALL: usize = 65536;
 /// 6% at all three seeds. Sponza does not gain (`cargo xtask eval --sky`, sky and sun).
 const CAPPED_WALKS: u32 = 32;
 
+/// Bytes a pane's texel takes resident at run time (RGB9E5).
+const PANE_TEXEL_BYTES: f64 = 4.0;
+
+/// Bytes a covered texel of a pane takes in the archive budget's estimate: the measured RGB9E5 +
+/// filter + zstd rate on smooth panes, doubled for safety.
+const ARCHIVE_BYTES_PER_TEXEL: f64 = 1.5;
+
+/// The smallest side, texels, the time budget shrinks an automatic atlas to (more where its
+/// charts need more).
+const MIN_AUTO_ATLAS: u32 = 128;
+
+/// Texels a side the automatic atlas loses at each step while [`AUTO_ATLAS_PANES`] panes do not
+/// fit the memory budget.
+const ATLAS_MEMORY_STEP: u32 = 64;
+
+/// Automatic atlas sides are whole multiples of this many texels.
+const ATLAS_STEP: u32 = 32;
+
+/// Automatic entry points per chart of the scene (charts are its distinct flat pieces).
+const ENTRIES_PER_CHART: usize = 4;
+
+/// Automatic entry-point counts are whole multiples of this.
+const ENTRY_STEP: usize = 256;
+
+/// Fewest entry points the automatic rules choose, and the time budget and the cluster cap leave.
+const MIN_AUTO_ENTRIES: usize = 1024;
+
+/// Most automatic entry points per cluster the bake can have. Where the budgets cap the
+/// clusters, more entry points only crowd them: Sibenik's own error estimate
+/// (`--accuracy-points`, three lights) is the same at 2048 and 16384 entries, for three times the
+/// bake.
+const MAX_ENTRIES_PER_CLUSTER: usize = 16;
+
+/// Most automatic walks per entry point ([`auto_walks_per_entry`]).
+const MAX_AUTO_WALKS: usize = 16;
+
+/// Fewest automatic clusters (fewer where there are fewer entry points).
+const MIN_AUTO_CLUSTERS: usize = 32;
+
+/// Most automatic clusters before the memory and archive budgets cap them.
+const MAX_AUTO_CLUSTERS: usize = 1024;
+
+/// Share of an atlas given by resolution or texel size that the first time estimate takes to be
+/// exit points, before that atlas is built ([`Plan::for_renderer`](crate::Plan) then builds it
+/// and estimates again).
+const GUESSED_UTILIZATION: f64 = 0.5;
+
+/// The pane passes' cube-face resolution without a preset or `--face-resolution`.
+const DEFAULT_FACE_RESOLUTION: u32 = 128;
+
 /// Bytes the player keeps resident for the panes of `clusters` clusters in a `resolution`²
 /// atlas: every pane and residual group's summed pane at 4 bytes (RGB9E5) a texel.
 pub fn resident_pane_bytes(clusters: usize, resolution: u32) -> u64 {
     let groups = prm_format::residual_group_count(clusters, prm_format::RESIDUAL_GROUPS) as u64;
-    (clusters as u64 + groups) * u64::from(resolution).pow(2) * 4
+    (clusters as u64 + groups) * u64::from(resolution).pow(2) * PANE_TEXEL_BYTES as u64
 }
 
 /// The smallest automatic atlas side that holds `charts` charts: every chart needs a texel and
-/// its gutters, a 3×3 block at the least, in whole steps of 32 texels.
+/// its gutters, a 3×3 block at the least, in whole steps of [`ATLAS_STEP`] texels.
 fn atlas_floor(charts: usize) -> u32 {
-    ((3.0 * (charts as f64).sqrt() / 32.0).ceil() as u32 * 32).max(32)
+    ((3.0 * (charts as f64).sqrt() / ATLAS_STEP as f64).ceil() as u32 * ATLAS_STEP).max(ATLAS_STEP)
 }
 
 /// Why the automatic top K is `k`: the panes a frame blends less the residual groups, with the
@@ -482,9 +532,9 @@ fn top_k_reason(k: usize, panes: usize, texels_per_pane: f64, groups: usize, clu
     }
 }
 
-/// The automatic walks per entry point: enough for about `WALKS_IN_ALL`, 1 to 16.
+/// The automatic walks per entry point: enough for about `WALKS_IN_ALL`, 1 to [`MAX_AUTO_WALKS`].
 fn auto_walks_per_entry(entries: usize) -> u32 {
-    WALKS_IN_ALL.div_ceil(entries.max(1)).clamp(1, 16) as u32
+    WALKS_IN_ALL.div_ceil(entries.max(1)).clamp(1, MAX_AUTO_WALKS) as u32
 }
 
 /// "s" unless `n` is one.
@@ -511,6 +561,483 @@ pub(crate) fn bounces_per_walk(scene: &Scene) -> f64 {
     }
     let q = (q / area.max(1e-30)).min(0.95);
     q / (1.0 - q)
+}
+
+/// The bake's budgets, and the panes they allow.
+struct Budgets {
+    /// The archive's size, MiB.
+    archive_mib: f64,
+    /// The run-time pane memory, MiB.
+    memory_mib: f64,
+    /// The bake's time, seconds.
+    time_s: f64,
+}
+
+impl Budgets {
+    /// The config's budgets, else the preset's memory budget, else the defaults; all positive.
+    fn resolve(config: &BakeConfig, fixed: Option<&PresetValues>) -> Result<Budgets, BakeError> {
+        let archive_budget_mib = config.archive_budget_mib.unwrap_or(DEFAULT_ARCHIVE_BUDGET_MIB);
+        let memory_budget_mib = config
+            .memory_budget_mib
+            .or(fixed.and_then(|v| v.memory_budget_mib))
+            .unwrap_or(DEFAULT_MEMORY_BUDGET_MIB);
+        let time_budget_s = config.time_budget_s.unwrap_or(DEFAULT_TIME_BUDGET_S);
+        if !(archive_budget_mib > 0.0 && memory_budget_mib > 0.0 && time_budget_s > 0.0) {
+            invalid!(
+                "budgets must be positive (archive {archive_budget_mib} MiB, memory {memory_budget_mib} MiB, \
+                 time {time_budget_s} s)"
+            );
+        }
+        Ok(Budgets {
+            archive_mib: archive_budget_mib,
+            memory_mib: memory_budget_mib,
+            time_s: time_budget_s,
+        })
+    }
+
+    /// The most panes of `texels_per_pane` the memory budget holds beside the residual groups'
+    /// summed ones (up to one group per `CLUSTERS_PER_GROUP` clusters, at most `RESIDUAL_GROUPS`).
+    fn by_memory(&self, texels_per_pane: f64) -> usize {
+        let panes = (self.memory_mib * 1024.0 * 1024.0 / (PANE_TEXEL_BYTES * texels_per_pane)) as usize;
+        let per = prm_format::CLUSTERS_PER_GROUP as usize;
+        let groups = (panes / (per + 1)).min(prm_format::RESIDUAL_GROUPS as usize);
+        panes - groups
+    }
+
+    /// The most panes of `texels_per_pane` the archive budget holds.
+    fn by_archive(&self, texels_per_pane: f64) -> usize {
+        (self.archive_mib * 1024.0 * 1024.0 / (ARCHIVE_BYTES_PER_TEXEL * texels_per_pane)) as usize
+    }
+
+    /// The most panes of `texels_per_pane` that both budgets allow, at least one.
+    fn clusters_allowed(&self, texels_per_pane: f64) -> usize {
+        self.by_memory(texels_per_pane)
+            .min(self.by_archive(texels_per_pane))
+            .max(1)
+    }
+}
+
+/// A size a rule settled, and whether the planner chose it (the later rules change only those).
+#[derive(Clone, Copy)]
+struct Choice<T> {
+    value: T,
+    auto: bool,
+}
+
+/// The atlas a rule settled.
+#[derive(Clone, Copy)]
+struct AtlasChoice {
+    size: AtlasSize,
+    /// The automatic atlas's side as first chosen (`None`: the atlas is given).
+    auto_resolution: Option<u32>,
+    /// The smallest side the time budget may shrink an automatic atlas to.
+    smallest: u32,
+}
+
+/// The sizes the rules settle in turn, and the time the bake is expected to take at them.
+struct Draft {
+    atlas: AtlasChoice,
+    entries: Choice<usize>,
+    walks: Choice<u32>,
+    /// Share of the atlas's texels the time estimate counts as exit points.
+    utilization: f64,
+    /// Expected seconds at the sizes first chosen.
+    planned_seconds: f64,
+    /// Expected seconds at the current sizes.
+    estimated_seconds: f64,
+    /// Whether the cluster cap cut the entry points.
+    capped: bool,
+}
+
+/// What the planner's rules read: the config, its preset's values, the scene, the budgets and
+/// the cost model.
+struct Planner<'a> {
+    config: &'a BakeConfig,
+    fixed: Option<PresetValues>,
+    scene: &'a Scene,
+    budgets: Budgets,
+    cost: &'a CostModel,
+    /// VPLs per walk beyond the entry point's own.
+    bounces_per_walk: f64,
+}
+
+impl Planner<'_> {
+    /// Texels of a pane of `atlas`: the side squared, or for a texel size twice the scene's area
+    /// in texels.
+    fn texels(&self, atlas: AtlasSize) -> f64 {
+        match atlas {
+            AtlasSize::Resolution(r) => (r as f64).powi(2),
+            AtlasSize::TexelSize(s) => self.scene.area() / (s as f64).powi(2) * 2.0,
+        }
+    }
+
+    /// The seconds the cost model expects of `entries` entry points with `walks` walks each in
+    /// `atlas`, of which the share `utilization` of texels are exit points.
+    fn seconds(&self, utilization: f64, entries: usize, walks: u32, atlas: AtlasSize) -> f64 {
+        let exits = utilization * self.texels(atlas);
+        let triangles = self.scene.triangles.len() as f64;
+        self.cost
+            .bake_seconds(entries, walks, self.bounces_per_walk, exits, triangles)
+    }
+
+    /// The atlas: given (resolution, texel size or preset), else the atlas's own automatic size
+    /// (about 12 texels per triangle) shrunk until [`AUTO_ATLAS_PANES`] panes fit the memory
+    /// budget, never below what its charts need.
+    fn atlas_rule(
+        &self,
+        probe: &dyn Fn() -> Result<Atlas, BakeError>,
+        reasons: &mut Vec<String>,
+    ) -> Result<AtlasChoice, BakeError> {
+        let given = |size| AtlasChoice {
+            size,
+            auto_resolution: None,
+            smallest: MIN_AUTO_ATLAS,
+        };
+        let auto = match (self.config.resolution, self.config.texel_size, &self.fixed) {
+            (Some(r), _, _) => return Ok(given(AtlasSize::Resolution(r))),
+            (None, Some(s), _) => return Ok(given(AtlasSize::TexelSize(s))),
+            (None, None, Some(v)) => return Ok(given(AtlasSize::Resolution(v.resolution))),
+            (None, None, None) => probe()?,
+        };
+        let mut r = auto.resolution;
+        let memory_texels = self.budgets.memory_mib * 1024.0 * 1024.0 / PANE_TEXEL_BYTES;
+        // Never below what the charts need: the bake would refuse that atlas.
+        let floor = atlas_floor(auto.stats.charts as usize).min(auto.resolution);
+        while r > floor.max(ATLAS_MEMORY_STEP) && (AUTO_ATLAS_PANES as f64 * (r as f64).powi(2)) > memory_texels {
+            r = (r - ATLAS_MEMORY_STEP).max(floor);
+        }
+        reasons.push(format!(
+            "atlas {r}² texels: {} triangles want about 12 texels each{}",
+            self.scene.triangles.len(),
+            if r < auto.resolution {
+                ", shrunk so 256 panes fit the memory budget"
+            } else {
+                ""
+            }
+        ));
+        Ok(AtlasChoice {
+            size: AtlasSize::Resolution(r),
+            auto_resolution: Some(r),
+            smallest: floor.max(MIN_AUTO_ATLAS).min(r),
+        })
+    }
+
+    /// The entry points: given, else [`ENTRIES_PER_CHART`] per chart, [`MIN_AUTO_ENTRIES`] to
+    /// [`MAX_AUTO_ENTRIES`], a multiple of [`ENTRY_STEP`].
+    fn entries_rule(
+        &self,
+        probe: &dyn Fn() -> Result<Atlas, BakeError>,
+        reasons: &mut Vec<String>,
+    ) -> Result<Choice<usize>, BakeError> {
+        let given = |value| Ok(Choice { value, auto: false });
+        match (self.config.entries, &self.fixed) {
+            (Some(n), _) => given(n),
+            (None, Some(v)) => given(v.entries),
+            (None, None) => {
+                let charts = probe()?.stats.charts as usize;
+                let n = (ENTRIES_PER_CHART * charts)
+                    .div_ceil(ENTRY_STEP)
+                    .clamp(MIN_AUTO_ENTRIES / ENTRY_STEP, MAX_AUTO_ENTRIES / ENTRY_STEP)
+                    * ENTRY_STEP;
+                reasons.push(format!(
+                    "{n} entry points: 4 per chart of the scene's {charts} charts, 1024..16384"
+                ));
+                Ok(Choice { value: n, auto: true })
+            }
+        }
+    }
+
+    /// The walks per entry point: given, else enough for about [`WALKS_IN_ALL`] in all
+    /// ([`auto_walks_per_entry`]).
+    fn walks_rule(&self, entries: usize, reasons: &mut Vec<String>) -> Choice<u32> {
+        let given = |value| Choice { value, auto: false };
+        match (self.config.paths_per_entry, &self.fixed) {
+            (Some(m), _) => given(m),
+            (None, Some(v)) => given(v.paths),
+            (None, None) => {
+                let m = auto_walks_per_entry(entries);
+                reasons.push(format!(
+                    "{m} walk{} per entry point: about {WALKS_IN_ALL} walks in all",
+                    plural(m as usize)
+                ));
+                Choice { value: m, auto: true }
+            }
+        }
+    }
+
+    /// The draft of the sizes chosen so far, with the time the bake is expected to take at them:
+    /// the automatic atlas's own share of exit points, else [`GUESSED_UTILIZATION`].
+    fn draft(
+        &self,
+        atlas: AtlasChoice,
+        entries: Choice<usize>,
+        walks: Choice<u32>,
+        probe: &dyn Fn() -> Result<Atlas, BakeError>,
+    ) -> Result<Draft, BakeError> {
+        let utilization = match atlas.auto_resolution {
+            Some(_) => probe()?.stats.utilization as f64,
+            None => GUESSED_UTILIZATION,
+        };
+        let planned_seconds = self.seconds(utilization, entries.value, walks.value, atlas.size);
+        Ok(Draft {
+            atlas,
+            entries,
+            walks,
+            utilization,
+            planned_seconds,
+            estimated_seconds: planned_seconds,
+            capped: false,
+        })
+    }
+
+    /// The time budget: while the bake is expected to take longer, fewer walks, fewer entry
+    /// points (down to [`MIN_AUTO_ENTRIES`]) or a smaller atlas (down to its smallest), among the
+    /// automatic sizes, whichever saves the most time.
+    fn fit_time_budget(&self, draft: &mut Draft, reasons: &mut Vec<String>) {
+        let time_budget_s = self.budgets.time_s;
+        let estimate = |entries, walks, atlas| self.seconds(draft.utilization, entries, walks, atlas);
+        let (mut entries, mut walks, mut atlas) = (draft.entries.value, draft.walks.value, draft.atlas.size);
+        let mut estimated_seconds = draft.estimated_seconds;
+        while estimated_seconds > time_budget_s {
+            // Each step drops about a quarter of one size; take the one that saves the most time.
+            let fewer_walks = (draft.walks.auto && walks > 1).then(|| (entries, walks - 1, atlas));
+            let fewer_entries = (draft.entries.auto && entries > MIN_AUTO_ENTRIES).then(|| {
+                (
+                    ((entries * 3 / 4) / ENTRY_STEP * ENTRY_STEP).max(MIN_AUTO_ENTRIES),
+                    walks,
+                    atlas,
+                )
+            });
+            let smallest = draft.atlas.smallest;
+            let smaller_atlas = match atlas {
+                AtlasSize::Resolution(r) if draft.atlas.auto_resolution.is_some() && r > smallest => Some((
+                    entries,
+                    walks,
+                    AtlasSize::Resolution(((r * 7 / 8) / ATLAS_STEP * ATLAS_STEP).max(smallest)),
+                )),
+                _ => None,
+            };
+            let Some((e, m, a, t)) = [fewer_walks, fewer_entries, smaller_atlas]
+                .into_iter()
+                .flatten()
+                .map(|(e, m, a)| (e, m, a, estimate(e, m, a)))
+                .min_by(|x, y| x.3.total_cmp(&y.3))
+            else {
+                break;
+            };
+            (entries, walks, atlas, estimated_seconds) = (e, m, a, t);
+        }
+        let planned = draft.planned_seconds;
+        if estimated_seconds < planned {
+            reasons.push(format!(
+                "shrunk to fit the {time_budget_s:.0} s time budget: {planned:.0} s expected at the sizes above, \
+                 {estimated_seconds:.0} s with {entries} entries, {walks} walk{} each{}",
+                plural(walks as usize),
+                match atlas {
+                    AtlasSize::Resolution(r) => format!(", atlas {r}²"),
+                    AtlasSize::TexelSize(_) => String::new(),
+                }
+            ));
+        }
+        (draft.entries.value, draft.walks.value, draft.atlas.size) = (entries, walks, atlas);
+        draft.estimated_seconds = estimated_seconds;
+    }
+
+    /// The cluster cap: no more automatic entry points than [`MAX_ENTRIES_PER_CLUSTER`] per
+    /// cluster the bake can have (given, or the most the budgets allow at the atlas the time
+    /// budget left); the automatic walks per entry then rise towards twice [`WALKS_IN_ALL`], at
+    /// most [`CAPPED_WALKS`] each, as far as the time budget allows. Applied after the time
+    /// budget's shrinking: before, it would let Sponza under a 60 s budget trade clusters for
+    /// atlas (52.3 % from the reference instead of 42.4 %, `cargo xtask eval --budget`).
+    fn cap_entries(&self, draft: &mut Draft, reasons: &mut Vec<String>) {
+        if !draft.entries.auto {
+            return;
+        }
+        let atlas = draft.atlas.size;
+        let (clusters, which) = match self.config.clusters {
+            Some(c) => (c, "given"),
+            None => (self.budgets.clusters_allowed(self.texels(atlas)), "the budgets allow"),
+        };
+        let cap = (clusters.saturating_mul(MAX_ENTRIES_PER_CLUSTER) / ENTRY_STEP * ENTRY_STEP).max(MIN_AUTO_ENTRIES);
+        if draft.entries.value <= cap {
+            return;
+        }
+        let entries = cap;
+        draft.entries.value = entries;
+        draft.capped = true;
+        let estimate = |walks| self.seconds(draft.utilization, entries, walks, atlas);
+        let mut walks = draft.walks.value;
+        if draft.walks.auto {
+            let wanted = (2 * WALKS_IN_ALL).div_ceil(entries).clamp(1, CAPPED_WALKS as usize) as u32;
+            while walks < wanted && estimate(walks + 1) <= self.budgets.time_s {
+                walks += 1;
+            }
+        }
+        draft.walks.value = walks;
+        draft.estimated_seconds = estimate(walks);
+        reasons.push(format!(
+            "{entries} entry points, {walks} walk{} each: at most 16 for each of the {clusters} \
+             clusters {which}",
+            plural(walks as usize)
+        ));
+    }
+
+    /// Twice the automatic entry points (and so clusters), up to [`MAX_DOUBLINGS`] times, where
+    /// neither the time budget nor the cluster cap cut anything and the time budget allows it: at
+    /// most [`MAX_AUTO_ENTRIES`] and [`ENTRIES_PER_CLUSTER`] per cluster the budgets allow
+    /// (beyond, more entry points only crowd the clusters), the automatic walks per entry falling
+    /// to keep about [`WALKS_IN_ALL`].
+    fn double_entries(&self, draft: &mut Draft, reasons: &mut Vec<String>) {
+        let uncut = draft.estimated_seconds >= draft.planned_seconds && !draft.capped;
+        if !(draft.entries.auto && uncut) {
+            return;
+        }
+        let atlas = draft.atlas.size;
+        let most = MAX_AUTO_ENTRIES.min(ENTRIES_PER_CLUSTER * self.budgets.clusters_allowed(self.texels(atlas)));
+        for _ in 0..MAX_DOUBLINGS {
+            let more = draft.entries.value * 2;
+            let walks = if draft.walks.auto {
+                auto_walks_per_entry(more)
+            } else {
+                draft.walks.value
+            };
+            let doubled = self.seconds(draft.utilization, more, walks, atlas);
+            if more > most || doubled > self.budgets.time_s {
+                break;
+            }
+            (draft.entries.value, draft.walks.value, draft.estimated_seconds) = (more, walks, doubled);
+            reasons.push(format!(
+                "{more} entry points, {walks} walk{} each: twice as many, as the time budget allows",
+                plural(walks as usize)
+            ));
+        }
+    }
+
+    /// The clusters: given (a preset's at most one per entry point), else entries /
+    /// [`ENTRIES_PER_CLUSTER`], [`MIN_AUTO_CLUSTERS`] to [`MAX_AUTO_CLUSTERS`], then as many as
+    /// the memory and archive budgets allow.
+    fn clusters_rule(&self, draft: &Draft, reasons: &mut Vec<String>) -> usize {
+        let entries = draft.entries.value;
+        match (self.config.clusters, &self.fixed) {
+            (Some(c), _) => c,
+            (None, Some(v)) => v.clusters.min(entries),
+            (None, None) => {
+                let texels_per_pane = self.texels(draft.atlas.size);
+                let wanted = (entries / ENTRIES_PER_CLUSTER)
+                    .clamp(MIN_AUTO_CLUSTERS, MAX_AUTO_CLUSTERS)
+                    .min(entries);
+                let (by_memory, by_archive) = (
+                    self.budgets.by_memory(texels_per_pane),
+                    self.budgets.by_archive(texels_per_pane),
+                );
+                let c = wanted.min(self.budgets.clusters_allowed(texels_per_pane));
+                reasons.push(format!(
+                    "{c} clusters: entries/{ENTRIES_PER_CLUSTER} = {wanted}, memory budget allows {by_memory}, archive budget {by_archive}"
+                ));
+                c
+            }
+        }
+    }
+
+    /// The top K: given, else the panes of [`BLEND_TEXELS`] a frame less the residual groups, at
+    /// least [`MIN_AUTO_TOP_K`]; never more than the clusters.
+    fn top_k_rule(&self, clusters: usize, texels_per_pane: f64, reasons: &mut Vec<String>) -> usize {
+        match self.config.top_k.or(self.fixed.as_ref().map(|v| v.top_k)) {
+            Some(k) => k,
+            None => {
+                let groups = prm_format::residual_group_count(clusters, prm_format::RESIDUAL_GROUPS) as usize;
+                let panes = (BLEND_TEXELS / texels_per_pane) as usize;
+                let k = panes.saturating_sub(groups).max(MIN_AUTO_TOP_K);
+                reasons.push(top_k_reason(k.min(clusters), panes, texels_per_pane, groups, clusters));
+                k
+            }
+        }
+        .min(clusters)
+    }
+
+    /// The pane passes' cube-face resolution: given, else the preset's, else
+    /// [`DEFAULT_FACE_RESOLUTION`].
+    fn face_resolution_rule(&self) -> u32 {
+        self.config
+            .face_resolution
+            .or(self.fixed.as_ref().map(|v| v.face))
+            .unwrap_or(DEFAULT_FACE_RESOLUTION)
+    }
+
+    /// The sky's paths per texel: given, else with `--sky` [`crate::SKY_PATHS`], doubled up to
+    /// [`MAX_AUTO_SKY_PATHS`] while the planned bake and the sky step fit the time budget; none
+    /// without the sky.
+    fn sky_paths_rule(&self, draft: &Draft, reasons: &mut Vec<String>) -> Result<Option<u32>, BakeError> {
+        match (self.config.sky_paths, self.config.sky) {
+            (Some(paths), Some(false)) => {
+                invalid!("sky_paths = {paths} asks for the sky, which sky = false turns off: drop one of them")
+            }
+            (Some(paths), _) => Ok(Some(paths)),
+            (None, Some(true)) => {
+                let exits = draft.utilization * self.texels(draft.atlas.size);
+                let step = |paths: u32| exits * paths as f64 * SKY_PATH_SECONDS;
+                let mut paths = crate::SKY_PATHS;
+                while paths < MAX_AUTO_SKY_PATHS && draft.estimated_seconds + step(2 * paths) <= self.budgets.time_s {
+                    paths *= 2;
+                }
+                reasons.push(format!(
+                    "sky: {paths} paths per texel, a sky step of about {:.0} s{}",
+                    step(paths),
+                    if paths > crate::SKY_PATHS {
+                        " within what the time budget leaves"
+                    } else {
+                        ""
+                    }
+                ));
+                Ok(Some(paths))
+            }
+            _ => Ok(None),
+        }
+    }
+
+    /// The near rays per exit point: given, else [`prm_trace::NEAR_RAYS`]; none without the VPL
+    /// bound, since nothing is missing near the exit points then.
+    fn near_rays_rule(&self) -> u32 {
+        if self.config.vpl_disk_scale == Some(0.0) {
+            0
+        } else {
+            self.config.near_rays.unwrap_or(prm_trace::NEAR_RAYS)
+        }
+    }
+
+    /// The VPL disks' scale: given; else 1 without the near field; else
+    /// [`NEAR_FIELD_DISK_SCALE_LARGE`] for probes lit through the panes, which have no near
+    /// field to give back what a disk takes, or where the near hits could pass
+    /// [`NEAR_HIT_BUDGET`]; else [`NEAR_FIELD_DISK_SCALE`].
+    fn vpl_disk_scale_rule(&self, atlas: AtlasSize, near_rays: u32, reasons: &mut Vec<String>) -> f32 {
+        let config = self.config;
+        match config.vpl_disk_scale {
+            Some(scale) => scale,
+            None if near_rays == 0 => 1.0,
+            None if config.probes.is_some() && config.probe_rays == Some(0) => {
+                reasons.push(format!(
+                    "VPL disks {NEAR_FIELD_DISK_SCALE_LARGE} times the entry points' radius: the probes are \
+                     lit through the panes (--probe-rays 0), which larger disks would take light from"
+                ));
+                NEAR_FIELD_DISK_SCALE_LARGE
+            }
+            None => {
+                let texels = self.texels(atlas);
+                let fits = texels * near_rays as f64 <= NEAR_HIT_BUDGET as f64;
+                let scale = if fits {
+                    NEAR_FIELD_DISK_SCALE
+                } else {
+                    NEAR_FIELD_DISK_SCALE_LARGE
+                };
+                reasons.push(format!(
+                    "VPL disks {scale} times the entry points' radius: {near_rays} near rays from each of about \
+                     {texels:.0} texels, {} {NEAR_HIT_BUDGET} hits",
+                    if fits { "at most" } else { "possibly over" }
+                ));
+                scale
+            }
+        }
+    }
 }
 
 impl BakeParams {
@@ -556,301 +1083,56 @@ impl BakeParams {
     ) -> Result<BakeParams, BakeError> {
         let preset = config.preset.unwrap_or(Preset::Default);
         let fixed = preset_values(preset);
-        let archive_budget_mib = config.archive_budget_mib.unwrap_or(DEFAULT_ARCHIVE_BUDGET_MIB);
-        let memory_budget_mib = config
-            .memory_budget_mib
-            .or(fixed.as_ref().and_then(|v| v.memory_budget_mib))
-            .unwrap_or(DEFAULT_MEMORY_BUDGET_MIB);
-        let time_budget_s = config.time_budget_s.unwrap_or(DEFAULT_TIME_BUDGET_S);
-        if !(archive_budget_mib > 0.0 && memory_budget_mib > 0.0 && time_budget_s > 0.0) {
-            invalid!(
-                "budgets must be positive (archive {archive_budget_mib} MiB, memory {memory_budget_mib} MiB, \
-                 time {time_budget_s} s)"
-            );
-        }
+        let budgets = Budgets::resolve(config, fixed.as_ref())?;
+        let planner = Planner {
+            config,
+            fixed,
+            scene,
+            budgets,
+            cost,
+            bounces_per_walk,
+        };
         let mut reasons = Vec::new();
-        let mut auto_resolution = None;
-        // The smallest atlas the time budget may shrink an automatic one to: what its charts
-        // need, at least 128².
-        let mut smallest_atlas = 128;
-        let mut atlas = match (config.resolution, config.texel_size, &fixed) {
-            (Some(r), _, _) => AtlasSize::Resolution(r),
-            (None, Some(s), _) => AtlasSize::TexelSize(s),
-            (None, None, Some(v)) => AtlasSize::Resolution(v.resolution),
-            (None, None, None) => {
-                let auto = probe()?;
-                let mut r = auto.resolution;
-                let memory_texels = memory_budget_mib * 1024.0 * 1024.0 / 4.0;
-                // Never below what the charts need: the bake would refuse that atlas.
-                let floor = atlas_floor(auto.stats.charts as usize).min(auto.resolution);
-                while r > floor.max(64) && (AUTO_ATLAS_PANES as f64 * (r as f64).powi(2)) > memory_texels {
-                    r = (r - 64).max(floor);
-                }
-                reasons.push(format!(
-                    "atlas {r}² texels: {} triangles want about 12 texels each{}",
-                    scene.triangles.len(),
-                    if r < auto.resolution {
-                        ", shrunk so 256 panes fit the memory budget"
-                    } else {
-                        ""
-                    }
-                ));
-                auto_resolution = Some(r);
-                smallest_atlas = floor.max(128).min(r);
-                AtlasSize::Resolution(r)
-            }
-        };
-        let texels = |atlas: AtlasSize| match atlas {
-            AtlasSize::Resolution(r) => (r as f64).powi(2),
-            AtlasSize::TexelSize(s) => scene.area() / (s as f64).powi(2) * 2.0,
-        };
-        // The most panes of `texels_per_pane` that the memory and archive budgets allow.
-        // Resident panes: the clusters' and the residual groups' summed ones (up to one group per
-        // `CLUSTERS_PER_GROUP` clusters, at most `RESIDUAL_GROUPS`).
-        let by_memory = |texels_per_pane: f64| {
-            let panes = (memory_budget_mib * 1024.0 * 1024.0 / (4.0 * texels_per_pane)) as usize;
-            let per = prm_format::CLUSTERS_PER_GROUP as usize;
-            let groups = (panes / (per + 1)).min(prm_format::RESIDUAL_GROUPS as usize);
-            panes - groups
-        };
-        let by_archive =
-            |texels_per_pane: f64| (archive_budget_mib * 1024.0 * 1024.0 / (1.5 * texels_per_pane)) as usize;
-        let clusters_allowed =
-            |texels_per_pane: f64| by_memory(texels_per_pane).min(by_archive(texels_per_pane)).max(1);
-        let mut auto_entries = false;
-        let mut entries = match (config.entries, &fixed) {
-            (Some(n), _) => n,
-            (None, Some(v)) => v.entries,
-            (None, None) => {
-                let charts = probe()?.stats.charts as usize;
-                let n = (4 * charts).div_ceil(256).clamp(4, MAX_AUTO_ENTRIES / 256) * 256;
-                reasons.push(format!(
-                    "{n} entry points: 4 per chart of the scene's {charts} charts, 1024..16384"
-                ));
-                auto_entries = true;
-                n
-            }
-        };
-        let mut auto_paths = false;
-        let mut paths_per_entry = match (config.paths_per_entry, &fixed) {
-            (Some(m), _) => m,
-            (None, Some(v)) => v.paths,
-            (None, None) => {
-                let m = auto_walks_per_entry(entries);
-                reasons.push(format!(
-                    "{m} walk{} per entry point: about {WALKS_IN_ALL} walks in all",
-                    plural(m as usize)
-                ));
-                auto_paths = true;
-                m
-            }
-        };
+        let atlas = planner.atlas_rule(&probe, &mut reasons)?;
+        let entries = planner.entries_rule(&probe, &mut reasons)?;
+        let walks = planner.walks_rule(entries.value, &mut reasons);
+        let mut draft = planner.draft(atlas, entries, walks, &probe)?;
+        planner.fit_time_budget(&mut draft, &mut reasons);
+        planner.cap_entries(&mut draft, &mut reasons);
+        planner.double_entries(&mut draft, &mut reasons);
+        let clusters = planner.clusters_rule(&draft, &mut reasons);
+        let texels_per_pane = planner.texels(draft.atlas.size);
+        let top_k = planner.top_k_rule(clusters, texels_per_pane, &mut reasons);
+        let face_resolution = planner.face_resolution_rule();
+        let sky_paths = planner.sky_paths_rule(&draft, &mut reasons)?;
+        let near_rays = planner.near_rays_rule();
+        let vpl_disk_scale = planner.vpl_disk_scale_rule(draft.atlas.size, near_rays, &mut reasons);
 
-        // The time budget: estimate, and shrink what was chosen automatically until it fits.
-        let utilization = match auto_resolution {
-            Some(_) => probe()?.stats.utilization as f64,
-            None => 0.5,
-        };
-        let triangles = scene.triangles.len() as f64;
-        let estimate = |entries: usize, paths: u32, atlas: AtlasSize| {
-            cost.bake_seconds(entries, paths, bounces_per_walk, utilization * texels(atlas), triangles)
-        };
-        let planned = estimate(entries, paths_per_entry, atlas);
-        let mut estimated_seconds = planned;
-        while estimated_seconds > time_budget_s {
-            // Each step drops about a quarter of one size; take the one that saves the most time.
-            let fewer_walks = (auto_paths && paths_per_entry > 1).then(|| (entries, paths_per_entry - 1, atlas));
-            let fewer_entries = (auto_entries && entries > 1024)
-                .then(|| (((entries * 3 / 4) / 256 * 256).max(1024), paths_per_entry, atlas));
-            let smaller_atlas = match atlas {
-                AtlasSize::Resolution(r) if auto_resolution.is_some() && r > smallest_atlas => Some((
-                    entries,
-                    paths_per_entry,
-                    AtlasSize::Resolution(((r * 7 / 8) / 32 * 32).max(smallest_atlas)),
-                )),
-                _ => None,
-            };
-            let Some((e, m, a, t)) = [fewer_walks, fewer_entries, smaller_atlas]
-                .into_iter()
-                .flatten()
-                .map(|(e, m, a)| (e, m, a, estimate(e, m, a)))
-                .min_by(|x, y| x.3.total_cmp(&y.3))
-            else {
-                break;
-            };
-            (entries, paths_per_entry, atlas, estimated_seconds) = (e, m, a, t);
-        }
-        if estimated_seconds < planned {
-            reasons.push(format!(
-                "shrunk to fit the {time_budget_s:.0} s time budget: {planned:.0} s expected at the sizes above, \
-                 {estimated_seconds:.0} s with {entries} entries, {paths_per_entry} walk{} each{}",
-                plural(paths_per_entry as usize),
-                match atlas {
-                    AtlasSize::Resolution(r) => format!(", atlas {r}²"),
-                    AtlasSize::TexelSize(_) => String::new(),
-                }
-            ));
-        }
-
-        // No more than 16 entry points per cluster the bake can have, at the atlas the budget
-        // left (module docs); the walks per entry rise towards twice `WALKS_IN_ALL`, at most
-        // `CAPPED_WALKS` each, as far
-        // as the time budget allows.
-        let mut capped = false;
-        if auto_entries {
-            let (clusters, which) = match config.clusters {
-                Some(c) => (c, "given"),
-                None => (clusters_allowed(texels(atlas)), "the budgets allow"),
-            };
-            let cap = (clusters.saturating_mul(16) / 256 * 256).max(1024);
-            if entries > cap {
-                entries = cap;
-                capped = true;
-                if auto_paths {
-                    let wanted = (2 * WALKS_IN_ALL).div_ceil(entries).clamp(1, CAPPED_WALKS as usize) as u32;
-                    while paths_per_entry < wanted && estimate(entries, paths_per_entry + 1, atlas) <= time_budget_s {
-                        paths_per_entry += 1;
-                    }
-                }
-                estimated_seconds = estimate(entries, paths_per_entry, atlas);
-                reasons.push(format!(
-                    "{entries} entry points, {paths_per_entry} walk{} each: at most 16 for each of the {clusters} \
-                     clusters {which}",
-                    plural(paths_per_entry as usize)
-                ));
-            }
-        }
-
-        // Twice the entry points (and so clusters) at the same walks per entry, where neither the
-        // time budget nor the cluster cap cut anything (module docs).
-        let uncut = estimated_seconds >= planned && !capped;
-        if auto_entries && uncut {
-            // No more than `ENTRIES_PER_CLUSTER` per cluster the budgets allow: beyond, more
-            // entry points only crowd the clusters.
-            let most = MAX_AUTO_ENTRIES.min(ENTRIES_PER_CLUSTER * clusters_allowed(texels(atlas)));
-            for _ in 0..MAX_DOUBLINGS {
-                let more = entries * 2;
-                let walks = if auto_paths {
-                    auto_walks_per_entry(more)
-                } else {
-                    paths_per_entry
-                };
-                let doubled = estimate(more, walks, atlas);
-                if more > most || doubled > time_budget_s {
-                    break;
-                }
-                (entries, paths_per_entry, estimated_seconds) = (more, walks, doubled);
-                reasons.push(format!(
-                    "{entries} entry points, {paths_per_entry} walk{} each: twice as many, as the time budget allows",
-                    plural(paths_per_entry as usize)
-                ));
-            }
-        }
-
-        let texels_per_pane = texels(atlas);
-        let clusters = match (config.clusters, &fixed) {
-            (Some(c), _) => c,
-            (None, Some(v)) => v.clusters.min(entries),
-            (None, None) => {
-                let wanted = (entries / ENTRIES_PER_CLUSTER).clamp(32, 1024).min(entries);
-                let (by_memory, by_archive) = (by_memory(texels_per_pane), by_archive(texels_per_pane));
-                let c = wanted.min(clusters_allowed(texels_per_pane));
-                reasons.push(format!(
-                    "{c} clusters: entries/{ENTRIES_PER_CLUSTER} = {wanted}, memory budget allows {by_memory}, archive budget {by_archive}"
-                ));
-                c
-            }
-        };
-        let top_k = match config.top_k.or(fixed.as_ref().map(|v| v.top_k)) {
-            Some(k) => k,
-            None => {
-                let groups = prm_format::residual_group_count(clusters, prm_format::RESIDUAL_GROUPS) as usize;
-                let panes = (BLEND_TEXELS / texels_per_pane) as usize;
-                let k = panes.saturating_sub(groups).max(MIN_AUTO_TOP_K);
-                reasons.push(top_k_reason(k.min(clusters), panes, texels_per_pane, groups, clusters));
-                k
-            }
-        }
-        .min(clusters);
-        let face_resolution = config.face_resolution.or(fixed.as_ref().map(|v| v.face)).unwrap_or(128);
-        let sky_paths = match (config.sky_paths, config.sky) {
-            (Some(paths), Some(false)) => {
-                invalid!("sky_paths = {paths} asks for the sky, which sky = false turns off: drop one of them")
-            }
-            (Some(paths), _) => Some(paths),
-            (None, Some(true)) => {
-                let exits = utilization * texels(atlas);
-                let step = |paths: u32| exits * paths as f64 * SKY_PATH_SECONDS;
-                let mut paths = crate::SKY_PATHS;
-                while paths < MAX_AUTO_SKY_PATHS && estimated_seconds + step(2 * paths) <= time_budget_s {
-                    paths *= 2;
-                }
-                reasons.push(format!(
-                    "sky: {paths} paths per texel, a sky step of about {:.0} s{}",
-                    step(paths),
-                    if paths > crate::SKY_PATHS {
-                        " within what the time budget leaves"
-                    } else {
-                        ""
-                    }
-                ));
-                Some(paths)
-            }
-            _ => None,
-        };
-        // Without the VPL bound nothing is missing near the exit points.
-        let near_rays = if config.vpl_disk_scale == Some(0.0) {
-            0
-        } else {
-            config.near_rays.unwrap_or(prm_trace::NEAR_RAYS)
-        };
-        let vpl_disk_scale = match config.vpl_disk_scale {
-            Some(scale) => scale,
-            None if near_rays == 0 => 1.0,
-            // Probes lit through the panes have no near field to give back what a disk takes.
-            None if config.probes.is_some() && config.probe_rays == Some(0) => {
-                reasons.push(format!(
-                    "VPL disks {NEAR_FIELD_DISK_SCALE_LARGE} times the entry points' radius: the probes are \
-                     lit through the panes (--probe-rays 0), which larger disks would take light from"
-                ));
-                NEAR_FIELD_DISK_SCALE_LARGE
-            }
-            None => {
-                let fits = texels(atlas) * near_rays as f64 <= NEAR_HIT_BUDGET as f64;
-                let scale = if fits {
-                    NEAR_FIELD_DISK_SCALE
-                } else {
-                    NEAR_FIELD_DISK_SCALE_LARGE
-                };
-                reasons.push(format!(
-                    "VPL disks {scale} times the entry points' radius: {near_rays} near rays from each of about \
-                     {:.0} texels, {} {NEAR_HIT_BUDGET} hits",
-                    texels(atlas),
-                    if fits { "at most" } else { "possibly over" }
-                ));
-                scale
-            }
-        };
+        let Budgets {
+            archive_mib,
+            memory_mib,
+            time_s,
+        } = planner.budgets;
         let params = BakeParams {
             preset,
-            entries,
+            entries: draft.entries.value,
             clusters,
-            atlas,
-            paths_per_entry,
+            atlas: draft.atlas.size,
+            paths_per_entry: draft.walks.value,
             seed: config.seed.unwrap_or(0),
             top_k,
             face_resolution,
             vpl_disk_scale,
-            archive_budget_mib,
-            memory_budget_mib,
-            time_budget_s,
+            archive_budget_mib: archive_mib,
+            memory_budget_mib: memory_mib,
+            time_budget_s: time_s,
             sky_paths,
             probes: config.probes,
             probe_rays: config.probe_rays.unwrap_or(crate::PROBE_RAYS),
             near_rays,
             accuracy_points: config.accuracy_points.unwrap_or(crate::ACCURACY_POINTS),
             accuracy_paths: config.accuracy_paths.unwrap_or(crate::ACCURACY_PATHS),
-            estimated_seconds,
+            estimated_seconds: draft.estimated_seconds,
             reasons,
         };
         params.validate(texels_per_pane)?;
@@ -943,7 +1225,7 @@ impl BakeParams {
                 self.vpl_disk_scale
             );
         }
-        let memory_mib = self.clusters as f64 * texels_per_pane * 4.0 / (1024.0 * 1024.0);
+        let memory_mib = self.clusters as f64 * texels_per_pane * PANE_TEXEL_BYTES / (1024.0 * 1024.0);
         if memory_mib > self.memory_budget_mib {
             over_limit!(
                 "{} panes of {:.0} texels need {memory_mib:.0} MiB at run time, over the {:.0} MiB memory budget; \

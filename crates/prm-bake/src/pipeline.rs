@@ -2,12 +2,12 @@
 
 use glam::Vec3;
 use prm_format::ArchiveWriter;
-use prm_gpu::{GpuContext, PaneOutput, PaneRenderParams};
-use prm_scene::{Atlas, AtlasParams, AtlasStats, Scene, Sizing};
+use prm_gpu::{GpuContext, PaneInputs, PaneOutput, PaneRenderParams};
+use prm_scene::{Atlas, AtlasParams, AtlasStats, MergeNearHits, Scene, Sizing};
 use prm_trace::pane::Lattice;
 use prm_trace::{
     Bvh, BvhParams, Clustering, DeepDisk, Emitters, EntryParams, Lighting, PaneParams, Receiver, ReferenceParams,
-    ReferenceTracer, SurfaceSample, WalkParams,
+    ReferenceTracer, SurfaceSample, VplSet, WalkParams,
 };
 use std::cell::OnceCell;
 use std::collections::BTreeMap;
@@ -169,12 +169,7 @@ impl Plan {
         // (the bake reuses it) and estimate with its exit points: Sibenik at 704² covers 34%,
         // and the guess made the plan 36% long.
         if let (None, AtlasSize::Resolution(r)) = (auto_atlas.get(), params.atlas) {
-            let a = Atlas::build(scene, &AtlasParams::with_sizing(Sizing::Resolution(r))).map_err(|source| {
-                BakeError::Atlas {
-                    what: "building the lightmap atlas",
-                    source,
-                }
-            })?;
+            let a = lightmap_atlas(scene, Sizing::Resolution(r))?;
             params.estimated_seconds = cost.bake_seconds(
                 params.entries,
                 params.paths_per_entry,
@@ -199,15 +194,8 @@ const PROBE_WALKS: u32 = 4;
 /// walks escape, and a closed-scene expectation is 2.2× too high on the Cornell box, which would
 /// make the plan expect twice the bake's time.
 fn measured_bounces_per_walk(scene: &Scene) -> Result<f64, BakeError> {
-    let bvh = Bvh::build(scene, &BvhParams::DEFAULT).map_err(trace("building the BVH"))?;
-    let entries = prm_trace::sample_surface(
-        scene,
-        &EntryParams {
-            count: PROBE_ENTRIES,
-            seed: 0,
-        },
-    )
-    .map_err(trace("sampling entry points"))?;
+    let bvh = scene_bvh(scene)?;
+    let entries = sample_entries(scene, PROBE_ENTRIES, 0)?;
     let walks = WalkParams {
         walks_per_entry: PROBE_WALKS,
         seed: 0,
@@ -416,15 +404,9 @@ fn emitter_section(
     let to_entries = emitters.group_irradiance(scene, bvh, &at_entries, EMITTER_SAMPLES, seed);
     let to_exits = emitters.group_irradiance(scene, bvh, &at_exits, EMITTER_SAMPLES, !seed);
     progress.phase_advance(1);
-    let texels = (atlas.resolution * atlas.resolution) as usize;
     let image = |values: &[Vec3]| {
-        let mut out = vec![[0f32; 3]; texels];
-        for (x, v) in atlas.exits.iter().zip(values) {
-            out[x.texel as usize] = v.to_array();
-        }
-        for &(dst, src) in &atlas.dilation {
-            out[dst as usize] = out[src as usize];
-        }
+        let mut out = vec![[0f32; 3]; texel_count(atlas)];
+        fill_texels(atlas, values, &mut out);
         out
     };
     let mut out = Vec::with_capacity(emitters.groups.len());
@@ -468,9 +450,8 @@ fn truncate_name(name: &str) -> String {
     name[..end].replace('\0', "")
 }
 
-/// Wraps a transport error with the step that failed.
 /// The near field `trace(rays)` makes, with `rays` halved until its merged hits
-/// ([`prm_format::NearField::merged_hits`]) are at most `budget`, and the rays it took. The player
+/// ([`prm_scene::MergeNearHits::merged_hits`]) are at most `budget`, and the rays it took. The player
 /// holds the merged hits in one storage binding (8 bytes each; 2²⁴ fill lavapipe's and wgpu's
 /// default 128 MiB): the planner's rule (texels × rays before merging, `NEAR_HIT_BUDGET`) keeps
 /// the default plans within it, but an atlas set by hand can pass it even at the smaller disks
@@ -509,46 +490,173 @@ pub(crate) fn cluster_entries(
     }
 }
 
+/// Builds `scene`'s lightmap atlas at `sizing`.
+pub(crate) fn lightmap_atlas(scene: &Scene, sizing: Sizing) -> Result<Atlas, BakeError> {
+    Atlas::build(scene, &AtlasParams::with_sizing(sizing)).map_err(|source| BakeError::Atlas {
+        what: "building the lightmap atlas",
+        source,
+    })
+}
+
+/// Builds `scene`'s BVH.
+pub(crate) fn scene_bvh(scene: &Scene) -> Result<Bvh, BakeError> {
+    Bvh::build(scene, &BvhParams::DEFAULT).map_err(trace("building the BVH"))
+}
+
+/// Samples `count` entry points on `scene`'s surfaces with `seed`.
+pub(crate) fn sample_entries(scene: &Scene, count: usize, seed: u64) -> Result<Vec<SurfaceSample>, BakeError> {
+    prm_trace::sample_surface(scene, &EntryParams { count, seed }).map_err(trace("sampling entry points"))
+}
+
+/// Wraps a transport error with the step that failed.
 pub(crate) fn trace(what: &'static str) -> impl FnOnce(prm_trace::TraceError) -> BakeError {
     move |source| BakeError::Trace { what, source }
 }
 
-/// Ends the step `phase` begun at `started`: its seconds go into `timings` under `key` and, with
-/// `detail`, to `progress`.
-fn finish_phase(
-    timings: &mut BTreeMap<String, f64>,
-    progress: &mut dyn ProgressSink,
-    phase: Phase,
-    key: &str,
-    started: Instant,
-    detail: &str,
-) {
-    let secs = started.elapsed().as_secs_f64();
-    timings.insert(key.to_string(), secs);
-    progress.phase_finish(phase, detail, secs);
+/// Wraps an archive's error with the step that failed, e.g. "writing a pane".
+pub(crate) fn archive_error(what: impl Into<String>) -> impl FnOnce(prm_format::Error) -> BakeError {
+    let what = what.into();
+    move |source| BakeError::Archive { what, source }
+}
+
+/// The bake's progress reports, and the seconds each finished step took ([`Baked::timings`]).
+struct Steps<'p> {
+    progress: &'p mut dyn ProgressSink,
+    timings: BTreeMap<String, f64>,
+}
+
+impl Steps<'_> {
+    /// Ends the step `phase` begun at `started`: its seconds go into the timings under `key` and,
+    /// with `detail`, to the progress sink.
+    fn finish(&mut self, phase: Phase, key: &str, started: Instant, detail: &str) {
+        let secs = started.elapsed().as_secs_f64();
+        self.timings.insert(key.to_string(), secs);
+        self.progress.phase_finish(phase, detail, secs);
+    }
+}
+
+/// What the transport phases made, which the later phases read.
+struct Traced<'s> {
+    scene: &'s Scene,
+    params: &'s BakeParams,
+    atlas: Atlas,
+    bvh: Bvh,
+    /// The entry points in sampling order.
+    entries: Vec<SurfaceSample>,
+    /// The walks' VPLs (a shard's own clusters' only).
+    vpls: VplSet,
+    clustering: Clustering,
+    /// Entry indices in the archive's order (cluster by cluster).
+    order: Vec<u32>,
 }
 
 /// Bakes `job.scene` into the archive `job.output` with the panes rendered by `renderer`,
 /// reporting to `progress`.
 ///
-/// The destination is checked before any work ([`prm_format::check_destination`]); missing
+/// The destination is checked before any work ([`prm_scene::check_destination`]); missing
 /// directories are created. The archive's bytes depend only on the scene, the scene path
 /// relative to the archive, the parameters and the renderer: the same inputs give the same bytes.
 pub fn bake(job: &BakeJob<'_>, renderer: Renderer<'_>, progress: &mut dyn ProgressSink) -> Result<Baked, BakeError> {
-    let destination = prm_format::check_destination(job.output).map_err(BakeError::Destination)?;
+    let destination = prm_scene::check_destination(job.output).map_err(BakeError::Destination)?;
     let (scene, params) = (job.scene, &job.plan.params);
-    let mut timings = BTreeMap::new();
+    let mut steps = Steps {
+        progress,
+        timings: BTreeMap::new(),
+    };
     let backend_name = renderer.name();
 
+    let mut atlas = build_atlas(job, &mut steps)?;
+    let bvh = build_bvh(scene, &mut atlas, &mut steps)?;
+    let (entries, mut vpls) = trace_walks(scene, &bvh, params, &mut steps)?;
+    let clustering = cluster_vpls(job, &bvh, &entries, &mut vpls, &mut steps)?;
+    let order: Vec<u32> = clustering.members.iter().flatten().copied().collect();
+    let traced = Traced {
+        scene,
+        params,
+        atlas,
+        bvh,
+        entries,
+        vpls,
+        clustering,
+        order,
+    };
+
+    let emitter_groups = trace_emitters(&traced, &mut steps)?;
+    let sky = trace_sky(&traced, &mut steps)?;
+    let (mut writer, made, residual_groups) = start_archive(job, &destination, &traced, &backend_name)?;
+
+    // The accuracy check's exit points: a whole bake only (a shard holds some panes).
+    let checked_exits = if params.accuracy_points > 0 && job.shard.is_none() {
+        prm_trace::check_exits(traced.atlas.exits.len(), params.accuracy_points, params.seed)
+    } else {
+        Vec::new()
+    };
+    // Traced before the panes, so the accuracy check plays each pane's share of its series as it
+    // comes.
+    let near_field = trace_near_field(&traced, &mut steps);
+    // The accuracy check's model of the player's near field, over the whole atlas.
+    let near_play = near_field.as_ref().filter(|_| !checked_exits.is_empty()).map(|n| {
+        let texels: Vec<u32> = checked_exits.iter().map(|&i| traced.atlas.exits[i].texel).collect();
+        prm_trace::NearPlay::new(n, &traced.atlas.texel_exit, &texels, prm_trace::NEAR_GATHERS)
+    });
+    let mut recorder = PaneRecorder {
+        checked_exits: &checked_exits,
+        near_play: near_play.as_ref(),
+        checked_panes: Vec::new(),
+        pane_energy: Vec::new(),
+        write_s: 0.0,
+    };
+
+    if let Some(sky) = sky {
+        writer.set_sky(sky).map_err(archive_error("recording the sky"))?;
+    }
+    if !emitter_groups.is_empty() {
+        writer
+            .set_emitters(emitter_groups)
+            .map_err(archive_error("recording the emitters"))?;
+    }
+    let out = PaneSink {
+        writer: &mut writer,
+        recorder: &mut recorder,
+        steps: &mut steps,
+    };
+    let panes = render_panes(renderer, &backend_name, &traced, out)?;
+    trace_probes(&traced, &mut writer, &mut steps)?;
+    let write_s = recorder.write_s;
+    let accuracy = check_accuracy(&traced, recorder, &residual_groups, panes.sampled_energy, &mut steps)?;
+    writer.metadata_mut().accuracy = accuracy.clone();
+    drop(near_play);
+    if let Some(near) = near_field {
+        writer
+            .set_near_field(near)
+            .map_err(archive_error("recording the near field"))?;
+    }
+    let archive_bytes = finish_archive(job.output, writer, made, write_s, &mut steps)?;
+
+    Ok(Baked {
+        backend: backend_name,
+        atlas: traced.atlas.stats.clone(),
+        triangles: scene.triangles.len(),
+        entries: traced.entries.len(),
+        clusters: traced.clustering.len(),
+        walks: traced.vpls.stats.walks,
+        vpls: traced.vpls.vpls.len(),
+        rays: traced.vpls.stats.rays + panes.shadow_rays,
+        archive_bytes,
+        timings: steps.timings,
+        accuracy,
+    })
+}
+
+/// Builds the lightmap atlas, or takes the one planning built at the same resolution, and
+/// refuses one over the archive's limit.
+fn build_atlas(job: &BakeJob<'_>, steps: &mut Steps<'_>) -> Result<Atlas, BakeError> {
     let t = Instant::now();
-    progress.phase_start(Phase::Atlas, 1);
-    let sizing = Sizing::from(params.atlas);
-    let mut atlas = match (&job.plan.probed_atlas, sizing) {
+    steps.progress.phase_start(Phase::Atlas, 1);
+    let sizing = Sizing::from(job.plan.params.atlas);
+    let atlas = match (&job.plan.probed_atlas, sizing) {
         (Some(a), Sizing::Resolution(r)) if a.resolution == r => a.clone(),
-        _ => Atlas::build(scene, &AtlasParams::with_sizing(sizing)).map_err(|source| BakeError::Atlas {
-            what: "building the lightmap atlas",
-            source,
-        })?,
+        _ => lightmap_atlas(job.scene, sizing)?,
     };
     if atlas.resolution > MAX_ATLAS_RESOLUTION {
         return Err(BakeError::OverLimit(format!(
@@ -562,17 +670,20 @@ pub fn bake(job: &BakeJob<'_>, renderer: Renderer<'_>, progress: &mut dyn Progre
         atlas.exits.len(),
         r = atlas.resolution
     );
-    finish_phase(&mut timings, progress, Phase::Atlas, "atlas", t, &detail);
-    if let Some(w) = atlas.coverage_warning(scene.triangles.len()) {
-        progress.warn(&w);
+    steps.finish(Phase::Atlas, "atlas", t, &detail);
+    if let Some(w) = atlas.coverage_warning(job.scene.triangles.len()) {
+        steps.progress.warn(&w);
     }
+    Ok(atlas)
+}
 
+/// Builds the BVH, then moves the exit points under other geometry (a floor's texels half under
+/// a box) to the part of their texel that sees the scene, before anything traces from them.
+fn build_bvh(scene: &Scene, atlas: &mut Atlas, steps: &mut Steps<'_>) -> Result<Bvh, BakeError> {
     let t = Instant::now();
-    progress.phase_start(Phase::Bvh, 1);
-    let bvh = Bvh::build(scene, &BvhParams::DEFAULT).map_err(trace("building the BVH"))?;
-    // Exit points under other geometry (a floor's texels half under a box) move to the part of
-    // their texel that sees the scene, before anything traces from them.
-    let unburied = prm_trace::unbury_exits(scene, &bvh, &mut atlas);
+    steps.progress.phase_start(Phase::Bvh, 1);
+    let bvh = scene_bvh(scene)?;
+    let unburied = prm_trace::unbury_exits(scene, &bvh, atlas);
     let detail = format!(
         "{} triangles; {} exit points buried under other geometry, {} of them moved within their texel, {} to a neighbour's",
         scene.triangles.len(),
@@ -580,28 +691,39 @@ pub fn bake(job: &BakeJob<'_>, renderer: Renderer<'_>, progress: &mut dyn Progre
         unburied.moved,
         unburied.copied
     );
-    finish_phase(&mut timings, progress, Phase::Bvh, "bvh", t, &detail);
+    steps.finish(Phase::Bvh, "bvh", t, &detail);
+    Ok(bvh)
+}
 
+/// Whether the bake traces the near field, whose deeper share the player gathers back from the
+/// lightmap (format 1.8).
+fn gathers_near(params: &BakeParams) -> bool {
+    params.near_rays > 0 && params.vpl_disk_scale > 0.0
+}
+
+/// Samples the entry points and traces their random walks into VPLs.
+fn trace_walks(
+    scene: &Scene,
+    bvh: &Bvh,
+    params: &BakeParams,
+    steps: &mut Steps<'_>,
+) -> Result<(Vec<SurfaceSample>, VplSet), BakeError> {
     let t = Instant::now();
-    progress.phase_start(Phase::LightTracing, 1);
-    let entries = prm_trace::sample_surface(
-        scene,
-        &EntryParams {
-            count: params.entries,
-            seed: params.seed,
-        },
-    )
-    .map_err(trace("sampling entry points"))?;
-    // With the near field, whose deeper share the player gathers back from the lightmap (format
-    // 1.8), the deeper VPLs take their entry point's disk, which tames their spikes.
-    let gathers_near = params.near_rays > 0 && params.vpl_disk_scale > 0.0;
+    steps.progress.phase_start(Phase::LightTracing, 1);
+    let entries = sample_entries(scene, params.entries, params.seed)?;
+    // With the near field the deeper VPLs take their entry point's disk, which tames their
+    // spikes.
     let walk_params = WalkParams {
         walks_per_entry: params.paths_per_entry,
         seed: params.seed,
-        deep_disk: if gathers_near { DeepDisk::Entry } else { DeepDisk::Walk },
+        deep_disk: if gathers_near(params) {
+            DeepDisk::Entry
+        } else {
+            DeepDisk::Walk
+        },
         ..WalkParams::PREVIEW
     };
-    let vpls = prm_trace::trace_walks(scene, &bvh, &entries, &walk_params).map_err(trace("tracing walks"))?;
+    let vpls = prm_trace::trace_walks(scene, bvh, &entries, &walk_params).map_err(trace("tracing walks"))?;
     let detail = format!(
         "{} entries, {} walks, {} VPLs, {} rays",
         entries.len(),
@@ -609,60 +731,99 @@ pub fn bake(job: &BakeJob<'_>, renderer: Renderer<'_>, progress: &mut dyn Progre
         vpls.vpls.len(),
         vpls.stats.rays
     );
-    finish_phase(&mut timings, progress, Phase::LightTracing, "light_tracing", t, &detail);
+    steps.finish(Phase::LightTracing, "light_tracing", t, &detail);
+    Ok((entries, vpls))
+}
 
+/// Clusters the entry points; a shard then keeps its own clusters' VPLs only, and the other
+/// panes stay zero.
+fn cluster_vpls(
+    job: &BakeJob<'_>,
+    bvh: &Bvh,
+    entries: &[SurfaceSample],
+    vpls: &mut VplSet,
+    steps: &mut Steps<'_>,
+) -> Result<Clustering, BakeError> {
+    let params = &job.plan.params;
     let t = Instant::now();
-    progress.phase_start(Phase::Clustering, 1);
-    let clustering = cluster_entries(scene, &bvh, &entries, params.clusters, params.seed)?;
+    steps.progress.phase_start(Phase::Clustering, 1);
+    let clustering = cluster_entries(job.scene, bvh, entries, params.clusters, params.seed)?;
     let detail = format!("{} clusters", clustering.len());
-    finish_phase(&mut timings, progress, Phase::Clustering, "clustering", t, &detail);
-    // A shard renders its own clusters' VPLs only; the other panes stay zero.
-    let mut vpls = vpls;
+    steps.finish(Phase::Clustering, "clustering", t, &detail);
     if let Some(shard) = job.shard {
         vpls.vpls
             .retain(|v| shard.owns(clustering.of_entry[v.entry as usize] as usize));
-        progress.info(&format!(
+        steps.progress.info(&format!(
             "  shard {shard}: {} of {} clusters, {} VPLs",
             (0..clustering.len()).filter(|&c| shard.owns(c)).count(),
             clustering.len(),
             vpls.vpls.len()
         ));
     }
+    Ok(clustering)
+}
 
-    // Entry indices in the archive's order (cluster by cluster).
-    let order: Vec<u32> = clustering.members.iter().flatten().copied().collect();
-    let emitter_groups = if Emitters::from_scene(scene).is_empty() {
-        Vec::new()
+/// The emitters section ([`emitter_section`]) of a scene with emissive materials; none without.
+fn trace_emitters(traced: &Traced<'_>, steps: &mut Steps<'_>) -> Result<Vec<prm_format::EmitterGroup>, BakeError> {
+    let (scene, atlas) = (traced.scene, &traced.atlas);
+    if Emitters::from_scene(scene).is_empty() {
+        return Ok(Vec::new());
+    }
+    let t = Instant::now();
+    let groups = emitter_section(
+        scene,
+        &traced.bvh,
+        atlas,
+        &traced.entries,
+        &traced.order,
+        traced.params.seed,
+        steps.progress,
+    )?;
+    let names: Vec<&str> = groups.iter().map(|g| g.name.as_str()).collect();
+    let how = if groups.iter().all(|g| g.indirect.is_some()) {
+        format!("indirect traced, {EMITTER_INDIRECT_SPP} paths per texel")
     } else {
-        let t = Instant::now();
-        let groups = emitter_section(scene, &bvh, &atlas, &entries, &order, params.seed, progress)?;
-        let names: Vec<&str> = groups.iter().map(|g| g.name.as_str()).collect();
-        let how = if groups.iter().all(|g| g.indirect.is_some()) {
-            format!("indirect traced, {EMITTER_INDIRECT_SPP} paths per texel")
-        } else {
-            format!(
-                "indirect through the panes: {} exit points × {EMITTER_INDIRECT_SPP} paths exceed {EMITTER_INDIRECT_MAX_PATHS}",
-                atlas.exits.len()
-            )
-        };
-        let detail = format!("{} group(s): {}; {how}", groups.len(), names.join(", "));
-        finish_phase(&mut timings, progress, Phase::Emitters, "emitters", t, &detail);
-        groups
+        format!(
+            "indirect through the panes: {} exit points × {EMITTER_INDIRECT_SPP} paths exceed {EMITTER_INDIRECT_MAX_PATHS}",
+            atlas.exits.len()
+        )
     };
+    let detail = format!("{} group(s): {}; {how}", groups.len(), names.join(", "));
+    steps.finish(Phase::Emitters, "emitters", t, &detail);
+    Ok(groups)
+}
 
-    let sky = match params.sky_paths {
-        None => None,
-        Some(paths) => {
-            let t = Instant::now();
-            let sky = sky_section(scene, &bvh, &atlas, paths, params.seed, progress)?;
-            let detail = format!("{} exit points × {paths} paths", atlas.exits.len());
-            finish_phase(&mut timings, progress, Phase::Sky, "sky", t, &detail);
-            Some(sky)
-        }
+/// The sky section ([`sky_section`]) of a bake with the sky; none without.
+fn trace_sky(traced: &Traced<'_>, steps: &mut Steps<'_>) -> Result<Option<prm_format::SkyTransfer>, BakeError> {
+    let Some(paths) = traced.params.sky_paths else {
+        return Ok(None);
     };
+    let t = Instant::now();
+    let atlas = &traced.atlas;
+    let sky = sky_section(
+        traced.scene,
+        &traced.bvh,
+        atlas,
+        paths,
+        traced.params.seed,
+        steps.progress,
+    )?;
+    let detail = format!("{} exit points × {paths} paths", atlas.exits.len());
+    steps.finish(Phase::Sky, "sky", t, &detail);
+    Ok(Some(sky))
+}
 
-    let (table_entries, table_clusters, atlas_section) = archive_tables(&atlas, &entries, &clustering);
-    // The player's residual groups, for the accuracy check (a function of the cluster table).
+/// Creates the output's missing directories and starts the archive with its metadata and its
+/// atlas, entry and cluster tables. Also gives the player's residual groups, which the accuracy
+/// check reads (a function of the cluster table).
+fn start_archive(
+    job: &BakeJob<'_>,
+    destination: &Path,
+    traced: &Traced<'_>,
+    backend_name: &str,
+) -> Result<(ArchiveWriter, MadeDirs, Vec<u32>), BakeError> {
+    let (table_entries, table_clusters, atlas_section) =
+        archive_tables(&traced.atlas, &traced.entries, &traced.clustering);
     let residual_groups = prm_format::residual_groups(
         &table_clusters,
         prm_format::residual_group_count(table_clusters.len(), prm_format::RESIDUAL_GROUPS),
@@ -672,372 +833,462 @@ pub fn bake(job: &BakeJob<'_>, renderer: Renderer<'_>, progress: &mut dyn Progre
         .filter(|d| !d.as_os_str().is_empty())
         .unwrap_or(Path::new("."));
     let made = MadeDirs::create(out_dir)?;
-    let mut metadata = metadata(scene, job.scene_path, out_dir, params, &atlas, &backend_name)?;
+    let mut metadata = metadata(
+        traced.scene,
+        job.scene_path,
+        out_dir,
+        traced.params,
+        &traced.atlas,
+        backend_name,
+    )?;
     if let Some(shard) = job.shard {
         metadata.params.insert("shard".into(), shard.to_json());
     }
-    let mut writer = ArchiveWriter::create(job.output, metadata, &atlas_section, &table_entries, &table_clusters)
-        .map_err(|source| BakeError::Archive {
-            what: format!("starting {}", job.output.display()),
-            source,
-        })?;
+    let writer = ArchiveWriter::create(job.output, metadata, &atlas_section, &table_entries, &table_clusters)
+        .map_err(archive_error(format!("starting {}", job.output.display())))?;
+    Ok((writer, made, residual_groups))
+}
 
-    // The accuracy check's exit points: a whole bake only (a shard holds some panes).
-    let checked_exits = if params.accuracy_points > 0 && job.shard.is_none() {
-        prm_trace::check_exits(atlas.exits.len(), params.accuracy_points, params.seed)
-    } else {
-        Vec::new()
-    };
-    // The near field: what the VPL disk bound removes next to the exit points. Traced before
-    // the panes, so the accuracy check plays each pane's share of its series as it comes.
-    let near_field = match entries.first() {
-        Some(e) if gathers_near => {
-            let t = Instant::now();
-            progress.phase_start(Phase::NearField, 1);
-            let disk = prm_trace::near_disk(e.weight, params.vpl_disk_scale);
-            let (mut near, rays) = fit_near_field(params.near_rays, crate::params::NEAR_HIT_BUDGET, |rays| {
-                prm_trace::near_field(scene, &bvh, &atlas, rays, disk, params.seed)
-            });
-            if rays < params.near_rays {
-                progress.info(&format!(
-                    "  near field: {rays} rays per exit point instead of {}, so that its merged hits fit the player's storage binding ({} hits)",
-                    params.near_rays,
-                    crate::params::NEAR_HIT_BUDGET
-                ));
-            }
-            // The deeper VPLs' disk is the entry point's too (`DeepDisk::Entry` above), and the
-            // panes' kernel completes the cut weights (`BakeParams::bound`).
-            near.indirect_disk = disk;
-            near.complement = matches!(params.bound(), prm_trace::VplBound::Near { .. });
-            let detail = format!(
-                "{} texels (exit points and their gutter copies) keep {} rays in all of {} per exit point, ending at {} gather points",
-                near.exits.len(),
-                near.hits.len(),
-                rays,
-                near.points.len(),
-            );
-            finish_phase(&mut timings, progress, Phase::NearField, "near_field", t, &detail);
-            Some(near)
-        }
-        _ => None,
-    };
-    // The accuracy check's model of the player's near field, over the whole atlas.
-    let near_play = near_field.as_ref().filter(|_| !checked_exits.is_empty()).map(|n| {
-        let texels: Vec<u32> = checked_exits.iter().map(|&i| atlas.exits[i].texel).collect();
-        prm_trace::NearPlay::new(n, &atlas.texel_exit, &texels, prm_trace::NEAR_GATHERS)
+/// The near field: what the VPL disk bound removes next to the exit points, with its rays cut
+/// until its merged hits fit the player's storage binding ([`fit_near_field`]). `None` where the
+/// bake does not gather it ([`gathers_near`]).
+fn trace_near_field(traced: &Traced<'_>, steps: &mut Steps<'_>) -> Option<prm_format::NearField> {
+    let params = traced.params;
+    let e = traced.entries.first().filter(|_| gathers_near(params))?;
+    let t = Instant::now();
+    steps.progress.phase_start(Phase::NearField, 1);
+    let disk = prm_trace::near_disk(e.weight, params.vpl_disk_scale);
+    let (mut near, rays) = fit_near_field(params.near_rays, crate::params::NEAR_HIT_BUDGET, |rays| {
+        prm_trace::near_field(traced.scene, &traced.bvh, &traced.atlas, rays, disk, params.seed)
     });
-    let mut checked_panes: Vec<Vec<Vec3>> = Vec::new();
-    let mut pane_energy: Vec<Vec3> = Vec::new();
+    if rays < params.near_rays {
+        steps.progress.info(&format!(
+            "  near field: {rays} rays per exit point instead of {}, so that its merged hits fit the player's storage binding ({} hits)",
+            params.near_rays,
+            crate::params::NEAR_HIT_BUDGET
+        ));
+    }
+    // The deeper VPLs' disk is the entry point's too (`DeepDisk::Entry` in `trace_walks`), and
+    // the panes' kernel completes the cut weights (`BakeParams::bound`).
+    near.indirect_disk = disk;
+    near.complement = matches!(params.bound(), prm_trace::VplBound::Near { .. });
+    let detail = format!(
+        "{} texels (exit points and their gutter copies) keep {} rays in all of {} per exit point, ending at {} gather points",
+        near.exits.len(),
+        near.hits.len(),
+        rays,
+        near.points.len(),
+    );
+    steps.finish(Phase::NearField, "near_field", t, &detail);
+    Some(near)
+}
 
-    // Panes: render (GPU or CPU), fill the atlas image, dilate into the gutters, encode, write.
-    let mut write_s = 0.0;
-    let pane_image = |pane: &[Vec3], image: &mut [[f32; 3]]| {
-        image.fill([0.0; 3]);
-        for (e, v) in atlas.exits.iter().zip(pane) {
-            image[e.texel as usize] = v.to_array();
-        }
-        for &(dst, src) in &atlas.dilation {
-            image[dst as usize] = image[src as usize];
-        }
-    };
-    let encoding = |source| BakeError::Archive {
-        what: "encoding a pane".to_string(),
-        source,
-    };
-    let texels = (atlas.resolution * atlas.resolution) as usize;
-    // Appends an encoded pane, and keeps what the accuracy check reads of it.
-    let mut add = |pane: &[Vec3], encoded: prm_format::EncodedPane, writer: &mut ArchiveWriter| {
-        writer.add_encoded_pane(encoded).map_err(|source| BakeError::Archive {
-            what: "writing a pane".to_string(),
-            source,
-        })?;
-        if !checked_exits.is_empty() {
+/// Appends encoded panes to the archive, and keeps what the accuracy check reads of each.
+struct PaneRecorder<'a> {
+    /// The accuracy check's exit points (none: no check).
+    checked_exits: &'a [usize],
+    /// The accuracy check's model of the player's near field.
+    near_play: Option<&'a prm_trace::NearPlay<'a>>,
+    /// Every pane at the checked exit points ([`crate::estimate::checked_pane`]).
+    checked_panes: Vec<Vec<Vec3>>,
+    /// Every pane's energy, from the cluster table.
+    pane_energy: Vec<Vec3>,
+    /// Seconds spent placing, encoding and writing the panes.
+    write_s: f64,
+}
+
+impl PaneRecorder<'_> {
+    /// Appends an encoded pane, and keeps what the accuracy check reads of it.
+    fn add(
+        &mut self,
+        pane: &[Vec3],
+        encoded: prm_format::EncodedPane,
+        writer: &mut ArchiveWriter,
+    ) -> Result<(), BakeError> {
+        writer
+            .add_encoded_pane(encoded)
+            .map_err(archive_error("writing a pane"))?;
+        if !self.checked_exits.is_empty() {
             // What the player reads: the stored RGB9E5 texels, and the cluster table's energy.
             let stored = |v: &Vec3| Vec3::from(prm_format::decode_rgb9e5(prm_format::encode_rgb9e5(v.to_array())));
             let stored: Vec<Vec3> = pane.par_iter().map(stored).collect();
-            checked_panes.push(crate::estimate::checked_pane(
-                near_play.as_ref(),
-                &checked_exits,
+            self.checked_panes.push(crate::estimate::checked_pane(
+                self.near_play,
+                self.checked_exits,
                 &stored,
             ));
             let done = writer.clusters().len() - writer.panes_remaining();
-            pane_energy.push(Vec3::from(writer.clusters()[done - 1].energy));
+            self.pane_energy.push(Vec3::from(writer.clusters()[done - 1].energy));
         }
-        Ok::<(), BakeError>(())
-    };
-    if let Some(sky) = sky {
-        writer.set_sky(sky).map_err(|source| BakeError::Archive {
-            what: "recording the sky".to_string(),
-            source,
-        })?;
+        Ok(())
     }
-    if !emitter_groups.is_empty() {
-        writer
-            .set_emitters(emitter_groups)
-            .map_err(|source| BakeError::Archive {
-                what: "recording the emitters".to_string(),
-                source,
-            })?;
+}
+
+/// Places `values`, one per exit point, in their texels of `image` (the atlas's size) and dilates
+/// them into the gutters; the other texels are zero.
+fn fill_texels(atlas: &Atlas, values: &[Vec3], image: &mut [[f32; 3]]) {
+    image.fill([0.0; 3]);
+    for (e, v) in atlas.exits.iter().zip(values) {
+        image[e.texel as usize] = v.to_array();
     }
+    for &(dst, src) in &atlas.dilation {
+        image[dst as usize] = image[src as usize];
+    }
+}
+
+/// Texels in the atlas's image.
+fn texel_count(atlas: &Atlas) -> usize {
+    (atlas.resolution * atlas.resolution) as usize
+}
+
+/// Where a renderer's panes go: the archive, what the accuracy check keeps of them, and the
+/// bake's progress and timings.
+struct PaneSink<'a, 'r, 'p> {
+    writer: &'a mut ArchiveWriter,
+    recorder: &'a mut PaneRecorder<'r>,
+    steps: &'a mut Steps<'p>,
+}
+
+impl PaneSink<'_, '_, '_> {
+    /// Begins the pane phase, `units` of progress long: the time it began.
+    fn start(&mut self, units: u64) -> Instant {
+        let started = Instant::now();
+        self.steps.progress.phase_start(Phase::PaneRendering, units);
+        started
+    }
+}
+
+/// What a renderer left of the panes besides the archive's.
+struct RenderedPanes {
+    /// The entries' pane energies, in the archive's order.
+    entry_energy: Vec<[f32; 3]>,
+    /// Whether every entry's energy came back.
+    entry_energy_known: bool,
+    /// Shadow rays cast (the CPU renderer's).
+    shadow_rays: u64,
+    /// When the pane phase began.
+    started: Instant,
+}
+
+/// What the pane phase leaves for the bake's summary and its accuracy check.
+struct PaneSummary {
+    /// Every entry's pane energy in sampling order (`None`: not all are known).
+    sampled_energy: Option<Vec<Vec3>>,
+    /// Shadow rays cast (the CPU renderer's).
+    shadow_rays: u64,
+}
+
+/// Renders every pane with `renderer` and appends it to the archive (a fill of the atlas image,
+/// dilated into the gutters, encoded), then records the entries' pane energies where all are
+/// known.
+fn render_panes(
+    renderer: Renderer<'_>,
+    backend_name: &str,
+    traced: &Traced<'_>,
+    mut out: PaneSink,
+) -> Result<PaneSummary, BakeError> {
     let t = Instant::now();
-    // The entries' pane energies, in the archive's order.
-    let mut entry_energy = vec![[0f32; 3]; entries.len()];
-    let mut entry_energy_known = true;
-    let shadow_rays;
-    let phase_started;
-    match renderer {
-        Renderer::Gpu(ctx) => {
-            let mut encoder = writer.pane_encoder().map_err(encoding)?;
-            let mut image = vec![[0f32; 3]; texels];
-            let mut emit = |pane: &[Vec3], writer: &mut ArchiveWriter| {
-                let t = Instant::now();
-                pane_image(pane, &mut image);
-                let encoded = encoder.encode(&image).map_err(encoding)?;
-                add(pane, encoded, writer)?;
-                write_s += t.elapsed().as_secs_f64();
-                Ok::<(), BakeError>(())
-            };
-            let rp = PaneRenderParams {
-                bound: params.bound(),
-                face_resolution: params.face_resolution,
-                ..PaneRenderParams::DEFAULT
-            };
-            // Progress counts VPLs: a group of panes can take minutes on a big scene.
-            phase_started = Instant::now();
-            progress.phase_start(Phase::PaneRendering, vpls.vpls.len() as u64);
-            let mut at = 0;
-            let mut energies_complete = true;
-            let stats = prm_gpu::render_panes_with(ctx, scene, &atlas.exits, &vpls, &clustering, &rp, |out| {
-                match out {
-                    PaneOutput::Pane {
-                        cluster,
-                        irradiance,
-                        member_energy,
-                    } => {
-                        // Members arrive cluster by cluster: the archive's entry order.
-                        energies_complete &= member_energy.len() == clustering.members[cluster].len();
-                        for (slot, e) in entry_energy[at..].iter_mut().zip(member_energy) {
-                            *slot = e.to_array();
-                        }
-                        at += member_energy.len();
-                        emit(irradiance, &mut writer)?
-                    }
-                    PaneOutput::Progress(s) => progress.phase_advance(s.vpls),
-                }
-                Ok::<(), BakeError>(())
-            })?;
-            progress.info(&format!(
-                "  GPU: {} batches, {} depth faces ({:.0} triangles each after culling) {:.2} s, {} evaluations {:.2} s ({:.0} M/s)",
-                stats.batches,
-                stats.faces,
-                stats.triangles as f64 / stats.faces.max(1) as f64,
-                stats.depth_seconds,
-                stats.evaluations,
-                stats.gather_seconds,
-                stats.evaluations as f64 / stats.gather_seconds.max(1e-9) / 1e6
-            ));
-            if !energies_complete {
-                entry_energy_known = false;
-                progress.info(&format!(
-                    "  no entry energies: their read-back would take {:.1} GiB, over the {:.1} GiB \
-                     budget, so the panes were rendered per cluster and the player weighs \
-                     members equally (the archive stays format 1.0)",
-                    prm_gpu::pane::member_readback_bytes(entries.len(), atlas.exits.len()) as f64 / (1u64 << 30) as f64,
-                    rp.member_energy_bytes as f64 / (1u64 << 30) as f64
-                ));
-            }
-            timings.insert("pane_depth_maps".to_string(), stats.depth_seconds);
-            timings.insert("pane_gather".to_string(), stats.gather_seconds);
-            shadow_rays = 0;
-        }
-        Renderer::Cpu | Renderer::CpuExact => {
-            let lattice = match renderer {
-                Renderer::CpuExact => Lattice::EXACT,
-                _ => Lattice::DEFAULT,
-            };
-            phase_started = Instant::now();
-            progress.phase_start(Phase::PaneRendering, atlas.exits.len() as u64);
-            let panes = prm_trace::evaluate_atlas_panes(
-                &bvh,
-                &vpls,
-                &clustering,
-                &atlas,
-                &PaneParams { bound: params.bound() },
-                &lattice,
-                &mut |done| progress.phase_advance(done),
-            )
-            .map_err(trace("evaluating panes on the CPU"))?;
-            shadow_rays = panes.rays;
-            for (slot, &k) in entry_energy.iter_mut().zip(&order) {
-                *slot = panes
-                    .entry_energy
-                    .get(k as usize)
-                    .copied()
-                    .unwrap_or_default()
-                    .to_array();
-            }
-            entry_energy_known = panes.entry_energy.len() == entries.len();
-            progress.info(&format!(
-                "  CPU: {} shadow rays for {} VPL × exit point pairs ({:.0}%; lattice step {})",
-                panes.rays,
-                vpls.vpls.len() as u64 * atlas.exits.len() as u64,
-                100.0 * panes.rays as f64 / (vpls.vpls.len() as f64 * atlas.exits.len() as f64).max(1.0),
-                lattice.step
-            ));
-            // Every pane is at hand: encode a batch on every thread, then append it in order.
-            let t = Instant::now();
-            // One image per worker: no more workers than panes (a 4096² image is 192 MiB).
-            let threads = rayon::current_num_threads().min(panes.clusters).max(1);
-            let mut workers = (0..threads)
-                .map(|_| Ok((writer.pane_encoder()?, vec![[0f32; 3]; texels])))
-                .collect::<Result<Vec<_>, prm_format::Error>>()
-                .map_err(encoding)?;
-            let batch = 4 * threads;
-            for first in (0..panes.clusters).step_by(batch) {
-                let last = (first + batch).min(panes.clusters);
-                let per_worker = (last - first).div_ceil(threads);
-                let encoded = workers
-                    .par_iter_mut()
-                    .enumerate()
-                    .map(|(w, (encoder, image))| {
-                        let lo = (first + w * per_worker).min(last);
-                        (lo..(lo + per_worker).min(last))
-                            .map(|c| {
-                                pane_image(panes.pane(c), image);
-                                encoder.encode(image)
-                            })
-                            .collect::<Result<Vec<_>, _>>()
-                    })
-                    .collect::<Result<Vec<_>, _>>()
-                    .map_err(encoding)?;
-                for (c, e) in (first..last).zip(encoded.into_iter().flatten()) {
-                    add(panes.pane(c), e, &mut writer)?;
-                }
-            }
-            write_s += t.elapsed().as_secs_f64();
-        }
-    }
+    let rendered = match renderer {
+        Renderer::Gpu(ctx) => render_panes_gpu(ctx, traced, &mut out)?,
+        Renderer::Cpu => render_panes_cpu(&Lattice::DEFAULT, traced, &mut out)?,
+        Renderer::CpuExact => render_panes_cpu(&Lattice::EXACT, traced, &mut out)?,
+    };
+    let PaneSink {
+        writer,
+        recorder,
+        steps,
+    } = out;
     // The entries' pane energies in sampling order, for the accuracy check.
-    let mut sampled_energy = vec![Vec3::ZERO; entries.len()];
-    for (&k, e) in order.iter().zip(&entry_energy) {
-        sampled_energy[k as usize] = Vec3::from_array(*e);
-    }
-    if entry_energy_known {
+    let sampled_energy =
+        crate::estimate::in_sampling_order(&traced.order, &rendered.entry_energy, traced.entries.len());
+    if rendered.entry_energy_known {
         writer
-            .set_entry_energy(entry_energy)
-            .map_err(|source| BakeError::Archive {
-                what: "recording the entry energies".to_string(),
-                source,
-            })?;
+            .set_entry_energy(rendered.entry_energy)
+            .map_err(archive_error("recording the entry energies"))?;
     }
-    let render_s = t.elapsed().as_secs_f64() - write_s;
-    progress.phase_finish(
+    let render_s = t.elapsed().as_secs_f64() - recorder.write_s;
+    steps.progress.phase_finish(
         Phase::PaneRendering,
         &format!(
             "{} panes, {} VPLs on {}",
-            clustering.len(),
-            vpls.vpls.len(),
+            traced.clustering.len(),
+            traced.vpls.vpls.len(),
             backend_name
         ),
-        phase_started.elapsed().as_secs_f64(),
+        rendered.started.elapsed().as_secs_f64(),
     );
-    timings.insert("pane_rendering".to_string(), render_s);
-
-    if let Some(cells) = params.probes {
-        let t = Instant::now();
-        let (probes, mut detail) = probe_section(scene, &bvh, &vpls, &clustering, cells, params, progress)?;
-        let positions: Vec<glam::Vec3> = probes.positions.iter().map(|p| glam::Vec3::from(*p)).collect();
-        writer.set_probes(probes).map_err(|source| BakeError::Archive {
-            what: "recording the probes".to_string(),
-            source,
-        })?;
-        if params.probe_rays > 0 {
-            let rays = prm_trace::probe_rays(scene, &bvh, &atlas, &positions, params.probe_rays);
-            detail += &format!(
-                "; {} rays each, reaching {} texels",
-                params.probe_rays,
-                rays.points.len()
-            );
-            writer.set_probe_rays(rays).map_err(|source| BakeError::Archive {
-                what: "recording the probe rays".to_string(),
-                source,
-            })?;
-        }
-        finish_phase(&mut timings, progress, Phase::Probes, "probes", t, &detail);
-    }
-
-    let accuracy = if checked_exits.is_empty() {
-        None
-    } else {
-        let t = Instant::now();
-        let inputs = crate::estimate::CheckInputs {
-            scene,
-            bvh: &bvh,
-            atlas: &atlas,
-            entries: &entries,
-            clustering: &clustering,
-            entry_energy: entry_energy_known.then_some(sampled_energy.as_slice()),
-            pane_energy: &pane_energy,
-            groups: &residual_groups,
-            top_k: params.top_k,
-            near: near_play.as_ref(),
-        };
-        let check = prm_trace::CheckParams {
-            exit_points: params.accuracy_points,
-            paths: params.accuracy_paths,
-            seed: params.seed,
-        };
-        let accuracy = crate::estimate::check(&inputs, &checked_exits, &checked_panes, &check, progress)?;
-        // A NaN in a pane or the reference must not cost the whole bake: no estimate then.
-        let valid = accuracy.validate();
-        let detail = match &valid {
-            _ if accuracy.lights.is_empty() => "no free place for a test light: no estimate".to_string(),
-            Err(e) => format!("no estimate: {e}"),
-            Ok(()) => accuracy_line(&accuracy),
-        };
-        finish_phase(
-            &mut timings,
-            progress,
-            Phase::AccuracyCheck,
-            "accuracy_check",
-            t,
-            &detail,
-        );
-        (!accuracy.lights.is_empty() && valid.is_ok()).then_some(accuracy)
-    };
-    writer.metadata_mut().accuracy = accuracy.clone();
-    drop(near_play);
-    if let Some(near) = near_field {
-        writer.set_near_field(near).map_err(|source| BakeError::Archive {
-            what: "recording the near field".to_string(),
-            source,
-        })?;
-    }
-
-    // Timings go to the caller only: the archive's bytes depend on nothing but the scene, the
-    // parameters and the backend, so caches and content-addressed pipelines can key on them
-    // (tested by `bake_is_byte_identical_across_runs_and_threads`).
-    let t = Instant::now();
-    let archive_bytes = writer.finish().map_err(|source| BakeError::Archive {
-        what: format!("finishing {}", job.output.display()),
-        source,
-    })?;
-    made.keep();
-    timings.insert("compression_write".to_string(), write_s + t.elapsed().as_secs_f64());
-
-    Ok(Baked {
-        backend: backend_name,
-        atlas: atlas.stats.clone(),
-        triangles: scene.triangles.len(),
-        entries: entries.len(),
-        clusters: clustering.len(),
-        walks: vpls.stats.walks,
-        vpls: vpls.vpls.len(),
-        rays: vpls.stats.rays + shadow_rays,
-        archive_bytes,
-        timings,
-        accuracy,
+    steps.timings.insert("pane_rendering".to_string(), render_s);
+    Ok(PaneSummary {
+        sampled_energy: rendered.entry_energy_known.then_some(sampled_energy),
+        shadow_rays: rendered.shadow_rays,
     })
+}
+
+/// Renders the panes on the GPU, appending each as it comes back.
+fn render_panes_gpu(ctx: &GpuContext, traced: &Traced<'_>, out: &mut PaneSink) -> Result<RenderedPanes, BakeError> {
+    let (atlas, clustering) = (&traced.atlas, &traced.clustering);
+    let mut entry_energy = vec![[0f32; 3]; traced.entries.len()];
+    let mut encoder = out.writer.pane_encoder().map_err(archive_error("encoding a pane"))?;
+    let mut image = vec![[0f32; 3]; texel_count(atlas)];
+    let rp = PaneRenderParams {
+        bound: traced.params.bound(),
+        face_resolution: traced.params.face_resolution,
+        ..PaneRenderParams::DEFAULT
+    };
+    let inputs = PaneInputs {
+        scene: traced.scene,
+        exits: &atlas.exits,
+        vpls: &traced.vpls,
+        clustering,
+    };
+    // Progress counts VPLs: a group of panes can take minutes on a big scene.
+    let started = out.start(traced.vpls.vpls.len() as u64);
+    let mut at = 0;
+    let mut energies_complete = true;
+    let progress = &mut *out.steps.progress;
+    let stats = prm_gpu::render_panes_with(ctx, &inputs, &rp, |pane| {
+        match pane {
+            PaneOutput::Pane {
+                cluster,
+                irradiance,
+                member_energy,
+            } => {
+                // Members arrive cluster by cluster: the archive's entry order.
+                energies_complete &= member_energy.len() == clustering.members[cluster].len();
+                for (slot, e) in entry_energy[at..].iter_mut().zip(member_energy) {
+                    *slot = e.to_array();
+                }
+                at += member_energy.len();
+                let t = Instant::now();
+                fill_texels(atlas, irradiance, &mut image);
+                let encoded = encoder.encode(&image).map_err(archive_error("encoding a pane"))?;
+                out.recorder.add(irradiance, encoded, out.writer)?;
+                out.recorder.write_s += t.elapsed().as_secs_f64();
+            }
+            PaneOutput::Progress(s) => progress.phase_advance(s.vpls),
+        }
+        Ok::<(), BakeError>(())
+    })?;
+    let steps = &mut *out.steps;
+    steps.progress.info(&format!(
+        "  GPU: {} batches, {} depth faces ({:.0} triangles each after culling) {:.2} s, {} evaluations {:.2} s ({:.0} M/s)",
+        stats.batches,
+        stats.faces,
+        stats.triangles as f64 / stats.faces.max(1) as f64,
+        stats.depth_seconds,
+        stats.evaluations,
+        stats.gather_seconds,
+        stats.evaluations as f64 / stats.gather_seconds.max(1e-9) / 1e6
+    ));
+    if !energies_complete {
+        steps.progress.info(&format!(
+            "  no entry energies: their read-back would take {:.1} GiB, over the {:.1} GiB \
+             budget, so the panes were rendered per cluster and the player weighs \
+             members equally (the archive stays format 1.0)",
+            prm_gpu::pane::member_readback_bytes(traced.entries.len(), atlas.exits.len()) as f64 / (1u64 << 30) as f64,
+            rp.member_energy_bytes as f64 / (1u64 << 30) as f64
+        ));
+    }
+    steps.timings.insert("pane_depth_maps".to_string(), stats.depth_seconds);
+    steps.timings.insert("pane_gather".to_string(), stats.gather_seconds);
+    Ok(RenderedPanes {
+        entry_energy,
+        entry_energy_known: energies_complete,
+        shadow_rays: 0,
+        started,
+    })
+}
+
+/// Evaluates every pane on the CPU with `lattice`'s shared visibility, then appends them
+/// ([`write_cpu_panes`]).
+fn render_panes_cpu(lattice: &Lattice, traced: &Traced<'_>, out: &mut PaneSink) -> Result<RenderedPanes, BakeError> {
+    let (atlas, vpls) = (&traced.atlas, &traced.vpls);
+    let started = out.start(atlas.exits.len() as u64);
+    let progress = &mut *out.steps.progress;
+    let panes = prm_trace::evaluate_atlas_panes(
+        &traced.bvh,
+        vpls,
+        &traced.clustering,
+        atlas,
+        &PaneParams {
+            bound: traced.params.bound(),
+        },
+        lattice,
+        &mut |done| progress.phase_advance(done),
+    )
+    .map_err(trace("evaluating panes on the CPU"))?;
+    let mut entry_energy = vec![[0f32; 3]; traced.entries.len()];
+    for (slot, &k) in entry_energy.iter_mut().zip(&traced.order) {
+        *slot = panes
+            .entry_energy
+            .get(k as usize)
+            .copied()
+            .unwrap_or_default()
+            .to_array();
+    }
+    out.steps.progress.info(&format!(
+        "  CPU: {} shadow rays for {} VPL × exit point pairs ({:.0}%; lattice step {})",
+        panes.rays,
+        vpls.vpls.len() as u64 * atlas.exits.len() as u64,
+        100.0 * panes.rays as f64 / (vpls.vpls.len() as f64 * atlas.exits.len() as f64).max(1.0),
+        lattice.step
+    ));
+    write_cpu_panes(atlas, &panes, out.writer, out.recorder)?;
+    Ok(RenderedPanes {
+        entry_energy,
+        entry_energy_known: panes.entry_energy.len() == traced.entries.len(),
+        shadow_rays: panes.rays,
+        started,
+    })
+}
+
+/// Appends the CPU's panes, every one at hand: encodes a batch on every thread, then appends it
+/// in order.
+fn write_cpu_panes(
+    atlas: &Atlas,
+    panes: &prm_trace::Panes,
+    writer: &mut ArchiveWriter,
+    recorder: &mut PaneRecorder<'_>,
+) -> Result<(), BakeError> {
+    let t = Instant::now();
+    // One image per worker: no more workers than panes (a 4096² image is 192 MiB).
+    let threads = rayon::current_num_threads().min(panes.clusters).max(1);
+    let mut workers = (0..threads)
+        .map(|_| Ok((writer.pane_encoder()?, vec![[0f32; 3]; texel_count(atlas)])))
+        .collect::<Result<Vec<_>, prm_format::Error>>()
+        .map_err(archive_error("encoding a pane"))?;
+    let batch = 4 * threads;
+    for first in (0..panes.clusters).step_by(batch) {
+        let last = (first + batch).min(panes.clusters);
+        let per_worker = (last - first).div_ceil(threads);
+        let encoded = workers
+            .par_iter_mut()
+            .enumerate()
+            .map(|(w, (encoder, image))| {
+                let lo = (first + w * per_worker).min(last);
+                (lo..(lo + per_worker).min(last))
+                    .map(|c| {
+                        fill_texels(atlas, panes.pane(c), image);
+                        encoder.encode(image)
+                    })
+                    .collect::<Result<Vec<_>, _>>()
+            })
+            .collect::<Result<Vec<_>, _>>()
+            .map_err(archive_error("encoding a pane"))?;
+        for (c, e) in (first..last).zip(encoded.into_iter().flatten()) {
+            recorder.add(panes.pane(c), e, writer)?;
+        }
+    }
+    recorder.write_s += t.elapsed().as_secs_f64();
+    Ok(())
+}
+
+/// Records the probes section ([`probe_section`]) of a bake with probes, and their rays where
+/// asked.
+fn trace_probes(traced: &Traced<'_>, writer: &mut ArchiveWriter, steps: &mut Steps<'_>) -> Result<(), BakeError> {
+    let (scene, params) = (traced.scene, traced.params);
+    let Some(cells) = params.probes else {
+        return Ok(());
+    };
+    let t = Instant::now();
+    let (probes, mut detail) = probe_section(
+        scene,
+        &traced.bvh,
+        &traced.vpls,
+        &traced.clustering,
+        cells,
+        params,
+        steps.progress,
+    )?;
+    let positions: Vec<glam::Vec3> = probes.positions.iter().map(|p| glam::Vec3::from(*p)).collect();
+    writer
+        .set_probes(probes)
+        .map_err(archive_error("recording the probes"))?;
+    if params.probe_rays > 0 {
+        let rays = prm_trace::probe_rays(scene, &traced.bvh, &traced.atlas, &positions, params.probe_rays);
+        detail += &format!(
+            "; {} rays each, reaching {} texels",
+            params.probe_rays,
+            rays.points.len()
+        );
+        writer
+            .set_probe_rays(rays)
+            .map_err(archive_error("recording the probe rays"))?;
+    }
+    steps.finish(Phase::Probes, "probes", t, &detail);
+    Ok(())
+}
+
+/// The accuracy check of a whole bake ([`crate::estimate::check`]) on the panes `recorder` kept;
+/// `None` where nothing was checked, no test light found a place, or a value is not finite.
+fn check_accuracy(
+    traced: &Traced<'_>,
+    recorder: PaneRecorder<'_>,
+    residual_groups: &[u32],
+    sampled_energy: Option<Vec<Vec3>>,
+    steps: &mut Steps<'_>,
+) -> Result<Option<prm_format::Accuracy>, BakeError> {
+    if recorder.checked_exits.is_empty() {
+        return Ok(None);
+    }
+    let params = traced.params;
+    let t = Instant::now();
+    let inputs = crate::estimate::CheckInputs {
+        scene: traced.scene,
+        bvh: &traced.bvh,
+        atlas: &traced.atlas,
+        entries: &traced.entries,
+        clustering: &traced.clustering,
+        entry_energy: sampled_energy.as_deref(),
+        pane_energy: &recorder.pane_energy,
+        groups: residual_groups,
+        top_k: params.top_k,
+        near: recorder.near_play,
+    };
+    let check = prm_trace::CheckParams {
+        exit_points: params.accuracy_points,
+        paths: params.accuracy_paths,
+        seed: params.seed,
+    };
+    let accuracy = crate::estimate::check(
+        &inputs,
+        recorder.checked_exits,
+        &recorder.checked_panes,
+        &check,
+        steps.progress,
+    )?;
+    // A NaN in a pane or the reference must not cost the whole bake: no estimate then.
+    let valid = accuracy.validate();
+    let detail = match &valid {
+        _ if accuracy.lights.is_empty() => "no free place for a test light: no estimate".to_string(),
+        Err(e) => format!("no estimate: {e}"),
+        Ok(()) => accuracy_line(&accuracy),
+    };
+    steps.finish(Phase::AccuracyCheck, "accuracy_check", t, &detail);
+    Ok((!accuracy.lights.is_empty() && valid.is_ok()).then_some(accuracy))
+}
+
+/// Finishes the archive at `output` and keeps the directories made for it; its size in bytes.
+///
+/// Timings go to the caller only: the archive's bytes depend on nothing but the scene, the
+/// parameters and the backend, so caches and content-addressed pipelines can key on them
+/// (tested by `bake_is_byte_identical_across_runs_and_threads`).
+fn finish_archive(
+    output: &Path,
+    writer: ArchiveWriter,
+    made: MadeDirs,
+    write_s: f64,
+    steps: &mut Steps<'_>,
+) -> Result<u64, BakeError> {
+    let t = Instant::now();
+    let archive_bytes = writer
+        .finish()
+        .map_err(archive_error(format!("finishing {}", output.display())))?;
+    made.keep();
+    steps
+        .timings
+        .insert("compression_write".to_string(), write_s + t.elapsed().as_secs_f64());
+    Ok(archive_bytes)
 }
 
 /// One line for an accuracy estimate: the mean over its lights.

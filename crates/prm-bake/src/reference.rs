@@ -275,7 +275,7 @@ fn render_image(
 /// Refuses an output that cannot be written, before the long work: an existing directory or
 /// other non-file, or a path below a file. Missing directories are created when writing.
 fn check_output(output: &std::path::Path) -> Result<()> {
-    prm_format::check_output_path(output)
+    prm_scene::check_output_path(output)
         .map_err(|why| anyhow::Error::new(crate::Refused(format!("--output {}: {why}", output.display()))))
 }
 

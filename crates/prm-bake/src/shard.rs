@@ -14,9 +14,12 @@
 //! there the merged panes agree with a single bake's to float rounding, not bit for bit.
 
 use prm_format::{Archive, ArchiveWriter, Cluster, Metadata};
+use std::fs::File;
+use std::io::{BufReader, Read, Seek};
 use std::path::{Path, PathBuf};
 
 use crate::archive::relative_path;
+use crate::pipeline::archive_error;
 use crate::BakeError;
 
 /// One slice of a bake's clusters: `index` of `count`, as `--shard I/N` writes it.
@@ -150,10 +153,7 @@ pub fn merge_checked(
 ) -> Result<(Merged, prm_format::Accuracy), BakeError> {
     // The scene first: a part of another scene is refused before anything is written.
     if let Some(first) = parts.first() {
-        let part = Archive::open(first).map_err(|source| BakeError::Archive {
-            what: format!("opening {}", first.display()),
-            source,
-        })?;
+        let part = Archive::open(first).map_err(archive_error(format!("opening {}", first.display())))?;
         if part.metadata().scene_fingerprint != scene.fingerprint() {
             return Err(BakeError::InvalidParams(format!(
                 "{}: baked from other geometry than {}",
@@ -190,13 +190,75 @@ fn merge_recording(
     output: &Path,
     accuracy: Option<prm_format::Accuracy>,
 ) -> Result<Merged, BakeError> {
-    let invalid = |m: String| BakeError::InvalidParams(m);
-    let destination = prm_format::check_destination(output).map_err(BakeError::Destination)?;
+    let destination = prm_scene::check_destination(output).map_err(BakeError::Destination)?;
+    let mut opened = open_parts(parts, output, &destination)?;
+    let owners = shard_owners(&opened)?;
+    let owner = |c: usize| owners[c % owners.len()];
+
+    let out_dir = destination
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    let first = &opened[0];
+    let metadata = merged_metadata(first, accuracy, out_dir);
+    let atlas = first.archive.atlas().clone();
+    let entries = first.archive.entries().to_vec();
+    // The writer computes every cluster's pane energy and peak again.
+    let clusters: Vec<Cluster> = first
+        .archive
+        .clusters()
+        .iter()
+        .map(|c| Cluster::new(c.first, c.count, c.centroid, c.mean_normal))
+        .collect();
+    let made = crate::archive::MadeDirs::create(out_dir)?;
+    let mut writer = ArchiveWriter::create(output, metadata, &atlas, &entries, &clusters)
+        .map_err(archive_error(format!("starting {}", output.display())))?;
+    // Entry energies: each entry's from the shard of its cluster.
+    let energies: Option<Vec<[f32; 3]>> = entries
+        .iter()
+        .enumerate()
+        .map(|(i, e)| opened[owner(e.cluster as usize)].archive.entry_energy().map(|en| en[i]))
+        .collect();
+    if let Some(energy) = energies {
+        writer
+            .set_entry_energy(energy)
+            .map_err(archive_error("recording the entry energies"))?;
+    }
+    copy_shared_sections(&first.archive, &mut writer)?;
+    merge_probes(&opened, owner, clusters.len(), &mut writer)?;
+    for c in 0..clusters.len() {
+        let part = &mut opened[owner(c)];
+        let pane = part
+            .archive
+            .read_pane(c)
+            .map_err(archive_error(format!("reading pane {c} of {}", part.path.display())))?;
+        writer.add_pane(&pane).map_err(archive_error("writing a pane"))?;
+    }
+    let archive_bytes = writer
+        .finish()
+        .map_err(archive_error(format!("finishing {}", output.display())))?;
+    made.keep();
+    Ok(Merged {
+        shards: owners.len() as u32,
+        panes: clusters.len(),
+        archive_bytes,
+    })
+}
+
+/// A partial archive of a sharded bake.
+struct Part<'p> {
+    path: &'p Path,
+    shard: Shard,
+    archive: Archive<BufReader<File>>,
+}
+
+/// Opens the parts and reads their shards; refuses no parts, an output that is one of them
+/// (`destination` is the output's checked path), and a whole archive.
+fn open_parts<'p>(parts: &'p [PathBuf], output: &Path, destination: &Path) -> Result<Vec<Part<'p>>, BakeError> {
     if parts.is_empty() {
         return Err(invalid("no parts to merge".to_string()));
     }
-    // The output may not be one of the parts.
-    if let Some(p) = parts.iter().find(|p| prm_format::same_destination(p, &destination)) {
+    if let Some(p) = parts.iter().find(|p| prm_scene::same_destination(p, destination)) {
         return Err(invalid(format!(
             "the output {} is the part {}: name another file",
             output.display(),
@@ -205,11 +267,8 @@ fn merge_recording(
     }
     let mut opened = Vec::with_capacity(parts.len());
     for p in parts {
-        let a = Archive::open(p).map_err(|source| BakeError::Archive {
-            what: format!("opening {}", p.display()),
-            source,
-        })?;
-        let shard = match Shard::of(a.metadata()) {
+        let archive = Archive::open(p).map_err(archive_error(format!("opening {}", p.display())))?;
+        let shard = match Shard::of(archive.metadata()) {
             None => {
                 return Err(invalid(format!(
                     "{} is a whole archive, not a shard of a bake (bake the parts with --shard I/N)",
@@ -219,12 +278,31 @@ fn merge_recording(
             Some(Err(e)) => return Err(invalid(format!("{}: {e}", p.display()))),
             Some(Ok(s)) => s,
         };
-        opened.push((p, shard, a));
+        opened.push(Part {
+            path: p,
+            shard,
+            archive,
+        });
     }
-    let count = opened[0].1.count;
+    Ok(opened)
+}
+
+/// The part of each shard index, once the parts are found to be every shard of one bake once:
+/// the same shard count, metadata (but the shard), entry points, clusters and atlas.
+fn shard_owners(opened: &[Part<'_>]) -> Result<Vec<usize>, BakeError> {
+    let first = &opened[0];
+    let (p0, a0) = (first.path, &first.archive);
+    let count = first.shard.count;
     let mut by_index: Vec<Option<usize>> = vec![None; count as usize];
-    for (k, (p, shard, a)) in opened.iter().enumerate() {
-        let (p0, _, a0) = &opened[0];
+    for (
+        k,
+        Part {
+            path: p,
+            shard,
+            archive: a,
+        },
+    ) in opened.iter().enumerate()
+    {
         if shard.count != count {
             return Err(invalid(format!(
                 "{} is shard {shard} but {} is of {count} shards",
@@ -249,7 +327,7 @@ fn merge_recording(
         if let Some(other) = by_index[shard.index as usize].replace(k) {
             return Err(invalid(format!(
                 "shard {shard} is given twice: {} and {}",
-                opened[other].0.display(),
+                opened[other].path.display(),
                 p.display()
             )));
         }
@@ -259,130 +337,91 @@ fn merge_recording(
             "shard {missing}/{count} is missing: pass all {count} parts"
         )));
     }
+    Ok(by_index.into_iter().flatten().collect())
+}
 
-    // The single bake's metadata: no shard, and the scene's path relative to the output.
-    let (first_path, _, first) = &opened[0];
-    let mut metadata = first.metadata().clone();
+/// The single bake's metadata, from the `first` part's: no shard, `accuracy` as its estimate (a
+/// shard never checks its accuracy; the merged archive is checked as one, or not at all), and
+/// the scene's path relative to `out_dir`.
+fn merged_metadata(first: &Part<'_>, accuracy: Option<prm_format::Accuracy>, out_dir: &Path) -> Metadata {
+    let mut metadata = first.archive.metadata().clone();
     metadata.params.remove("shard");
-    // A shard never checks its accuracy; the merged archive is checked as one, or not at all.
     metadata.accuracy = accuracy;
-    let part_dir = std::fs::canonicalize(first_path)
+    let part_dir = std::fs::canonicalize(first.path)
         .ok()
         .and_then(|p| p.parent().map(Path::to_path_buf))
         .unwrap_or_default();
     let scene = part_dir.join(&metadata.source_scene);
-    let out_dir = destination
-        .parent()
-        .filter(|d| !d.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
     if scene.exists() {
         metadata.source_scene = relative_path(out_dir, &scene);
     }
-    let atlas = first.atlas().clone();
-    let entries = first.entries().to_vec();
-    // The writer computes every cluster's pane energy and peak again.
-    let clusters: Vec<Cluster> = first
-        .clusters()
-        .iter()
-        .map(|c| Cluster::new(c.first, c.count, c.centroid, c.mean_normal))
-        .collect();
-    let made = crate::archive::MadeDirs::create(out_dir)?;
-    let mut writer =
-        ArchiveWriter::create(output, metadata, &atlas, &entries, &clusters).map_err(|source| BakeError::Archive {
-            what: format!("starting {}", output.display()),
-            source,
-        })?;
-    let owner = |c: usize| by_index[c % count as usize].expect("every shard is present");
-    // Entry energies: each entry's from the shard of its cluster.
-    let energies: Option<Vec<[f32; 3]>> = entries
-        .iter()
-        .enumerate()
-        .map(|(i, e)| opened[owner(e.cluster as usize)].2.entry_energy().map(|en| en[i]))
-        .collect();
-    if let Some(energy) = energies {
-        writer.set_entry_energy(energy).map_err(|source| BakeError::Archive {
-            what: "recording the entry energies".to_string(),
-            source,
-        })?;
-    }
-    // Emitters: every shard computes the same section.
+    metadata
+}
+
+/// Copies the sections every shard computes the same from the `first` part: the emitters, the
+/// sky and the near field.
+fn copy_shared_sections<R: Read + Seek>(first: &Archive<R>, writer: &mut ArchiveWriter) -> Result<(), BakeError> {
     if !first.emitters().is_empty() {
         writer
             .set_emitters(first.emitters().to_vec())
-            .map_err(|source| BakeError::Archive {
-                what: "recording the emitters".to_string(),
-                source,
-            })?;
+            .map_err(archive_error("recording the emitters"))?;
     }
-    // The sky likewise.
     if let Some(sky) = first.sky() {
-        writer.set_sky(sky.clone()).map_err(|source| BakeError::Archive {
-            what: "recording the sky".to_string(),
-            source,
-        })?;
+        writer
+            .set_sky(sky.clone())
+            .map_err(archive_error("recording the sky"))?;
     }
-    // The near field: every shard traces the same rays.
     if let Some(near) = first.near_field() {
         writer
             .set_near_field(near.clone())
-            .map_err(|source| BakeError::Archive {
-                what: "recording the near field".to_string(),
-                source,
-            })?;
+            .map_err(archive_error("recording the near field"))?;
     }
-    // Probes: every shard places the same ones; each cluster's transfer from its owner.
-    if let Some(probes) = first.probes() {
-        let n = probes.len();
-        let mut merged = probes.clone();
-        for c in 0..clusters.len() {
-            let part = opened[owner(c)]
-                .2
-                .probes()
-                .filter(|q| q.len() == n && q.cells == probes.cells);
-            let Some(part) = part else {
-                return Err(invalid(format!(
-                    "{} has no probes or other ones than {}",
-                    opened[owner(c)].0.display(),
-                    first_path.display()
-                )));
-            };
-            merged.transfer[c * n..(c + 1) * n].copy_from_slice(&part.transfer[c * n..(c + 1) * n]);
-        }
-        writer.set_probes(merged).map_err(|source| BakeError::Archive {
-            what: "recording the probes".to_string(),
-            source,
-        })?;
-        // Their rays: every shard traces the same ones.
-        if let Some(rays) = first.probe_rays() {
-            writer
-                .set_probe_rays(rays.clone())
-                .map_err(|source| BakeError::Archive {
-                    what: "recording the probe rays".to_string(),
-                    source,
-                })?;
-        }
+    Ok(())
+}
+
+/// The probes: every shard places the same ones and traces the same rays from them; each of the
+/// `clusters` clusters' transfer comes from its `owner`'s part.
+fn merge_probes(
+    opened: &[Part<'_>],
+    owner: impl Fn(usize) -> usize,
+    clusters: usize,
+    writer: &mut ArchiveWriter,
+) -> Result<(), BakeError> {
+    let first = &opened[0];
+    let Some(probes) = first.archive.probes() else {
+        return Ok(());
+    };
+    let n = probes.len();
+    let mut merged = probes.clone();
+    for c in 0..clusters {
+        let part = &opened[owner(c)];
+        let Some(own) = part
+            .archive
+            .probes()
+            .filter(|q| q.len() == n && q.cells == probes.cells)
+        else {
+            return Err(invalid(format!(
+                "{} has no probes or other ones than {}",
+                part.path.display(),
+                first.path.display()
+            )));
+        };
+        merged.transfer[c * n..(c + 1) * n].copy_from_slice(&own.transfer[c * n..(c + 1) * n]);
     }
-    for c in 0..clusters.len() {
-        let (p, _, a) = &mut opened[owner(c)];
-        let pane = a.read_pane(c).map_err(|source| BakeError::Archive {
-            what: format!("reading pane {c} of {}", p.display()),
-            source,
-        })?;
-        writer.add_pane(&pane).map_err(|source| BakeError::Archive {
-            what: "writing a pane".to_string(),
-            source,
-        })?;
+    writer
+        .set_probes(merged)
+        .map_err(archive_error("recording the probes"))?;
+    if let Some(rays) = first.archive.probe_rays() {
+        writer
+            .set_probe_rays(rays.clone())
+            .map_err(archive_error("recording the probe rays"))?;
     }
-    let archive_bytes = writer.finish().map_err(|source| BakeError::Archive {
-        what: format!("finishing {}", output.display()),
-        source,
-    })?;
-    made.keep();
-    Ok(Merged {
-        shards: count,
-        panes: clusters.len(),
-        archive_bytes,
-    })
+    Ok(())
+}
+
+/// A merge refused: [`BakeError::InvalidParams`] with `message`.
+fn invalid(message: String) -> BakeError {
+    BakeError::InvalidParams(message)
 }
 
 #[cfg(test)]

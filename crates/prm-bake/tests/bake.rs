@@ -52,6 +52,17 @@ fn describe(out: &Output) -> String {
     )
 }
 
+/// Asserts that the command `what` was refused before any work, with status 2 (by clap or by
+/// the bake's own checks; never 0 or 1, never a panic's 101) and an error containing `expected`.
+fn assert_refused(r: &Output, what: &str, expected: &str) {
+    assert_eq!(r.status.code(), Some(2), "{what}: {}", describe(r));
+    assert!(
+        String::from_utf8_lossy(&r.stderr).contains(expected),
+        "{what}: expected `{expected}` in the error:\n{}",
+        describe(r)
+    );
+}
+
 /// Writes the config file with the settings the command line has no flag for.
 /// VPL disks of three entry-point radii: at 256 entry points the plan's eight (its rule for a
 /// 64² atlas) would be 40 cm discs in a 55 cm box, and the panes would hold little of the light
@@ -375,14 +386,7 @@ fn limits_are_refused_up_front() {
     ];
     for (args, option) in cases {
         let r = run(&args);
-        let stderr = String::from_utf8_lossy(&r.stderr);
-        // 2: refused before any work, by clap or by our own checks. Never 0 or 1, never a
-        // panic's 101.
-        assert_eq!(r.status.code(), Some(2), "{args:?}: {}", describe(&r));
-        assert!(
-            stderr.contains(option),
-            "{args:?}: the error should name {option}:\n{stderr}"
-        );
+        assert_refused(&r, &format!("{args:?}"), option);
         assert!(!Path::new(out).exists() && !Path::new(exr).exists() && !Path::new(png).exists());
     }
 }
@@ -478,9 +482,7 @@ fn failures_are_clean_and_leave_existing_archives_alone() {
         "--backend",
         "vulkan",
     ]);
-    assert_eq!(r.status.code(), Some(2), "{}", describe(&r));
-    let stderr = String::from_utf8_lossy(&r.stderr);
-    assert!(stderr.contains("clusters"), "{}", describe(&r));
+    assert_refused(&r, "--clusters 100 --entries 10", "clusters");
     assert!(
         !String::from_utf8_lossy(&r.stdout).contains("device:"),
         "refused before opening the GPU: {}",
@@ -725,13 +727,7 @@ fn destinations_are_checked_before_work_and_symlinks_written_through() {
         (subdir.clone(), "directory"),
     ] {
         let r = run(&[&["bake", scene, "-o", dest.to_str().unwrap()][..], &small[..]].concat());
-        let stderr = String::from_utf8_lossy(&r.stderr);
-        assert_eq!(r.status.code(), Some(2), "-o {}: {}", dest.display(), describe(&r));
-        assert!(
-            stderr.contains(what),
-            "-o {}: the error should say it is a {what}:\n{stderr}",
-            dest.display()
-        );
+        assert_refused(&r, &format!("-o {}", dest.display()), what);
         // Refused before any work: not even the plan was printed.
         assert!(r.stdout.is_empty(), "-o {}: {}", dest.display(), describe(&r));
     }
@@ -829,12 +825,7 @@ fn check_repeats_the_bake_s_own_estimate() {
         (vec![scene, &p, "--accuracy-paths", "0"], "at least 1"),
     ] {
         let r = run(&[&["check"][..], &args, &["--quiet"]].concat());
-        assert_eq!(r.status.code(), Some(2), "{args:?}: {}", describe(&r));
-        assert!(
-            String::from_utf8_lossy(&r.stderr).contains(expected),
-            "{args:?}: {}",
-            describe(&r)
-        );
+        assert_refused(&r, &format!("{args:?}"), expected);
     }
 }
 
@@ -887,20 +878,15 @@ fn shards_merge_into_the_single_bake_byte_for_byte() {
         std::fs::read(&merged).unwrap() == std::fs::read(&single).unwrap(),
         "the merged archive differs from the single bake"
     );
+    // The arguments of a merge of both parts into `out`, checked against the scene `against`.
+    let checked_merge = |out, against| vec!["merge", p0, p1, "-o", out, "--scene", against];
     // With the scene, the merge checks the merged archive as the single bake checks itself.
     let (single_checked, _, _) = bake(&dir, "single-checked", 1, "cpu", &["--quiet", "--probes", "32"]);
     let checked = dir.join("merged-checked.prm");
     let scene = scene_path();
-    let r = run(&[
-        "merge",
-        p0,
-        p1,
-        "-o",
-        checked.to_str().unwrap(),
-        "--scene",
-        scene.to_str().unwrap(),
-        "--quiet",
-    ]);
+    let mut args = checked_merge(checked.to_str().unwrap(), scene.to_str().unwrap());
+    args.push("--quiet");
+    let r = run(&args);
     assert!(r.status.success(), "{}", describe(&r));
     assert!(Archive::open(&checked).unwrap().metadata().accuracy.is_some());
     assert!(
@@ -919,12 +905,7 @@ fn shards_merge_into_the_single_bake_byte_for_byte() {
     ] {
         let out = dir.join("refused.prm");
         let r = run(&[&["merge"][..], &args, &["-o", out.to_str().unwrap()]].concat());
-        let stderr = String::from_utf8_lossy(&r.stderr);
-        assert_eq!(r.status.code(), Some(2), "{args:?}: {}", describe(&r));
-        assert!(
-            stderr.contains(expected),
-            "{args:?}: expected `{expected}` in:\n{stderr}"
-        );
+        assert_refused(&r, &format!("{args:?}"), expected);
         assert!(!out.exists(), "{args:?} left {}", out.display());
     }
     // A merge checked against another scene, or written over one of its parts, fails before
@@ -935,26 +916,13 @@ fn shards_merge_into_the_single_bake_byte_for_byte() {
     let before = std::fs::read_dir(&dir).unwrap().count();
     for (args, expected) in [
         (
-            vec![
-                "merge",
-                p0,
-                p1,
-                "-o",
-                keep.to_str().unwrap(),
-                "--scene",
-                other_scene.to_str().unwrap(),
-            ],
+            checked_merge(keep.to_str().unwrap(), other_scene.to_str().unwrap()),
             "other geometry",
         ),
         (vec!["merge", p0, p1, "-o", p0], "is the part"),
     ] {
         let r = run(&args);
-        assert_eq!(r.status.code(), Some(2), "{args:?}: {}", describe(&r));
-        assert!(
-            String::from_utf8_lossy(&r.stderr).contains(expected),
-            "{args:?}: {}",
-            describe(&r)
-        );
+        assert_refused(&r, &format!("{args:?}"), expected);
     }
     assert!(
         std::fs::read(&keep).unwrap() == std::fs::read(&single).unwrap(),
@@ -973,12 +941,7 @@ fn shards_merge_into_the_single_bake_byte_for_byte() {
     let r = run(&["bake", scene_path().to_str().unwrap(), "-o", m, "--shard", "2/2"]);
     assert_eq!(r.status.code(), Some(2), "--shard 2/2 accepted: {}", describe(&r));
     let r = run(&["bake", scene_path().to_str().unwrap(), "-o", m, "--shard", "0/1"]);
-    assert_eq!(r.status.code(), Some(2), "--shard 0/1 accepted: {}", describe(&r));
-    assert!(
-        String::from_utf8_lossy(&r.stderr).contains("whole bake"),
-        "{}",
-        describe(&r)
-    );
+    assert_refused(&r, "--shard 0/1", "whole bake");
 }
 
 /// Small command-line conventions: a closed standard output ends a listing quietly, paths
@@ -1012,12 +975,7 @@ fn command_line_conventions() {
             let r =
                 run(&[command, path, "-o", dir.join("x.prm").to_str().unwrap()]
                     [..if command == "atlas" { 2 } else { 4 }]);
-            assert_eq!(r.status.code(), Some(2), "{command} {path}: {}", describe(&r));
-            assert!(
-                String::from_utf8_lossy(&r.stderr).contains(expected),
-                "{}",
-                describe(&r)
-            );
+            assert_refused(&r, &format!("{command} {path}"), expected);
         }
     }
 
@@ -1052,15 +1010,10 @@ fn command_line_conventions() {
         "--export-exr",
         file.to_str().unwrap(),
     ]);
-    assert_eq!(r.status.code(), Some(2), "{}", describe(&r));
+    assert_refused(&r, "--export-exr onto a file", "not a directory");
     assert!(
         r.stdout.is_empty(),
         "nothing printed before the refusal: {}",
-        describe(&r)
-    );
-    assert!(
-        String::from_utf8_lossy(&r.stderr).contains("not a directory"),
-        "{}",
         describe(&r)
     );
 
@@ -1071,12 +1024,7 @@ fn command_line_conventions() {
         "-o",
         dir.join("merged.prm").to_str().unwrap(),
     ]);
-    assert_eq!(r.status.code(), Some(2), "{}", describe(&r));
-    assert!(
-        String::from_utf8_lossy(&r.stderr).contains("merging 1 part into"),
-        "{}",
-        describe(&r)
-    );
+    assert_refused(&r, "merge of one part", "merging 1 part into");
 
     // One sample per pixel has no standard error to report.
     let exr = dir.join("ref.exr");

@@ -9,7 +9,7 @@
 //! texel each; the indirect all zero unless flag bit 0 is set). The sizes are fixed by the
 //! header, so a reader checks the raw size before it decompresses anything past it.
 
-use crate::layout::{limits, Cursor, PutLe};
+use crate::layout::{check_reserved, limits, Cursor, PutLe};
 use crate::rgb9e5::{decode_rgb9e5, encode_rgb9e5};
 
 /// Size of the emitters section's fixed header.
@@ -152,15 +152,8 @@ pub(crate) fn encode(groups: &[EmitterGroup], entries: usize, resolution: u32) -
 /// Parses the header: `(groups, entries, resolution)`; checks the group limit and, if `strict`,
 /// the reserved field. The caller checks entries and resolution against the archive.
 pub(crate) fn decode_header(head: &[u8], strict: bool) -> Result<(u32, u32, u32), String> {
-    let err = |e: crate::Error| e.to_string();
-    let mut c = Cursor::new(head, "emitters");
-    let groups = c.u32().map_err(err)?;
-    let entries = c.u32().map_err(err)?;
-    let resolution = c.u32().map_err(err)?;
-    let reserved = c.u32().map_err(err)?;
-    if strict && reserved != 0 {
-        return Err("emitters reserved field is not zero".into());
-    }
+    let [groups, entries, resolution, reserved] = Cursor::new(head, "emitters").u32s().map_err(|e| e.to_string())?;
+    check_reserved("emitters", strict, reserved)?;
     if groups == 0 || groups > limits::MAX_EMITTER_GROUPS {
         return Err(format!(
             "{groups} emitter groups outside 1..={}",

@@ -69,9 +69,10 @@ pub enum Error {
     #[error("invalid input: {0}")]
     InvalidInput(String),
     /// The writer's destination cannot receive an archive: it exists and is
-    /// not a regular file (directory, device, FIFO, socket), its directory
-    /// is missing, or no file can be created there. Raised before any data
-    /// is written (see [`check_destination`](crate::check_destination)).
+    /// not a regular file (directory, device, FIFO, socket) or not an
+    /// archive, its directory is missing, or no file can be created there.
+    /// Raised before any data is written (see
+    /// [`resolve_destination`](crate::resolve_destination)).
     #[error("cannot write an archive to {}: {reason}", path.display())]
     Destination {
         /// The destination as given (or the symlink target it resolved to).

@@ -6,7 +6,7 @@
 //! shine. A residual group's pane, the sum of its members' panes, puts it roughly where the
 //! dropped clusters would have: each group's dropped (and faded) energy `Σ w_c ⊙ e_c` is given
 //! to its summed pane, scaled to that energy. Measured on default bakes against the reference
-//! (`cargo run --release -p prm-trace --example residual_panes`, 2048 exit points, the bake
+//! (`cargo xtask eval experiment residual_panes`, 2048 exit points, the bake
 //! check's three lights): chairs (240 clusters, K = 32) 23.7% scaled, 12.3% with 4 residual
 //! groups, 22.3% with K = 36 scaled (the same 36 panes), 10.4% with every cluster; the bundled
 //! Cornell box (64 clusters) 13.6% (14.3% scaled), CornellBox-Sphere 11.9% (12.8%). One group (the sum

@@ -173,6 +173,59 @@ impl<'a> Cursor<'a> {
     pub(crate) fn vec3(&mut self) -> Result<[f32; 3]> {
         Ok([self.f32()?, self.f32()?, self.f32()?])
     }
+    /// The next `N` little-endian `u32` words, as a section header's counts are stored.
+    pub(crate) fn u32s<const N: usize>(&mut self) -> Result<[u32; N]> {
+        let mut words = [0u32; N];
+        for w in &mut words {
+            *w = self.u32()?;
+        }
+        Ok(words)
+    }
+}
+
+/// Refuses, when `strict`, a section header's non-zero reserved word: "`what` reserved field is
+/// not zero".
+pub(crate) fn check_reserved(what: &str, strict: bool, reserved: u32) -> std::result::Result<(), String> {
+    if strict && reserved != 0 {
+        return Err(format!("{what} reserved field is not zero"));
+    }
+    Ok(())
+}
+
+/// Refuses a section header whose flags hold a bit outside `known`, or whose reserved fields
+/// are set (`reserved_set`, which the caller computes only when strict).
+pub(crate) fn check_flags(
+    section: &str,
+    flags: u32,
+    known: u32,
+    reserved_set: bool,
+) -> std::result::Result<(), String> {
+    if flags & !known != 0 || reserved_set {
+        return Err(format!(
+            "{section} section has unknown flags {flags:#x} or a non-zero reserved field"
+        ));
+    }
+    Ok(())
+}
+
+/// Refuses a section header's count of rays per `per` (exit, probe) outside `1..=max`.
+pub(crate) fn check_ray_count(section: &str, rays: u32, per: &str, max: u32) -> std::result::Result<(), String> {
+    if rays == 0 || rays > max {
+        return Err(format!(
+            "{section} section has {rays} rays per {per}, not between 1 and {max}"
+        ));
+    }
+    Ok(())
+}
+
+/// The little-endian `u32` at byte `offset` of a record.
+pub(crate) fn u32_at(record: &[u8], offset: usize) -> u32 {
+    u32::from_le_bytes(record[offset..offset + 4].try_into().expect("4 bytes"))
+}
+
+/// The little-endian `f32` at byte `offset` of a record.
+pub(crate) fn f32_at(record: &[u8], offset: usize) -> f32 {
+    f32::from_bits(u32_at(record, offset))
 }
 
 /// Little-endian appenders for building records.

@@ -6,8 +6,8 @@
 //! tiles. The byte layout is specified in `formats/prm.md`.
 //!
 //! * [`ArchiveWriter`] streams panes tile by tile into a temporary file and
-//!   renames it into place atomically; [`check_destination`] lets a binary
-//!   refuse a bad destination before any work.
+//!   renames it into place atomically; [`resolve_destination`] and
+//!   [`probe_directory`] let a binary refuse a bad destination before any work.
 //! * [`Archive`] opens an archive from a path, a byte slice or any
 //!   `Read + Seek`, validates it as it goes and reads panes on demand;
 //!   [`Archive::verify`] checks everything.
@@ -36,7 +36,6 @@ mod groups;
 mod layout;
 mod metadata;
 mod near_field;
-mod near_series;
 mod probe_rays;
 mod probes;
 mod reader;
@@ -57,9 +56,6 @@ pub use groups::{residual_group_count, residual_groups, CLUSTERS_PER_GROUP, RESI
 pub use layout::{checksum, compression, kind, limits, MAGIC, VERSION_MAJOR, VERSION_MINOR};
 pub use metadata::{Accuracy, Generator, LightAccuracy, Metadata, Units};
 pub use near_field::{NearExit, NearField, NearHit, MAX_NEAR_RAYS, MIN_WEIGHT as NEAR_MIN_WEIGHT};
-pub use near_series::{
-    DeeperOperator, MergedHit, TAIL_TERMS as NEAR_TAIL_TERMS, TAIL_TOLERANCE as NEAR_TAIL_TOLERANCE,
-};
 pub use probe_rays::{
     probe_ray_direction, GatherPoint, ProbeRays, MAX_PROBE_RAYS, NO_EMITTER, RAY_BLOCKED, RAY_SKY, SH_COSINE_LOBE,
 };
@@ -75,5 +71,6 @@ pub use sections::{AtlasSection, Cluster, Entry};
 pub use sh::{sh_basis, sh_rotate_y, SH_COEFFS};
 pub use sky::SkyTransfer;
 pub use writer::{
-    check_destination, check_output_path, own_temp_files, same_destination, scratch_path, ArchiveWriter, WriterOptions,
+    describe_file_type, own_temp_files, probe_directory, resolve_destination, scratch_path, ArchiveWriter,
+    WriterOptions,
 };

@@ -34,7 +34,7 @@
 //! bytes (as the probe rays', §5.5), `E` exit records of 8 bytes (texel `u32`, the end of its hits `u32`: exit `i`'s hits are
 //! `[end[i−1], end[i])`), then `H` hits of 8 bytes (gather point `u32`, `r²` `f32`).
 
-use crate::layout::{Cursor, PutLe};
+use crate::layout::{check_flags, check_ray_count, f32_at, u32_at, Cursor, PutLe};
 use crate::probe_rays::{self, GatherPoint, GATHER_POINT_SIZE};
 
 /// Size of the section's fixed header.
@@ -261,11 +261,7 @@ pub(crate) struct Header {
 /// non-zero reserved field (the indirect disk's bytes before 1.8).
 pub(crate) fn decode_header(head: &[u8], minor: u16, strict: bool) -> Result<Header, String> {
     let mut c = Cursor::new(head, "near field");
-    let mut v = [0u32; 6];
-    for x in &mut v {
-        *x = c.u32().map_err(|e| e.to_string())?;
-    }
-    let [exits, rays_per_exit, points, flags, resolution, hits] = v;
+    let [exits, rays_per_exit, points, flags, resolution, hits] = c.u32s().map_err(|e| e.to_string())?;
     let disk = c.f32().map_err(|e| e.to_string())?;
     let last = c.u32().map_err(|e| e.to_string())?;
     // Reserved until 1.8, which gives the word the deeper VPLs' disk.
@@ -276,16 +272,8 @@ pub(crate) fn decode_header(head: &[u8], minor: u16, strict: bool) -> Result<Hea
     };
     // 1.9 defines bit 0.
     let known = if minor >= 9 { FLAG_COMPLEMENT } else { 0 };
-    if flags & !known != 0 || (strict && reserved != 0) {
-        return Err(format!(
-            "near field section has unknown flags {flags:#x} or a non-zero reserved field"
-        ));
-    }
-    if rays_per_exit == 0 || rays_per_exit > MAX_NEAR_RAYS {
-        return Err(format!(
-            "near field section has {rays_per_exit} rays per exit, not between 1 and {MAX_NEAR_RAYS}"
-        ));
-    }
+    check_flags("near field", flags, known, strict && reserved != 0)?;
+    check_ray_count("near field", rays_per_exit, "exit", MAX_NEAR_RAYS)?;
     Ok(Header {
         exits,
         rays_per_exit,
@@ -303,8 +291,8 @@ pub(crate) fn decode_exits(raw: &[u8]) -> Result<Vec<NearExit>, String> {
     Ok(raw
         .chunks_exact(NEAR_EXIT_SIZE)
         .map(|r| NearExit {
-            texel: u32::from_le_bytes([r[0], r[1], r[2], r[3]]),
-            end: u32::from_le_bytes([r[4], r[5], r[6], r[7]]),
+            texel: u32_at(r, 0),
+            end: u32_at(r, 4),
         })
         .collect())
 }
@@ -314,8 +302,8 @@ pub(crate) fn decode_hits(raw: &[u8]) -> Result<Vec<NearHit>, String> {
     Ok(raw
         .chunks_exact(NEAR_HIT_SIZE)
         .map(|r| NearHit {
-            point: u32::from_le_bytes([r[0], r[1], r[2], r[3]]),
-            distance2: f32::from_le_bytes([r[4], r[5], r[6], r[7]]),
+            point: u32_at(r, 0),
+            distance2: f32_at(r, 4),
         })
         .collect())
 }
@@ -323,17 +311,9 @@ pub(crate) fn decode_hits(raw: &[u8]) -> Result<Vec<NearHit>, String> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::NO_EMITTER;
 
     fn near() -> NearField {
-        let point = |t: u32| GatherPoint {
-            texel: t,
-            position: [t as f32, 0.5, -1.0],
-            normal: [0.0, 1.0, 0.0],
-            albedo: [0.5, 0.25, 1.0],
-            emission: [0.0; 3],
-            emitter: NO_EMITTER,
-        };
+        let point = crate::probe_rays::test_point;
         NearField {
             rays_per_exit: 4,
             disk: 0.01,

@@ -20,7 +20,7 @@
 //! `u32` = 0), `G` gather point records of 56 bytes (texel `u32`, position, normal, albedo and
 //! emission `[f32; 3]` each, emitter group `u32`), then `N × M` hits (`u32`), probe by probe.
 
-use crate::layout::{Cursor, PutLe};
+use crate::layout::{check_flags, check_ray_count, u32_at, Cursor, PutLe};
 use crate::probes::ProbeSkyTransfer;
 use crate::sh::{sh_basis, SH_COEFFS};
 
@@ -273,22 +273,10 @@ pub(crate) struct Header {
 
 /// Parses and checks the header's own fields.
 pub(crate) fn decode_header(head: &[u8], strict: bool) -> Result<Header, String> {
-    let mut c = Cursor::new(head, "probe rays");
-    let mut v = [0u32; 8];
-    for x in &mut v {
-        *x = c.u32().map_err(|e| e.to_string())?;
-    }
-    let [probes, rays_per_probe, points, flags, resolution, r0, r1, r2] = v;
-    if flags != 0 || (strict && (r0 | r1 | r2) != 0) {
-        return Err(format!(
-            "probe rays section has unknown flags {flags:#x} or a non-zero reserved field"
-        ));
-    }
-    if rays_per_probe == 0 || rays_per_probe > MAX_PROBE_RAYS {
-        return Err(format!(
-            "probe rays section has {rays_per_probe} rays per probe, not between 1 and {MAX_PROBE_RAYS}"
-        ));
-    }
+    let [probes, rays_per_probe, points, flags, resolution, r0, r1, r2] =
+        Cursor::new(head, "probe rays").u32s().map_err(|e| e.to_string())?;
+    check_flags("probe rays", flags, 0, strict && (r0 | r1 | r2) != 0)?;
+    check_ray_count("probe rays", rays_per_probe, "probe", MAX_PROBE_RAYS)?;
     Ok(Header {
         probes,
         rays_per_probe,
@@ -317,10 +305,20 @@ pub(crate) fn decode_points(raw: &[u8]) -> Result<Vec<GatherPoint>, String> {
 
 /// Decodes whole hits.
 pub(crate) fn decode_hits(raw: &[u8]) -> Result<Vec<u32>, String> {
-    Ok(raw
-        .chunks_exact(4)
-        .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-        .collect())
+    Ok(raw.chunks_exact(4).map(|b| u32_at(b, 0)).collect())
+}
+
+/// A gather point on texel `t` without emission, for the tests of the sections that hold them.
+#[cfg(test)]
+pub(crate) fn test_point(t: u32) -> GatherPoint {
+    GatherPoint {
+        texel: t,
+        position: [t as f32, 0.5, -1.0],
+        normal: [0.0, 1.0, 0.0],
+        albedo: [0.5, 0.25, 1.0],
+        emission: [0.0; 3],
+        emitter: NO_EMITTER,
+    }
 }
 
 #[cfg(test)]
@@ -328,14 +326,7 @@ mod tests {
     use super::*;
 
     fn rays() -> ProbeRays {
-        let point = |t: u32| GatherPoint {
-            texel: t,
-            position: [t as f32, 0.5, -1.0],
-            normal: [0.0, 1.0, 0.0],
-            albedo: [0.5, 0.25, 1.0],
-            emission: [0.0; 3],
-            emitter: NO_EMITTER,
-        };
+        let point = test_point;
         let mut lamp = point(9);
         lamp.emission = [4.0, 3.0, 2.0];
         lamp.emitter = 1;

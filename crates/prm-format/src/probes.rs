@@ -16,7 +16,7 @@
 //! and the indices increase strictly. `f16` for the same reason as the sky section: noise that
 //! does not compress, carried far above its precision.
 
-use crate::layout::{Cursor, PutLe};
+use crate::layout::{check_flags, Cursor, PutLe};
 use crate::sh::SH_COEFFS;
 
 /// Size of the probes section's fixed header.
@@ -284,12 +284,8 @@ pub(crate) struct Header {
 pub(crate) fn decode_header(head: &[u8], strict: bool) -> Result<Header, String> {
     let err = |e: crate::Error| e.to_string();
     let mut c = Cursor::new(head, "probes");
-    let n = c.u32().map_err(err)?;
-    let clusters = c.u32().map_err(err)?;
-    let coeffs = c.u32().map_err(err)?;
-    let flags = c.u32().map_err(err)?;
-    let dims = [c.u32().map_err(err)?, c.u32().map_err(err)?, c.u32().map_err(err)?];
-    let reserved = c.u32().map_err(err)?;
+    let [n, clusters, coeffs, flags, dx, dy, dz, reserved] = c.u32s().map_err(err)?;
+    let dims = [dx, dy, dz];
     let origin = c.vec3().map_err(err)?;
     let spacing = c.f32().map_err(err)?;
     if coeffs != SH_COEFFS as u32 {
@@ -297,11 +293,7 @@ pub(crate) fn decode_header(head: &[u8], strict: bool) -> Result<Header, String>
             "probes section has {coeffs} coefficients per probe, this reader knows {SH_COEFFS}"
         ));
     }
-    if flags & !FLAG_SKY != 0 || (strict && reserved != 0) {
-        return Err(format!(
-            "probes section has unknown flags {flags:#x} or a non-zero reserved field"
-        ));
-    }
+    check_flags("probes", flags, FLAG_SKY, strict && reserved != 0)?;
     if n == 0 || n > MAX_PROBES {
         return Err(format!("probes section has {n} probes, not between 1 and {MAX_PROBES}"));
     }

@@ -97,12 +97,7 @@ pub struct Archive<R> {
     metadata: Metadata,
     atlas: AtlasSection,
     entries: Vec<Entry>,
-    entry_energy: Option<Vec<[f32; 3]>>,
-    emitters: Vec<EmitterGroup>,
-    sky: Option<SkyTransfer>,
-    probes: Option<Probes>,
-    probe_rays: Option<crate::ProbeRays>,
-    near_field: Option<crate::NearField>,
+    optional: OptionalSections,
     clusters: Vec<Cluster>,
     tiles: Vec<TileRecord>,
     panes_offset: u64,
@@ -146,353 +141,409 @@ fn read_at<R: Read + Seek>(src: &mut R, offset: u64, len: u64, what: &str) -> Re
     Ok(buf)
 }
 
-impl<R: Read + Seek> Archive<R> {
-    /// Opens and validates an archive from any seekable source.
-    pub fn from_reader(mut src: R) -> Result<Self> {
-        let file_length = src.seek(SeekFrom::End(0))?;
-        let head_len = file_length.min(HEADER_SIZE as u64);
-        let head = read_at(&mut src, 0, head_len, "header")?;
-        let header = Header::decode(&head)?;
-        let strict = header.strict_reserved();
-        if header.file_length > file_length {
-            return Err(Error::truncated(format!(
-                "the header declares {} bytes, the file has {file_length}",
-                header.file_length
-            )));
-        }
-        if header.file_length < file_length {
-            return Err(Error::inconsistent(format!(
-                "{} bytes follow the declared end of the archive",
-                file_length - header.file_length
-            )));
-        }
-        if strict && header.reserved != [0, 0] {
-            return Err(Error::inconsistent("reserved header fields are not zero"));
-        }
-        if header.section_count > limits::MAX_SECTIONS {
-            return Err(Error::inconsistent(format!(
-                "{} sections exceed the limit",
-                header.section_count
-            )));
-        }
-        let table_len = u64::from(header.section_count) * SECTION_RECORD_SIZE as u64;
-        let table_end = header.table_offset.checked_add(table_len);
-        if header.table_offset < HEADER_SIZE as u64 || table_end.is_none_or(|e| e > file_length) {
-            return Err(Error::inconsistent(format!(
-                "section table ({} records at offset {}) lies outside the file",
-                header.section_count, header.table_offset
-            )));
-        }
-        let table = read_at(&mut src, header.table_offset, table_len, "section table")?;
-        if checksum(&table) != header.table_checksum {
-            return Err(Error::checksum("section table"));
-        }
-        let mut c = Cursor::new(&table, "section table");
-        let mut records = Vec::with_capacity(header.section_count as usize);
-        for _ in 0..header.section_count {
-            records.push(SectionRecord::decode(&mut c)?);
-        }
+/// Reads and checks the header against the file's length; returns it and that length.
+fn read_header<R: Read + Seek>(src: &mut R) -> Result<(Header, u64)> {
+    let file_length = src.seek(SeekFrom::End(0))?;
+    let head_len = file_length.min(HEADER_SIZE as u64);
+    let head = read_at(src, 0, head_len, "header")?;
+    let header = Header::decode(&head)?;
+    if header.file_length > file_length {
+        return Err(Error::truncated(format!(
+            "the header declares {} bytes, the file has {file_length}",
+            header.file_length
+        )));
+    }
+    if header.file_length < file_length {
+        return Err(Error::inconsistent(format!(
+            "{} bytes follow the declared end of the archive",
+            file_length - header.file_length
+        )));
+    }
+    if header.strict_reserved() && header.reserved != [0, 0] {
+        return Err(Error::inconsistent("reserved header fields are not zero"));
+    }
+    if header.section_count > limits::MAX_SECTIONS {
+        return Err(Error::inconsistent(format!(
+            "{} sections exceed the limit",
+            header.section_count
+        )));
+    }
+    Ok((header, file_length))
+}
 
-        // Every section lies after the header, inside the file, and overlaps
-        // neither another section nor the table.
-        let mut spans: Vec<(u64, u64, String)> = vec![(
-            header.table_offset,
-            header.table_offset + table_len,
-            "section table".into(),
-        )];
-        for r in &records {
-            let name = section_name(r.kind);
-            if strict && r.reserved != 0 {
-                return Err(Error::inconsistent(format!("{name}: reserved field is not zero")));
-            }
-            if r.kind == 0 {
-                return Err(Error::inconsistent("section kind 0 is invalid"));
-            }
-            let end = r.offset.checked_add(r.stored_size);
-            if r.offset < HEADER_SIZE as u64 || end.is_none_or(|e| e > file_length) {
+/// Reads the section table and checks its checksum and that every section lies after the
+/// header, inside the file, and overlaps neither another section nor the table.
+fn read_section_table<R: Read + Seek>(src: &mut R, header: &Header, file_length: u64) -> Result<Vec<SectionRecord>> {
+    let strict = header.strict_reserved();
+    let table_len = u64::from(header.section_count) * SECTION_RECORD_SIZE as u64;
+    let table_end = header.table_offset.checked_add(table_len);
+    if header.table_offset < HEADER_SIZE as u64 || table_end.is_none_or(|e| e > file_length) {
+        return Err(Error::inconsistent(format!(
+            "section table ({} records at offset {}) lies outside the file",
+            header.section_count, header.table_offset
+        )));
+    }
+    let table = read_at(src, header.table_offset, table_len, "section table")?;
+    if checksum(&table) != header.table_checksum {
+        return Err(Error::checksum("section table"));
+    }
+    let mut c = Cursor::new(&table, "section table");
+    let mut records = Vec::with_capacity(header.section_count as usize);
+    for _ in 0..header.section_count {
+        records.push(SectionRecord::decode(&mut c)?);
+    }
+    let mut spans: Vec<(u64, u64, String)> = vec![(
+        header.table_offset,
+        header.table_offset + table_len,
+        "section table".into(),
+    )];
+    for r in &records {
+        let name = section_name(r.kind);
+        if strict && r.reserved != 0 {
+            return Err(Error::inconsistent(format!("{name}: reserved field is not zero")));
+        }
+        if r.kind == 0 {
+            return Err(Error::inconsistent("section kind 0 is invalid"));
+        }
+        let end = r.offset.checked_add(r.stored_size);
+        if r.offset < HEADER_SIZE as u64 || end.is_none_or(|e| e > file_length) {
+            return Err(Error::inconsistent(format!(
+                "{name} section ({} bytes at offset {}) lies outside the file",
+                r.stored_size, r.offset
+            )));
+        }
+        spans.push((r.offset, r.offset + r.stored_size, name));
+    }
+    spans.sort();
+    for w in spans.windows(2) {
+        if w[0].1 > w[1].0 {
+            return Err(Error::inconsistent(format!("{} overlaps {}", w[0].2, w[1].2)));
+        }
+    }
+    Ok(records)
+}
+
+/// The records of the sections the reader interprets.
+struct SectionRecords {
+    metadata: SectionRecord,
+    atlas: SectionRecord,
+    entries: SectionRecord,
+    clusters: SectionRecord,
+    panes: SectionRecord,
+    entry_energy: Option<SectionRecord>,
+    emitters: Option<SectionRecord>,
+    sky: Option<SectionRecord>,
+    probes: Option<SectionRecord>,
+    probe_rays: Option<SectionRecord>,
+    near_field: Option<SectionRecord>,
+}
+
+impl SectionRecords {
+    /// Finds the required sections and the optional ones of an archive of minor version
+    /// `minor`; each kind at most once.
+    fn find(records: &[SectionRecord], minor: u16) -> Result<SectionRecords> {
+        let required = |k: u32| {
+            optional_section(records, k, 0, minor)?
+                .ok_or_else(|| Error::inconsistent(format!("required {} section is missing", section_name(k))))
+        };
+        Ok(SectionRecords {
+            metadata: required(kind::METADATA)?,
+            atlas: required(kind::ATLAS)?,
+            entries: required(kind::ENTRIES)?,
+            clusters: required(kind::CLUSTERS)?,
+            panes: required(kind::PANES)?,
+            entry_energy: optional_section(records, kind::ENTRY_ENERGY, 1, minor)?,
+            emitters: optional_section(records, kind::EMITTERS, 2, minor)?,
+            sky: optional_section(records, kind::SKY, 3, minor)?,
+            probes: optional_section(records, kind::PROBES, 4, minor)?,
+            probe_rays: optional_section(records, kind::PROBE_RAYS, 6, minor)?,
+            near_field: optional_section(records, kind::NEAR_FIELD, 7, minor)?,
+        })
+    }
+}
+
+/// The one record of `kind`, a kind defined from minor version `since` on: in an archive of an
+/// older `minor` a section of that kind is a private one (the writers of those versions allowed
+/// it), skipped like any unknown one.
+fn optional_section(records: &[SectionRecord], kind: u32, since: u16, minor: u16) -> Result<Option<SectionRecord>> {
+    let mut of_kind = records.iter().filter(|r| r.kind == kind && minor >= since);
+    let first = of_kind.next().cloned();
+    if of_kind.next().is_some() {
+        return Err(Error::inconsistent(format!(
+            "{} section appears more than once",
+            section_name(kind)
+        )));
+    }
+    Ok(first)
+}
+
+/// Reads the metadata section (at most 16 MiB of JSON) and validates it.
+fn read_metadata<R: Read + Seek>(src: &mut R, rec: &SectionRecord, minor: u16) -> Result<Metadata> {
+    let meta = open_section(src, rec)?;
+    if meta.record.raw_size > limits::MAX_METADATA_BYTES {
+        return Err(Error::inconsistent(format!(
+            "metadata section declares {} raw bytes, more than the limit {}",
+            meta.record.raw_size,
+            limits::MAX_METADATA_BYTES
+        )));
+    }
+    let raw = meta.read_all()?;
+    drop(meta);
+    let json = |e: serde_json::Error| Error::inconsistent(format!("metadata JSON: {e}"));
+    let mut value: serde_json::Value = serde_json::from_slice(&raw).map_err(json)?;
+    if minor < 5 {
+        // Before 1.5 an `accuracy` key is not the bake's estimate (§3.1): ignored.
+        if let Some(object) = value.as_object_mut() {
+            object.remove("accuracy");
+        }
+    }
+    let metadata: Metadata = serde_json::from_value(value).map_err(json)?;
+    metadata
+        .validate()
+        .map_err(|e| Error::inconsistent(format!("metadata: {e}")))?;
+    Ok(metadata)
+}
+
+/// The panes section's fixed header and tile index.
+struct PanesIndex {
+    pane_count: u32,
+    tiles_per_pane: u64,
+    tiles: Vec<TileRecord>,
+    stored_tiles: u64,
+    stored_tile_bytes: u64,
+    tile_filter: TileFilter,
+}
+
+/// Reads the panes section's fixed header and tile index (checked by the index checksum) and
+/// checks that every stored tile lies in the section's data area.
+fn read_panes_index<R: Read + Seek>(
+    src: &mut R,
+    rec: &SectionRecord,
+    atlas: &AtlasSection,
+    strict: bool,
+) -> Result<PanesIndex> {
+    if rec.compression != compression::NONE {
+        return Err(Error::inconsistent(
+            "the panes section must not be compressed as a whole",
+        ));
+    }
+    if rec.raw_size != rec.stored_size {
+        return Err(Error::inconsistent("panes section raw size differs from stored size"));
+    }
+    if rec.stored_size < PANES_HEADER_SIZE as u64 {
+        return Err(Error::inconsistent(format!(
+            "panes section has {} bytes, less than its {PANES_HEADER_SIZE}-byte header",
+            rec.stored_size
+        )));
+    }
+    let fixed = read_at(src, rec.offset, PANES_HEADER_SIZE as u64, "panes header")?;
+    let declared_panes = Cursor::new(&fixed[8..12], "panes header").u32()?;
+    if u64::from(declared_panes) > limits::MAX_CLUSTERS {
+        return Err(Error::inconsistent(format!(
+            "{declared_panes} panes exceed the limit {}",
+            limits::MAX_CLUSTERS
+        )));
+    }
+    let tps = u64::from(atlas.tiles_per_side());
+    let tiles_per_pane = tps * tps;
+    let tile_count = u64::from(declared_panes) * tiles_per_pane;
+    let index_len = tile_count * TILE_RECORD_SIZE as u64;
+    let data_start = PANES_HEADER_SIZE as u64 + index_len;
+    if rec.stored_size < data_start {
+        return Err(Error::inconsistent(format!(
+            "panes section ({} bytes) is smaller than its tile index ({declared_panes} panes × {tiles_per_pane} tiles)",
+            rec.stored_size,
+        )));
+    }
+    let head = read_at(src, rec.offset, data_start, "panes tile index")?;
+    let mut c = Cursor::new(&head, "panes header");
+    let index_sum = c.u64()?;
+    if checksum(&head[8..]) != index_sum {
+        return Err(Error::checksum("panes tile index"));
+    }
+    let pane_count = c.u32()?;
+    let stored_tps = c.u32()?;
+    let texel_format = c.u32()?;
+    let filter_code = c.u32()?;
+    let reserved = c.u64()?;
+    if u64::from(stored_tps) != tps {
+        return Err(Error::inconsistent(format!(
+            "panes have {stored_tps} tiles per side, the atlas implies {tps}"
+        )));
+    }
+    if texel_format != TEXEL_FORMAT_RGB9E5 {
+        return Err(Error::inconsistent(format!("unknown texel format {texel_format}")));
+    }
+    let tile_filter = TileFilter::from_code(filter_code)
+        .ok_or_else(|| Error::inconsistent(format!("unknown tile filter {filter_code}")))?;
+    if strict && reserved != 0 {
+        return Err(Error::inconsistent("panes header reserved fields are not zero"));
+    }
+    let mut index = PanesIndex {
+        pane_count,
+        tiles_per_pane,
+        tiles: Vec::with_capacity(tile_count as usize),
+        stored_tiles: 0,
+        stored_tile_bytes: 0,
+        tile_filter,
+    };
+    for i in 0..tile_count {
+        let t = TileRecord::decode(&mut c)?;
+        let where_ = || {
+            let pane = i / tiles_per_pane;
+            let k = i % tiles_per_pane;
+            format!("pane {pane} tile ({}, {})", k % tps, k / tps)
+        };
+        if strict && t.reserved != 0 {
+            return Err(Error::inconsistent(format!("{}: reserved field is not zero", where_())));
+        }
+        if t.size == 0 {
+            if t.offset != 0 || t.checksum != 0 {
                 return Err(Error::inconsistent(format!(
-                    "{name} section ({} bytes at offset {}) lies outside the file",
-                    r.stored_size, r.offset
+                    "{}: omitted tile with non-zero offset or checksum",
+                    where_()
                 )));
             }
-            spans.push((r.offset, r.offset + r.stored_size, name));
-        }
-        spans.sort();
-        for w in spans.windows(2) {
-            if w[0].1 > w[1].0 {
-                return Err(Error::inconsistent(format!("{} overlaps {}", w[0].2, w[1].2)));
-            }
-        }
-        let find = |k: u32| -> Result<SectionRecord> {
-            let mut it = records.iter().filter(|r| r.kind == k);
-            let first = it
-                .next()
-                .cloned()
-                .ok_or_else(|| Error::inconsistent(format!("required {} section is missing", section_name(k))))?;
-            if it.next().is_some() {
+        } else {
+            let end = t.offset.checked_add(u64::from(t.size));
+            if t.offset < data_start || end.is_none_or(|e| e > rec.stored_size) {
                 return Err(Error::inconsistent(format!(
-                    "{} section appears more than once",
-                    section_name(k)
+                    "{}: tile data lies outside the panes section's data area",
+                    where_()
                 )));
             }
-            Ok(first)
-        };
-        let meta_rec = find(kind::METADATA)?;
-        let atlas_rec = find(kind::ATLAS)?;
-        let entries_rec = find(kind::ENTRIES)?;
-        let clusters_rec = find(kind::CLUSTERS)?;
-        let panes_rec = find(kind::PANES)?;
-        // Kind 6 is the entry energy section from 1.1 on; a 1.0 file may hold a private section
-        // of that kind (the 1.0 writer allowed it), which is skipped like any unknown one.
-        let mut energy_recs = records
-            .iter()
-            .filter(|r| r.kind == kind::ENTRY_ENERGY && header.minor >= 1);
-        let energy_rec = energy_recs.next().cloned();
-        if energy_recs.next().is_some() {
-            return Err(Error::inconsistent("entry_energy section appears more than once"));
+            index.stored_tiles += 1;
+            index.stored_tile_bytes += u64::from(t.size);
         }
-        // Kind 7 is the emitters section from 1.2 on, likewise.
-        let mut emitter_recs = records.iter().filter(|r| r.kind == kind::EMITTERS && header.minor >= 2);
-        let emitters_rec = emitter_recs.next().cloned();
-        if emitter_recs.next().is_some() {
-            return Err(Error::inconsistent("emitters section appears more than once"));
-        }
-        // Kind 8 is the sky section from 1.3 on, likewise.
-        let mut sky_recs = records.iter().filter(|r| r.kind == kind::SKY && header.minor >= 3);
-        let sky_rec = sky_recs.next().cloned();
-        if sky_recs.next().is_some() {
-            return Err(Error::inconsistent("sky section appears more than once"));
-        }
-        // Kind 9 is the probes section from 1.4 on, likewise.
-        let mut probe_recs = records.iter().filter(|r| r.kind == kind::PROBES && header.minor >= 4);
-        let probes_rec = probe_recs.next().cloned();
-        if probe_recs.next().is_some() {
-            return Err(Error::inconsistent("probes section appears more than once"));
-        }
-        // Kind 10 is the probe rays section from 1.6 on, likewise.
-        let mut ray_recs = records
-            .iter()
-            .filter(|r| r.kind == kind::PROBE_RAYS && header.minor >= 6);
-        let rays_rec = ray_recs.next().cloned();
-        if ray_recs.next().is_some() {
-            return Err(Error::inconsistent("probe_rays section appears more than once"));
-        }
-        // Kind 11 is the near field section from 1.7 on, likewise.
-        let mut near_recs = records
-            .iter()
-            .filter(|r| r.kind == kind::NEAR_FIELD && header.minor >= 7);
-        let near_rec = near_recs.next().cloned();
-        if near_recs.next().is_some() {
-            return Err(Error::inconsistent("near_field section appears more than once"));
-        }
+        index.tiles.push(t);
+    }
+    Ok(index)
+}
 
-        // Every section's raw size is checked against what the counts read so
-        // far imply *before* it is decompressed, so a small stream cannot make
-        // the reader produce (or hold) more than those counts need. Hence the
-        // order: metadata (16 MiB cap), atlas (its own 16-byte header gives R
-        // and N), the panes header and tile index (uncompressed, bounded by
-        // real file bytes; gives the pane count), clusters (56 × panes), and
-        // last entries (28 × the entries the cluster ranges cover).
-        let meta = open_section(&mut src, &meta_rec)?;
-        if meta.record.raw_size > limits::MAX_METADATA_BYTES {
-            return Err(Error::inconsistent(format!(
-                "metadata section declares {} raw bytes, more than the limit {}",
-                meta.record.raw_size,
-                limits::MAX_METADATA_BYTES
-            )));
-        }
-        let raw = meta.read_all()?;
-        drop(meta);
-        let json = |e: serde_json::Error| Error::inconsistent(format!("metadata JSON: {e}"));
-        let mut value: serde_json::Value = serde_json::from_slice(&raw).map_err(json)?;
-        if header.minor < 5 {
-            // Before 1.5 an `accuracy` key is not the bake's estimate (§3.1): ignored.
-            if let Some(object) = value.as_object_mut() {
-                object.remove("accuracy");
-            }
-        }
-        let metadata: Metadata = serde_json::from_value(value).map_err(json)?;
-        metadata
-            .validate()
-            .map_err(|e| Error::inconsistent(format!("metadata: {e}")))?;
-        drop(raw);
+/// Reads a section of exactly `count` records of `size` bytes: its raw size must be that
+/// (`counts` describes the counts for the message).
+fn read_record_section<R: Read + Seek, T>(
+    src: &mut R,
+    rec: &SectionRecord,
+    count: u64,
+    size: usize,
+    counts: impl FnOnce() -> String,
+    decode: impl Fn(&[u8]) -> Result<Vec<T>, String>,
+) -> Result<Vec<T>> {
+    let section = open_section(src, rec)?;
+    section.expect_raw_size(count * size as u64, counts)?;
+    section.read_records(count as usize, size, decode)
+}
 
-        let atlas = read_atlas(&mut src, &atlas_rec, strict)?;
+/// Reads the clusters section: exactly one record per pane.
+fn read_clusters<R: Read + Seek>(src: &mut R, rec: &SectionRecord, pane_count: u32) -> Result<Vec<Cluster>> {
+    let panes = u64::from(pane_count);
+    read_record_section(
+        src,
+        rec,
+        panes,
+        CLUSTER_RECORD_SIZE,
+        || format!("{pane_count} panes"),
+        decode_clusters,
+    )
+}
 
-        // Panes: fixed header and tile index, checked by the index checksum.
-        if panes_rec.compression != compression::NONE {
-            return Err(Error::inconsistent(
-                "the panes section must not be compressed as a whole",
-            ));
-        }
-        if panes_rec.raw_size != panes_rec.stored_size {
-            return Err(Error::inconsistent("panes section raw size differs from stored size"));
-        }
-        if panes_rec.stored_size < PANES_HEADER_SIZE as u64 {
-            return Err(Error::inconsistent(format!(
-                "panes section has {} bytes, less than its {PANES_HEADER_SIZE}-byte header",
-                panes_rec.stored_size
-            )));
-        }
-        let fixed = read_at(&mut src, panes_rec.offset, PANES_HEADER_SIZE as u64, "panes header")?;
-        let declared_panes = Cursor::new(&fixed[8..12], "panes header").u32()?;
-        if u64::from(declared_panes) > limits::MAX_CLUSTERS {
-            return Err(Error::inconsistent(format!(
-                "{declared_panes} panes exceed the limit {}",
-                limits::MAX_CLUSTERS
-            )));
-        }
-        let tps = u64::from(atlas.tiles_per_side());
-        let tiles_per_pane = tps * tps;
-        let tile_count = u64::from(declared_panes) * tiles_per_pane;
-        let index_len = tile_count * TILE_RECORD_SIZE as u64;
-        let data_start = PANES_HEADER_SIZE as u64 + index_len;
-        if panes_rec.stored_size < data_start {
-            return Err(Error::inconsistent(format!(
-                "panes section ({} bytes) is smaller than its tile index ({declared_panes} panes × {tiles_per_pane} tiles)",
-                panes_rec.stored_size,
-            )));
-        }
-        let head = read_at(&mut src, panes_rec.offset, data_start, "panes tile index")?;
-        let mut c = Cursor::new(&head, "panes header");
-        let index_sum = c.u64()?;
-        if checksum(&head[8..]) != index_sum {
-            return Err(Error::checksum("panes tile index"));
-        }
-        let pane_count = c.u32()?;
-        let stored_tps = c.u32()?;
-        let texel_format = c.u32()?;
-        let filter_code = c.u32()?;
-        let reserved = c.u64()?;
-        if u64::from(stored_tps) != tps {
-            return Err(Error::inconsistent(format!(
-                "panes have {stored_tps} tiles per side, the atlas implies {tps}"
-            )));
-        }
-        if texel_format != TEXEL_FORMAT_RGB9E5 {
-            return Err(Error::inconsistent(format!("unknown texel format {texel_format}")));
-        }
-        let tile_filter = TileFilter::from_code(filter_code)
-            .ok_or_else(|| Error::inconsistent(format!("unknown tile filter {filter_code}")))?;
-        if strict && reserved != 0 {
-            return Err(Error::inconsistent("panes header reserved fields are not zero"));
-        }
-        let tile_bytes = u64::from(atlas.tile_size) * u64::from(atlas.tile_size) * 4;
-        let mut tiles = Vec::with_capacity(tile_count as usize);
-        let (mut stored_tiles, mut stored_tile_bytes) = (0u64, 0u64);
-        for i in 0..tile_count {
-            let t = TileRecord::decode(&mut c)?;
-            let where_ = || {
-                let pane = i / tiles_per_pane;
-                let k = i % tiles_per_pane;
-                format!("pane {pane} tile ({}, {})", k % tps, k / tps)
-            };
-            if strict && t.reserved != 0 {
-                return Err(Error::inconsistent(format!("{}: reserved field is not zero", where_())));
-            }
-            if t.size == 0 {
-                if t.offset != 0 || t.checksum != 0 {
-                    return Err(Error::inconsistent(format!(
-                        "{}: omitted tile with non-zero offset or checksum",
-                        where_()
-                    )));
-                }
-            } else {
-                let end = t.offset.checked_add(u64::from(t.size));
-                if t.offset < data_start || end.is_none_or(|e| e > panes_rec.stored_size) {
-                    return Err(Error::inconsistent(format!(
-                        "{}: tile data lies outside the panes section's data area",
-                        where_()
-                    )));
-                }
-                stored_tiles += 1;
-                stored_tile_bytes += u64::from(t.size);
-            }
-            tiles.push(t);
-        }
-        drop(head);
+/// Reads the entries section: exactly as many as the cluster ranges cover, sorted by cluster.
+fn read_entries<R: Read + Seek>(src: &mut R, rec: &SectionRecord, clusters: &[Cluster]) -> Result<Vec<Entry>> {
+    let entry_count = entries_covered(clusters).map_err(Error::inconsistent)?;
+    if entry_count > limits::MAX_ENTRIES {
+        return Err(Error::inconsistent(format!(
+            "clusters cover {entry_count} entries, more than the limit {}",
+            limits::MAX_ENTRIES
+        )));
+    }
+    let counts = || format!("{entry_count} entries covered by the cluster ranges");
+    let entries = read_record_section(src, rec, entry_count, ENTRY_RECORD_SIZE, counts, decode_entries)?;
+    validate_entries_clusters(&entries, clusters).map_err(Error::inconsistent)?;
+    Ok(entries)
+}
 
-        // Clusters: exactly one record per pane.
-        let expected = u64::from(pane_count) * CLUSTER_RECORD_SIZE as u64;
-        let section = open_section(&mut src, &clusters_rec)?;
-        section.expect_raw_size(expected, || format!("{pane_count} panes"))?;
-        let clusters = section.read_records(pane_count as usize, CLUSTER_RECORD_SIZE, decode_clusters)?;
-        drop(section);
+/// The optional sections of 1.1 and later.
+struct OptionalSections {
+    entry_energy: Option<Vec<[f32; 3]>>,
+    emitters: Vec<EmitterGroup>,
+    sky: Option<SkyTransfer>,
+    probes: Option<Probes>,
+    probe_rays: Option<crate::ProbeRays>,
+    near_field: Option<crate::NearField>,
+}
 
-        // Entries: exactly as many as the cluster ranges cover.
-        let entry_count = entries_covered(&clusters).map_err(Error::inconsistent)?;
-        if entry_count > limits::MAX_ENTRIES {
-            return Err(Error::inconsistent(format!(
-                "clusters cover {entry_count} entries, more than the limit {}",
-                limits::MAX_ENTRIES
-            )));
+/// What the header and the required sections fix, against which the optional sections'
+/// headers are checked.
+#[derive(Clone, Copy)]
+struct Fixed {
+    minor: u16,
+    strict: bool,
+    /// The atlas's.
+    resolution: u32,
+    entry_count: u64,
+    clusters: usize,
+}
+
+/// Reads the optional sections that `found` holds, each sized by its own header and what the
+/// required sections fixed.
+fn read_optional_sections<R: Read + Seek>(
+    src: &mut R,
+    found: &SectionRecords,
+    fixed: &Fixed,
+) -> Result<OptionalSections> {
+    let entry_count = fixed.entry_count;
+    // Entry energy (1.1): exactly one record per entry.
+    let entry_energy = match &found.entry_energy {
+        None => None,
+        Some(rec) => Some(read_record_section(
+            src,
+            rec,
+            entry_count,
+            ENTRY_ENERGY_RECORD_SIZE,
+            || format!("{entry_count} entries"),
+            decode_entry_energy,
+        )?),
+    };
+    // Emitters (1.2): sizes fixed by its header, the entry count and the atlas.
+    let emitters = match &found.emitters {
+        None => Vec::new(),
+        Some(rec) => read_emitters(src, rec, fixed)?,
+    };
+    // Sky (1.3): its size is fixed by the atlas resolution.
+    let sky = found.sky.as_ref().map(|rec| read_sky(src, rec, fixed)).transpose()?;
+    // Probes (1.4): sizes fixed by its header and the cluster count.
+    let probes = found
+        .probes
+        .as_ref()
+        .map(|rec| read_probes(src, rec, fixed))
+        .transpose()?;
+    // Probe rays (1.6, only beside the probes): sizes fixed by its header.
+    let probe_rays = match (&found.probe_rays, &probes) {
+        (None, _) => None,
+        (Some(_), None) => {
+            return Err(Error::inconsistent("probe_rays section without a probes section"));
         }
-        let expected = entry_count * ENTRY_RECORD_SIZE as u64;
-        let section = open_section(&mut src, &entries_rec)?;
-        section.expect_raw_size(expected, || {
-            format!("{entry_count} entries covered by the cluster ranges")
-        })?;
-        let entries = section.read_records(entry_count as usize, ENTRY_RECORD_SIZE, decode_entries)?;
-        drop(section);
-        validate_entries_clusters(&entries, &clusters).map_err(Error::inconsistent)?;
+        (Some(rec), Some(p)) => Some(read_probe_rays(src, rec, fixed, p.len(), emitters.len())?),
+    };
+    // Near field (1.7): sizes fixed by its header and the atlas.
+    let near_field = (found.near_field.as_ref())
+        .map(|rec| read_near_field(src, rec, fixed, emitters.len()))
+        .transpose()?;
+    Ok(OptionalSections {
+        entry_energy,
+        emitters,
+        sky,
+        probes,
+        probe_rays,
+        near_field,
+    })
+}
 
-        // Entry energy (1.1, optional): exactly one record per entry.
-        let entry_energy = match &energy_rec {
-            None => None,
-            Some(rec) => {
-                let expected = entry_count * ENTRY_ENERGY_RECORD_SIZE as u64;
-                let section = open_section(&mut src, rec)?;
-                section.expect_raw_size(expected, || format!("{entry_count} entries"))?;
-                let e = section.read_records(entry_count as usize, ENTRY_ENERGY_RECORD_SIZE, decode_entry_energy)?;
-                drop(section);
-                Some(e)
-            }
-        };
-
-        // Emitters (1.2, optional): sizes fixed by its header, the entry count and the atlas.
-        let emitters = match &emitters_rec {
-            None => Vec::new(),
-            Some(rec) => read_emitters(&mut src, rec, strict, entry_count, atlas.resolution)?,
-        };
-        // Sky (1.3, optional): its size is fixed by the atlas resolution.
-        let sky = match &sky_rec {
-            None => None,
-            Some(rec) => Some(read_sky(&mut src, rec, strict, atlas.resolution)?),
-        };
-        // Probes (1.4, optional): sizes fixed by its header and the cluster count.
-        let probes = match &probes_rec {
-            None => None,
-            Some(rec) => Some(read_probes(&mut src, rec, strict, clusters.len())?),
-        };
-        // Probe rays (1.6, optional, only beside the probes): sizes fixed by its header.
-        let probe_rays = match (&rays_rec, &probes) {
-            (None, _) => None,
-            (Some(_), None) => {
-                return Err(Error::inconsistent("probe_rays section without a probes section"));
-            }
-            (Some(rec), Some(p)) => Some(read_probe_rays(
-                &mut src,
-                rec,
-                strict,
-                p.len(),
-                atlas.resolution,
-                emitters.len(),
-            )?),
-        };
-        // Near field (1.7, optional): sizes fixed by its header and the atlas.
-        let near_field = match &near_rec {
-            None => None,
-            Some(rec) => Some(read_near_field(
-                &mut src,
-                rec,
-                header.minor,
-                strict,
-                atlas.resolution,
-                emitters.len(),
-            )?),
-        };
-
-        let info = ArchiveInfo {
+impl ArchiveInfo {
+    fn new(header: &Header, file_length: u64, records: &[SectionRecord], panes: &PanesIndex, tile_size: u32) -> Self {
+        let tile_bytes = u64::from(tile_size) * u64::from(tile_size) * 4;
+        ArchiveInfo {
             major: header.major,
             minor: header.minor,
             file_length,
@@ -508,12 +559,43 @@ impl<R: Read + Seek> Archive<R> {
                     checksum: r.checksum,
                 })
                 .collect(),
-            pane_count,
-            tiles_per_pane,
-            stored_tiles,
-            stored_tile_bytes,
-            pane_texel_bytes: u64::from(pane_count) * tiles_per_pane * tile_bytes,
+            pane_count: panes.pane_count,
+            tiles_per_pane: panes.tiles_per_pane,
+            stored_tiles: panes.stored_tiles,
+            stored_tile_bytes: panes.stored_tile_bytes,
+            pane_texel_bytes: u64::from(panes.pane_count) * panes.tiles_per_pane * tile_bytes,
+        }
+    }
+}
+
+impl<R: Read + Seek> Archive<R> {
+    /// Opens and validates an archive from any seekable source.
+    ///
+    /// Every section's raw size is checked against what the counts read so far imply *before*
+    /// it is decompressed, so a small stream cannot make the reader produce (or hold) more than
+    /// those counts need. Hence the order: metadata (16 MiB cap), atlas (its own 16-byte header
+    /// gives R and N), the panes header and tile index (uncompressed, bounded by real file
+    /// bytes; gives the pane count), clusters (56 × panes), last entries (28 × the entries the
+    /// cluster ranges cover), then the optional sections.
+    pub fn from_reader(mut src: R) -> Result<Self> {
+        let (header, file_length) = read_header(&mut src)?;
+        let strict = header.strict_reserved();
+        let records = read_section_table(&mut src, &header, file_length)?;
+        let found = SectionRecords::find(&records, header.minor)?;
+        let metadata = read_metadata(&mut src, &found.metadata, header.minor)?;
+        let atlas = read_atlas(&mut src, &found.atlas, strict)?;
+        let panes = read_panes_index(&mut src, &found.panes, &atlas, strict)?;
+        let clusters = read_clusters(&mut src, &found.clusters, panes.pane_count)?;
+        let entries = read_entries(&mut src, &found.entries, &clusters)?;
+        let fixed = Fixed {
+            minor: header.minor,
+            strict,
+            resolution: atlas.resolution,
+            entry_count: entries.len() as u64,
+            clusters: clusters.len(),
         };
+        let optional = read_optional_sections(&mut src, &found, &fixed)?;
+        let info = ArchiveInfo::new(&header, file_length, &records, &panes, atlas.tile_size);
         Ok(Archive {
             src,
             info,
@@ -521,16 +603,11 @@ impl<R: Read + Seek> Archive<R> {
             metadata,
             atlas,
             entries,
-            entry_energy,
-            emitters,
-            sky,
-            probes,
-            probe_rays,
-            near_field,
+            optional,
             clusters,
-            tiles,
-            panes_offset: panes_rec.offset,
-            tile_filter,
+            tiles: panes.tiles,
+            panes_offset: found.panes.offset,
+            tile_filter: panes.tile_filter,
             decompressor: zstd::bulk::Decompressor::new()?,
         })
     }
@@ -557,30 +634,30 @@ impl<R: Read + Seek> Archive<R> {
 
     /// The emitter groups (formats/prm.md §5.2); empty when the archive has none.
     pub fn emitters(&self) -> &[EmitterGroup] {
-        &self.emitters
+        &self.optional.emitters
     }
 
     /// The sky's transfer at the atlas texels (formats/prm.md §5.3), when the bake made it.
     pub fn sky(&self) -> Option<&SkyTransfer> {
-        self.sky.as_ref()
+        self.optional.sky.as_ref()
     }
 
     /// The probes and every cluster's transfer to them (formats/prm.md §5.4), when the bake
     /// placed them.
     pub fn probes(&self) -> Option<&Probes> {
-        self.probes.as_ref()
+        self.optional.probes.as_ref()
     }
 
     /// Where every probe's rays meet the scene (formats/prm.md §5.5), when the bake traced
     /// them (1.6): a run time gathers the probes' light from the surfaces with them.
     pub fn probe_rays(&self) -> Option<&crate::ProbeRays> {
-        self.probe_rays.as_ref()
+        self.optional.probe_rays.as_ref()
     }
 
     /// Where every exit point's near rays end (formats/prm.md §5.6), when the bake traced them
     /// (1.7): a run time gathers back with them what the panes' VPL bound removes.
     pub fn near_field(&self) -> Option<&crate::NearField> {
-        self.near_field.as_ref()
+        self.optional.near_field.as_ref()
     }
 
     /// Every entry's pane energy (RGB, the sum over the atlas of the indirect irradiance its
@@ -588,7 +665,7 @@ impl<R: Read + Seek> Archive<R> {
     /// archives before 1.1. A player weighs a cluster's members by it, so that the cluster gives
     /// the indirect energy its members would give unclustered (formats/prm.md §5.1).
     pub fn entry_energy(&self) -> Option<&[[f32; 3]]> {
-        self.entry_energy.as_deref()
+        self.optional.entry_energy.as_deref()
     }
 
     /// Clusters; cluster `i` owns pane `i`.
@@ -880,6 +957,21 @@ impl StoredSection {
         Ok(())
     }
 
+    /// A reader of the raw bytes after the section's fixed `N`-byte header, and the header,
+    /// read first: a section of fewer raw bytes is refused before anything is decompressed.
+    fn raw_with_header<const N: usize>(&self) -> Result<(RawReader<'_>, [u8; N])> {
+        if self.record.raw_size < N as u64 {
+            return Err(Error::inconsistent(format!(
+                "{} section has {} raw bytes, less than its {N}-byte header",
+                self.name, self.record.raw_size
+            )));
+        }
+        let mut raw = self.raw()?;
+        let mut head = [0u8; N];
+        raw.read_exact(&mut head)?;
+        Ok((raw, head))
+    }
+
     /// A reader of the raw bytes, producing at most `raw_size + 1` of them.
     fn raw(&self) -> Result<RawReader<'_>> {
         let inner: Box<dyn Read + '_> = if self.record.compression == compression::NONE {
@@ -1012,258 +1104,219 @@ impl RawReader<'_> {
     }
 }
 
-/// Reads the emitters section: its 16-byte header first, whose counts fix the raw size,
-/// checked before the rest is decompressed.
-fn read_emitters<R: Read + Seek>(
+/// Reads a section that begins with a fixed `N`-byte header: `decode_header` parses and checks
+/// the header's own fields, then `read` checks the raw size its counts imply (before anything
+/// else is decompressed) and decodes the rest, which must end where the section table says.
+fn read_headed_section<R: Read + Seek, const N: usize, H, T>(
     src: &mut R,
     rec: &SectionRecord,
-    strict: bool,
-    entry_count: u64,
-    resolution: u32,
-) -> Result<Vec<EmitterGroup>> {
-    use crate::emitters::{self, EMITTERS_HEADER_SIZE, EMITTER_GROUP_RECORD_SIZE};
+    decode_header: impl FnOnce(&[u8; N]) -> Result<H, String>,
+    read: impl FnOnce(&StoredSection, &mut RawReader<'_>, H) -> Result<T>,
+) -> Result<T> {
     let section = open_section(src, rec)?;
-    if section.record.raw_size < EMITTERS_HEADER_SIZE as u64 {
-        return Err(Error::inconsistent(format!(
-            "emitters section has {} raw bytes, less than its {EMITTERS_HEADER_SIZE}-byte header",
-            section.record.raw_size
-        )));
-    }
-    let mut raw = section.raw()?;
-    let mut head = [0u8; EMITTERS_HEADER_SIZE];
-    raw.read_exact(&mut head)?;
-    let (groups, entries, res) = emitters::decode_header(&head, strict).map_err(Error::inconsistent)?;
-    if u64::from(entries) != entry_count || res != resolution {
-        return Err(Error::inconsistent(format!(
-            "emitters section is for {entries} entries at resolution {res}, the archive has {entry_count} at {resolution}"
-        )));
-    }
-    let expected = emitters::raw_size_for(u64::from(groups), entry_count, resolution).unwrap_or(u64::MAX);
-    section.expect_raw_size(expected, || {
-        format!("{groups} groups, {entry_count} entries, resolution {resolution}")
-    })?;
-    let mut out = raw.records(groups as usize, EMITTER_GROUP_RECORD_SIZE, |b| {
-        emitters::decode_groups(b, strict)
-    })?;
-    let texels = resolution as usize * resolution as usize;
-    for g in &mut out {
-        g.entry_irradiance = raw.records(entry_count as usize, 12, emitters::decode_entry_irradiance)?;
-        g.direct = raw.records(texels, 4, emitters::decode_direct)?;
-        // Read either way: without the flag the words are zeros, and skipped.
-        let indirect = raw.records(texels, 4, emitters::decode_direct)?;
-        if let Some(slot) = &mut g.indirect {
-            *slot = indirect;
-        }
-    }
+    let (mut raw, head) = section.raw_with_header::<N>()?;
+    let header = decode_header(&head).map_err(Error::inconsistent)?;
+    let out = read(&section, &mut raw, header)?;
     raw.finish()?;
     Ok(out)
 }
 
-/// Reads the sky section: its 16-byte header first, whose resolution (the atlas's) fixes the
-/// raw size, checked before the rest is decompressed.
-fn read_sky<R: Read + Seek>(src: &mut R, rec: &SectionRecord, strict: bool, resolution: u32) -> Result<SkyTransfer> {
-    use crate::sky::{self, DIRECT_TEXEL_BYTES, INDIRECT_TEXEL_BYTES, SKY_HEADER_SIZE};
-    let section = open_section(src, rec)?;
-    if section.record.raw_size < SKY_HEADER_SIZE as u64 {
-        return Err(Error::inconsistent(format!(
-            "sky section has {} raw bytes, less than its {SKY_HEADER_SIZE}-byte header",
-            section.record.raw_size
-        )));
-    }
-    let mut raw = section.raw()?;
-    let mut head = [0u8; SKY_HEADER_SIZE];
-    raw.read_exact(&mut head)?;
-    let res = sky::decode_header(&head, strict).map_err(Error::inconsistent)?;
-    if res != resolution {
-        return Err(Error::inconsistent(format!(
-            "sky section is for resolution {res}, the archive's atlas is {resolution}"
-        )));
-    }
-    section.expect_raw_size(sky::raw_size_for(resolution).unwrap_or(u64::MAX), || {
-        format!("resolution {resolution}")
-    })?;
-    let texels = resolution as usize * resolution as usize;
-    let direct = raw.records(texels, DIRECT_TEXEL_BYTES, sky::decode_direct)?;
-    let indirect = raw.records(texels, INDIRECT_TEXEL_BYTES, sky::decode_indirect)?;
-    raw.finish()?;
-    Ok(SkyTransfer { direct, indirect })
+/// Reads the emitters section: its 16-byte header first, whose counts fix the raw size.
+fn read_emitters<R: Read + Seek>(src: &mut R, rec: &SectionRecord, fixed: &Fixed) -> Result<Vec<EmitterGroup>> {
+    use crate::emitters::{self, EMITTERS_HEADER_SIZE, EMITTER_GROUP_RECORD_SIZE};
+    let Fixed {
+        strict,
+        entry_count,
+        resolution,
+        ..
+    } = *fixed;
+    let header = |head: &[u8; EMITTERS_HEADER_SIZE]| emitters::decode_header(head, strict);
+    read_headed_section(src, rec, header, |section, raw, (groups, entries, res)| {
+        if u64::from(entries) != entry_count || res != resolution {
+            return Err(Error::inconsistent(format!(
+                "emitters section is for {entries} entries at resolution {res}, the archive has {entry_count} at {resolution}"
+            )));
+        }
+        let expected = emitters::raw_size_for(u64::from(groups), entry_count, resolution).unwrap_or(u64::MAX);
+        section.expect_raw_size(expected, || {
+            format!("{groups} groups, {entry_count} entries, resolution {resolution}")
+        })?;
+        let mut out = raw.records(groups as usize, EMITTER_GROUP_RECORD_SIZE, |b| {
+            emitters::decode_groups(b, strict)
+        })?;
+        let texels = resolution as usize * resolution as usize;
+        for g in &mut out {
+            g.entry_irradiance = raw.records(entry_count as usize, 12, emitters::decode_entry_irradiance)?;
+            g.direct = raw.records(texels, 4, emitters::decode_direct)?;
+            // Read either way: without the flag the words are zeros, and skipped.
+            let indirect = raw.records(texels, 4, emitters::decode_direct)?;
+            if let Some(slot) = &mut g.indirect {
+                *slot = indirect;
+            }
+        }
+        Ok(out)
+    })
 }
 
+/// Reads the sky section: its 16-byte header first, whose resolution (the atlas's) fixes the
+/// raw size.
+fn read_sky<R: Read + Seek>(src: &mut R, rec: &SectionRecord, fixed: &Fixed) -> Result<SkyTransfer> {
+    use crate::sky::{self, DIRECT_TEXEL_BYTES, INDIRECT_TEXEL_BYTES, SKY_HEADER_SIZE};
+    let Fixed { strict, resolution, .. } = *fixed;
+    let header = |head: &[u8; SKY_HEADER_SIZE]| sky::decode_header(head, strict);
+    read_headed_section(src, rec, header, |section, raw, res| {
+        if res != resolution {
+            return Err(Error::inconsistent(format!(
+                "sky section is for resolution {res}, the archive's atlas is {resolution}"
+            )));
+        }
+        section.expect_raw_size(sky::raw_size_for(resolution).unwrap_or(u64::MAX), || {
+            format!("resolution {resolution}")
+        })?;
+        let texels = resolution as usize * resolution as usize;
+        let direct = raw.records(texels, DIRECT_TEXEL_BYTES, sky::decode_direct)?;
+        let indirect = raw.records(texels, INDIRECT_TEXEL_BYTES, sky::decode_indirect)?;
+        Ok(SkyTransfer { direct, indirect })
+    })
+}
+
+/// Reads the atlas section: its 16-byte header first, whose resolution and triangle count fix
+/// the raw size.
 fn read_atlas<R: Read + Seek>(src: &mut R, rec: &SectionRecord, strict: bool) -> Result<AtlasSection> {
-    let section = open_section(src, rec)?;
-    if section.record.raw_size < ATLAS_HEADER_SIZE as u64 {
-        return Err(Error::inconsistent(format!(
-            "atlas section has {} raw bytes, less than its {ATLAS_HEADER_SIZE}-byte header",
-            section.record.raw_size
-        )));
-    }
-    let mut raw = section.raw()?;
-    let mut head = [0u8; ATLAS_HEADER_SIZE];
-    raw.read_exact(&mut head)?;
-    let (resolution, tile_size, triangles) = AtlasSection::decode_header(&head, strict).map_err(Error::inconsistent)?;
-    let expected = AtlasSection::raw_size_for(resolution, u64::from(triangles)).unwrap_or(u64::MAX);
-    section.expect_raw_size(expected, || {
-        format!("resolution {resolution} and {triangles} triangles")
+    let header = |head: &[u8; ATLAS_HEADER_SIZE]| AtlasSection::decode_header(head, strict);
+    let atlas = read_headed_section(src, rec, header, |section, raw, (resolution, tile_size, triangles)| {
+        let expected = AtlasSection::raw_size_for(resolution, u64::from(triangles)).unwrap_or(u64::MAX);
+        section.expect_raw_size(expected, || {
+            format!("resolution {resolution} and {triangles} triangles")
+        })?;
+        Ok(AtlasSection {
+            resolution,
+            tile_size,
+            triangle_uvs: raw.records(triangles as usize, 24, AtlasSection::decode_uvs)?,
+            coverage: raw.bytes(AtlasSection::coverage_len(resolution))?,
+        })
     })?;
-    let triangle_uvs = raw.records(triangles as usize, 24, AtlasSection::decode_uvs)?;
-    let coverage = raw.bytes(AtlasSection::coverage_len(resolution))?;
-    raw.finish()?;
-    let atlas = AtlasSection {
-        resolution,
-        tile_size,
-        triangle_uvs,
-        coverage,
-    };
     atlas.validate().map_err(Error::inconsistent)?;
     Ok(atlas)
 }
 
-/// Reads the probe rays section: its 32-byte header first, whose counts fix the raw size,
-/// checked before the rest is decompressed.
+/// Reads the probe rays section: its 32-byte header first, whose counts fix the raw size.
 fn read_probe_rays<R: Read + Seek>(
     src: &mut R,
     rec: &SectionRecord,
-    strict: bool,
+    fixed: &Fixed,
     probes: usize,
-    resolution: u32,
     groups: usize,
 ) -> Result<crate::ProbeRays> {
     use crate::probe_rays::{self, GATHER_POINT_SIZE, PROBE_RAYS_HEADER_SIZE};
-    let section = open_section(src, rec)?;
-    if section.record.raw_size < PROBE_RAYS_HEADER_SIZE as u64 {
-        return Err(Error::inconsistent(format!(
-            "probe_rays section has {} raw bytes, less than its {PROBE_RAYS_HEADER_SIZE}-byte header",
-            section.record.raw_size
-        )));
-    }
-    let mut raw = section.raw()?;
-    let mut head = [0u8; PROBE_RAYS_HEADER_SIZE];
-    raw.read_exact(&mut head)?;
-    let h = probe_rays::decode_header(&head, strict).map_err(Error::inconsistent)?;
-    if h.probes as usize != probes || h.resolution != resolution {
-        return Err(Error::inconsistent(format!(
-            "probe_rays section is for {} probes on a {}² atlas, the archive has {probes} on {resolution}²",
-            h.probes, h.resolution
-        )));
-    }
-    if u64::from(h.points) > u64::from(resolution) * u64::from(resolution) {
-        return Err(Error::inconsistent(format!(
-            "probe_rays section has {} gather points, more than the atlas's texels",
-            h.points
-        )));
-    }
-    let m = u64::from(h.rays_per_probe);
-    let expected = probe_rays::raw_size_for(probes as u64, m, u64::from(h.points)).unwrap_or(u64::MAX);
-    section.expect_raw_size(expected, || {
-        format!("{probes} probes × {m} rays, {} gather points", h.points)
+    let Fixed { strict, resolution, .. } = *fixed;
+    let header = |head: &[u8; PROBE_RAYS_HEADER_SIZE]| probe_rays::decode_header(head, strict);
+    let out = read_headed_section(src, rec, header, |section, raw, h| {
+        if h.probes as usize != probes || h.resolution != resolution {
+            return Err(Error::inconsistent(format!(
+                "probe_rays section is for {} probes on a {}² atlas, the archive has {probes} on {resolution}²",
+                h.probes, h.resolution
+            )));
+        }
+        if u64::from(h.points) > u64::from(resolution) * u64::from(resolution) {
+            return Err(Error::inconsistent(format!(
+                "probe_rays section has {} gather points, more than the atlas's texels",
+                h.points
+            )));
+        }
+        let m = u64::from(h.rays_per_probe);
+        let expected = probe_rays::raw_size_for(probes as u64, m, u64::from(h.points)).unwrap_or(u64::MAX);
+        section.expect_raw_size(expected, || {
+            format!("{probes} probes × {m} rays, {} gather points", h.points)
+        })?;
+        Ok(crate::ProbeRays {
+            rays_per_probe: h.rays_per_probe,
+            points: raw.records(h.points as usize, GATHER_POINT_SIZE, probe_rays::decode_points)?,
+            hits: raw.records(probes * m as usize, 4, probe_rays::decode_hits)?,
+        })
     })?;
-    let points = raw.records(h.points as usize, GATHER_POINT_SIZE, probe_rays::decode_points)?;
-    let hits = raw.records(probes * m as usize, 4, probe_rays::decode_hits)?;
-    raw.finish()?;
-    let out = crate::ProbeRays {
-        rays_per_probe: h.rays_per_probe,
-        points,
-        hits,
-    };
     probe_rays::validate(&out, probes, resolution, groups).map_err(Error::inconsistent)?;
     Ok(out)
 }
 
 /// Reads the near field section: its 32-byte header first, whose counts (each bounded by the
-/// atlas's texels and the rays per exit) fix the raw size, checked before the rest is
-/// decompressed.
+/// atlas's texels and the rays per exit) fix the raw size.
 fn read_near_field<R: Read + Seek>(
     src: &mut R,
     rec: &SectionRecord,
-    minor: u16,
-    strict: bool,
-    resolution: u32,
+    fixed: &Fixed,
     groups: usize,
 ) -> Result<crate::NearField> {
     use crate::near_field::{self, NEAR_EXIT_SIZE, NEAR_FIELD_HEADER_SIZE, NEAR_HIT_SIZE};
     use crate::probe_rays::{self, GATHER_POINT_SIZE};
-    let section = open_section(src, rec)?;
-    if section.record.raw_size < NEAR_FIELD_HEADER_SIZE as u64 {
-        return Err(Error::inconsistent(format!(
-            "near_field section has {} raw bytes, less than its {NEAR_FIELD_HEADER_SIZE}-byte header",
-            section.record.raw_size
-        )));
-    }
-    let mut raw = section.raw()?;
-    let mut head = [0u8; NEAR_FIELD_HEADER_SIZE];
-    raw.read_exact(&mut head)?;
-    let h = near_field::decode_header(&head, minor, strict).map_err(Error::inconsistent)?;
-    let texels = u64::from(resolution) * u64::from(resolution);
-    if h.resolution != resolution
-        || u64::from(h.points) > texels
-        || u64::from(h.exits) > texels
-        || u64::from(h.hits) > u64::from(h.exits) * u64::from(h.rays_per_exit)
-    {
-        return Err(Error::inconsistent(format!(
-            "near_field section is for a {}² atlas ({resolution}² here) with {} gather points, {} exits and {} hits of {} rays each",
-            h.resolution, h.points, h.exits, h.hits, h.rays_per_exit
-        )));
-    }
-    let expected =
-        near_field::raw_size_for(u64::from(h.exits), u64::from(h.points), u64::from(h.hits)).unwrap_or(u64::MAX);
-    section.expect_raw_size(expected, || {
-        format!("{} gather points, {} exits, {} hits", h.points, h.exits, h.hits)
+    let Fixed {
+        minor,
+        strict,
+        resolution,
+        ..
+    } = *fixed;
+    let header = |head: &[u8; NEAR_FIELD_HEADER_SIZE]| near_field::decode_header(head, minor, strict);
+    let out = read_headed_section(src, rec, header, |section, raw, h| {
+        let texels = u64::from(resolution) * u64::from(resolution);
+        if h.resolution != resolution
+            || u64::from(h.points) > texels
+            || u64::from(h.exits) > texels
+            || u64::from(h.hits) > u64::from(h.exits) * u64::from(h.rays_per_exit)
+        {
+            return Err(Error::inconsistent(format!(
+                "near_field section is for a {}² atlas ({resolution}² here) with {} gather points, {} exits and {} hits of {} rays each",
+                h.resolution, h.points, h.exits, h.hits, h.rays_per_exit
+            )));
+        }
+        let expected =
+            near_field::raw_size_for(u64::from(h.exits), u64::from(h.points), u64::from(h.hits)).unwrap_or(u64::MAX);
+        section.expect_raw_size(expected, || {
+            format!("{} gather points, {} exits, {} hits", h.points, h.exits, h.hits)
+        })?;
+        Ok(crate::NearField {
+            rays_per_exit: h.rays_per_exit,
+            disk: h.disk,
+            indirect_disk: h.indirect_disk,
+            complement: h.complement,
+            points: raw.records(h.points as usize, GATHER_POINT_SIZE, probe_rays::decode_points)?,
+            exits: raw.records(h.exits as usize, NEAR_EXIT_SIZE, near_field::decode_exits)?,
+            hits: raw.records(h.hits as usize, NEAR_HIT_SIZE, near_field::decode_hits)?,
+        })
     })?;
-    let points = raw.records(h.points as usize, GATHER_POINT_SIZE, probe_rays::decode_points)?;
-    let exits = raw.records(h.exits as usize, NEAR_EXIT_SIZE, near_field::decode_exits)?;
-    let hits = raw.records(h.hits as usize, NEAR_HIT_SIZE, near_field::decode_hits)?;
-    raw.finish()?;
-    let out = crate::NearField {
-        rays_per_exit: h.rays_per_exit,
-        disk: h.disk,
-        indirect_disk: h.indirect_disk,
-        complement: h.complement,
-        points,
-        exits,
-        hits,
-    };
     near_field::validate(&out, resolution, groups).map_err(Error::inconsistent)?;
     Ok(out)
 }
 
 /// Reads the probes section: its 48-byte header first, whose probe count and the archive's
-/// cluster count fix the raw size, checked before the rest is decompressed.
-fn read_probes<R: Read + Seek>(src: &mut R, rec: &SectionRecord, strict: bool, clusters: usize) -> Result<Probes> {
+/// cluster count fix the raw size.
+fn read_probes<R: Read + Seek>(src: &mut R, rec: &SectionRecord, fixed: &Fixed) -> Result<Probes> {
     use crate::probes::{self, PROBES_HEADER_SIZE, PROBE_RECORD_SIZE, PROBE_SKY_BYTES, PROBE_TRANSFER_BYTES};
-    let section = open_section(src, rec)?;
-    if section.record.raw_size < PROBES_HEADER_SIZE as u64 {
-        return Err(Error::inconsistent(format!(
-            "probes section has {} raw bytes, less than its {PROBES_HEADER_SIZE}-byte header",
-            section.record.raw_size
-        )));
-    }
-    let mut raw = section.raw()?;
-    let mut head = [0u8; PROBES_HEADER_SIZE];
-    raw.read_exact(&mut head)?;
-    let h = probes::decode_header(&head, strict).map_err(Error::inconsistent)?;
-    let (n, c) = (h.probes, h.clusters);
-    if c as usize != clusters {
-        return Err(Error::inconsistent(format!(
-            "probes section is for {c} clusters, the archive has {clusters}"
-        )));
-    }
-    let expected = probes::raw_size_for(u64::from(n), clusters as u64, h.sky).unwrap_or(u64::MAX);
-    section.expect_raw_size(expected, || format!("{n} probes, {clusters} clusters"))?;
-    let records = raw.records(n as usize, PROBE_RECORD_SIZE, probes::decode_records)?;
-    let transfer = raw.records(n as usize * clusters, PROBE_TRANSFER_BYTES, probes::decode_transfer)?;
-    let sky = if h.sky {
-        Some(raw.records(n as usize, PROBE_SKY_BYTES, probes::decode_sky)?)
-    } else {
-        None
-    };
-    raw.finish()?;
-    let out = Probes {
-        grid: h.grid,
-        sky,
-        cells: records.iter().map(|r| r.0).collect(),
-        positions: records.iter().map(|r| r.1).collect(),
-        transfer,
-    };
+    let Fixed { strict, clusters, .. } = *fixed;
+    let header = |head: &[u8; PROBES_HEADER_SIZE]| probes::decode_header(head, strict);
+    let out = read_headed_section(src, rec, header, |section, raw, h| {
+        let (n, c) = (h.probes, h.clusters);
+        if c as usize != clusters {
+            return Err(Error::inconsistent(format!(
+                "probes section is for {c} clusters, the archive has {clusters}"
+            )));
+        }
+        let expected = probes::raw_size_for(u64::from(n), clusters as u64, h.sky).unwrap_or(u64::MAX);
+        section.expect_raw_size(expected, || format!("{n} probes, {clusters} clusters"))?;
+        let records = raw.records(n as usize, PROBE_RECORD_SIZE, probes::decode_records)?;
+        let transfer = raw.records(n as usize * clusters, PROBE_TRANSFER_BYTES, probes::decode_transfer)?;
+        let sky = if h.sky {
+            Some(raw.records(n as usize, PROBE_SKY_BYTES, probes::decode_sky)?)
+        } else {
+            None
+        };
+        Ok(Probes {
+            grid: h.grid,
+            sky,
+            cells: records.iter().map(|r| r.0).collect(),
+            positions: records.iter().map(|r| r.1).collect(),
+            transfer,
+        })
+    })?;
     probes::validate(&out, clusters).map_err(Error::inconsistent)?;
     Ok(out)
 }

@@ -4,8 +4,8 @@ use std::ops::Range;
 
 use crate::error::Result;
 use crate::layout::{
-    limits, record_codec, Cursor, PutLe, ATLAS_HEADER_SIZE, CLUSTER_RECORD_SIZE, ENTRY_ENERGY_RECORD_SIZE,
-    ENTRY_RECORD_SIZE,
+    check_reserved, limits, record_codec, Cursor, PutLe, ATLAS_HEADER_SIZE, CLUSTER_RECORD_SIZE,
+    ENTRY_ENERGY_RECORD_SIZE, ENTRY_RECORD_SIZE,
 };
 
 /// The lightmap atlas shared by every pane.
@@ -150,15 +150,9 @@ impl AtlasSection {
     /// triangle limit, which fix the section's raw size; the tile size is
     /// checked by [`validate`](Self::validate).
     pub(crate) fn decode_header(head: &[u8], strict: bool) -> Result<(u32, u32, u32), String> {
-        let err = |e: crate::Error| e.to_string();
-        let mut c = Cursor::new(head, "atlas");
-        let resolution = c.u32().map_err(err)?;
-        let tile_size = c.u32().map_err(err)?;
-        let triangles = c.u32().map_err(err)?;
-        let reserved = c.u32().map_err(err)?;
-        if strict && reserved != 0 {
-            return Err("atlas reserved field is not zero".into());
-        }
+        let [resolution, tile_size, triangles, reserved] =
+            Cursor::new(head, "atlas").u32s().map_err(|e| e.to_string())?;
+        check_reserved("atlas", strict, reserved)?;
         if resolution == 0 || resolution > limits::MAX_RESOLUTION {
             return Err(format!(
                 "atlas resolution {resolution} outside 1..={}",

@@ -15,7 +15,7 @@
 //! its noise does not compress, so `f32` made the section larger than the panes (5.8 MiB
 //! against 5.5 on our courtyard's 256² atlas, 8.3 MiB on Sponza's 512²).
 
-use crate::layout::{Cursor, PutLe};
+use crate::layout::{check_flags, Cursor, PutLe};
 use crate::sh::SH_COEFFS;
 
 /// Size of the sky section's fixed header.
@@ -106,22 +106,13 @@ pub(crate) fn encode(sky: &SkyTransfer, resolution: u32) -> Vec<u8> {
 /// Parses the header: the resolution; checks the coefficient count and flags, and if `strict`
 /// the reserved field. The caller checks the resolution against the archive.
 pub(crate) fn decode_header(head: &[u8], strict: bool) -> Result<u32, String> {
-    let err = |e: crate::Error| e.to_string();
-    let mut c = Cursor::new(head, "sky");
-    let resolution = c.u32().map_err(err)?;
-    let coeffs = c.u32().map_err(err)?;
-    let flags = c.u32().map_err(err)?;
-    let reserved = c.u32().map_err(err)?;
+    let [resolution, coeffs, flags, reserved] = Cursor::new(head, "sky").u32s().map_err(|e| e.to_string())?;
     if coeffs != SH_COEFFS as u32 {
         return Err(format!(
             "sky section has {coeffs} coefficients per texel, this reader knows {SH_COEFFS}"
         ));
     }
-    if flags != 0 || (strict && reserved != 0) {
-        return Err(format!(
-            "sky section has unknown flags {flags:#x} or a non-zero reserved field"
-        ));
-    }
+    check_flags("sky", flags, 0, strict && reserved != 0)?;
     Ok(resolution)
 }
 

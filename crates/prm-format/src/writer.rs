@@ -1,6 +1,6 @@
 //! Streaming, atomic archive writer: panes are encoded and compressed tile by tile.
 //!
-//! Over 600 lines on purpose: the destination checks, the temporary-file discipline and the
+//! Over 600 lines on purpose: the destination rules, the temporary-file discipline and the
 //! section writers share one invariant (nothing but a complete archive ever appears at the
 //! destination, formats/prm.md §9), which is easiest to audit in one file.
 //!
@@ -16,8 +16,10 @@
 //!   a directory, device, FIFO or socket is refused with
 //!   [`Error::Destination`] naming the path and what it is, before anything
 //!   is written (renaming over `/dev/full` as root would otherwise replace
-//!   the device node). [`check_destination`] runs the same checks plus a
-//!   probe file, so a binary can fail before a long bake.
+//!   the device node). So is a non-empty file that does not begin as an
+//!   archive does. [`resolve_destination`] applies these rules and
+//!   [`probe_directory`] tries the temporary file's directory, so a binary
+//!   can fail before a long bake.
 //! * **Stale temporary files are swept.** The temporary file is
 //!   `.<name>.tmp-<pid>-<n>` beside the target. A process killed with
 //!   SIGKILL cannot remove its own, so creating a writer removes the files
@@ -111,8 +113,9 @@ fn destination_error(path: &Path, reason: impl Into<String>, source: Option<std:
     }
 }
 
-/// "a directory", "a character device", … for a file that is not regular.
-fn describe_file_type(t: fs::FileType) -> &'static str {
+/// "a directory", "a character device", … for a file that is not regular, as the writer's
+/// [`Error::Destination`] names it.
+pub fn describe_file_type(t: fs::FileType) -> &'static str {
     #[cfg(unix)]
     {
         use std::os::unix::fs::FileTypeExt;
@@ -142,9 +145,8 @@ fn describe_file_type(t: fs::FileType) -> &'static str {
 
 /// Follows symbolic links from `given` to the path the archive will really
 /// replace, and refuses a target that exists and is not a regular file. A
-/// target that does not exist is fine here (its directory is checked by the
-/// callers).
-fn resolve_destination(given: &Path) -> Result<PathBuf> {
+/// target that does not exist is fine here (the writer creates it).
+fn follow_links(given: &Path) -> Result<PathBuf> {
     let mut path = given.to_path_buf();
     let via = |p: &Path| {
         if p == given {
@@ -187,21 +189,6 @@ fn resolve_destination(given: &Path) -> Result<PathBuf> {
     ))
 }
 
-/// Whether `a` and `b` name the same file as destinations: symbolic links resolved as the
-/// writer resolves them, then the path made canonical (for a file still to be created, its
-/// directory's path, with the file name). Binaries use it to refuse an output that is one of
-/// their inputs (the scene, a part of a merge, the archive a report would replace).
-pub fn same_destination(a: impl AsRef<Path>, b: impl AsRef<Path>) -> bool {
-    let key = |p: &Path| -> Option<PathBuf> {
-        let p = resolve_destination(p).unwrap_or_else(|_| p.to_path_buf());
-        match fs::canonicalize(&p) {
-            Ok(c) => Some(c),
-            Err(_) => Some(fs::canonicalize(parent_dir(&p)).ok()?.join(p.file_name()?)),
-        }
-    };
-    matches!((key(a.as_ref()), key(b.as_ref())), (Some(x), Some(y)) if x == y)
-}
-
 /// Refuses an existing `dest` that holds something other than an archive: a bake must not
 /// replace its own scene, a report or any file that a mistyped `-o` names. An empty file (as
 /// `mktemp` leaves) and an archive, damaged or not, may be replaced.
@@ -225,6 +212,29 @@ fn refuse_foreign_file(dest: &Path) -> Result<()> {
         "it exists and is not a .prm archive; refusing to replace it (remove it, or name another file)",
         None,
     ))
+}
+
+/// The file that an archive written at `path` replaces, or the writer's refusal
+/// ([`Error::Destination`]) as [`ArchiveWriter::create`] would give it.
+///
+/// Symbolic links are followed as the writer follows them (module docs). Refused: a
+/// destination that exists and is not a regular file (directory, device, FIFO, socket), and a
+/// non-empty file that does not begin as an archive does (the scene, a report: anything a
+/// mistyped output path names). A destination that does not exist is accepted; its directory
+/// is not checked.
+pub fn resolve_destination(path: impl AsRef<Path>) -> Result<PathBuf> {
+    let dest = follow_links(path.as_ref())?;
+    refuse_foreign_file(&dest)?;
+    Ok(dest)
+}
+
+/// Creates, and removes at once, a file in `dir` named as the writer names its temporary files
+/// for destination `name`: whether the writer can create its temporary file there.
+pub fn probe_directory(dir: &Path, name: &OsStr) -> std::io::Result<()> {
+    let probe = temp_path_for(dir, name);
+    drop(OpenOptions::new().write(true).create_new(true).open(&probe)?);
+    let _ = fs::remove_file(&probe);
+    Ok(())
 }
 
 /// `.<name>.tmp-<pid>-<n>` in `dir`.
@@ -259,7 +269,7 @@ fn temp_file_pid(file: &str, name: &str) -> Option<u32> {
 /// when their process has died. Symbolic links in `dest` are resolved as the writer does.
 pub fn scratch_path(dest: impl AsRef<Path>) -> PathBuf {
     let dest = dest.as_ref();
-    let dest = resolve_destination(dest).unwrap_or_else(|_| dest.to_path_buf());
+    let dest = follow_links(dest).unwrap_or_else(|_| dest.to_path_buf());
     temp_path_for(&parent_dir(&dest), dest.file_name().unwrap_or(OsStr::new("archive")))
 }
 
@@ -309,7 +319,7 @@ fn remove_stale_temps(dir: &Path, name: &OsStr) -> usize {
 /// files while a writer is alive makes its `finish` fail.
 pub fn own_temp_files(path: impl AsRef<Path>) -> Vec<PathBuf> {
     let path = path.as_ref();
-    let dest = resolve_destination(path).unwrap_or_else(|_| path.to_path_buf());
+    let dest = follow_links(path).unwrap_or_else(|_| path.to_path_buf());
     let (Some(name), dir) = (dest.file_name().and_then(OsStr::to_str), parent_dir(&dest)) else {
         return Vec::new();
     };
@@ -324,95 +334,6 @@ pub fn own_temp_files(path: impl AsRef<Path>) -> Vec<PathBuf> {
         .collect();
     files.sort();
     files
-}
-
-/// Checks, before any work, that an archive can be written at `path`, and
-/// returns the path the writer will replace (symbolic links resolved).
-///
-/// Refuses ([`Error::Destination`]) a destination that exists and is not a
-/// regular file (directory, device, FIFO, socket), a non-empty file that
-/// does not begin as an archive does (the scene, a report: anything a
-/// mistyped `-o` may name), one whose nearest
-/// existing ancestor is not a directory, and one whose directory exists but
-/// where no file can be created (checked by creating and removing a probe
-/// file named like the writer's temporary files). Missing directories are
-/// accepted: a caller may create them before [`ArchiveWriter::create`].
-pub fn check_destination(path: impl AsRef<Path>) -> Result<PathBuf> {
-    let dest = resolve_destination(path.as_ref())?;
-    refuse_foreign_file(&dest)?;
-    let name = dest
-        .file_name()
-        .ok_or_else(|| destination_error(&dest, "it has no file name", None))?
-        .to_os_string();
-    check_directory(&parent_dir(&dest), &name).map_err(|(reason, source)| destination_error(&dest, reason, source))?;
-    Ok(dest)
-}
-
-/// Checks, before any work, that an output file other than an archive (an image, a report)
-/// can be written at `path`: what exists there must be a regular file (not a directory, a
-/// device or a FIFO), the nearest existing ancestor of its directory must be a directory, and
-/// where the directory exists a file must be creatable in it (a probe file, removed at once).
-/// Missing directories pass: the caller creates them. The error is the reason; the caller
-/// names the option and the path.
-pub fn check_output_path(path: impl AsRef<Path>) -> std::result::Result<(), String> {
-    let path = path.as_ref();
-    if let Ok(m) = fs::metadata(path) {
-        if !m.is_file() {
-            return Err(format!(
-                "it is {}, not a regular file",
-                describe_file_type(m.file_type())
-            ));
-        }
-    }
-    let name = path.file_name().unwrap_or(OsStr::new("output"));
-    check_directory(&parent_dir(path), name).map_err(|(reason, source)| match source {
-        Some(e) => format!("{reason}: {e}"),
-        None => reason,
-    })
-}
-
-/// The directory checks of [`check_output_path`] for a file `name` in `dir`: the reason and the OS
-/// error, if any.
-fn check_directory(dir: &Path, name: &OsStr) -> std::result::Result<(), (String, Option<std::io::Error>)> {
-    let mut ancestor = dir;
-    loop {
-        match fs::metadata(ancestor) {
-            Ok(m) if m.is_dir() => break,
-            Ok(m) => {
-                let reason = format!(
-                    "{} is {}, not a directory",
-                    ancestor.display(),
-                    describe_file_type(m.file_type())
-                );
-                return Err((reason, None));
-            }
-            // Not found, or below a file (ENOTDIR): the ancestor above says which.
-            Err(e)
-                if matches!(
-                    e.kind(),
-                    std::io::ErrorKind::NotFound | std::io::ErrorKind::NotADirectory
-                ) =>
-            {
-                match ancestor.parent() {
-                    Some(p) if !p.as_os_str().is_empty() => ancestor = p,
-                    _ => return Ok(()),
-                }
-            }
-            Err(e) => return Err((format!("cannot inspect {}", ancestor.display()), Some(e))),
-        }
-    }
-    if ancestor != dir {
-        return Ok(()); // the directory is still to be created
-    }
-    let probe = temp_path_for(dir, name);
-    match OpenOptions::new().write(true).create_new(true).open(&probe) {
-        Ok(f) => {
-            drop(f);
-            let _ = fs::remove_file(&probe);
-            Ok(())
-        }
-        Err(e) => Err((format!("cannot create a file in {}", dir.display()), Some(e))),
-    }
 }
 
 /// Writes a `.prm` archive.
@@ -514,7 +435,6 @@ impl ArchiveWriter {
             return Err(Error::InvalidInput(format!("{} has no file name", given.display())));
         }
         let dest = resolve_destination(&given)?;
-        refuse_foreign_file(&dest)?;
         let file_name = dest
             .file_name()
             .ok_or_else(|| destination_error(&dest, "it has no file name", None))?
@@ -840,8 +760,27 @@ impl ArchiveWriter {
             )));
         }
         self.poisoned = true;
+        self.write_panes_index()?;
+        let clusters = encode_clusters(&self.clusters);
+        self.write_section(kind::CLUSTERS, &clusters)?;
+        self.metadata.validate().map_err(Error::InvalidInput)?;
+        let json = serde_json::to_vec(&self.metadata).map_err(|e| Error::InvalidInput(format!("metadata: {e}")))?;
+        if json.len() as u64 > crate::limits::MAX_METADATA_BYTES {
+            return Err(Error::InvalidInput("metadata JSON exceeds 16 MiB".into()));
+        }
+        self.write_section(kind::METADATA, &json)?;
+        let minor = self.write_optional_sections()?;
+        for (k, data) in std::mem::take(&mut self.custom) {
+            self.write_section(k, &data)?;
+        }
+        let file_length = self.write_table_and_header(minor)?;
+        self.rename_into_place()?;
+        Ok(file_length)
+    }
 
-        // Panes section: header + tile index, then hash the whole section.
+    /// Writes the panes section's header and tile index into the space reserved for them and
+    /// records the section, hashed whole.
+    fn write_panes_index(&mut self) -> Result<()> {
         let panes_end = self.pos;
         let mut head = Vec::with_capacity(PANES_HEADER_SIZE + self.tiles.len() * TILE_RECORD_SIZE);
         head.put_u64(0); // index checksum, patched below
@@ -881,15 +820,12 @@ impl ArchiveWriter {
             checksum: hasher.digest(),
             reserved: 0,
         });
+        Ok(())
+    }
 
-        let clusters = encode_clusters(&self.clusters);
-        self.write_section(kind::CLUSTERS, &clusters)?;
-        self.metadata.validate().map_err(Error::InvalidInput)?;
-        let json = serde_json::to_vec(&self.metadata).map_err(|e| Error::InvalidInput(format!("metadata: {e}")))?;
-        if json.len() as u64 > crate::limits::MAX_METADATA_BYTES {
-            return Err(Error::InvalidInput("metadata JSON exceeds 16 MiB".into()));
-        }
-        self.write_section(kind::METADATA, &json)?;
+    /// Writes the optional sections that were set; returns the minor version they make the
+    /// archive.
+    fn write_optional_sections(&mut self) -> Result<u16> {
         let mut minor = match self.entry_energy.take() {
             Some(e) => {
                 self.write_section(kind::ENTRY_ENERGY, &encode_entry_energy(&e))?;
@@ -927,10 +863,12 @@ impl ArchiveWriter {
                 7
             };
         }
-        for (k, data) in std::mem::take(&mut self.custom) {
-            self.write_section(k, &data)?;
-        }
+        Ok(minor)
+    }
 
+    /// Writes the section table, then the header over its placeholder, and fsyncs the file;
+    /// returns the archive's size in bytes.
+    fn write_table_and_header(&mut self, minor: u16) -> Result<u64> {
         let mut table = Vec::with_capacity(self.records.len() * crate::layout::SECTION_RECORD_SIZE);
         for r in &self.records {
             r.encode_into(&mut table);
@@ -952,10 +890,16 @@ impl ArchiveWriter {
         file.write_all(&header.encode())?;
         file.flush()?;
         file.get_ref().sync_all()?;
+        Ok(file_length)
+    }
+
+    /// Closes the temporary file and renames it onto the destination, re-checked first, then
+    /// fsyncs the directory.
+    fn rename_into_place(&mut self) -> Result<()> {
         drop(self.temp.file.take());
         // The destination may have changed during the write: refuse it now
         // rather than rename over a directory, a device or a new symlink.
-        let now = resolve_destination(&self.given)?;
+        let now = follow_links(&self.given)?;
         if now != self.dest {
             return Err(destination_error(
                 &self.given,
@@ -971,7 +915,7 @@ impl ArchiveWriter {
         // The temp path no longer exists; make the guard's removal a no-op.
         self.temp.path = PathBuf::new();
         sync_parent_dir(&self.dest);
-        Ok(file_length)
+        Ok(())
     }
 
     fn check_usable(&self) -> Result<()> {
@@ -1026,14 +970,8 @@ impl ArchiveWriter {
 /// Best-effort fsync of the directory holding `path`, so the rename is durable.
 fn sync_parent_dir(path: &Path) {
     #[cfg(unix)]
-    {
-        let dir = match path.parent() {
-            Some(p) if !p.as_os_str().is_empty() => p,
-            _ => Path::new("."),
-        };
-        if let Ok(d) = File::open(dir) {
-            let _ = d.sync_all();
-        }
+    if let Ok(d) = File::open(parent_dir(path)) {
+        let _ = d.sync_all();
     }
     #[cfg(not(unix))]
     let _ = path;

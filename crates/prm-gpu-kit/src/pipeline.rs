@@ -1,6 +1,8 @@
 //! Pipelines, bind groups and buffers in one call each, the way every pass of PRM builds them:
 //! WGSL modules assembled from a shared prelude and the pass's file, compute pipelines with
-//! layouts derived from the shader, bind groups whose bindings are numbered in order.
+//! layouts derived from the shader, bind groups whose bindings are numbered in order; where a
+//! pass needs an explicit layout (dynamic offsets), its entries ([`storage_entry`],
+//! [`uniform_entry`]) and depth-only pipelines on it ([`depth_only`]).
 
 use wgpu::util::DeviceExt;
 
@@ -59,25 +61,31 @@ pub fn compute_group(
     bind_group(device, label, &pipeline.get_bind_group_layout(0), resources)
 }
 
-/// An uninitialised storage buffer of `size` bytes (at least 16: wgpu refuses empty bindings)
-/// that can also be written from the CPU, plus `extra` usages.
-pub fn storage(device: &wgpu::Device, label: &str, size: u64, extra: wgpu::BufferUsages) -> wgpu::Buffer {
+/// An uninitialised buffer of `size` bytes with `usage`.
+pub fn buffer(device: &wgpu::Device, label: &str, size: u64, usage: wgpu::BufferUsages) -> wgpu::Buffer {
     device.create_buffer(&wgpu::BufferDescriptor {
         label: Some(label),
-        size: size.max(16),
-        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | extra,
+        size,
+        usage,
         mapped_at_creation: false,
     })
 }
 
+/// An uninitialised storage buffer of `size` bytes (at least 16: wgpu refuses empty bindings)
+/// that can also be written from the CPU, plus `extra` usages.
+pub fn storage(device: &wgpu::Device, label: &str, size: u64, extra: wgpu::BufferUsages) -> wgpu::Buffer {
+    let usage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | extra;
+    buffer(device, label, size.max(16), usage)
+}
+
 /// A uniform buffer of `size` bytes written from the CPU.
 pub fn uniform(device: &wgpu::Device, label: &str, size: u64) -> wgpu::Buffer {
-    device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some(label),
+    buffer(
+        device,
+        label,
         size,
-        usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    })
+        wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+    )
 }
 
 /// A buffer holding `contents`, zero-padded to at least 16 bytes (so an empty array still binds).
@@ -89,6 +97,16 @@ pub fn buffer_init(device: &wgpu::Device, label: &str, contents: &[u8], usage: w
         contents: &padded,
         usage,
     })
+}
+
+/// A vertex buffer holding `vertices` (see [`buffer_init`]).
+pub fn vertex_buffer<T: bytemuck::Pod>(device: &wgpu::Device, label: &str, vertices: &[T]) -> wgpu::Buffer {
+    buffer_init(
+        device,
+        label,
+        bytemuck::cast_slice(vertices),
+        wgpu::BufferUsages::VERTEX,
+    )
 }
 
 /// A 2D texture (array when `layers > 1`) of one mip level and one sample.
@@ -131,6 +149,21 @@ pub fn layer_view(texture: &wgpu::Texture, layer: u32) -> wgpu::TextureView {
         array_layer_count: Some(1),
         ..Default::default()
     })
+}
+
+/// A 2D array texture of `size` (`[width, height, layers]`) in `format` that render passes draw
+/// into layer by layer and shaders read whole (depth maps): its view of every layer as an array
+/// ([`array_view`]) and one view per layer ([`layer_view`]).
+pub fn layered_target(
+    device: &wgpu::Device,
+    label: &str,
+    size: [u32; 3],
+    format: wgpu::TextureFormat,
+) -> (wgpu::TextureView, Vec<wgpu::TextureView>) {
+    let usage = wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING;
+    let texture = texture(device, label, size, format, usage);
+    let layers = (0..size[2]).map(|layer| layer_view(&texture, layer)).collect();
+    (array_view(&texture), layers)
 }
 
 /// Writes `data` (rows of `bytes_per_row` bytes) into layer `layer` of `texture`, whole.
@@ -246,6 +279,39 @@ pub fn render(device: &wgpu::Device, spec: &RenderSpec) -> wgpu::RenderPipeline 
     })
 }
 
+/// A depth-only pipeline (entry point `vs_main` of WGSL `parts`, see [`shader`]) that draws
+/// triangle lists of one vertex buffer of `stride`-byte vertices, each starting with its
+/// position (`vec3<f32>` at location 0), into a `format` depth attachment, with the bind group
+/// `layouts` in order (dynamic offsets the shader alone cannot imply).
+pub fn depth_only(
+    device: &wgpu::Device,
+    label: &str,
+    parts: &[&str],
+    layouts: &[&wgpu::BindGroupLayout],
+    stride: usize,
+    format: wgpu::TextureFormat,
+) -> wgpu::RenderPipeline {
+    let module = shader(device, label, parts);
+    let layouts: Vec<Option<&wgpu::BindGroupLayout>> = layouts.iter().copied().map(Some).collect();
+    let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: Some(label),
+        bind_group_layouts: &layouts,
+        immediate_size: 0,
+    });
+    render(
+        device,
+        &RenderSpec {
+            label,
+            module: &module,
+            layout: Some(&layout),
+            vertex_buffers: &[vertices(stride, &wgpu::vertex_attr_array![0 => Float32x3])],
+            depth: Some(format),
+            color: None,
+            topology: wgpu::PrimitiveTopology::TriangleList,
+        },
+    )
+}
+
 /// A vertex type and its attributes, locations in field order, for [`mesh`].
 pub trait Vertex: Sized {
     /// The attributes (`wgpu::vertex_attr_array!`).
@@ -285,22 +351,58 @@ pub fn vertices(stride: usize, attributes: &[wgpu::VertexAttribute]) -> Option<w
     })
 }
 
+/// A bind group layout entry of a storage buffer at `binding`, seen by `visibility`, read-only
+/// or not, of any size.
+pub fn storage_entry(binding: u32, visibility: wgpu::ShaderStages, read_only: bool) -> wgpu::BindGroupLayoutEntry {
+    buffer_entry(binding, visibility, wgpu::BufferBindingType::Storage { read_only })
+}
+
+/// A bind group layout entry of a uniform buffer at `binding`, seen by `visibility`, of any size.
+pub fn uniform_entry(binding: u32, visibility: wgpu::ShaderStages) -> wgpu::BindGroupLayoutEntry {
+    buffer_entry(binding, visibility, wgpu::BufferBindingType::Uniform)
+}
+
+fn buffer_entry(
+    binding: u32,
+    visibility: wgpu::ShaderStages,
+    ty: wgpu::BufferBindingType,
+) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility,
+        ty: wgpu::BindingType::Buffer {
+            ty,
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    }
+}
+
+/// A bind group layout of `entries`.
+pub fn bind_group_layout(
+    device: &wgpu::Device,
+    label: &str,
+    entries: &[wgpu::BindGroupLayoutEntry],
+) -> wgpu::BindGroupLayout {
+    device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some(label),
+        entries,
+    })
+}
+
 /// A bind group layout of one uniform buffer of `size` bytes read by the vertex stage at a
 /// dynamic offset (one matrix per view, selected per draw).
 pub fn dynamic_uniform_layout(device: &wgpu::Device, label: &str, size: u64) -> wgpu::BindGroupLayout {
-    device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-        label: Some(label),
-        entries: &[wgpu::BindGroupLayoutEntry {
-            binding: 0,
-            visibility: wgpu::ShaderStages::VERTEX,
-            ty: wgpu::BindingType::Buffer {
-                ty: wgpu::BufferBindingType::Uniform,
-                has_dynamic_offset: true,
-                min_binding_size: wgpu::BufferSize::new(size),
-            },
-            count: None,
-        }],
-    })
+    let entry = wgpu::BindGroupLayoutEntry {
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Uniform,
+            has_dynamic_offset: true,
+            min_binding_size: wgpu::BufferSize::new(size),
+        },
+        ..uniform_entry(0, wgpu::ShaderStages::VERTEX)
+    };
+    bind_group_layout(device, label, &[entry])
 }
 
 /// Begins a render pass onto `color` (cleared to transparent black) and/or `depth` (cleared to

@@ -27,13 +27,14 @@ pub fn map_read(device: &wgpu::Device, buffer: &wgpu::Buffer) -> Result<Vec<u8>,
     bytes.map_err(|_| GpuError::Map(wgpu::BufferAsyncError))
 }
 
-fn staging(device: &wgpu::Device, size: u64) -> wgpu::Buffer {
-    device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("readback"),
+/// A buffer of `size` bytes to copy into and map for reading.
+pub fn staging(device: &wgpu::Device, label: &str, size: u64) -> wgpu::Buffer {
+    crate::pipeline::buffer(
+        device,
+        label,
         size,
-        usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
-        mapped_at_creation: false,
-    })
+        wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+    )
 }
 
 /// The first `size` bytes of `src` (which must have `COPY_SRC`).
@@ -43,7 +44,7 @@ pub fn read_buffer(
     src: &wgpu::Buffer,
     size: u64,
 ) -> Result<Vec<u8>, GpuError> {
-    let buffer = staging(device, size);
+    let buffer = staging(device, "readback", size);
     let mut enc = device.create_command_encoder(&Default::default());
     enc.copy_buffer_to_buffer(src, 0, &buffer, 0, size);
     queue.submit([enc.finish()]);
@@ -61,7 +62,7 @@ pub fn read_texture(
     let texel = texture.format().block_copy_size(None).unwrap_or(4);
     let (w, h) = (texture.width(), texture.height());
     let (row, padded) = (w as usize * texel as usize, padded_row(w, texel));
-    let buffer = staging(device, padded_size(w, h, texel));
+    let buffer = staging(device, "readback", padded_size(w, h, texel));
     let mut enc = device.create_command_encoder(&Default::default());
     enc.copy_texture_to_buffer(
         wgpu::TexelCopyTextureInfo {

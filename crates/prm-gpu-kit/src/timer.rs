@@ -28,14 +28,7 @@ impl PassTimer {
             return None;
         }
         let size = names.len() as u64 * SLOT;
-        let buffer = |label, usage| {
-            device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some(label),
-                size,
-                usage,
-                mapped_at_creation: false,
-            })
-        };
+        let buffer = |label, usage| crate::pipeline::buffer(device, label, size, usage);
         Some(PassTimer {
             names: names.to_vec(),
             set: device.create_query_set(&wgpu::QuerySetDescriptor {

@@ -5,7 +5,7 @@
 //! every (filter, face resolution) variant, the wall time of the depth and gather passes, the
 //! evaluation rate, and the relative RMSE of the summed panes against the Pcf2x2/256 variant.
 
-use prm_gpu::{Backend, DepthFilter, GpuContext, PaneRenderParams};
+use prm_gpu::{Backend, DepthFilter, GpuContext, PaneInputs, PaneRenderParams};
 use prm_scene::{Atlas, AtlasParams, Sizing};
 use prm_trace::{Bvh, BvhParams, ClusterParams, Clustering, EntryParams, WalkParams};
 use std::time::Instant;
@@ -50,6 +50,12 @@ fn main() -> anyhow::Result<()> {
         clustering.len(),
         ctx.describe()
     );
+    let inputs = PaneInputs {
+        scene: &scene,
+        exits: &atlas.exits,
+        vpls: &vpls,
+        clustering: &clustering,
+    };
     let sum = |p: &prm_trace::Panes| p.combine(&vec![glam::Vec3::ONE; p.clusters]);
     let mut reference: Option<Vec<glam::Vec3>> = None;
     for (filter, face, batch) in [
@@ -66,7 +72,7 @@ fn main() -> anyhow::Result<()> {
             ..PaneRenderParams::DEFAULT
         };
         let t = Instant::now();
-        let (panes, stats) = prm_gpu::render_panes(&ctx, &scene, &atlas.exits, &vpls, &clustering, &params)?;
+        let (panes, stats) = prm_gpu::render_panes(&ctx, &inputs, &params)?;
         let total = t.elapsed().as_secs_f64();
         let s = sum(&panes);
         let rmse = match &reference {

@@ -11,7 +11,7 @@ pub mod smoke;
 pub mod vpl_depth;
 
 pub use pane::{
-    check_support, render_panes, render_panes_with, DepthFilter, PaneOutput, PaneRenderParams, PaneRenderStats,
-    ShadowBias,
+    check_support, render_panes, render_panes_with, DepthFilter, PaneInputs, PaneOutput, PaneRenderParams,
+    PaneRenderStats, ShadowBias,
 };
 pub use prm_gpu_kit::{instance, silence_wayland_probe, Backend, ContextOptions, ErrorScopes, GpuContext, GpuError};

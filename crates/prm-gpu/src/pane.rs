@@ -22,7 +22,7 @@
 //! no member energies are produced.
 
 use glam::Vec3;
-use prm_gpu_kit::pipeline;
+use prm_gpu_kit::{pipeline, readback};
 use prm_scene::{ExitPoint, Scene};
 use prm_trace::{Clustering, Panes, VplBound, VplSet};
 
@@ -132,6 +132,19 @@ pub struct PaneRenderStats {
     pub gather_seconds: f64,
 }
 
+/// What the panes are rendered from.
+#[derive(Clone, Copy)]
+pub struct PaneInputs<'a> {
+    /// The scene whose triangles occlude the VPLs.
+    pub scene: &'a Scene,
+    /// The points every pane is evaluated at.
+    pub exits: &'a [ExitPoint],
+    /// The VPLs, by entry point.
+    pub vpls: &'a VplSet,
+    /// The clusters of entry points, one pane each.
+    pub clustering: &'a Clustering,
+}
+
 /// What [`render_panes_with`] hands its sink.
 #[derive(Debug)]
 pub enum PaneOutput<'a> {
@@ -149,24 +162,23 @@ pub enum PaneOutput<'a> {
     Progress(&'a PaneRenderStats),
 }
 
-/// Renders every cluster's pane over `exits` and hands each to `sink` in cluster order, with
-/// its members' pane energies, and a [`PaneOutput::Progress`] after every batch; `sink`'s errors
-/// stop the work and are returned as they are.
+/// Renders every cluster's pane of `inputs` over its exit points with `params` on `ctx`, and
+/// hands each to `sink` in cluster order, with its members' pane energies, and a
+/// [`PaneOutput::Progress`] after every batch; `sink`'s errors stop the work and are returned as
+/// they are.
 ///
 /// The GPU renders one pane per *entry point* (members in cluster order) and the cluster's pane
 /// is their sum, so each member's energy is known; see the module docs for the cost, and
 /// [`PaneRenderParams::member_energy_bytes`] for when it renders per cluster instead.
 pub fn render_panes_with<E: From<GpuError>>(
     ctx: &GpuContext,
-    scene: &Scene,
-    exits: &[ExitPoint],
-    vpls: &VplSet,
-    clustering: &Clustering,
+    inputs: &PaneInputs,
     params: &PaneRenderParams,
     mut sink: impl FnMut(PaneOutput) -> Result<(), E>,
 ) -> Result<PaneRenderStats, E> {
+    let (exits, clustering) = (inputs.exits, inputs.clustering);
     if member_readback_bytes(clustering.of_entry.len(), exits.len()) > params.member_energy_bytes {
-        return render_cluster_panes(ctx, scene, exits, vpls, clustering, params, sink);
+        return render_cluster_panes(ctx, inputs, params, sink);
     }
     let order: Vec<u32> = clustering.members.iter().flatten().copied().collect();
     let mut of_entry = vec![0u32; clustering.of_entry.len()];
@@ -189,7 +201,11 @@ pub fn render_panes_with<E: From<GpuError>>(
     let mut current = 0usize;
     let mut pane = vec![Vec3::ZERO; exits.len()];
     let mut energy: Vec<Vec3> = Vec::new();
-    let stats = render_cluster_panes(ctx, scene, exits, vpls, &singletons, params, |out| match out {
+    let per_entry = PaneInputs {
+        clustering: &singletons,
+        ..*inputs
+    };
+    let stats = render_cluster_panes(ctx, &per_entry, params, |out| match out {
         PaneOutput::Pane {
             cluster: j, irradiance, ..
         } => {
@@ -236,20 +252,21 @@ pub fn member_readback_bytes(entries: usize, exits: usize) -> u64 {
     entries as u64 * exits as u64 * 16
 }
 
-/// The pane of every cluster of `clustering` in order (for [`render_panes_with`]: of every
-/// entry point), with no member energies.
+/// The pane of every cluster of `inputs.clustering` in order (for [`render_panes_with`]: of
+/// every entry point), with no member energies.
 fn render_cluster_panes<E: From<GpuError>>(
     ctx: &GpuContext,
-    scene: &Scene,
-    exits: &[ExitPoint],
-    vpls: &VplSet,
-    clustering: &Clustering,
+    inputs: &PaneInputs,
     params: &PaneRenderParams,
     mut sink: impl FnMut(PaneOutput) -> Result<(), E>,
 ) -> Result<PaneRenderStats, E> {
+    let PaneInputs {
+        scene,
+        exits,
+        vpls,
+        clustering,
+    } = *inputs;
     let device = &ctx.device;
-    let limits = device.limits();
-    let n_exit = exits.len().max(1) as u64;
     let clusters = clustering.len();
     let mut stats = PaneRenderStats::default();
     if clusters == 0 {
@@ -267,11 +284,45 @@ fn render_cluster_panes<E: From<GpuError>>(
         lift: 1e-5 * diagonal,
         _pad: 0.0,
     };
-    let (bound_kind, bound_value) = VplBoundKind::of(params.bound);
+    let (sorted, cluster_start) = sort_vpls_by_cluster(vpls, clustering);
+    let sizes = WorkSizes::new(&device.limits(), params, chunked.chunks(), exits.len());
+    let mut gpu = PaneResources::new(device, &chunked, exits, &frame, &sizes, clusters);
+    scope.pop("pane setup")?;
+    ctx.take_uncaptured()?;
 
-    // VPLs sorted by cluster (members ascending, VPLs of an entry in walk order).
+    let base = gather_params(
+        params,
+        &frame,
+        diagonal,
+        sizes.face_res,
+        exits.len(),
+        gpu.depth.faces_per_row,
+    );
+    let mut first = 0;
+    while first < clusters {
+        let last = (first + sizes.group_cap).min(clusters);
+        gpu.clear_panes(ctx);
+        for batch in sorted[cluster_start[first]..cluster_start[last]].chunks(sizes.batch_cap as usize) {
+            let gp = GatherParams {
+                vpl_count: batch.len() as u32,
+                first_cluster: first as u32,
+                ..base
+            };
+            gpu.render_batch(ctx, &chunked, batch, &gp, &mut stats)?;
+            sink(PaneOutput::Progress(&stats))?;
+        }
+        gpu.read_group(ctx, first..last, exits.len(), &mut sink)?;
+        stats.groups += 1;
+        first = last;
+    }
+    Ok(stats)
+}
+
+/// The VPLs of `vpls` sorted by cluster (members ascending, VPLs of an entry in walk order),
+/// and where each cluster's start in them (one more: the end).
+fn sort_vpls_by_cluster(vpls: &VplSet, clustering: &Clustering) -> (Vec<GpuVpl>, Vec<usize>) {
     let mut sorted = Vec::with_capacity(vpls.vpls.len());
-    let mut cluster_start = Vec::with_capacity(clusters + 1);
+    let mut cluster_start = Vec::with_capacity(clustering.len() + 1);
     for (c, members) in clustering.members.iter().enumerate() {
         cluster_start.push(sorted.len());
         for &k in members {
@@ -281,131 +332,197 @@ fn render_cluster_panes<E: From<GpuError>>(
         }
     }
     cluster_start.push(sorted.len());
+    (sorted, cluster_start)
+}
 
-    // Each face of a batch may need a draw for every other chunk; keep them in one buffer.
-    let list_cap = limits.max_buffer_size / (16 * FACES as u64 * chunked.chunks().div_ceil(2).max(1) as u64);
-    let batch_cap = params
-        .vpls_per_batch
-        .min(list_cap.min(u32::MAX as u64) as u32)
-        .clamp(1, (limits.max_texture_array_layers / FACES).max(1));
-    let group_bytes = params
-        .max_group_bytes
-        .min(limits.max_storage_buffer_binding_size)
-        .max(16 * n_exit);
-    let group_cap = (group_bytes / (16 * n_exit)).max(1) as usize;
-    let face_res = params.face_resolution.clamp(8, limits.max_texture_dimension_2d);
+/// How the work is cut on this device: VPLs per batch, clusters per group, face resolution.
+struct WorkSizes {
+    batch_cap: u32,
+    group_cap: usize,
+    face_res: u32,
+}
 
-    let scene_buffer = pipeline::buffer_init(
-        device,
-        "pane scene",
-        bytemuck::cast_slice(&chunked.vertices),
-        wgpu::BufferUsages::VERTEX,
-    );
-    let gpu_exits: Vec<GpuExit> = exits
-        .iter()
-        .map(|e| GpuExit {
-            position: e.position.to_array(),
-            _pad0: 0.0,
-            normal: e.normal.to_array(),
-            _pad1: 0.0,
-        })
-        .collect();
-    let exit_contents: &[u8] = if gpu_exits.is_empty() {
-        &[0u8; 32]
-    } else {
-        bytemuck::cast_slice(&gpu_exits)
-    };
-    let exit_buffer = pipeline::buffer_init(device, "pane exits", exit_contents, wgpu::BufferUsages::STORAGE);
-    // At least one VPL of at least 16 bytes: `storage`'s 16-byte floor changes nothing here.
-    let vpl_bytes = batch_cap as u64 * std::mem::size_of::<GpuVpl>() as u64;
-    let vpl_buffer = pipeline::storage(device, "pane vpl batch", vpl_bytes, wgpu::BufferUsages::empty());
-    let frame_buffer = pipeline::buffer_init(
-        device,
-        "pane depth frame",
-        bytemuck::bytes_of(&frame),
-        wgpu::BufferUsages::UNIFORM,
-    );
-    let params_buffer = pipeline::uniform(device, "pane gather params", std::mem::size_of::<GatherParams>() as u64);
-    // At least one cluster and one exit point: at least 16 bytes.
-    let pane_bytes = (group_cap.min(clusters) as u64) * 16 * n_exit;
-    let pane_buffer = pipeline::storage(device, "pane group", pane_bytes, wgpu::BufferUsages::COPY_SRC);
-    let readback = device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("pane readback"),
-        size: pane_bytes,
-        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    });
-    let mut depth = VplDepthPass::new(device, batch_cap, face_res, &vpl_buffer, &frame_buffer, &chunked);
-    let gather = PaneGatherPass::new(
-        device,
-        &vpl_buffer,
-        &exit_buffer,
-        &pane_buffer,
-        &params_buffer,
-        &depth.array_view,
-    );
-    scope.pop("pane setup")?;
-    ctx.take_uncaptured()?;
-
-    // A face spans 90°: one texel subtends about π/2 / resolution at its centre.
-    let texel = std::f32::consts::FRAC_PI_2 / face_res as f32;
-    let mut first = 0;
-    while first < clusters {
-        let last = (first + group_cap).min(clusters);
-        let (v0, v1) = (cluster_start[first], cluster_start[last]);
-        let mut encoder = device.create_command_encoder(&Default::default());
-        encoder.clear_buffer(&pane_buffer, 0, None);
-        ctx.queue.submit([encoder.finish()]);
-        let mut at = v0;
-        while at < v1 {
-            let end = (at + batch_cap as usize).min(v1);
-            let batch = &sorted[at..end];
-            let scope = ErrorScopes::push(device);
-            ctx.queue.write_buffer(&vpl_buffer, 0, bytemuck::cast_slice(batch));
-            let gp = GatherParams {
-                exit_count: exits.len() as u32,
-                vpl_count: batch.len() as u32,
-                first_cluster: first as u32,
-                bound_kind: bound_kind as u32,
-                bound_value,
-                near: frame.near,
-                far: frame.far,
-                lift: frame.lift,
-                receiver_offset: params.bias.receiver_offset * diagonal,
-                bias_constant: params.bias.constant * diagonal,
-                bias_slope: params.bias.slope,
-                texel_angle: texel,
-                depth_filter: params.filter as u32,
-                face_resolution: face_res,
-                faces_per_row: depth.faces_per_row,
-                _pad: 0,
-            };
-            ctx.queue.write_buffer(&params_buffer, 0, bytemuck::bytes_of(&gp));
-            // Two submissions so each pass can be timed (the device runs them in order anyway).
-            let mut counts = (0, 0);
-            stats.depth_seconds += submit_timed(ctx, |encoder| {
-                counts = depth.encode(encoder, &ctx.queue, &chunked, &scene_buffer, frame.lift, batch);
-            })?;
-            stats.triangles += counts.0;
-            stats.draws += counts.1;
-            stats.gather_seconds += submit_timed(ctx, |encoder| gather.encode(encoder, exits.len() as u32))?;
-            scope.pop("pane batch")?;
-            stats.vpls += batch.len() as u64;
-            stats.faces += (batch.len() as u32 * FACES) as u64;
-            stats.batches += 1;
-            stats.evaluations += batch.len() as u64 * exits.len() as u64;
-            sink(PaneOutput::Progress(&stats))?;
-            at = end;
+impl WorkSizes {
+    /// The sizes `params` ask for within `limits`, for a scene of `chunks` culling chunks and
+    /// `exits` exit points.
+    fn new(limits: &wgpu::Limits, params: &PaneRenderParams, chunks: usize, exits: usize) -> WorkSizes {
+        let n_exit = exits.max(1) as u64;
+        // Each face of a batch may need a draw for every other chunk; keep them in one buffer.
+        let list_cap = limits.max_buffer_size / (16 * FACES as u64 * chunks.div_ceil(2).max(1) as u64);
+        let batch_cap = params
+            .vpls_per_batch
+            .min(list_cap.min(u32::MAX as u64) as u32)
+            .clamp(1, (limits.max_texture_array_layers / FACES).max(1));
+        let group_bytes = params
+            .max_group_bytes
+            .min(limits.max_storage_buffer_binding_size)
+            .max(16 * n_exit);
+        WorkSizes {
+            batch_cap,
+            group_cap: (group_bytes / (16 * n_exit)).max(1) as usize,
+            face_res: params.face_resolution.clamp(8, limits.max_texture_dimension_2d),
         }
-        let bytes = ((last - first) as u64) * 16 * n_exit;
-        let mut encoder = device.create_command_encoder(&Default::default());
-        encoder.copy_buffer_to_buffer(&pane_buffer, 0, &readback, 0, bytes);
+    }
+}
+
+/// The gather parameters every batch shares (`vpl_count` and `first_cluster` 0).
+fn gather_params(
+    params: &PaneRenderParams,
+    frame: &DepthFrame,
+    diagonal: f32,
+    face_res: u32,
+    exit_count: usize,
+    faces_per_row: u32,
+) -> GatherParams {
+    let (bound_kind, bound_value) = VplBoundKind::of(params.bound);
+    GatherParams {
+        exit_count: exit_count as u32,
+        vpl_count: 0,
+        first_cluster: 0,
+        bound_kind: bound_kind as u32,
+        bound_value,
+        near: frame.near,
+        far: frame.far,
+        lift: frame.lift,
+        receiver_offset: params.bias.receiver_offset * diagonal,
+        bias_constant: params.bias.constant * diagonal,
+        bias_slope: params.bias.slope,
+        // A face spans 90°: one texel subtends about π/2 / resolution at its centre.
+        texel_angle: std::f32::consts::FRAC_PI_2 / face_res as f32,
+        depth_filter: params.filter as u32,
+        face_resolution: face_res,
+        faces_per_row,
+        _pad: 0,
+    }
+}
+
+/// The buffers and passes of a pane rendering run.
+struct PaneResources {
+    scene: wgpu::Buffer,
+    /// The exit points and the hemicube frame, which only the passes' bind groups read.
+    _bound: [wgpu::Buffer; 2],
+    vpls: wgpu::Buffer,
+    params: wgpu::Buffer,
+    panes: wgpu::Buffer,
+    readback: wgpu::Buffer,
+    depth: VplDepthPass,
+    gather: PaneGatherPass,
+    lift: f32,
+}
+
+impl PaneResources {
+    /// Uploads the scene and the exit points, and makes room for a batch of VPLs and a group
+    /// of at most `clusters` panes.
+    fn new(
+        device: &wgpu::Device,
+        chunked: &ChunkedScene,
+        exits: &[ExitPoint],
+        frame: &DepthFrame,
+        sizes: &WorkSizes,
+        clusters: usize,
+    ) -> PaneResources {
+        let scene = pipeline::vertex_buffer(device, "pane scene", &chunked.vertices);
+        let gpu_exits: Vec<GpuExit> = exits
+            .iter()
+            .map(|e| GpuExit {
+                position: e.position.to_array(),
+                _pad0: 0.0,
+                normal: e.normal.to_array(),
+                _pad1: 0.0,
+            })
+            .collect();
+        let exit_contents: &[u8] = if gpu_exits.is_empty() {
+            &[0u8; 32]
+        } else {
+            bytemuck::cast_slice(&gpu_exits)
+        };
+        let exit_buffer = pipeline::buffer_init(device, "pane exits", exit_contents, wgpu::BufferUsages::STORAGE);
+        // At least one VPL of at least 16 bytes: `storage`'s 16-byte floor changes nothing here.
+        let vpl_bytes = sizes.batch_cap as u64 * std::mem::size_of::<GpuVpl>() as u64;
+        let vpls = pipeline::storage(device, "pane vpl batch", vpl_bytes, wgpu::BufferUsages::empty());
+        let frame_buffer = pipeline::buffer_init(
+            device,
+            "pane depth frame",
+            bytemuck::bytes_of(frame),
+            wgpu::BufferUsages::UNIFORM,
+        );
+        let params = pipeline::uniform(device, "pane gather params", std::mem::size_of::<GatherParams>() as u64);
+        // At least one cluster and one exit point: at least 16 bytes.
+        let pane_bytes = (sizes.group_cap.min(clusters) as u64) * 16 * exits.len().max(1) as u64;
+        let panes = pipeline::storage(device, "pane group", pane_bytes, wgpu::BufferUsages::COPY_SRC);
+        let readback = readback::staging(device, "pane readback", pane_bytes);
+        let depth = VplDepthPass::new(device, sizes.batch_cap, sizes.face_res, &vpls, &frame_buffer, chunked);
+        let gather = PaneGatherPass::new(device, &vpls, &exit_buffer, &panes, &params, &depth.array_view);
+        PaneResources {
+            scene,
+            _bound: [exit_buffer, frame_buffer],
+            vpls,
+            params,
+            panes,
+            readback,
+            depth,
+            gather,
+            lift: frame.lift,
+        }
+    }
+
+    /// Zeroes the group's panes.
+    fn clear_panes(&self, ctx: &GpuContext) {
+        let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        encoder.clear_buffer(&self.panes, 0, None);
         ctx.queue.submit([encoder.finish()]);
-        let data = ctx.read_buffer(&readback)?;
+    }
+
+    /// Renders the depth faces of `batch` and adds its VPLs into the group's panes with `gp`,
+    /// counting the work in `stats`.
+    fn render_batch(
+        &mut self,
+        ctx: &GpuContext,
+        chunked: &ChunkedScene,
+        batch: &[GpuVpl],
+        gp: &GatherParams,
+        stats: &mut PaneRenderStats,
+    ) -> Result<(), GpuError> {
+        let scope = ErrorScopes::push(&ctx.device);
+        ctx.queue.write_buffer(&self.vpls, 0, bytemuck::cast_slice(batch));
+        ctx.queue.write_buffer(&self.params, 0, bytemuck::bytes_of(gp));
+        // Two submissions so each pass can be timed (the device runs them in order anyway).
+        let mut counts = (0, 0);
+        stats.depth_seconds += submit_timed(ctx, |encoder| {
+            counts = self
+                .depth
+                .encode(encoder, &ctx.queue, chunked, &self.scene, self.lift, batch);
+        })?;
+        stats.triangles += counts.0;
+        stats.draws += counts.1;
+        stats.gather_seconds += submit_timed(ctx, |encoder| self.gather.encode(encoder, gp.exit_count))?;
+        scope.pop("pane batch")?;
+        stats.vpls += batch.len() as u64;
+        stats.faces += (batch.len() as u32 * FACES) as u64;
+        stats.batches += 1;
+        stats.evaluations += batch.len() as u64 * gp.exit_count as u64;
+        Ok(())
+    }
+
+    /// Reads back the panes of `clusters` (the group) over `exit_count` exit points and hands
+    /// each to `sink`.
+    fn read_group<E: From<GpuError>>(
+        &self,
+        ctx: &GpuContext,
+        clusters: std::ops::Range<usize>,
+        exit_count: usize,
+        sink: &mut impl FnMut(PaneOutput) -> Result<(), E>,
+    ) -> Result<(), E> {
+        let n_exit = exit_count.max(1);
+        let bytes = clusters.len() as u64 * 16 * n_exit as u64;
+        let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        encoder.copy_buffer_to_buffer(&self.panes, 0, &self.readback, 0, bytes);
+        ctx.queue.submit([encoder.finish()]);
+        let data = ctx.read_buffer(&self.readback)?;
         let texels: &[[f32; 4]] = bytemuck::cast_slice(&data);
-        let mut pane = vec![Vec3::ZERO; exits.len()];
-        for c in first..last {
-            let base = (c - first) * n_exit as usize;
+        let mut pane = vec![Vec3::ZERO; exit_count];
+        for c in clusters.clone() {
+            let base = (c - clusters.start) * n_exit;
             for (i, p) in pane.iter_mut().enumerate() {
                 let t = texels[base + i];
                 *p = Vec3::new(t[0], t[1], t[2]);
@@ -416,10 +533,8 @@ fn render_cluster_panes<E: From<GpuError>>(
                 member_energy: &[],
             })?;
         }
-        stats.groups += 1;
-        first = last;
+        Ok(())
     }
-    Ok(stats)
 }
 
 /// Records into a fresh encoder with `record`, submits it and waits for the device: the seconds
@@ -456,17 +571,15 @@ pub fn check_support(ctx: &GpuContext) -> Result<(), GpuError> {
 /// Renders all panes into memory (cluster-major, like [`prm_trace::Panes`]).
 pub fn render_panes(
     ctx: &GpuContext,
-    scene: &Scene,
-    exits: &[ExitPoint],
-    vpls: &VplSet,
-    clustering: &Clustering,
+    inputs: &PaneInputs,
     params: &PaneRenderParams,
 ) -> Result<(Panes, PaneRenderStats), GpuError> {
+    let (exits, clustering) = (inputs.exits, inputs.clustering);
     let mut data = vec![Vec3::ZERO; clustering.len() * exits.len()];
     let mut entry_energy = vec![Vec3::ZERO; clustering.of_entry.len()];
     let mut energies_complete = true;
     let n = exits.len();
-    let stats = render_panes_with(ctx, scene, exits, vpls, clustering, params, |out| {
+    let stats = render_panes_with(ctx, inputs, params, |out| {
         if let PaneOutput::Pane {
             cluster,
             irradiance,

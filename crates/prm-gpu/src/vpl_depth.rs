@@ -12,7 +12,10 @@
 //! from a storage buffer through a chunk list instead cost more than the culling saved: lavapipe
 //! reads storage buffers lane by lane, while vertex buffers take its fast fetch path.)
 
+use std::mem::size_of;
+
 use bytemuck::{Pod, Zeroable};
+use prm_gpu_kit::pipeline;
 
 /// The hemicube faces and the VPL struct (`shaders/hemicube.wgsl`), shared by the depth and the
 /// gather pass.
@@ -231,151 +234,27 @@ impl VplDepthPass {
         frame: &wgpu::Buffer,
         scene: &ChunkedScene,
     ) -> VplDepthPass {
-        // Runs of visible chunks per face; at worst every other chunk starts a run.
-        let runs_capacity = (capacity as u64 * FACES as u64 * scene.chunks().div_ceil(2) as u64).max(1);
-        let indirect = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("vpl_depth draws"),
-            size: 16 * runs_capacity,
-            usage: wgpu::BufferUsages::INDIRECT | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-        let source = [HEMICUBE_WGSL, VPL_DEPTH_WGSL].join("\n");
-        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("vpl_depth"),
-            source: wgpu::ShaderSource::Wgsl(source.into()),
-        });
-        let frame_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("vpl_depth frame"),
-            entries: &[
-                wgpu::BindGroupLayoutEntry {
-                    binding: 0,
-                    visibility: wgpu::ShaderStages::VERTEX,
-                    ty: wgpu::BindingType::Buffer {
-                        ty: wgpu::BufferBindingType::Storage { read_only: true },
-                        has_dynamic_offset: false,
-                        min_binding_size: None,
-                    },
-                    count: None,
-                },
-                wgpu::BindGroupLayoutEntry {
-                    binding: 1,
-                    visibility: wgpu::ShaderStages::VERTEX,
-                    ty: wgpu::BindingType::Buffer {
-                        ty: wgpu::BufferBindingType::Uniform,
-                        has_dynamic_offset: false,
-                        min_binding_size: None,
-                    },
-                    count: None,
-                },
-            ],
-        });
-        let face_layout = prm_gpu_kit::pipeline::dynamic_uniform_layout(
+        let indirect = draw_buffer(device, capacity, scene);
+        let vertex = wgpu::ShaderStages::VERTEX;
+        let frame_layout = pipeline::bind_group_layout(
             device,
-            "vpl_depth face",
-            std::mem::size_of::<FaceSelect>() as u64,
-        );
-        let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("vpl_depth"),
-            bind_group_layouts: &[Some(&frame_layout), Some(&face_layout)],
-            immediate_size: 0,
-        });
-        // No raster bias: the gather pass biases distances in scene units.
-        let pipeline = prm_gpu_kit::pipeline::render(
-            device,
-            &prm_gpu_kit::pipeline::RenderSpec {
-                label: "vpl_depth",
-                module: &module,
-                layout: Some(&layout),
-                vertex_buffers: &[prm_gpu_kit::pipeline::vertices(
-                    16,
-                    &wgpu::vertex_attr_array![0 => Float32x3],
-                )],
-                depth: Some(DEPTH_FORMAT),
-                color: None,
-                topology: wgpu::PrimitiveTopology::TriangleList,
-            },
-        );
-        let frame_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("vpl_depth frame"),
-            layout: &frame_layout,
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: vpls.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: frame.as_entire_binding(),
-                },
+            "vpl_depth frame",
+            &[
+                pipeline::storage_entry(0, vertex, true),
+                pipeline::uniform_entry(1, vertex),
             ],
-        });
-        // Face selectors: layer j·5+f reads VPL j, face f; one aligned uniform slot per layer.
+        );
+        let face_layout = pipeline::dynamic_uniform_layout(device, "vpl_depth face", size_of::<FaceSelect>() as u64);
+        let pipeline = depth_pipeline(device, &frame_layout, &face_layout);
+        let frame_group = pipeline::bind_group(
+            device,
+            "vpl_depth frame",
+            &frame_layout,
+            &[vpls.as_entire_binding(), frame.as_entire_binding()],
+        );
         let layers = capacity * FACES;
-        let face_stride = device.limits().min_uniform_buffer_offset_alignment.max(16);
-        let mut faces = vec![0u8; (layers * face_stride) as usize];
-        for layer in 0..layers {
-            let sel = FaceSelect {
-                vpl: layer / FACES,
-                face: layer % FACES,
-                _pad0: 0,
-                _pad1: 0,
-            };
-            let at = (layer * face_stride) as usize;
-            faces[at..at + std::mem::size_of::<FaceSelect>()].copy_from_slice(bytemuck::bytes_of(&sel));
-        }
-        let face_buffer = wgpu::util::DeviceExt::create_buffer_init(
-            device,
-            &wgpu::util::BufferInitDescriptor {
-                label: Some("vpl_depth faces"),
-                contents: &faces,
-                usage: wgpu::BufferUsages::UNIFORM,
-            },
-        );
-        let face_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("vpl_depth face"),
-            layout: &face_layout,
-            entries: &[wgpu::BindGroupEntry {
-                binding: 0,
-                resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                    buffer: &face_buffer,
-                    offset: 0,
-                    size: wgpu::BufferSize::new(std::mem::size_of::<FaceSelect>() as u64),
-                }),
-            }],
-        });
-        let faces_per_row = (LAYER_SIDE.min(device.limits().max_texture_dimension_2d) / resolution).max(1);
-        let per_layer = faces_per_row * faces_per_row;
-        let side = faces_per_row * resolution;
-        let texture = device.create_texture(&wgpu::TextureDescriptor {
-            label: Some("vpl_depth layers"),
-            size: wgpu::Extent3d {
-                width: side,
-                height: side,
-                depth_or_array_layers: layers.div_ceil(per_layer),
-            },
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format: DEPTH_FORMAT,
-            usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
-            view_formats: &[],
-        });
-        let layer_views = (0..layers.div_ceil(per_layer))
-            .map(|layer| {
-                texture.create_view(&wgpu::TextureViewDescriptor {
-                    label: Some("vpl_depth layer"),
-                    dimension: Some(wgpu::TextureViewDimension::D2),
-                    base_array_layer: layer,
-                    array_layer_count: Some(1),
-                    ..Default::default()
-                })
-            })
-            .collect();
-        let array_view = texture.create_view(&wgpu::TextureViewDescriptor {
-            label: Some("vpl_depth array"),
-            dimension: Some(wgpu::TextureViewDimension::D2Array),
-            ..Default::default()
-        });
+        let (face_group, face_stride) = face_selectors(device, &face_layout, layers);
+        let tiles = DepthTiles::new(device, layers, resolution);
         VplDepthPass {
             pipeline,
             indirect,
@@ -385,10 +264,10 @@ impl VplDepthPass {
             frame_group,
             face_group,
             face_stride,
-            layer_views,
-            array_view,
+            layer_views: tiles.layer_views,
+            array_view: tiles.array_view,
             resolution,
-            faces_per_row,
+            faces_per_row: tiles.faces_per_row,
         }
     }
 
@@ -446,8 +325,7 @@ impl VplDepthPass {
             .enumerate()
             .take(faces.div_ceil(per_layer) as usize)
         {
-            let mut pass =
-                prm_gpu_kit::pipeline::begin_render_pass(encoder, "vpl_depth", None, Some((view, true)), None);
+            let mut pass = pipeline::begin_render_pass(encoder, "vpl_depth", None, Some((view, true)), None);
             pass.set_pipeline(&self.pipeline);
             pass.set_bind_group(0, &self.frame_group, &[]);
             pass.set_vertex_buffer(0, vertices.slice(..));
@@ -465,6 +343,85 @@ impl VplDepthPass {
             }
         }
         (triangles, self.draws.len() as u64)
+    }
+}
+
+/// The indirect draws of a batch of `capacity` VPLs: runs of visible chunks per face, at worst
+/// every other chunk starting a run.
+fn draw_buffer(device: &wgpu::Device, capacity: u32, scene: &ChunkedScene) -> wgpu::Buffer {
+    let runs_capacity = (capacity as u64 * FACES as u64 * scene.chunks().div_ceil(2) as u64).max(1);
+    let usage = wgpu::BufferUsages::INDIRECT | wgpu::BufferUsages::COPY_DST;
+    pipeline::buffer(device, "vpl_depth draws", 16 * runs_capacity, usage)
+}
+
+/// The depth-only pipeline over the scene's vertex buffer, with the frame (group 0) and the
+/// face selector (group 1, dynamic offset) bound. No raster bias: the gather pass biases
+/// distances in scene units.
+fn depth_pipeline(
+    device: &wgpu::Device,
+    frame_layout: &wgpu::BindGroupLayout,
+    face_layout: &wgpu::BindGroupLayout,
+) -> wgpu::RenderPipeline {
+    pipeline::depth_only(
+        device,
+        "vpl_depth",
+        &[HEMICUBE_WGSL, VPL_DEPTH_WGSL],
+        &[frame_layout, face_layout],
+        16,
+        DEPTH_FORMAT,
+    )
+}
+
+/// The face selectors of `layers` depth faces, one aligned uniform slot each (face `j·5 + f`
+/// reads VPL `j`, face `f`), bound at a dynamic offset; and the slots' stride.
+fn face_selectors(device: &wgpu::Device, layout: &wgpu::BindGroupLayout, layers: u32) -> (wgpu::BindGroup, u32) {
+    let face_stride = device.limits().min_uniform_buffer_offset_alignment.max(16);
+    let mut faces = vec![0u8; (layers * face_stride) as usize];
+    for layer in 0..layers {
+        let sel = FaceSelect {
+            vpl: layer / FACES,
+            face: layer % FACES,
+            _pad0: 0,
+            _pad1: 0,
+        };
+        let at = (layer * face_stride) as usize;
+        faces[at..at + size_of::<FaceSelect>()].copy_from_slice(bytemuck::bytes_of(&sel));
+    }
+    let face_buffer = pipeline::buffer_init(device, "vpl_depth faces", &faces, wgpu::BufferUsages::UNIFORM);
+    let resource = wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+        buffer: &face_buffer,
+        offset: 0,
+        size: wgpu::BufferSize::new(size_of::<FaceSelect>() as u64),
+    });
+    let group = pipeline::bind_group(device, "vpl_depth face", layout, &[resource]);
+    (group, face_stride)
+}
+
+/// The depth texture array the faces are tiled into.
+struct DepthTiles {
+    /// One view per layer, to render into.
+    layer_views: Vec<wgpu::TextureView>,
+    /// All layers, for sampling.
+    array_view: wgpu::TextureView,
+    /// Faces on a row of a layer.
+    faces_per_row: u32,
+}
+
+impl DepthTiles {
+    /// Layers of [`LAYER_SIDE`]² texels (or the device's largest side) for `faces` faces of
+    /// `resolution`² texels.
+    fn new(device: &wgpu::Device, faces: u32, resolution: u32) -> DepthTiles {
+        let faces_per_row = (LAYER_SIDE.min(device.limits().max_texture_dimension_2d) / resolution).max(1);
+        let per_layer = faces_per_row * faces_per_row;
+        let side = faces_per_row * resolution;
+        let layers = faces.div_ceil(per_layer);
+        let (array_view, layer_views) =
+            pipeline::layered_target(device, "vpl_depth layers", [side, side, layers], DEPTH_FORMAT);
+        DepthTiles {
+            layer_views,
+            array_view,
+            faces_per_row,
+        }
     }
 }
 

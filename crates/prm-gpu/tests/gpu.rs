@@ -65,7 +65,7 @@ fn missing_adapter_error_names_the_fix() {
 
 mod panes {
     use super::{relative_rmse, trace_scene, vulkan};
-    use prm_gpu::PaneRenderParams;
+    use prm_gpu::{PaneInputs, PaneRenderParams};
     use prm_trace::{ClusterParams, Clustering, EntryParams, PaneParams, WalkParams};
     use std::path::Path;
 
@@ -81,14 +81,19 @@ mod panes {
         let (atlas, bvh, entries, vpls) = trace_scene(&scene, 64, EntryParams { count: 256, seed: 7 }, walks);
         let clustering =
             Clustering::kmeans(&entries, scene.bounds().diagonal(), &ClusterParams::with_clusters(16)).unwrap();
+        let inputs = PaneInputs {
+            scene: &scene,
+            exits: &atlas.exits,
+            vpls: &vpls,
+            clustering: &clustering,
+        };
         let cpu = prm_trace::evaluate_panes(&bvh, &vpls, &clustering, &atlas.exits, &PaneParams::DEFAULT).unwrap();
         let params = PaneRenderParams {
             face_resolution: 256,
             vpls_per_batch: 128,
             ..PaneRenderParams::DEFAULT
         };
-        let (gpu, stats) =
-            prm_gpu::render_panes(&ctx, &scene, &atlas.exits, &vpls, &clustering, &params).expect("GPU panes");
+        let (gpu, stats) = prm_gpu::render_panes(&ctx, &inputs, &params).expect("GPU panes");
         assert_eq!(stats.vpls as usize, vpls.vpls.len());
         assert!(stats.batches > 1, "several batches exercised");
         let all = relative_rmse(&gpu.data, &cpu.data);
@@ -156,8 +161,7 @@ mod panes {
             member_energy_bytes: 0,
             ..params
         };
-        let (per_cluster, _) =
-            prm_gpu::render_panes(&ctx, &scene, &atlas.exits, &vpls, &clustering, &direct).expect("GPU panes");
+        let (per_cluster, _) = prm_gpu::render_panes(&ctx, &inputs, &direct).expect("GPU panes");
         assert!(per_cluster.entry_energy.is_empty());
         let same = relative_rmse(&per_cluster.data, &gpu.data);
         assert!(
@@ -172,7 +176,7 @@ mod panes {
 mod furnace {
     use super::{relative_rmse, trace_scene, vulkan};
     use glam::Vec3;
-    use prm_gpu::PaneRenderParams;
+    use prm_gpu::{PaneInputs, PaneRenderParams};
     use prm_scene::ExitPoint;
     use prm_trace::{ClusterParams, Clustering, EntryParams, PaneParams, WalkParams};
 
@@ -284,8 +288,13 @@ mod furnace {
             ),
         ] {
             let t = std::time::Instant::now();
-            let (gpu, render) =
-                prm_gpu::render_panes(&ctx, &scene, exits, &walks, &clustering, &params).expect("GPU panes");
+            let inputs = PaneInputs {
+                scene: &scene,
+                exits,
+                vpls: &walks,
+                clustering: &clustering,
+            };
+            let (gpu, render) = prm_gpu::render_panes(&ctx, &inputs, &params).expect("GPU panes");
             let gpu_s = t.elapsed().as_secs_f64();
             assert_eq!(render.vpls as usize, walks.vpls.len());
             assert!(gpu.data.iter().all(|v| v.is_finite()));

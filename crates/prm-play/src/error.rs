@@ -66,6 +66,9 @@ pub enum PlayError {
     /// The run time could not load the archive or run a frame.
     #[error(transparent)]
     Runtime(prm_runtime::RuntimeError),
+    /// The CPU player could not read what it needs of the archive or build its model.
+    #[error("CPU player: {0}")]
+    Cpu(String),
     /// Window mode failed (no display, no surface).
     #[error("window mode: {0}")]
     Window(String),

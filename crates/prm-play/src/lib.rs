@@ -17,6 +17,7 @@ pub mod shade;
 pub mod sphere;
 
 pub mod animation;
+pub mod cpu;
 pub mod export;
 pub mod output;
 pub mod present;

@@ -126,14 +126,21 @@ struct Args {
     #[arg(long, default_value_t = 0.25, value_parser = non_negative, allow_negative_numbers = true)]
     fade_band: f32,
     /// Write static lightmaps for the first frame's lights into this directory and exit (no
-    /// window): indirect.exr and irradiance.exr (direct + indirect, W/m² per lightmap texel) and
-    /// scene.gltf + scene.bin with the lightmap UVs as TEXCOORD_1, for engines that take only
+    /// window): indirect.exr and irradiance.exr (direct + indirect, W/m² per lightmap texel), the
+    /// same as indirect.ktx2 and irradiance.ktx2 (RGB9E5, Zstandard; Bevy loads them directly),
+    /// and scene.gltf + scene.bin with the lightmap UVs as TEXCOORD_1, for engines that take only
     /// baked lightmaps.
     #[arg(long, value_name = "DIR", conflicts_with_all = ["screenshot", "timings", "frames", "out", "probe_sphere"])]
     export: Option<PathBuf>,
     /// Exposure of the tone-mapped PNG (multiplies radiance before clamping and sRGB).
     #[arg(long, default_value_t = 1.0, value_parser = non_negative, allow_negative_numbers = true)]
     exposure: f32,
+    /// Where headless frames are rendered: `vulkan` (a GPU, or Mesa's lavapipe), `cpu`
+    /// (ray-traced on the CPU, no GPU driver needed: punctual lights only, no sky, emitters,
+    /// probes, export or GPU timings), or `auto`: Vulkan when an adapter exists, else the CPU,
+    /// with a note.
+    #[arg(long, value_name = "auto|vulkan|cpu", default_value = "auto", value_parser = ["auto", "vulkan", "cpu"])]
+    backend: String,
 }
 
 /// A finite number >= 0, for `--exposure` and `--fade-band`.
@@ -255,7 +262,9 @@ fn run() -> Result<()> {
         })
         .with_context(|| format!("playing {} in a window", args.archive.display()));
     }
-    let ctx = prm_play::open_vulkan()?;
+    let Some(ctx) = open_gpu(&args.backend)? else {
+        return play_cpu(&args, &play, &scene, &mut archive);
+    };
     eprintln!("GPU: {}", ctx.describe());
     let opts = PlayOptions {
         width,
@@ -300,6 +309,97 @@ fn run() -> Result<()> {
     Ok(())
 }
 
+/// The Vulkan device headless frames are rendered on, or `None` for the CPU player: with
+/// `--backend cpu`, or with `auto` when no Vulkan adapter exists (said in a note).
+fn open_gpu(backend: &str) -> Result<Option<prm_gpu_kit::GpuContext>> {
+    if backend == "cpu" {
+        return Ok(None);
+    }
+    match prm_play::open_vulkan() {
+        Ok(ctx) => Ok(Some(ctx)),
+        Err(e @ prm_gpu_kit::GpuError::NoAdapter { .. }) if backend == "auto" => {
+            eprintln!("note: {e}\nnote: rendering on the CPU instead (--backend cpu: punctual lights only)");
+            Ok(None)
+        }
+        Err(e) => Err(e.into()),
+    }
+}
+
+/// Refuses what the CPU player does not play, before any frame.
+fn check_cpu_options(args: &Args, play: &Play) -> Result<()> {
+    let unsupported = [
+        (args.export.is_some(), "--export"),
+        (args.timings.is_some(), "--timings"),
+        (args.probe_sphere, "--probe-sphere"),
+        (play.sky.is_some(), "--sky"),
+        (!args.emitters.is_empty(), "--emitter"),
+        (args.near_tail == "off", "--near-tail off"),
+        (
+            play.animation.as_ref().is_some_and(|a| !a.emitters.is_empty()),
+            "an animation of emitter scales",
+        ),
+    ];
+    if let Some((_, what)) = unsupported.iter().find(|(given, _)| *given) {
+        refuse!("{what} needs the GPU player, and the CPU player renders these frames (no Vulkan adapter, or --backend cpu)");
+    }
+    Ok(())
+}
+
+/// Plays the frames on the CPU ([`prm_play::cpu`]) and writes them as the GPU player does.
+fn play_cpu(args: &Args, play: &Play, scene: &prm_scene::Scene, archive: &mut prm_play::FileArchive) -> Result<()> {
+    check_cpu_options(args, play)?;
+    if !archive.emitters().is_empty() || archive.sky().is_some() {
+        eprintln!("note: the CPU player plays punctual lights only: this archive's emitters and sky stay dark");
+    }
+    let options = prm_play::cpu::CpuOptions {
+        top_k: play.top_k,
+        residual_groups: args.residual_groups,
+        fade_band: args.fade_band,
+        near_field: args.near_field == "gather",
+        near_bounces: args.near_bounces,
+    };
+    let started = std::time::Instant::now();
+    let model = prm_play::cpu::CpuArchive::load(archive, scene, &options)
+        .with_context(|| format!("playing {} on the CPU", args.archive.display()))?;
+    let player = prm_play::cpu::CpuPlayer::new(scene, &model, options)?;
+    eprintln!(
+        "CPU: {} threads, loaded in {:.2} s",
+        rayon::current_num_threads(),
+        started.elapsed().as_secs_f64()
+    );
+    std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
+    let frame_count = args.frames.unwrap_or(1);
+    for i in 0..frame_count {
+        let (camera, lights) = frame_view(play, i);
+        let start = std::time::Instant::now();
+        let input = FrameInput {
+            camera,
+            lights: &lights,
+            mode: args.mode,
+        };
+        let image = player.render(&input, args.size.0, args.size.1);
+        write_frame(args, i, i + 1 == frame_count, &image)?;
+        eprintln!("frame {i}: {:.2} ms (CPU)", start.elapsed().as_secs_f64() * 1e3);
+    }
+    Ok(())
+}
+
+/// Frame `i`'s camera and lights: the animation's where it drives them, else the fixed ones.
+fn frame_view(play: &Play, i: u32) -> (prm_scene::Camera, Vec<prm_scene::Light>) {
+    match play.animation.as_ref() {
+        Some(a) => {
+            let t = a.time(i);
+            let lights = if a.lights.is_empty() {
+                play.lights.clone()
+            } else {
+                a.lights_at(t)
+            };
+            (a.camera_at(t).unwrap_or(play.camera), lights)
+        }
+        None => (play.camera, play.lights.clone()),
+    }
+}
+
 /// What the frames play, from the arguments and the scene: the camera and lights when the
 /// animation does not drive them, K, the animation, the emitter scales and the sky.
 struct Play {
@@ -320,6 +420,9 @@ fn refused(message: String) -> anyhow::Error {
 fn check_arguments(args: &Args) -> Result<()> {
     if args.timings.is_some() && !args.headless {
         refuse!("--timings needs --headless: a window records no timings");
+    }
+    if args.backend == "cpu" && !args.headless && args.export.is_none() {
+        refuse!("--backend cpu renders headless frames only: add --headless");
     }
     if let Some(p) = args
         .screenshot
@@ -428,18 +531,7 @@ fn play_headless(
     let frame_count = args.frames.unwrap_or(1);
     let animation = play.animation.as_ref();
     for i in 0..frame_count {
-        let (camera, lights) = match animation {
-            Some(a) => {
-                let t = a.time(i);
-                let lights = if a.lights.is_empty() {
-                    play.lights.clone()
-                } else {
-                    a.lights_at(t)
-                };
-                (a.camera_at(t).unwrap_or(play.camera), lights)
-            }
-            None => (play.camera, play.lights.clone()),
-        };
+        let (camera, lights) = frame_view(play, i);
         if let Some(a) = animation.filter(|a| !a.emitters.is_empty()) {
             let scales = a
                 .emitter_scales_at(emitter_names, &play.emitter_scales, a.time(i))
@@ -547,14 +639,14 @@ fn write_timings(
 /// scene), is not a regular file, or lies below a file; a missing directory is created when
 /// writing.
 fn check_output(flag: &str, path: &Path, inputs: &[&Path]) -> Result<()> {
-    if let Some(input) = inputs.iter().find(|i| prm_format::same_destination(i, path)) {
+    if let Some(input) = inputs.iter().find(|i| prm_scene::same_destination(i, path)) {
         refuse!(
             "{flag} {}: it is {}, which the player reads; name another file",
             path.display(),
             input.display()
         );
     }
-    prm_format::check_output_path(path).map_err(|why| refused(format!("{flag} {}: {why}", path.display())))
+    prm_scene::check_output_path(path).map_err(|why| refused(format!("{flag} {}: {why}", path.display())))
 }
 
 /// The process's resident memory after a frame (`VmRSS` in `/proc/self/status`; Linux only),
@@ -602,7 +694,7 @@ mod tests {
     }
 
     /// Every value refused before any work exits 2 with clap's message naming the option;
-    /// among them those that used to fail only once the GPU had started.
+    /// among them values that the GPU would otherwise meet only after it had started.
     #[test]
     fn bad_values_are_refused_up_front_with_status_2() {
         for args in [

@@ -20,9 +20,10 @@ pub const CAMERA_WGSL: &str = include_str!("../../../shaders/play/camera.wgsl");
 
 /// The shade pass source: the run time's shared structs and direct light, the camera, then the
 /// pass.
-pub fn source() -> [&'static str; 4] {
+pub fn source() -> [&'static str; 5] {
     [
         prm_runtime::SHARED_WGSL,
+        prm_runtime::LIGHT_BINDINGS_WGSL,
         prm_runtime::LIGHTS_WGSL,
         CAMERA_WGSL,
         include_str!("../../../shaders/play/shade.wgsl"),
@@ -80,12 +81,7 @@ impl ShadePass {
             base,
             textures,
             vertex_count: vertices.len() as u32,
-            vertices: pipeline::buffer_init(
-                device,
-                "play vertices",
-                bytemuck::cast_slice(&vertices),
-                wgpu::BufferUsages::VERTEX,
-            ),
+            vertices: pipeline::vertex_buffer(device, "play vertices", &vertices),
         };
         let pipeline =
             pipeline::mesh::<GpuVertex>(device, "play shade", &source(), Some(DEPTH_FORMAT), Some(COLOR_FORMAT));

@@ -48,9 +48,10 @@ impl ProbeSphere {
 
 /// The sphere pass source: the run time's shared structs, direct light and probe volume, the
 /// camera, then the pass.
-pub fn source() -> [&'static str; 5] {
+pub fn source() -> [&'static str; 6] {
     [
         prm_runtime::SHARED_WGSL,
+        prm_runtime::LIGHT_BINDINGS_WGSL,
         prm_runtime::LIGHTS_WGSL,
         prm_runtime::PROBES_WGSL,
         CAMERA_WGSL,
@@ -103,12 +104,7 @@ impl SpherePass {
             bind_group,
             uniform,
             vertex_count: vertices.len() as u32,
-            vertices: pipeline::buffer_init(
-                device,
-                "play sphere vertices",
-                bytemuck::cast_slice(&vertices),
-                wgpu::BufferUsages::VERTEX,
-            ),
+            vertices: pipeline::vertex_buffer(device, "play sphere vertices", &vertices),
         })
     }
 

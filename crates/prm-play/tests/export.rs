@@ -1,6 +1,6 @@
 //! Static lightmap export (`prm_play::export`, `prm-play --export DIR`): the glTF reloads
-//! through our own loader as the same geometry with the same lightmap UVs, and the EXR maps are
-//! the run time's lightmaps.
+//! through our own loader as the same geometry with the same lightmap UVs, the EXR maps are the
+//! run time's lightmaps, and the KTX2 maps parse with the `ktx2` crate and decode to them.
 
 use std::path::Path;
 
@@ -8,6 +8,40 @@ use glam::Vec3;
 use prm_play::synthetic::{cornell_box_path, write_archive, SyntheticParams};
 use prm_play::{PlayOptions, Renderer};
 use prm_scene::Light;
+
+/// Reads a KTX2 lightmap with the `ktx2` crate, checks its header and descriptor, inflates its
+/// one level and decodes RGB9E5 as Vulkan defines it (9-bit mantissas R, G, B from bit 0, a
+/// shared exponent with bias 15 in the top five bits).
+fn read_ktx2(path: &Path) -> (usize, usize, Vec<[f32; 3]>) {
+    let bytes = std::fs::read(path).unwrap();
+    let reader = ktx2::Reader::new(&bytes[..]).expect("the ktx2 crate parses the file");
+    let header = reader.header();
+    assert_eq!(header.format, Some(ktx2::Format::E5B9G9R9_UFLOAT_PACK32));
+    assert_eq!(
+        header.supercompression_scheme,
+        Some(ktx2::SupercompressionScheme::Zstandard)
+    );
+    assert_eq!((header.level_count, header.face_count, header.layer_count), (1, 1, 0));
+    let (expected_dfd, type_size) = ktx2::dfd::Basic::from_format(ktx2::Format::E5B9G9R9_UFLOAT_PACK32).unwrap();
+    assert_eq!(header.type_size, type_size);
+    assert_eq!(
+        reader.basic_dfd(),
+        Some(&expected_dfd),
+        "the descriptor the ktx2 crate derives"
+    );
+    assert!(reader.writer().is_some_and(|w| w.starts_with("prm-scene")));
+    let level = reader.levels().next().unwrap();
+    let raw = zstd::bulk::decompress(level.data, level.uncompressed_byte_length as usize).unwrap();
+    let rgb = raw
+        .chunks_exact(4)
+        .map(|c| {
+            let w = u32::from_le_bytes(c.try_into().unwrap());
+            let scale = 2f32.powi((w >> 27) as i32 - 15 - 9);
+            [0, 9, 18].map(|shift| ((w >> shift) & 511) as f32 * scale)
+        })
+        .collect();
+    (header.pixel_width as usize, header.pixel_height as usize, rgb)
+}
 
 fn read_exr(path: &Path) -> (usize, usize, Vec<[f32; 3]>) {
     let image = prm_play::output::read_exr(path).unwrap();
@@ -57,6 +91,18 @@ fn exported_lightmaps_and_gltf_match_the_run_time_and_reload_as_the_same_scene()
     assert_eq!(indirect, r.read_lightmap().unwrap());
     let (w, h, full) = read_exr(&out.irradiance);
     assert_eq!((w, h), (res, res));
+    // The KTX2 maps are the same to RGB9E5's precision: half a unit of the 9-bit mantissa of
+    // the texel's largest channel.
+    for (ktx2, exact) in [(&out.indirect_ktx2, &indirect), (&out.irradiance_ktx2, &full)] {
+        let (w, h, decoded) = read_ktx2(ktx2);
+        assert_eq!((w, h), (res, res));
+        for (d, e) in decoded.iter().zip(exact.iter()) {
+            let max = e[0].max(e[1]).max(e[2]);
+            for c in 0..3 {
+                assert!((d[c] - e[c]).abs() <= max / 512.0 * 1.001 + 1e-9, "{d:?} against {e:?}");
+            }
+        }
+    }
     let sum = |m: &[[f32; 3]]| m.iter().flatten().map(|v| *v as f64).sum::<f64>();
     assert!(full.iter().flatten().all(|v| v.is_finite() && *v >= 0.0));
     assert!(

@@ -14,17 +14,16 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use glam::{Mat4, Vec3};
 use prm_gpu_kit::pipeline as kit;
-use prm_runtime::{look_to, perspective, Runtime, RuntimeOptions, Shadows, LIGHTS_WGSL, SHARED_WGSL};
+use prm_runtime::{
+    look_to, perspective, Runtime, RuntimeOptions, Shadows, LIGHTS_WGSL, LIGHT_BINDINGS_WGSL, SHARED_WGSL,
+};
 use wgpu::util::DeviceExt;
 
 const SIZE: u32 = 256;
 
-/// The shading: the run time's structs and direct light, a camera, the lightmap.
+/// The shading: after the run time's structs, its direct light's bindings (0 to 3) and direct
+/// light, a camera and the lightmap.
 const SHADE: &str = r#"
-@group(0) @binding(0) var<uniform> frame: Frame;
-@group(0) @binding(1) var<storage, read> lights: array<Light>;
-@group(0) @binding(2) var<storage, read> views: array<ShadowView>;
-@group(0) @binding(3) var shadow_maps: texture_depth_2d_array;
 @group(0) @binding(4) var lightmap: texture_2d<f32>;
 @group(0) @binding(5) var<uniform> view_proj: mat4x4<f32>;
 
@@ -151,7 +150,7 @@ fn run(archive_path: &Path, out: &Path) -> Result<()> {
     });
     let format = wgpu::TextureFormat::Rgba8Unorm;
     let depth_format = wgpu::TextureFormat::Depth32Float;
-    let parts = [SHARED_WGSL, LIGHTS_WGSL, SHADE];
+    let parts = [SHARED_WGSL, LIGHT_BINDINGS_WGSL, LIGHTS_WGSL, SHADE];
     let pipeline = kit::mesh::<Vertex>(&device, "embed", &parts, Some(depth_format), Some(format));
     let d = runtime.direct_light_bindings();
     let own = [

@@ -42,6 +42,7 @@ impl IrradiancePass {
     pub fn new(device: &wgpu::Device) -> IrradiancePass {
         let parts = [
             crate::SHARED_WGSL,
+            crate::LIGHT_BINDINGS_WGSL,
             crate::LIGHTS_WGSL,
             include_str!("../../../shaders/runtime/irradiance.wgsl"),
         ];

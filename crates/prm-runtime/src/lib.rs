@@ -50,13 +50,16 @@
 
 mod baked;
 mod blend;
+mod gather;
 mod irradiance;
 mod lights;
+mod lit;
 mod memory;
 mod near_field;
 mod options;
 mod probe_rays;
 mod probes;
+mod setup;
 mod shadow;
 mod shared;
 pub mod synthetic;
@@ -64,7 +67,7 @@ mod topk;
 mod weights;
 
 use prm_format::Archive;
-use prm_gpu_kit::{pipeline, readback, ErrorScopes, PassTimer};
+use prm_gpu_kit::{readback, ErrorScopes, PassTimer};
 use prm_scene::{Aabb, Light, Scene};
 
 pub use baked::EmitterInfo;
@@ -79,8 +82,8 @@ pub use probes::ProbeVolume;
 pub use shadow::SHADOW_FORMAT;
 pub use shared::{
     GpuBlendChunk, GpuCluster, GpuEffective, GpuEntry, GpuFrame, GpuGatherPoint, GpuLight, GpuNearExit, GpuNearField,
-    GpuNearHit, GpuProbeGrid, GpuProbeRays, GpuSelected, GpuView, GpuWeight, LightKind, LIGHTS_WGSL, PROBES_WGSL,
-    SHARED_WGSL,
+    GpuNearHit, GpuProbeGrid, GpuProbeRays, GpuSelected, GpuView, GpuWeight, LightKind, LIGHTS_WGSL,
+    LIGHT_BINDINGS_WGSL, PROBES_WGSL, SHARED_WGSL,
 };
 
 use shadow::{ShadowMaps, ShadowPass};
@@ -134,7 +137,8 @@ pub struct ClusterWeight {
 
 /// What a shader needs to compute direct light with [`LIGHTS_WGSL`] on the run time's shadow
 /// maps: bind `frame` as `var<uniform> frame: Frame`, `lights` and `views` as read-only storage
-/// arrays of `Light` and `ShadowView`, `shadow_maps` as `texture_depth_2d_array`.
+/// arrays of `Light` and `ShadowView`, `shadow_maps` as `texture_depth_2d_array`
+/// ([`LIGHT_BINDINGS_WGSL`] declares them as bindings 0 to 3 of group 0).
 pub struct DirectLight<'a> {
     /// This frame's [`GpuFrame`] (uniform).
     pub frame: &'a wgpu::Buffer,
@@ -234,274 +238,36 @@ impl Runtime {
         options: RuntimeOptions,
     ) -> Result<Runtime, RuntimeError> {
         options.validate(&device.limits())?;
-        if let Some(shard) = archive.metadata().params.get("shard") {
-            let field = |k: &str| shard.get(k).map_or("?".to_string(), |v| v.to_string());
-            return Err(RuntimeError::PartialArchive(format!(
-                "{}/{}",
-                field("index"),
-                field("count")
-            )));
-        }
+        setup::check_archive(archive, scene)?;
         let atlas = archive.atlas().clone();
-        if atlas.triangle_uvs.len() != scene.triangles.len() {
-            return Err(RuntimeError::Mismatch(format!(
-                "the archive's atlas has {} triangles, the scene {}",
-                atlas.triangle_uvs.len(),
-                scene.triangles.len()
-            )));
-        }
         let cluster_count = archive.clusters().len() as u32;
         let max_layers = device.limits().max_texture_array_layers;
         let group_count = prm_format::residual_group_count(cluster_count as usize, options.residual_groups);
-        let group_of = if group_count > 0 {
-            prm_format::residual_groups(archive.clusters(), group_count)
-        } else {
-            vec![0; cluster_count as usize]
-        };
+        let group_of = setup::residual_group_of(archive, group_count);
         let scope = ErrorScopes::push(device);
-        let positions: Vec<[f32; 3]> = scene
-            .triangles
-            .iter()
-            .flat_map(|t| t.positions.map(|p| p.to_array()))
-            .collect();
-        let vertex_count = positions.len() as u32;
-        let atlas_vertices: Vec<irradiance::AtlasVertex> = scene
-            .triangles
-            .iter()
-            .zip(&atlas.triangle_uvs)
-            .flat_map(|(t, uv)| {
-                (0..3).map(move |i| irradiance::AtlasVertex {
-                    position: t.positions[i].to_array(),
-                    normal: t.normals[i].to_array(),
-                    uv: uv[i],
-                })
-            })
-            .collect();
-        let atlas_vertices = pipeline::buffer_init(
-            device,
-            "prm atlas vertices",
-            bytemuck::cast_slice(&atlas_vertices),
-            wgpu::BufferUsages::VERTEX,
-        );
-        let positions = pipeline::buffer_init(
-            device,
-            "prm positions",
-            bytemuck::cast_slice(&positions),
-            wgpu::BufferUsages::VERTEX,
-        );
-
-        // Each entry stands for a disk of area A/N (its irradiance bound, see weights.wgsl).
-        let disk = prm_scene::ENTRY_DISK
-            * (scene.area() / archive.entries().len().max(1) as f64 / std::f64::consts::PI) as f32;
-        let energy = archive.entry_energy();
-        let mut entries: Vec<GpuEntry> = archive
-            .entries()
-            .iter()
-            .enumerate()
-            .map(|(i, e)| GpuEntry {
-                position: e.position,
-                disk,
-                normal: e.normal,
-                energy: energy.map_or([1.0; 3], |en| en[i]),
-                ..Default::default()
-            })
-            .collect();
-        let clusters: Vec<GpuCluster> = archive
-            .clusters()
-            .iter()
-            .zip(&group_of)
-            .map(|(c, &group)| GpuCluster {
-                first: c.first,
-                count: c.count,
-                group,
-                energy: c.energy,
-                ..Default::default()
-            })
-            .collect();
+        let geometry = setup::SceneGeometry::upload(device, scene, &atlas.triangle_uvs);
+        let mut entries = setup::gpu_entries(archive, scene);
+        let clusters = setup::gpu_clusters(archive, &group_of);
         let mut emitters = baked::BakedLights::new(device, archive.emitters(), archive.sky(), atlas.resolution);
         emitters.apply(queue, &mut entries);
-        let entry_count = entries.len() as u32;
-        let st = wgpu::BufferUsages::STORAGE;
-        let src = wgpu::BufferUsages::COPY_SRC;
-        let per_cluster = cluster_count.max(1) as u64 * 16;
-        let buffers = Buffers {
-            frame: pipeline::uniform(device, "prm frame", std::mem::size_of::<GpuFrame>() as u64),
-            lights: pipeline::storage(
-                device,
-                "prm lights",
-                (MAX_LIGHTS * std::mem::size_of::<GpuLight>()) as u64,
-                wgpu::BufferUsages::empty(),
-            ),
-            views: pipeline::storage(
-                device,
-                "prm views",
-                // At most six views a light (update refuses more, whatever the sun tiles).
-                (MAX_LIGHTS * 6 * std::mem::size_of::<GpuView>()) as u64,
-                wgpu::BufferUsages::empty(),
-            ),
-            clusters: pipeline::buffer_init(device, "prm clusters", bytemuck::cast_slice(&clusters), st),
-            entries: pipeline::buffer_init(
-                device,
-                "prm entries",
-                bytemuck::cast_slice(&entries),
-                st | wgpu::BufferUsages::COPY_DST,
-            ),
-            weights: pipeline::storage(device, "prm weights", per_cluster, src),
-            ranks: pipeline::storage(device, "prm ranks", cluster_count.max(1) as u64 * 4, src),
-            threshold: pipeline::storage(device, "prm threshold", 16, src),
-            selected: pipeline::storage(
-                device,
-                "prm selected",
-                (cluster_count + group_count).max(1) as u64 * 16,
-                src,
-            ),
-            effective: pipeline::storage(device, "prm effective", per_cluster, src),
-            group_energy: pipeline::storage(
-                device,
-                "prm group energy",
-                group_count.max(1) as u64 * 16,
-                wgpu::BufferUsages::COPY_DST,
-            ),
-        };
-
-        // Panes: the clusters' RGB9E5 words, then the residual groups' summed panes.
+        let buffers = Buffers::new(device, &clusters, &entries, group_count);
+        let (panes, mut lit) = setup::upload_panes(device, queue, archive, &buffers, &group_of, group_count, &options)?;
         let res = atlas.resolution;
-        let texels = (res * res) as usize;
-        let panes = blend::Panes::new(
-            device,
-            (cluster_count + group_count).max(1) as usize,
-            texels,
-            options.pane_chunk_bytes,
-        )?;
-        // Group by group (the groups partition the clusters), so one sum is held at a time.
-        let mut order: Vec<u32> = (0..cluster_count).collect();
-        order.sort_by_key(|&c| group_of[c as usize]);
-        let mut sum = vec![[0f32; 3]; if group_count > 0 { texels } else { 0 }];
-        let mut group_energy = Vec::with_capacity(group_count as usize);
-        let mut words = Vec::with_capacity(texels);
-        // The texels the blend writes: any pane, the traced indirect light or the near field
-        // lights them (the rest of the lightmap stays zero).
-        let mut lit = vec![false; texels];
-        for (i, &p) in order.iter().enumerate() {
-            let pane = archive
-                .read_pane_rgb9e5(p as usize)
-                .map_err(|source| RuntimeError::Pane {
-                    pane: p as usize,
-                    source,
-                })?;
-            for (l, &w) in lit.iter_mut().zip(&pane) {
-                *l |= w & prm_format::RGB9E5_MANTISSAS != 0;
-            }
-            panes.write(queue, p, &pane);
-            if group_count == 0 {
-                continue;
-            }
-            for (s, &w) in sum.iter_mut().zip(&pane) {
-                let v = prm_format::decode_rgb9e5(w);
-                (0..3).for_each(|k| s[k] += v[k]);
-            }
-            let g = group_of[p as usize];
-            if order.get(i + 1).is_some_and(|&next| group_of[next as usize] == g) {
-                continue;
-            }
-            // The group's last member: store its summed pane and the energy of the pane as
-            // stored (as the writer computes a cluster's).
-            words.clear();
-            prm_format::encode_rgb9e5_slice(&sum, &mut words);
-            let mut energy = [0f64; 3];
-            for &w in &words {
-                let v = prm_format::decode_rgb9e5(w);
-                (0..3).for_each(|k| energy[k] += f64::from(v[k]));
-            }
-            group_energy.push([energy[0] as f32, energy[1] as f32, energy[2] as f32, 0.0]);
-            panes.write(queue, cluster_count + g, &words);
-            sum.fill([0.0; 3]);
-        }
-        drop(sum);
-        if !group_energy.is_empty() {
-            queue.write_buffer(&buffers.group_energy, 0, bytemuck::cast_slice(&group_energy));
-        }
-        let lightmap = pipeline::texture(
-            device,
-            "prm lightmap",
-            [res, res, 1],
-            LIGHTMAP_FORMAT,
-            // COPY_DST: an engine may seed or clear it (and the tests of GiUpdate do).
-            wgpu::TextureUsages::STORAGE_BINDING
-                | wgpu::TextureUsages::TEXTURE_BINDING
-                | wgpu::TextureUsages::COPY_SRC
-                | wgpu::TextureUsages::COPY_DST,
-        );
-        let lightmap_view = lightmap.create_view(&Default::default());
+        let (lightmap, lightmap_view) = setup::create_lightmap(device, res);
 
         let maps = ShadowMaps::new(device, options.shadow_resolution, 1);
         let shadow = ShadowPass::new(device, &maps);
         let weights = WeightsPass::new(device, &buffers, &maps.array);
-        // The near field's lightmap, added by the blend: 1×1 and unused without one.
-        let near_field = archive.near_field().filter(|_| options.near_light == NearLight::Gather);
-        let near_map = pipeline::texture(
-            device,
-            "prm near lightmap",
-            if near_field.is_some() { [res, res, 1] } else { [1, 1, 1] },
-            LIGHTMAP_FORMAT,
-            wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::TEXTURE_BINDING,
-        );
-        let near_view = near_map.create_view(&Default::default());
-        let near = match near_field {
-            Some(n) => {
-                let limits = device.limits();
-                let mib = |b: u64| b as f64 / (1 << 20) as f64;
-                let merged = near_field::Merged::new(n);
-                for (what, count, size) in [
-                    ("merged near hits", merged.hits.len(), std::mem::size_of::<GpuNearHit>()),
-                    (
-                        "near exit records",
-                        merged.ends.len(),
-                        std::mem::size_of::<GpuNearExit>(),
-                    ),
-                    (
-                        "near gather points",
-                        n.points.len(),
-                        std::mem::size_of::<GpuGatherPoint>(),
-                    ),
-                ] {
-                    let bytes = count as u64 * size as u64;
-                    if bytes > limits.max_storage_buffer_binding_size {
-                        return Err(RuntimeError::NearField(format!(
-                            "{count} {what} take {:.1} MiB, over the device's {:.1} MiB storage binding (play with `NearLight::Off`)",
-                            mib(bytes),
-                            mib(limits.max_storage_buffer_binding_size)
-                        )));
-                    }
-                }
-                Some(near_field::NearFieldPass::new(
-                    device,
-                    &buffers,
-                    n,
-                    &merged,
-                    &maps.array,
-                    near_field::NearTargets {
-                        near_map: &near_view,
-                        lightmap: &lightmap_view,
-                        emitted: &emitters.indirect_view,
-                        resolution: res,
-                    },
-                    near_field::NearSeries {
-                        gathers: options.near_bounces,
-                        tail: options.near_tail,
-                    },
-                ))
-            }
-            None => None,
+        let inputs = setup::PassInputs {
+            maps: &maps,
+            lightmap: &lightmap_view,
+            emitters: &emitters,
+            resolution: res,
         };
+        let near_field = setup::gathered_near_field(archive, &options);
+        let (near_view, near) = setup::build_near_field(device, &buffers, near_field, &inputs, &options)?;
         emitters.mark_indirect(&mut lit);
-        if let Some(n) = near_field {
-            for x in &n.exits {
-                if let Some(l) = lit.get_mut(x.texel as usize) {
-                    *l = true;
-                }
-            }
-        }
+        setup::mark_near_exits(near_field, &mut lit);
         let topk = TopKPasses::new(device, &buffers);
         let blend = blend::BlendPass::new(
             device,
@@ -514,21 +280,7 @@ impl Runtime {
             },
             &lit,
         );
-        let probes = match archive.probes() {
-            Some(p) => Some(probes::ProbesPass::new(
-                device,
-                &buffers,
-                p,
-                archive.probe_rays().filter(|_| options.probe_light == ProbeLight::Rays),
-                probes::RayInputs {
-                    shadow_maps: &maps.array,
-                    lightmap: &lightmap_view,
-                    baked_direct: &emitters.view,
-                    groups: emitters.scales.len(),
-                },
-            )?),
-            None => None,
-        };
+        let probes = setup::build_probes(device, &buffers, archive, &inputs, &options)?;
         scope.pop("runtime setup")?;
         let frame_top_k = options.top_k.max(1);
         Ok(Runtime {
@@ -540,12 +292,12 @@ impl Runtime {
             group_count,
             frame_top_k,
             max_views: (MAX_LIGHTS * 6).min(max_layers as usize),
-            entry_count,
+            entry_count: entries.len() as u32,
             resolution: res,
-            vertex_count,
+            vertex_count: geometry.vertex_count,
             lightmap_uvs: atlas.triangle_uvs,
-            positions,
-            atlas_vertices,
+            positions: geometry.positions,
+            atlas_vertices: geometry.atlas_vertices,
             buffers,
             lightmap,
             lightmap_view,
@@ -597,7 +349,7 @@ impl Runtime {
                 p.rebind(&self.device, &self.buffers, &self.maps.array);
             }
             if let Some(n) = &mut self.near {
-                n.rebind(&self.device, &self.buffers, &self.maps.array);
+                n.gathered.rebind(&self.device, &self.buffers, &self.maps.array);
             }
         }
         self.view_count = views.len() as u32;
@@ -663,16 +415,15 @@ impl Runtime {
             return;
         }
         self.gi_stale.store(false, std::sync::atomic::Ordering::Relaxed);
-        self.weights.encode(
-            &self.device,
-            encoder,
-            &self.buffers,
-            self.cluster_count,
+        let frame = lit::LitFrame {
+            device: &self.device,
+            buffers: &self.buffers,
             external,
             timer,
-        );
+        };
+        self.weights.encode(encoder, &frame, self.cluster_count);
         if let Some(n) = &self.near {
-            n.encode(&self.device, encoder, &self.buffers, external, timer);
+            n.gathered.encode(encoder, &frame);
         }
         self.topk.encode(encoder, self.cluster_count, timer);
         self.blend.encode(encoder, timer);
@@ -680,7 +431,7 @@ impl Runtime {
             n.encode_after_blend(encoder, &self.lightmap, timer);
         }
         if let Some(p) = &self.probes {
-            p.encode(&self.device, encoder, &self.buffers, external, timer);
+            p.encode(encoder, &frame);
         }
     }
 
@@ -731,7 +482,7 @@ impl Runtime {
     /// point of the near field ([`prm_format::NearField::points`]; empty without it), waiting
     /// for the device.
     pub fn read_near_radiance(&self) -> Result<Vec<[f32; 3]>, RuntimeError> {
-        self.read_radiance(self.near.as_ref().map(|n| n.radiance()))
+        self.read_radiance(self.near.as_ref().map(|n| n.gathered.radiance()))
     }
 
     /// The first `points` RGB values of a `vec4` radiance buffer, waiting for the device.

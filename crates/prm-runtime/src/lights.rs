@@ -61,158 +61,190 @@ fn cols(m: Mat4) -> [[f32; 4]; 4] {
 /// `resolution`² texels and `sun_tiles`² tiles (at least 1) for a directional light: light `i`'s
 /// views are layers `first_view .. first_view + view_count`.
 pub fn shadow_views(lights: &[Light], bounds: &Aabb, resolution: u32, sun_tiles: u32) -> (Vec<GpuLight>, Vec<GpuView>) {
-    let res = resolution as f32;
-    let diag = bounds.diagonal().max(1e-3);
-    let mut out_lights = Vec::with_capacity(lights.len());
-    let mut views = Vec::new();
-    let far_from = |p: Vec3| {
-        corners(bounds)
+    let mut views = ViewList {
+        bounds,
+        res: resolution as f32,
+        diag: bounds.diagonal().max(1e-3),
+        views: Vec::new(),
+    };
+    let gpu_lights = lights
+        .iter()
+        .map(|light| {
+            let first_view = views.views.len() as u32;
+            let gl = match *light {
+                Light::Point { position, intensity } => views.point_light(position, intensity),
+                Light::Spot {
+                    position,
+                    direction,
+                    angle,
+                    intensity,
+                } => views.spot_light(position, direction, angle, intensity),
+                Light::Rect {
+                    position,
+                    direction,
+                    up,
+                    half_angles,
+                    intensity,
+                } => views.rect_light(position, direction, up, half_angles, intensity),
+                Light::Directional { direction, irradiance } => views.sun_light(direction, irradiance, sun_tiles),
+            };
+            GpuLight { first_view, ..gl }
+        })
+        .collect();
+    (gpu_lights, views.views)
+}
+
+/// The shadow views of a frame's lights so far, and what they are fitted to.
+struct ViewList<'a> {
+    bounds: &'a Aabb,
+    /// Shadow-map side in texels.
+    res: f32,
+    /// The scene's diagonal (at least 1 mm).
+    diag: f32,
+    views: Vec<GpuView>,
+}
+
+impl ViewList<'_> {
+    /// A far plane from `p` beyond every corner of the scene.
+    fn far_from(&self, p: Vec3) -> f32 {
+        corners(self.bounds)
             .iter()
             .map(|c| c.distance(p))
             .fold(0.0f32, f32::max)
-            .max(diag * 1e-2)
+            .max(self.diag * 1e-2)
             * 1.01
-    };
-    let cube = |views: &mut Vec<GpuView>, p: Vec3| {
-        let near = diag * 1e-3;
-        let far = far_from(p);
-        let proj = perspective(std::f32::consts::FRAC_PI_2, 1.0, near, far);
+    }
+
+    /// Appends a perspective view from `eye` along `dir` of vertical field `fov_y` and `aspect`,
+    /// whose texels span `texel` at unit distance.
+    fn push_perspective(&mut self, eye: Vec3, dir: Vec3, up: Vec3, [fov_y, aspect]: [f32; 2], texel: f32) {
+        let near = self.diag * 1e-3;
+        let far = self.far_from(eye);
+        let proj = perspective(fov_y, aspect, near, far);
+        self.views.push(GpuView {
+            view_proj: cols(proj * look_to(eye, dir, up)),
+            texel,
+            near,
+            far,
+            orthographic: 0,
+        });
+    }
+
+    /// Appends the six views of a cube around `p`.
+    fn push_cube(&mut self, p: Vec3) {
         for (dir, up) in CUBE {
-            views.push(GpuView {
-                view_proj: cols(proj * look_to(p, dir, up)),
-                texel: 2.0 / res,
-                near,
-                far,
-                orthographic: 0,
-            });
+            self.push_perspective(p, dir, up, [std::f32::consts::FRAC_PI_2, 1.0], 2.0 / self.res);
         }
-    };
-    for light in lights {
-        let first_view = views.len() as u32;
-        let gl = match *light {
-            Light::Point { position, intensity } => {
-                cube(&mut views, position);
-                GpuLight {
-                    kind: LightKind::Point as u32,
-                    first_view,
-                    view_count: 6,
-                    cos_cutoff: -2.0,
-                    position: position.to_array(),
-                    direction: [0.0; 3],
-                    color: intensity.to_array(),
-                    ..Default::default()
-                }
-            }
-            Light::Spot {
-                position,
-                direction,
-                angle,
-                intensity,
-            } => {
-                let view_count = if angle.to_degrees() <= SPOT_SINGLE_VIEW_MAX_DEG {
-                    let fov = (angle * 2.0 * 1.05 + 2f32.to_radians()).min(170f32.to_radians());
-                    let near = diag * 1e-3;
-                    let far = far_from(position);
-                    let up = if direction.y.abs() > 0.99 { Vec3::Z } else { Vec3::Y };
-                    let proj = perspective(fov, 1.0, near, far);
-                    views.push(GpuView {
-                        view_proj: cols(proj * look_to(position, direction, up)),
-                        texel: 2.0 * (fov * 0.5).tan() / res,
-                        near,
-                        far,
-                        orthographic: 0,
-                    });
-                    1
-                } else {
-                    cube(&mut views, position);
-                    6
-                };
-                GpuLight {
-                    kind: LightKind::Spot as u32,
-                    first_view,
-                    view_count,
-                    cos_cutoff: angle.cos(),
-                    position: position.to_array(),
-                    direction: direction.normalize().to_array(),
-                    color: intensity.to_array(),
-                    ..Default::default()
-                }
-            }
-            Light::Rect {
-                position,
-                direction,
-                up,
-                half_angles,
-                intensity,
-            } => {
-                // One view of the frustum's own aspect, 5% and 1° wider than it like a spot's.
-                let widen = |a: f32| (a * 1.05 + 1f32.to_radians()).min(88f32.to_radians()).tan();
-                let (tx, ty) = (widen(half_angles[0]), widen(half_angles[1]));
-                let near = diag * 1e-3;
-                let far = far_from(position);
-                let proj = perspective(2.0 * ty.atan(), tx / ty, near, far);
-                views.push(GpuView {
-                    view_proj: cols(proj * look_to(position, direction, up)),
-                    texel: 2.0 * tx.max(ty) / res,
+    }
+
+    /// A point light: a cube of views.
+    fn point_light(&mut self, position: Vec3, intensity: Vec3) -> GpuLight {
+        self.push_cube(position);
+        GpuLight {
+            kind: LightKind::Point as u32,
+            view_count: 6,
+            cos_cutoff: -2.0,
+            position: position.to_array(),
+            direction: [0.0; 3],
+            color: intensity.to_array(),
+            ..Default::default()
+        }
+    }
+
+    /// A spot light: one view up to [`SPOT_SINGLE_VIEW_MAX_DEG`], a cube beyond.
+    fn spot_light(&mut self, position: Vec3, direction: Vec3, angle: f32, intensity: Vec3) -> GpuLight {
+        let view_count = if angle.to_degrees() <= SPOT_SINGLE_VIEW_MAX_DEG {
+            let fov = (angle * 2.0 * 1.05 + 2f32.to_radians()).min(170f32.to_radians());
+            let up = if direction.y.abs() > 0.99 { Vec3::Z } else { Vec3::Y };
+            let texel = 2.0 * (fov * 0.5).tan() / self.res;
+            self.push_perspective(position, direction, up, [fov, 1.0], texel);
+            1
+        } else {
+            self.push_cube(position);
+            6
+        };
+        GpuLight {
+            kind: LightKind::Spot as u32,
+            view_count,
+            cos_cutoff: angle.cos(),
+            position: position.to_array(),
+            direction: direction.normalize().to_array(),
+            color: intensity.to_array(),
+            ..Default::default()
+        }
+    }
+
+    /// A rectangular spot: one view of the frustum's own aspect, 5% and 1° wider than it like a
+    /// spot's.
+    fn rect_light(
+        &mut self,
+        position: Vec3,
+        direction: Vec3,
+        up: Vec3,
+        half_angles: [f32; 2],
+        intensity: Vec3,
+    ) -> GpuLight {
+        let widen = |a: f32| (a * 1.05 + 1f32.to_radians()).min(88f32.to_radians()).tan();
+        let (tx, ty) = (widen(half_angles[0]), widen(half_angles[1]));
+        self.push_perspective(
+            position,
+            direction,
+            up,
+            [2.0 * ty.atan(), tx / ty],
+            2.0 * tx.max(ty) / self.res,
+        );
+        GpuLight {
+            kind: LightKind::Rect as u32,
+            view_count: 1,
+            cos_cutoff: -2.0,
+            position: position.to_array(),
+            tan_x: half_angles[0].tan(),
+            direction: direction.normalize().to_array(),
+            tan_y: half_angles[1].tan(),
+            color: intensity.to_array(),
+            up: up.normalize().to_array(),
+            ..Default::default()
+        }
+    }
+
+    /// A directional light: an orthographic map of the scene's bounding sphere in `sun_tiles`²
+    /// tiles (at least 1), row-major from the bottom-left, each one texel wider on every side.
+    fn sun_light(&mut self, direction: Vec3, irradiance: Vec3, sun_tiles: u32) -> GpuLight {
+        let d = direction.normalize();
+        let centre = (self.bounds.min + self.bounds.max) * 0.5;
+        let r = self.diag * 0.5;
+        let eye = centre - d * 2.0 * r;
+        let up = if d.y.abs() > 0.99 { Vec3::Z } else { Vec3::Y };
+        let (near, far) = (0.5 * r, 3.5 * r);
+        let view = look_to(eye, d, up);
+        // The view's own vertical (look_to's `u`), which lights.wgsl measures tiles along.
+        let map_up = d.cross(up).normalize().cross(d);
+        let tiles = sun_tiles.max(1);
+        let step = 2.0 * r / tiles as f32;
+        let pad = step / self.res;
+        for iy in 0..tiles {
+            for ix in 0..tiles {
+                let (x0, y0) = (-r + ix as f32 * step, -r + iy as f32 * step);
+                let proj = orthographic(x0 - pad, x0 + step + pad, y0 - pad, y0 + step + pad, near, far);
+                self.views.push(GpuView {
+                    view_proj: cols(proj * view),
+                    texel: (step + 2.0 * pad) / self.res,
                     near,
                     far,
-                    orthographic: 0,
+                    orthographic: 1,
                 });
-                GpuLight {
-                    kind: LightKind::Rect as u32,
-                    first_view,
-                    view_count: 1,
-                    cos_cutoff: -2.0,
-                    position: position.to_array(),
-                    tan_x: half_angles[0].tan(),
-                    direction: direction.normalize().to_array(),
-                    tan_y: half_angles[1].tan(),
-                    color: intensity.to_array(),
-                    up: up.normalize().to_array(),
-                    ..Default::default()
-                }
             }
-            Light::Directional { direction, irradiance } => {
-                let d = direction.normalize();
-                let centre = (bounds.min + bounds.max) * 0.5;
-                let r = diag * 0.5;
-                let eye = centre - d * 2.0 * r;
-                let up = if d.y.abs() > 0.99 { Vec3::Z } else { Vec3::Y };
-                let (near, far) = (0.5 * r, 3.5 * r);
-                let view = look_to(eye, d, up);
-                // The view's own vertical (look_to's `u`), which lights.wgsl measures tiles along.
-                let map_up = d.cross(up).normalize().cross(d);
-                let tiles = sun_tiles.max(1);
-                let step = 2.0 * r / tiles as f32;
-                let pad = step / res;
-                for iy in 0..tiles {
-                    for ix in 0..tiles {
-                        let (x0, y0) = (-r + ix as f32 * step, -r + iy as f32 * step);
-                        let proj = orthographic(x0 - pad, x0 + step + pad, y0 - pad, y0 + step + pad, near, far);
-                        views.push(GpuView {
-                            view_proj: cols(proj * view),
-                            texel: (step + 2.0 * pad) / res,
-                            near,
-                            far,
-                            orthographic: 1,
-                        });
-                    }
-                }
-                GpuLight {
-                    kind: LightKind::Directional as u32,
-                    first_view,
-                    view_count: tiles * tiles,
-                    cos_cutoff: -2.0,
-                    position: centre.to_array(),
-                    tan_x: r,
-                    direction: d.to_array(),
-                    color: irradiance.to_array(),
-                    up: map_up.to_array(),
-                    ..Default::default()
-                }
-            }
-        };
-        out_lights.push(gl);
+        }
+        GpuLight {
+            kind: LightKind::Directional as u32,
+            view_count: tiles * tiles,
+            cos_cutoff: -2.0,
+            position: centre.to_array(),
+            tan_x: r,
+            direction: d.to_array(),
+            color: irradiance.to_array(),
+            up: map_up.to_array(),
+            ..Default::default()
+        }
     }
-    (out_lights, views)
 }

@@ -13,18 +13,20 @@
 
 use prm_format::NearField;
 use prm_gpu_kit::{linear_workgroups, pipeline, ComputePass, PassTimer};
+use prm_scene::MergeNearHits;
 use rayon::prelude::*;
 
-use crate::{Buffers, GpuGatherPoint, GpuNearExit, GpuNearField, GpuNearHit, NearTail};
+use crate::gather::{at_least_one, GatherPasses, GatherPoints};
+use crate::lit::{LitBindings, LitPass};
+use crate::{Buffers, GpuNearExit, GpuNearField, GpuNearHit, NearTail};
 
 /// The passes and the buffers they own.
 pub(crate) struct NearFieldPass {
-    radiance_pass: ComputePass,
-    inputs: RadianceBindings,
-    sum: ComputePass,
+    /// Before the blend: the radiance pass (one invocation per gather point), then the sum (one
+    /// per exit point with near hits) into the near lightmap.
+    pub gathered: GatherPasses<RadianceBindings>,
     indirect: Option<IndirectShare>,
     exit_count: u32,
-    point_count: u32,
     /// Bytes of the exit records and hits, which every gather reads.
     pub bytes_per_gather: u64,
 }
@@ -64,10 +66,10 @@ pub(crate) struct NearSeries {
 }
 
 /// Every exit record's tail factor (RGB, then 0) at `gathers` gathers
-/// ([`prm_format::DeeperOperator::series_tail`], its terms summed on every thread), from the
+/// ([`prm_scene::DeeperOperator::series_tail`], its terms summed on every thread), from the
 /// merged hits' f32 weights.
 pub(crate) fn series_tail(near: &NearField, merged: &Merged, gathers: u32) -> Vec<[f32; 4]> {
-    let op = prm_format::DeeperOperator::new(near, &merged.ends, &merged.hits);
+    let op = prm_scene::DeeperOperator::new(near, &merged.ends, &merged.hits);
     op.series_tail(gathers, |v| {
         (0..op.len()).into_par_iter().map(|i| op.row(i, v)).collect()
     })
@@ -90,29 +92,209 @@ pub(crate) struct NearTargets<'a> {
 }
 
 /// The radiance pass's own bindings; the shadow maps and the frame's buffers come per bind group.
-struct RadianceBindings {
-    points: wgpu::Buffer,
-    radiance: wgpu::Buffer,
+pub(crate) struct RadianceBindings {
+    gather: GatherPoints,
     info: wgpu::Buffer,
 }
 
-impl RadianceBindings {
-    /// The radiance pass's bindings, in the order of `near_radiance.wgsl`.
-    fn resources<'a>(&'a self, b: &'a Buffers, shadow_maps: &'a wgpu::TextureView) -> [wgpu::BindingResource<'a>; 7] {
-        [
-            b.frame.as_entire_binding(),
-            b.lights.as_entire_binding(),
-            b.views.as_entire_binding(),
-            wgpu::BindingResource::TextureView(shadow_maps),
-            self.points.as_entire_binding(),
-            self.radiance.as_entire_binding(),
+impl LitBindings for RadianceBindings {
+    /// The radiance pass's own bindings, in the order of `near_radiance.wgsl`.
+    fn own<'a>(&'a self, _: &'a Buffers) -> Vec<wgpu::BindingResource<'a>> {
+        vec![
+            self.gather.points.as_entire_binding(),
+            self.gather.radiance.as_entire_binding(),
             self.info.as_entire_binding(),
         ]
     }
 }
 
+/// The near field's buffers: the radiance pass's bindings, the constants and the exit records
+/// and merged hits every sum walks.
+struct NearBuffers {
+    inputs: RadianceBindings,
+    constants: GpuNearField,
+    exits: wgpu::Buffer,
+    hits: wgpu::Buffer,
+    /// Gather points as uploaded (at least one).
+    point_slots: u64,
+}
+
+impl NearBuffers {
+    /// Uploads `near`'s gather points, its constants and its `merged` exit records and hits.
+    fn upload(device: &wgpu::Device, near: &NearField, merged: &Merged) -> NearBuffers {
+        let st = wgpu::BufferUsages::STORAGE;
+        let gather = GatherPoints::upload(device, "prm near", &near.points);
+        let constants = GpuNearField {
+            exits: merged.ends.len() as u32,
+            points: near.points.len() as u32,
+            scale: std::f32::consts::PI / near.rays_per_exit.max(1) as f32,
+            tail: 0,
+        };
+        let info = constants_buffer(device, "prm near field", &constants);
+        let (exits, hits) = merged.gpu(near);
+        let (exits, hits) = (at_least_one(exits), at_least_one(hits));
+        let exits = pipeline::buffer_init(device, "prm near exits", bytemuck::cast_slice(&exits), st);
+        let hits = pipeline::buffer_init(device, "prm near hits", bytemuck::cast_slice(&hits), st);
+        NearBuffers {
+            inputs: RadianceBindings { gather, info },
+            constants,
+            exits,
+            hits,
+            point_slots: near.points.len().max(1) as u64,
+        }
+    }
+
+    /// The direct share's sum into `near_map` (`near_field.wgsl`).
+    fn sum_pass(&self, device: &wgpu::Device, near_map: &wgpu::TextureView) -> ComputePass {
+        ComputePass::new(
+            device,
+            "near field",
+            &[
+                crate::SHARED_WGSL,
+                NEAR_SUM_WGSL,
+                include_str!("../../../shaders/runtime/near_field.wgsl"),
+            ],
+            &[
+                self.sum_bindings(&self.inputs.info, &self.inputs.gather.radiance)
+                    .as_slice(),
+                &[wgpu::BindingResource::TextureView(near_map)],
+            ]
+            .concat(),
+        )
+    }
+
+    /// Bindings 0 to 3 of both sums, which `near_sum.wgsl` declares: the constants
+    /// `constants`, the exit records, their hits and the gather points' `radiance`.
+    fn sum_bindings<'a>(
+        &'a self,
+        constants: &'a wgpu::Buffer,
+        radiance: &'a wgpu::Buffer,
+    ) -> [wgpu::BindingResource<'a>; 4] {
+        [
+            constants.as_entire_binding(),
+            self.exits.as_entire_binding(),
+            self.hits.as_entire_binding(),
+            radiance.as_entire_binding(),
+        ]
+    }
+}
+
+/// What both sums share (`near_sum.wgsl`): bindings 0 to 3, the entry point (one invocation per
+/// exit record) and the walk along an exit record's hits.
+const NEAR_SUM_WGSL: &str = include_str!("../../../shaders/runtime/near_sum.wgsl");
+
+/// What both radiance passes share (`near_points.wgsl`): the entry point, one invocation per
+/// gather point writing albedo/π × the irradiance the pass gathers.
+const NEAR_POINTS_WGSL: &str = include_str!("../../../shaders/runtime/near_points.wgsl");
+
+/// A uniform buffer holding the near field's constants `c`.
+fn constants_buffer(device: &wgpu::Device, label: &str, c: &GpuNearField) -> wgpu::Buffer {
+    pipeline::buffer_init(device, label, bytemuck::bytes_of(c), wgpu::BufferUsages::UNIFORM)
+}
+
+/// A copy of the lightmap (`resolution`², [`crate::LIGHTMAP_FORMAT`]) that the passes sample.
+fn lightmap_copy(device: &wgpu::Device, label: &str, resolution: u32) -> wgpu::Texture {
+    pipeline::texture(
+        device,
+        label,
+        [resolution, resolution, 1],
+        crate::LIGHTMAP_FORMAT,
+        wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+    )
+}
+
+impl IndirectShare {
+    /// The deeper share's passes for `gathers` gathers (at least one), the last sum adding
+    /// `tail` (every exit record's tail factor; empty: none).
+    fn new(
+        device: &wgpu::Device,
+        bufs: &NearBuffers,
+        targets: &NearTargets,
+        tail: Vec<[f32; 4]>,
+        gathers: u32,
+    ) -> IndirectShare {
+        let with_tail = !tail.is_empty();
+        let view = |t: &wgpu::Texture| t.create_view(&Default::default());
+        let indirect = pipeline::storage(
+            device,
+            "prm near indirect radiance",
+            bufs.point_slots * 16,
+            wgpu::BufferUsages::empty(),
+        );
+        let info = &bufs.inputs.info;
+        let radiance_from = |from: &wgpu::Texture| {
+            ComputePass::new(
+                device,
+                "near indirect radiance",
+                &[
+                    crate::SHARED_WGSL,
+                    NEAR_POINTS_WGSL,
+                    include_str!("../../../shaders/runtime/near_indirect_radiance.wgsl"),
+                ],
+                &[
+                    info.as_entire_binding(),
+                    bufs.inputs.gather.points.as_entire_binding(),
+                    wgpu::BindingResource::TextureView(&view(from)),
+                    wgpu::BindingResource::TextureView(targets.emitted),
+                    indirect.as_entire_binding(),
+                ],
+            )
+        };
+        let source = lightmap_copy(device, "prm near source", targets.resolution);
+        let completed = (gathers > 1).then(|| lightmap_copy(device, "prm near completed", targets.resolution));
+        let tail_buf = pipeline::buffer_init(
+            device,
+            "prm near tail",
+            bytemuck::cast_slice(&at_least_one(tail)),
+            wgpu::BufferUsages::STORAGE,
+        );
+        // The sum after `previous`'s gather, with or without the series' tail.
+        let sum_after = |previous: &wgpu::Texture, constants: &wgpu::Buffer| {
+            ComputePass::new(
+                device,
+                "near indirect",
+                &[
+                    crate::SHARED_WGSL,
+                    NEAR_SUM_WGSL,
+                    include_str!("../../../shaders/runtime/near_indirect.wgsl"),
+                ],
+                &[
+                    bufs.sum_bindings(constants, &indirect).as_slice(),
+                    &[
+                        wgpu::BindingResource::TextureView(&view(&source)),
+                        wgpu::BindingResource::TextureView(targets.lightmap),
+                        wgpu::BindingResource::TextureView(&view(previous)),
+                        tail_buf.as_entire_binding(),
+                    ],
+                ]
+                .concat(),
+            )
+        };
+        let last_info = constants_buffer(
+            device,
+            "prm near field, last sum",
+            &GpuNearField {
+                tail: u32::from(with_tail),
+                ..bufs.constants
+            },
+        );
+        let previous = completed.as_ref().unwrap_or(&source);
+        IndirectShare {
+            radiance_pass: radiance_from(&source),
+            last: sum_after(previous, &last_info),
+            again: completed.map(|c| Again {
+                radiance_pass: radiance_from(&c),
+                sum: sum_after(&c, info),
+                completed: c,
+            }),
+            source,
+            gathers,
+        }
+    }
+}
+
 /// The near field's hits with each exit record's hits on one gather point merged into one
-/// ([`NearField::merged_hits`]): each walk along them cost lavapipe about 50 ms a frame on the
+/// ([`MergeNearHits::merged_hits`]): each walk along them cost lavapipe about 50 ms a frame on the
 /// fireplace room before. The passes read the sums as half floats ([`GpuNearHit`], 8 bytes
 /// instead of 16 with f32 weights and padding): the fireplace room's default archive played its
 /// `gi` frame at 1024×768 in 197–205 ms instead of 221–233 (`prm-play --timings --gi-update
@@ -122,7 +304,7 @@ pub(crate) struct Merged {
     /// Every exit record's end in `hits`.
     pub ends: Vec<u32>,
     /// The merged hits, f32.
-    pub hits: Vec<prm_format::MergedHit>,
+    pub hits: Vec<prm_scene::MergedHit>,
 }
 
 impl Merged {
@@ -159,202 +341,35 @@ impl NearFieldPass {
         targets: NearTargets,
         series: NearSeries,
     ) -> NearFieldPass {
-        let st = wgpu::BufferUsages::STORAGE;
-        // Never empty: a binding of zero bytes is invalid.
-        fn at_least_one<T: Default>(mut v: Vec<T>) -> Vec<T> {
-            if v.is_empty() {
-                v.push(T::default());
-            }
-            v
-        }
-        let points = at_least_one(
-            near.points
-                .iter()
-                .map(|g| GpuGatherPoint {
-                    position: g.position,
-                    texel: g.texel,
-                    normal: g.normal,
-                    albedo: g.albedo,
-                    emitter: g.emitter,
-                    emission: g.emission,
-                    ..Default::default()
-                })
-                .collect(),
-        );
-        let exit_count = merged.ends.len() as u32;
         let gathers = if near.indirect_disk > 0.0 { series.gathers } else { 0 };
         let tail = match series.tail {
             NearTail::Extrapolated if gathers > 0 => series_tail(near, merged, gathers),
             _ => Vec::new(),
         };
-        let with_tail = !tail.is_empty();
-        let (exits, hits) = merged.gpu(near);
-        let (exits, hits) = (at_least_one(exits), at_least_one(hits));
-        let points_buf = pipeline::buffer_init(device, "prm near points", bytemuck::cast_slice(&points), st);
-        let radiance = pipeline::storage(
-            device,
-            "prm near radiance",
-            points.len() as u64 * 16,
-            wgpu::BufferUsages::COPY_SRC,
-        );
-        let constants = GpuNearField {
-            exits: exit_count,
-            points: near.points.len() as u32,
-            scale: std::f32::consts::PI / near.rays_per_exit.max(1) as f32,
-            tail: 0,
-        };
-        let uniform = |label, c: &GpuNearField| {
-            pipeline::buffer_init(device, label, bytemuck::bytes_of(c), wgpu::BufferUsages::UNIFORM)
-        };
-        let info = uniform("prm near field", &constants);
-        let exits_buf = pipeline::buffer_init(device, "prm near exits", bytemuck::cast_slice(&exits), st);
-        let hits_buf = pipeline::buffer_init(device, "prm near hits", bytemuck::cast_slice(&hits), st);
-        let sum = ComputePass::new(
-            device,
-            "near field",
-            &[
-                crate::SHARED_WGSL,
-                include_str!("../../../shaders/runtime/near_sum.wgsl"),
-                include_str!("../../../shaders/runtime/near_field.wgsl"),
-            ],
-            &[
-                info.as_entire_binding(),
-                exits_buf.as_entire_binding(),
-                hits_buf.as_entire_binding(),
-                radiance.as_entire_binding(),
-                wgpu::BindingResource::TextureView(targets.near_map),
-            ],
-        );
-        let indirect = (gathers > 0).then(|| {
-            let copy = |label| {
-                pipeline::texture(
-                    device,
-                    label,
-                    [targets.resolution, targets.resolution, 1],
-                    crate::LIGHTMAP_FORMAT,
-                    wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-                )
-            };
-            let view = |t: &wgpu::Texture| t.create_view(&Default::default());
-            let indirect = pipeline::storage(
-                device,
-                "prm near indirect radiance",
-                points.len() as u64 * 16,
-                wgpu::BufferUsages::empty(),
-            );
-            let radiance_from = |from: &wgpu::Texture| {
-                ComputePass::new(
-                    device,
-                    "near indirect radiance",
-                    &[
-                        crate::SHARED_WGSL,
-                        include_str!("../../../shaders/runtime/near_indirect_radiance.wgsl"),
-                    ],
-                    &[
-                        info.as_entire_binding(),
-                        points_buf.as_entire_binding(),
-                        wgpu::BindingResource::TextureView(&view(from)),
-                        wgpu::BindingResource::TextureView(targets.emitted),
-                        indirect.as_entire_binding(),
-                    ],
-                )
-            };
-            let source = copy("prm near source");
-            let completed = (gathers > 1).then(|| copy("prm near completed"));
-            let tail_buf =
-                pipeline::buffer_init(device, "prm near tail", bytemuck::cast_slice(&at_least_one(tail)), st);
-            // The sum after `previous`'s gather, with or without the series' tail.
-            let sum_after = |previous: &wgpu::Texture, constants: &wgpu::Buffer| {
-                ComputePass::new(
-                    device,
-                    "near indirect",
-                    &[
-                        crate::SHARED_WGSL,
-                        include_str!("../../../shaders/runtime/near_sum.wgsl"),
-                        include_str!("../../../shaders/runtime/near_indirect.wgsl"),
-                    ],
-                    &[
-                        constants.as_entire_binding(),
-                        exits_buf.as_entire_binding(),
-                        hits_buf.as_entire_binding(),
-                        indirect.as_entire_binding(),
-                        wgpu::BindingResource::TextureView(&view(&source)),
-                        wgpu::BindingResource::TextureView(targets.lightmap),
-                        wgpu::BindingResource::TextureView(&view(previous)),
-                        tail_buf.as_entire_binding(),
-                    ],
-                )
-            };
-            let last_info = uniform(
-                "prm near field, last sum",
-                &GpuNearField {
-                    tail: u32::from(with_tail),
-                    ..constants
-                },
-            );
-            let previous = completed.as_ref().unwrap_or(&source);
-            IndirectShare {
-                radiance_pass: radiance_from(&source),
-                last: sum_after(previous, &last_info),
-                again: completed.map(|c| Again {
-                    radiance_pass: radiance_from(&c),
-                    sum: sum_after(&c, &info),
-                    completed: c,
-                }),
-                source,
-                gathers,
-            }
-        });
-        let inputs = RadianceBindings {
-            points: points_buf,
-            radiance,
-            info,
-        };
+        let bufs = NearBuffers::upload(device, near, merged);
+        let sum = bufs.sum_pass(device, targets.near_map);
+        let indirect = (gathers > 0).then(|| IndirectShare::new(device, &bufs, &targets, tail, gathers));
         let parts = [
             crate::SHARED_WGSL,
+            crate::LIGHT_BINDINGS_WGSL,
             crate::LIGHTS_WGSL,
+            NEAR_POINTS_WGSL,
             include_str!("../../../shaders/runtime/near_radiance.wgsl"),
         ];
-        let radiance_pass = ComputePass::new(device, "near radiance", &parts, &inputs.resources(b, shadow_maps));
+        let radiance = LitPass::new(device, "near radiance", &parts, bufs.inputs, b, shadow_maps);
+        let (exit_count, points) = (bufs.constants.exits, bufs.constants.points);
         NearFieldPass {
-            radiance_pass,
-            inputs,
-            sum,
+            gathered: GatherPasses::new(
+                radiance.bindings.gather.radiance.clone(),
+                radiance,
+                points,
+                sum,
+                linear_workgroups(exit_count),
+            ),
             indirect,
             exit_count,
-            point_count: near.points.len() as u32,
-            bytes_per_gather: exits_buf.size() + hits_buf.size(),
+            bytes_per_gather: bufs.exits.size() + bufs.hits.size(),
         }
-    }
-
-    /// The radiance buffer (one `vec4` per gather point, `w` unused, then a placeholder when
-    /// there are none) and the gather point count, for tests.
-    pub fn radiance(&self) -> (&wgpu::Buffer, u32) {
-        (&self.inputs.radiance, self.point_count)
-    }
-
-    /// Binds the radiance pass to other (larger) shadow maps.
-    pub fn rebind(&mut self, device: &wgpu::Device, b: &Buffers, shadow_maps: &wgpu::TextureView) {
-        self.radiance_pass
-            .rebind(device, &self.inputs.resources(b, shadow_maps));
-    }
-
-    /// Before the blend: the radiance pass (one invocation per gather point, reading `external`
-    /// shadow maps for this frame if given), then the sum (one per exit point with near hits)
-    /// into the near lightmap.
-    pub fn encode(
-        &self,
-        device: &wgpu::Device,
-        encoder: &mut wgpu::CommandEncoder,
-        b: &Buffers,
-        external: Option<&wgpu::TextureView>,
-        timer: Option<&PassTimer>,
-    ) {
-        let groups = linear_workgroups(self.point_count);
-        let own = external.map(|maps| self.inputs.resources(b, maps));
-        self.radiance_pass
-            .encode_on(device, encoder, own.as_ref().map(|r| &r[..]), groups, timer);
-        self.sum.encode(encoder, linear_workgroups(self.exit_count), timer);
     }
 
     /// After the blend, for format 1.8: copies the blended `lightmap`, gives every gather point
@@ -373,7 +388,7 @@ impl NearFieldPass {
         encoder.copy_texture_to_texture(lightmap.as_image_copy(), share.source.as_image_copy(), lightmap.size());
         share
             .radiance_pass
-            .encode(encoder, linear_workgroups(self.point_count), timer);
+            .encode(encoder, linear_workgroups(self.gathered.point_count()), timer);
         for k in 1..=share.gathers {
             let again = share.again.as_ref();
             if k > 1 {
@@ -385,7 +400,7 @@ impl NearFieldPass {
                 );
                 again
                     .radiance_pass
-                    .encode(encoder, linear_workgroups(self.point_count), timer);
+                    .encode(encoder, linear_workgroups(self.gathered.point_count()), timer);
             }
             let sum = match again {
                 Some(again) if k < share.gathers => &again.sum,

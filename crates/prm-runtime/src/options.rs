@@ -122,7 +122,7 @@ pub enum NearLight {
 pub enum NearTail {
     /// The rest of the share's series, extrapolated at every exit point from its last term:
     /// that term times the ratio of the rest to it for uniform light
-    /// ([`prm_format::DeeperOperator::series_tail`], summed once at load on the CPU: 0.5 s for
+    /// ([`prm_scene::DeeperOperator::series_tail`], summed once at load on the CPU: 0.5 s for
     /// the fireplace room's 185k near exit points on two cores). Light passed back and forth between close surfaces converges
     /// slowly where they enclose a space (under furniture, between a sofa's cushions, behind a
     /// picture: the terms fall by about 0.87 each on the fireplace room), and this takes it

@@ -8,41 +8,35 @@
 //! entry points only.
 
 use prm_format::{probe_ray_direction, sh_basis, ProbeRays, SH_COEFFS, SH_COSINE_LOBE};
-use prm_gpu_kit::{linear_workgroups, pipeline, ComputePass, PassTimer};
+use prm_gpu_kit::{pipeline, ComputePass};
 
-use crate::{Buffers, GpuGatherPoint, GpuProbeRays};
+use crate::gather::{GatherPasses, GatherPoints};
+use crate::lit::{LitBindings, LitPass};
+use crate::{Buffers, GpuProbeRays};
 
 /// The two passes and the buffers they own.
 pub(crate) struct ProbeRaysPass {
-    radiance_pass: ComputePass,
-    sum: ComputePass,
-    inputs: RadianceBindings,
-    point_count: u32,
-    probe_count: u32,
+    /// The radiance pass (one invocation per gather point), then the sum (one per probe).
+    pub gathered: GatherPasses<RadianceBindings>,
 }
 
 /// The radiance pass's own bindings; the shadow maps and the frame's buffers come per bind group.
-struct RadianceBindings {
-    points: wgpu::Buffer,
+pub(crate) struct RadianceBindings {
+    gather: GatherPoints,
     lightmap: wgpu::TextureView,
     baked_direct: wgpu::TextureView,
-    radiance: wgpu::Buffer,
     /// Every emitter group's scale (`vec4`, at least one).
     scales: wgpu::Buffer,
 }
 
-impl RadianceBindings {
-    /// The radiance pass's bindings, in the order of `probe_radiance.wgsl`.
-    fn resources<'a>(&'a self, b: &'a Buffers, shadow_maps: &'a wgpu::TextureView) -> [wgpu::BindingResource<'a>; 9] {
-        [
-            b.frame.as_entire_binding(),
-            b.lights.as_entire_binding(),
-            b.views.as_entire_binding(),
-            wgpu::BindingResource::TextureView(shadow_maps),
-            self.points.as_entire_binding(),
+impl LitBindings for RadianceBindings {
+    /// The radiance pass's own bindings, in the order of `probe_radiance.wgsl`.
+    fn own<'a>(&'a self, _: &'a Buffers) -> Vec<wgpu::BindingResource<'a>> {
+        vec![
+            self.gather.points.as_entire_binding(),
             wgpu::BindingResource::TextureView(&self.lightmap),
             wgpu::BindingResource::TextureView(&self.baked_direct),
-            self.radiance.as_entire_binding(),
+            self.gather.radiance.as_entire_binding(),
             self.scales.as_entire_binding(),
         ]
     }
@@ -66,32 +60,7 @@ impl ProbeRaysPass {
         groups: usize,
     ) -> ProbeRaysPass {
         let st = wgpu::BufferUsages::STORAGE;
-        let gpu_points: Vec<GpuGatherPoint> = rays
-            .points
-            .iter()
-            .map(|g| GpuGatherPoint {
-                position: g.position,
-                texel: g.texel,
-                normal: g.normal,
-                albedo: g.albedo,
-                emitter: g.emitter,
-                emission: g.emission,
-                ..Default::default()
-            })
-            .collect();
-        // Never empty: a binding of zero bytes is invalid.
-        let gpu_points = if gpu_points.is_empty() {
-            vec![GpuGatherPoint::default()]
-        } else {
-            gpu_points
-        };
-        let points = pipeline::buffer_init(device, "prm gather points", bytemuck::cast_slice(&gpu_points), st);
-        let radiance = pipeline::storage(
-            device,
-            "prm gather radiance",
-            gpu_points.len() as u64 * 16,
-            wgpu::BufferUsages::COPY_SRC,
-        );
+        let gather = GatherPoints::upload(device, "prm gather", &rays.points);
         let ones = vec![[1.0f32; 4]; groups.max(1)];
         let scales = pipeline::buffer_init(
             device,
@@ -132,54 +101,34 @@ impl ProbeRaysPass {
                 info.as_entire_binding(),
                 basis.as_entire_binding(),
                 hits.as_entire_binding(),
-                radiance.as_entire_binding(),
+                gather.radiance.as_entire_binding(),
                 coefficients.as_entire_binding(),
                 sky.as_entire_binding(),
             ],
         );
         let parts = [
             crate::SHARED_WGSL,
+            crate::LIGHT_BINDINGS_WGSL,
             crate::LIGHTS_WGSL,
             include_str!("../../../shaders/runtime/probe_radiance.wgsl"),
         ];
         let inputs = RadianceBindings {
-            points,
+            gather,
             lightmap: lightmap.clone(),
             baked_direct: baked_direct.clone(),
-            radiance,
             scales,
         };
-        let radiance_pass = ComputePass::new(device, "probe radiance", &parts, &inputs.resources(b, shadow_maps));
+        let radiance = LitPass::new(device, "probe radiance", &parts, inputs, b, shadow_maps);
+        let probe_groups = (rays.probes() as u32).div_ceil(64);
         ProbeRaysPass {
-            radiance_pass,
-            sum,
-            inputs,
-            point_count: rays.points.len() as u32,
-            probe_count: rays.probes() as u32,
+            gathered: GatherPasses::new(
+                radiance.bindings.gather.radiance.clone(),
+                radiance,
+                rays.points.len() as u32,
+                sum,
+                [probe_groups, 1, 1],
+            ),
         }
-    }
-
-    /// Binds the radiance pass to other (larger) shadow maps.
-    pub fn rebind(&mut self, device: &wgpu::Device, b: &Buffers, shadow_maps: &wgpu::TextureView) {
-        self.radiance_pass
-            .rebind(device, &self.inputs.resources(b, shadow_maps));
-    }
-
-    /// The radiance pass (one invocation per gather point, reading `external` shadow maps for
-    /// this frame if given), then the sum (one per probe).
-    pub fn encode(
-        &self,
-        device: &wgpu::Device,
-        encoder: &mut wgpu::CommandEncoder,
-        b: &Buffers,
-        external: Option<&wgpu::TextureView>,
-        timer: Option<&PassTimer>,
-    ) {
-        let groups = linear_workgroups(self.point_count);
-        let own = external.map(|maps| self.inputs.resources(b, maps));
-        self.radiance_pass
-            .encode_on(device, encoder, own.as_ref().map(|r| &r[..]), groups, timer);
-        self.sum.encode(encoder, [self.probe_count.div_ceil(64), 1, 1], timer);
     }
 
     /// Uploads the emitter groups' scales (one RGB each, the archive's order).
@@ -188,12 +137,6 @@ impl ProbeRaysPass {
             return;
         }
         let v: Vec<[f32; 4]> = scales.iter().map(|s| [s[0], s[1], s[2], 0.0]).collect();
-        queue.write_buffer(&self.inputs.scales, 0, bytemuck::cast_slice(&v));
-    }
-
-    /// The radiance buffer (one `vec4` per gather point, `w` unused, then a placeholder when
-    /// there are none) and the gather point count, for tests.
-    pub fn radiance(&self) -> (&wgpu::Buffer, u32) {
-        (&self.inputs.radiance, self.point_count)
+        queue.write_buffer(&self.gathered.bindings().scales, 0, bytemuck::cast_slice(&v));
     }
 }

@@ -13,8 +13,9 @@
 //! every texel.
 
 use prm_format::{sky_irradiance_sh, ProbeRays, ProbeSkyTransfer, Probes, SH_COEFFS};
-use prm_gpu_kit::{pipeline, ComputePass, PassTimer};
+use prm_gpu_kit::{pipeline, ComputePass};
 
+use crate::lit::LitFrame;
 use crate::probe_rays::ProbeRaysPass;
 use crate::{Buffers, GpuProbeGrid, RuntimeError};
 
@@ -203,7 +204,7 @@ impl ProbesPass {
     /// The gather points' radiance buffer and their count, when the probes have rays.
     pub fn ray_radiance(&self) -> Option<(&wgpu::Buffer, u32)> {
         match &self.light {
-            Light::Rays(r) => Some(r.radiance()),
+            Light::Rays(r) => Some(r.gathered.radiance()),
             Light::Panes(_) => None,
         }
     }
@@ -218,7 +219,7 @@ impl ProbesPass {
     /// Binds the probe rays to other (larger) shadow maps.
     pub fn rebind(&mut self, device: &wgpu::Device, b: &Buffers, shadow_maps: &wgpu::TextureView) {
         if let Light::Rays(r) = &mut self.light {
-            r.rebind(device, b, shadow_maps);
+            r.gathered.rebind(device, b, shadow_maps);
         }
     }
 
@@ -237,22 +238,15 @@ impl ProbesPass {
     }
 
     /// Through the panes one invocation per probe and coefficient (workgroups of 64), after
-    /// the weights; along the rays the probe rays passes, after the blend, reading `external`
-    /// shadow maps for this frame if given.
-    pub fn encode(
-        &self,
-        device: &wgpu::Device,
-        encoder: &mut wgpu::CommandEncoder,
-        b: &Buffers,
-        external: Option<&wgpu::TextureView>,
-        timer: Option<&PassTimer>,
-    ) {
+    /// the weights; along the rays the probe rays passes, after the blend, reading the frame's
+    /// external shadow maps if it has them.
+    pub fn encode(&self, encoder: &mut wgpu::CommandEncoder, frame: &LitFrame) {
         match &self.light {
             Light::Panes(pass) => {
                 let slots = (self.positions.len() * SH_COEFFS) as u32;
-                pass.encode(encoder, [slots.div_ceil(64), 1, 1], timer);
+                pass.encode(encoder, [slots.div_ceil(64), 1, 1], frame.timer);
             }
-            Light::Rays(rays) => rays.encode(device, encoder, b, external, timer),
+            Light::Rays(rays) => rays.gathered.encode(encoder, frame),
         }
     }
 }

@@ -20,18 +20,17 @@ pub(crate) struct ShadowMaps {
 impl ShadowMaps {
     /// `capacity` layers of `resolution`² texels.
     pub fn new(device: &wgpu::Device, resolution: u32, capacity: u32) -> ShadowMaps {
-        let texture = pipeline::texture(
+        let (array, layers) = pipeline::layered_target(
             device,
             "prm shadow maps",
             [resolution, resolution, capacity],
             SHADOW_FORMAT,
-            wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
         );
         let stride = device.limits().min_uniform_buffer_offset_alignment.max(64);
         ShadowMaps {
             capacity,
-            array: pipeline::array_view(&texture),
-            layers: (0..capacity).map(|l| pipeline::layer_view(&texture, l)).collect(),
+            array,
+            layers,
             matrices: pipeline::uniform(device, "prm shadow matrices", (capacity * stride) as u64),
             stride,
         }
@@ -60,27 +59,13 @@ pub(crate) struct ShadowPass {
 impl ShadowPass {
     pub fn new(device: &wgpu::Device, maps: &ShadowMaps) -> ShadowPass {
         let layout = pipeline::dynamic_uniform_layout(device, "prm shadow", 64);
-        let module = pipeline::shader(
+        let pipeline = pipeline::depth_only(
             device,
             "prm shadow",
             &[include_str!("../../../shaders/runtime/shadow.wgsl")],
-        );
-        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("prm shadow"),
-            bind_group_layouts: &[Some(&layout)],
-            immediate_size: 0,
-        });
-        let pipeline = pipeline::render(
-            device,
-            &pipeline::RenderSpec {
-                label: "prm shadow",
-                module: &module,
-                layout: Some(&pipeline_layout),
-                vertex_buffers: &[pipeline::vertices(12, &wgpu::vertex_attr_array![0 => Float32x3])],
-                depth: Some(SHADOW_FORMAT),
-                color: None,
-                topology: wgpu::PrimitiveTopology::TriangleList,
-            },
+            &[&layout],
+            12,
+            SHADOW_FORMAT,
         );
         let bind_group = Self::group(device, &pipeline, maps);
         ShadowPass { pipeline, bind_group }

@@ -11,6 +11,11 @@ pub const SHARED_WGSL: &str = include_str!("../../../shaders/runtime/shared.wgsl
 /// including shader binds `frame`, `lights`, `views` and `shadow_maps`
 /// (see [`Runtime::direct_light_bindings`](crate::Runtime::direct_light_bindings)).
 pub const LIGHTS_WGSL: &str = include_str!("../../../shaders/runtime/lights.wgsl");
+/// What [`LIGHTS_WGSL`] reads declared as group 0, bindings 0 to 3, in the order of
+/// [`DirectLight::resources`](crate::DirectLight::resources)
+/// (`shaders/runtime/light_bindings.wgsl`); needs [`SHARED_WGSL`] before it. The including shader
+/// binds its own resources from binding 4.
+pub const LIGHT_BINDINGS_WGSL: &str = include_str!("../../../shaders/runtime/light_bindings.wgsl");
 
 /// The indirect irradiance at a point from the probes around it, `probe_irradiance(x, n)`
 /// (`shaders/runtime/probe_volume.wgsl`); needs [`SHARED_WGSL`] before it, and the including

@@ -630,22 +630,35 @@ fn nearest_on_triangle(t: &[Vec2; 3], p: Vec2) -> (f32, f32, f32) {
     best
 }
 
-/// Barycentric `(b1, b2)` of the centroid of the 4×4 sub-samples of texel `(x, y)` that lie in
+/// Sub-samples per texel side used to estimate how much of a texel a triangle covers.
+const SUB: usize = 4;
+
+/// The `SUB × SUB` sub-sample points of texel `(x, y)` that lie in 2D triangle `t`, row by row.
+fn covered_subsamples(t: &[Vec2; 3], x: usize, y: usize) -> impl Iterator<Item = Vec2> + '_ {
+    (0..SUB)
+        .flat_map(move |sy| {
+            (0..SUB).map(move |sx| {
+                Vec2::new(
+                    x as f32 + (sx as f32 + 0.5) / SUB as f32,
+                    y as f32 + (sy as f32 + 0.5) / SUB as f32,
+                )
+            })
+        })
+        .filter(move |&p| barycentric(t, p).is_some_and(|(a, b, c)| a >= 0.0 && b >= 0.0 && c >= 0.0))
+}
+
+/// The fraction of texel `(x, y)` that 2D triangle `t` covers, from its sub-samples.
+fn subsample_coverage(t: &[Vec2; 3], x: usize, y: usize) -> f32 {
+    covered_subsamples(t, x, y).count() as f32 / (SUB * SUB) as f32
+}
+
+/// Barycentric `(b1, b2)` of the centroid of the sub-samples of texel `(x, y)` that lie in
 /// 2D triangle `t`; `None` when none does.
 fn covered_centroid(t: &[Vec2; 3], x: usize, y: usize) -> Option<(f32, f32)> {
-    const SUB: usize = 4;
     let (mut sum, mut n) = (Vec2::ZERO, 0);
-    for sy in 0..SUB {
-        for sx in 0..SUB {
-            let p = Vec2::new(
-                x as f32 + (sx as f32 + 0.5) / SUB as f32,
-                y as f32 + (sy as f32 + 0.5) / SUB as f32,
-            );
-            if barycentric(t, p).is_some_and(|(a, b, c)| a >= 0.0 && b >= 0.0 && c >= 0.0) {
-                sum += p;
-                n += 1;
-            }
-        }
+    for p in covered_subsamples(t, x, y) {
+        sum += p;
+        n += 1;
     }
     if n == 0 {
         return None;
@@ -695,6 +708,29 @@ fn overlaps_texel(t: &[Vec2; 3], x: f32, y: f32) -> bool {
     true
 }
 
+/// A texel's owning triangle: its index, its distance to the texel centre and the barycentric
+/// coordinates `(b1, b2)` of its point nearest that centre.
+type Owner = (u32, f32, f32, f32);
+
+/// The texel grid being rasterised: what each texel holds so far.
+struct Raster {
+    /// Texels per side.
+    r: usize,
+    owner: Vec<Owner>,
+    /// Whether the texel centre lies strictly inside its owner (not on a shared edge): two such
+    /// owners for one texel mean the chart folds over itself.
+    owner_strict: Vec<bool>,
+    /// Summed fraction of the texel covered by the triangles that overlap it.
+    coverage: Vec<f32>,
+    texel_chart: Vec<u32>,
+    /// Per triangle: whether it overlaps any texel.
+    touches: Vec<bool>,
+    /// Texels overlapped by two charts.
+    shared: u32,
+    /// Texels whose centre lies strictly inside two triangles.
+    overlapping: u32,
+}
+
 /// Rasterises the triangles at their lightmap UVs into exit points, then dilates into the gutters.
 fn rasterize(
     scene: &Scene,
@@ -705,20 +741,71 @@ fn rasterize(
     texel_size: f32,
     gutter: u32,
 ) -> Atlas {
-    let r = resolution as usize;
-    let rf = resolution as f32;
-    // Per texel: owning triangle and its distance to the texel centre, coverage, chart.
-    let mut owner = vec![(EMPTY_TEXEL, f32::INFINITY, 0.0f32, 0.0f32); r * r];
-    let mut coverage = vec![0.0f32; r * r];
-    let mut texel_chart = vec![EMPTY_TEXEL; r * r];
-    let (mut shared, mut overlapping) = (0u32, 0u32);
-    // Whether the texel centre lies strictly inside its owner (not on a shared edge): two such
-    // owners for one texel mean the chart folds over itself.
-    let mut owner_strict = vec![false; r * r];
-    let mut touches = vec![false; uvs.len()];
-    const SUB: usize = 4;
+    let mut raster = Raster::new(resolution, uvs.len());
     for (t, uv) in uvs.iter().enumerate() {
-        let tex = uv.map(|u| u * rf);
+        raster.draw_triangle(t, uv, chart_of_triangle[t]);
+    }
+    let (owned, without_exit) = raster.give_every_triangle_a_texel(&uvs);
+    let (exits, texel_exit) = raster.exit_points(scene, &uvs);
+    let dilation = raster.dilate(&texel_exit, gutter);
+
+    let r = raster.r;
+    let mut counts: Vec<u32> = owned;
+    counts.sort_unstable();
+    let stats = AtlasStats {
+        resolution,
+        texel_size,
+        charts,
+        utilization: exits.len() as f32 / (r * r) as f32,
+        covered_texels: exits.len() as u32,
+        dilated_texels: dilation.len() as u32,
+        uncovered_triangles: raster.touches.iter().filter(|&&t| !t).count() as u32,
+        triangles_without_exit: without_exit,
+        texels_per_triangle_min: counts.first().copied().unwrap_or(0),
+        texels_per_triangle_median: counts.get(counts.len() / 2).copied().unwrap_or(0),
+        overlapping_texels: raster.overlapping,
+        shared_texels: raster.shared,
+    };
+    Atlas {
+        resolution,
+        uvs,
+        chart_of_triangle,
+        exits,
+        texel_exit,
+        dilation,
+        texel_chart: raster.texel_chart,
+        stats,
+    }
+}
+
+impl Raster {
+    /// An empty grid of `resolution²` texels for `triangles` triangles.
+    fn new(resolution: u32, triangles: usize) -> Raster {
+        let r = resolution as usize;
+        Raster {
+            r,
+            owner: vec![(EMPTY_TEXEL, f32::INFINITY, 0.0f32, 0.0f32); r * r],
+            owner_strict: vec![false; r * r],
+            coverage: vec![0.0f32; r * r],
+            texel_chart: vec![EMPTY_TEXEL; r * r],
+            touches: vec![false; triangles],
+            shared: 0,
+            overlapping: 0,
+        }
+    }
+
+    /// UVs scaled to texel units.
+    fn texel_space(&self, uv: &[Vec2; 3]) -> [Vec2; 3] {
+        let rf = self.r as f32;
+        uv.map(|u| u * rf)
+    }
+
+    /// Draws triangle `t` of chart `chart`: every texel it overlaps records the chart, gains
+    /// its coverage, and takes it as owner when it lies nearer the centre than the owner so far
+    /// (or strictly contains the centre where the owner so far does not).
+    fn draw_triangle(&mut self, t: usize, uv: &[Vec2; 3], chart: u32) {
+        let (r, rf) = (self.r, self.r as f32);
+        let tex = self.texel_space(uv);
         let (min, max) = (tex[0].min(tex[1]).min(tex[2]), tex[0].max(tex[1]).max(tex[2]));
         let x0 = (min.x.floor().max(0.0)) as usize;
         let y0 = (min.y.floor().max(0.0)) as usize;
@@ -730,178 +817,153 @@ fn rasterize(
                     continue;
                 }
                 let i = y * r + x;
-                touches[t] = true;
-                let chart = chart_of_triangle[t];
-                if texel_chart[i] != EMPTY_TEXEL && texel_chart[i] != chart {
-                    shared += 1;
+                self.touches[t] = true;
+                if self.texel_chart[i] != EMPTY_TEXEL && self.texel_chart[i] != chart {
+                    self.shared += 1;
                 }
-                texel_chart[i] = chart;
+                self.texel_chart[i] = chart;
                 let centre = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
                 let (b1, b2, d) = nearest_on_triangle(&tex, centre);
                 let strict = d == 0.0 && strictly_inside(&tex, centre);
-                if strict && owner_strict[i] {
-                    overlapping += 1;
+                if strict && self.owner_strict[i] {
+                    self.overlapping += 1;
                 }
-                if d < owner[i].1 || (strict && !owner_strict[i]) {
+                if d < self.owner[i].1 || (strict && !self.owner_strict[i]) {
+                    self.owner[i] = (t as u32, d, b1, b2);
+                    self.owner_strict[i] = strict;
+                }
+                self.coverage[i] += subsample_coverage(&tex, x, y);
+            }
+        }
+    }
+
+    /// Triangles that lost every texel take one they overlap from an owner that has several.
+    /// Returns the texels each triangle owns and how many triangles still own none.
+    fn give_every_triangle_a_texel(&mut self, uvs: &[[Vec2; 3]]) -> (Vec<u32>, u32) {
+        let (r, rf) = (self.r, self.r as f32);
+        let owner = &mut self.owner;
+        let mut owned = vec![0u32; uvs.len()];
+        for o in owner.iter() {
+            if o.0 != EMPTY_TEXEL {
+                owned[o.0 as usize] += 1;
+            }
+        }
+        let mut without_exit = 0u32;
+        for t in 0..uvs.len() {
+            if owned[t] > 0 {
+                continue;
+            }
+            let tex = uvs[t].map(|u| u * rf);
+            let (min, max) = (tex[0].min(tex[1]).min(tex[2]), tex[0].max(tex[1]).max(tex[2]));
+            let mut best: Option<(usize, u32)> = None;
+            for y in (min.y.floor().max(0.0) as usize)..(max.y.ceil().min(rf) as usize).max(1) {
+                for x in (min.x.floor().max(0.0) as usize)..(max.x.ceil().min(rf) as usize).max(1) {
+                    let i = y * r + x;
+                    if i >= owner.len() || !overlaps_texel(&tex, x as f32, y as f32) {
+                        continue;
+                    }
+                    let holder = owner[i].0;
+                    if holder != EMPTY_TEXEL
+                        && owned[holder as usize] > 1
+                        && best.is_none_or(|(_, n)| owned[holder as usize] > n)
+                    {
+                        best = Some((i, owned[holder as usize]));
+                    }
+                }
+            }
+            match best {
+                Some((i, _)) => {
+                    owned[owner[i].0 as usize] -= 1;
+                    let (x, y) = ((i % r) as f32, (i / r) as f32);
+                    let (b1, b2, d) = nearest_on_triangle(&tex, Vec2::new(x + 0.5, y + 0.5));
                     owner[i] = (t as u32, d, b1, b2);
-                    owner_strict[i] = strict;
+                    owned[t] = 1;
                 }
-                let mut inside = 0;
-                for sy in 0..SUB {
-                    for sx in 0..SUB {
-                        let p = Vec2::new(
-                            x as f32 + (sx as f32 + 0.5) / SUB as f32,
-                            y as f32 + (sy as f32 + 0.5) / SUB as f32,
-                        );
-                        if let Some((c0, c1, c2)) = barycentric(&tex, p) {
-                            if c0 >= 0.0 && c1 >= 0.0 && c2 >= 0.0 {
-                                inside += 1;
-                            }
+                None => without_exit += 1,
+            }
+        }
+        (owned, without_exit)
+    }
+
+    /// One exit point per owned texel, and each texel's exit index (`EMPTY_TEXEL` where none).
+    fn exit_points(&self, scene: &Scene, uvs: &[[Vec2; 3]]) -> (Vec<ExitPoint>, Vec<u32>) {
+        let r = self.r;
+        let mut exits = Vec::new();
+        let mut texel_exit = vec![EMPTY_TEXEL; r * r];
+        for (i, &(t, _, b1, b2)) in self.owner.iter().enumerate() {
+            if t == EMPTY_TEXEL {
+                continue;
+            }
+            let tri = &scene.triangles[t as usize];
+            // The exit point is the centroid of the part of the texel its triangle covers (the
+            // texel centre when it covers it all). A point on the triangle's boundary instead
+            // would sit exactly in a concave edge, where half the surroundings meet it at
+            // grazing angles.
+            let (b1, b2) = covered_centroid(&self.texel_space(&uvs[t as usize]), i % r, i / r).unwrap_or((b1, b2));
+            texel_exit[i] = exits.len() as u32;
+            exits.push(ExitPoint {
+                texel: i as u32,
+                position: tri.point(b1, b2),
+                normal: tri.shading_normal(b1, b2),
+                albedo: scene.albedo(t as usize, b1, b2),
+                triangle: t,
+                coverage: self.coverage[i].clamp(1.0 / (SUB * SUB) as f32, 1.0),
+            });
+        }
+        (exits, texel_exit)
+    }
+
+    /// Dilation: `max(gutter, 1)` rings; each empty texel copies a filled 8-neighbour's source
+    /// (and chart). Returns `(texel, source texel)` pairs in the order they were filled.
+    fn dilate(&mut self, texel_exit: &[u32], gutter: u32) -> Vec<(u32, u32)> {
+        let r = self.r;
+        let mut source: Vec<u32> = (0..(r * r) as u32)
+            .map(|i| {
+                if texel_exit[i as usize] != EMPTY_TEXEL {
+                    i
+                } else {
+                    EMPTY_TEXEL
+                }
+            })
+            .collect();
+        let mut dilation = Vec::new();
+        for _ in 0..gutter.max(1) {
+            let mut ring = Vec::new();
+            for y in 0..r {
+                for x in 0..r {
+                    let i = y * r + x;
+                    if source[i] != EMPTY_TEXEL {
+                        continue;
+                    }
+                    'n: for (dx, dy) in [
+                        (-1i64, 0i64),
+                        (1, 0),
+                        (0, -1),
+                        (0, 1),
+                        (-1, -1),
+                        (1, -1),
+                        (-1, 1),
+                        (1, 1),
+                    ] {
+                        let (nx, ny) = (x as i64 + dx, y as i64 + dy);
+                        if nx < 0 || ny < 0 || nx >= r as i64 || ny >= r as i64 {
+                            continue;
+                        }
+                        let n = ny as usize * r + nx as usize;
+                        if source[n] != EMPTY_TEXEL {
+                            ring.push((i, source[n], self.texel_chart[n]));
+                            break 'n;
                         }
                     }
                 }
-                coverage[i] += inside as f32 / (SUB * SUB) as f32;
+            }
+            for (i, s, c) in ring {
+                source[i] = s;
+                self.texel_chart[i] = c;
+                dilation.push((i as u32, s));
             }
         }
-    }
-
-    // Triangles that lost every texel take one they overlap from an owner that has several.
-    let mut owned = vec![0u32; uvs.len()];
-    for o in &owner {
-        if o.0 != EMPTY_TEXEL {
-            owned[o.0 as usize] += 1;
-        }
-    }
-    let mut without_exit = 0u32;
-    for t in 0..uvs.len() {
-        if owned[t] > 0 {
-            continue;
-        }
-        let tex = uvs[t].map(|u| u * rf);
-        let (min, max) = (tex[0].min(tex[1]).min(tex[2]), tex[0].max(tex[1]).max(tex[2]));
-        let mut best: Option<(usize, u32)> = None;
-        for y in (min.y.floor().max(0.0) as usize)..(max.y.ceil().min(rf) as usize).max(1) {
-            for x in (min.x.floor().max(0.0) as usize)..(max.x.ceil().min(rf) as usize).max(1) {
-                let i = y * r + x;
-                if i >= owner.len() || !overlaps_texel(&tex, x as f32, y as f32) {
-                    continue;
-                }
-                let holder = owner[i].0;
-                if holder != EMPTY_TEXEL
-                    && owned[holder as usize] > 1
-                    && best.is_none_or(|(_, n)| owned[holder as usize] > n)
-                {
-                    best = Some((i, owned[holder as usize]));
-                }
-            }
-        }
-        match best {
-            Some((i, _)) => {
-                owned[owner[i].0 as usize] -= 1;
-                let (x, y) = ((i % r) as f32, (i / r) as f32);
-                let (b1, b2, d) = nearest_on_triangle(&tex, Vec2::new(x + 0.5, y + 0.5));
-                owner[i] = (t as u32, d, b1, b2);
-                owned[t] = 1;
-            }
-            None => without_exit += 1,
-        }
-    }
-
-    let mut exits = Vec::new();
-    let mut texel_exit = vec![EMPTY_TEXEL; r * r];
-    for (i, &(t, _, b1, b2)) in owner.iter().enumerate() {
-        if t == EMPTY_TEXEL {
-            continue;
-        }
-        let tri = &scene.triangles[t as usize];
-        // The exit point is the centroid of the part of the texel its triangle covers (the
-        // texel centre when it covers it all). A point on the triangle's boundary instead would
-        // sit exactly in a concave edge, where half the surroundings meet it at grazing angles.
-        let (b1, b2) = covered_centroid(&uvs[t as usize].map(|u| u * rf), i % r, i / r).unwrap_or((b1, b2));
-        texel_exit[i] = exits.len() as u32;
-        exits.push(ExitPoint {
-            texel: i as u32,
-            position: tri.point(b1, b2),
-            normal: tri.shading_normal(b1, b2),
-            albedo: scene.albedo(t as usize, b1, b2),
-            triangle: t,
-            coverage: coverage[i].clamp(1.0 / (SUB * SUB) as f32, 1.0),
-        });
-    }
-
-    // Dilation: `max(gutter, 1)` rings; each empty texel copies a filled 8-neighbour's source.
-    let mut source: Vec<u32> = (0..(r * r) as u32)
-        .map(|i| {
-            if texel_exit[i as usize] != EMPTY_TEXEL {
-                i
-            } else {
-                EMPTY_TEXEL
-            }
-        })
-        .collect();
-    let mut dilation = Vec::new();
-    for _ in 0..gutter.max(1) {
-        let mut ring = Vec::new();
-        for y in 0..r {
-            for x in 0..r {
-                let i = y * r + x;
-                if source[i] != EMPTY_TEXEL {
-                    continue;
-                }
-                'n: for (dx, dy) in [
-                    (-1i64, 0i64),
-                    (1, 0),
-                    (0, -1),
-                    (0, 1),
-                    (-1, -1),
-                    (1, -1),
-                    (-1, 1),
-                    (1, 1),
-                ] {
-                    let (nx, ny) = (x as i64 + dx, y as i64 + dy);
-                    if nx < 0 || ny < 0 || nx >= r as i64 || ny >= r as i64 {
-                        continue;
-                    }
-                    let n = ny as usize * r + nx as usize;
-                    if source[n] != EMPTY_TEXEL {
-                        ring.push((i, source[n], texel_chart[n]));
-                        break 'n;
-                    }
-                }
-            }
-        }
-        for (i, s, c) in ring {
-            source[i] = s;
-            texel_chart[i] = c;
-            dilation.push((i as u32, s));
-        }
-    }
-
-    let mut counts: Vec<u32> = owned.clone();
-    counts.sort_unstable();
-    let stats = AtlasStats {
-        resolution,
-        texel_size,
-        charts,
-        utilization: exits.len() as f32 / (r * r) as f32,
-        covered_texels: exits.len() as u32,
-        dilated_texels: dilation.len() as u32,
-        uncovered_triangles: touches.iter().filter(|&&t| !t).count() as u32,
-        triangles_without_exit: without_exit,
-        texels_per_triangle_min: counts.first().copied().unwrap_or(0),
-        texels_per_triangle_median: counts.get(counts.len() / 2).copied().unwrap_or(0),
-        overlapping_texels: overlapping,
-        shared_texels: shared,
-    };
-    Atlas {
-        resolution,
-        uvs,
-        chart_of_triangle,
-        exits,
-        texel_exit,
-        dilation,
-        texel_chart,
-        stats,
+        dilation
     }
 }
 

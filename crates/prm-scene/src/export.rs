@@ -44,7 +44,10 @@ use serde_json::{json, Map, Value};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use crate::Scene;
+use crate::{Scene, Triangle};
+
+mod ktx2;
+pub use ktx2::{write_ktx2_rgb9e5, VK_FORMAT_E5B9G9R9_UFLOAT_PACK32};
 
 /// Why a scene could not be exported.
 #[derive(Debug, thiserror::Error)]
@@ -196,6 +199,29 @@ pub fn write_gltf(scene: &Scene, lightmap_uvs: &[[Vec2; 3]], path: &Path) -> Res
     }
 }
 
+/// [`ExportError::BadImage`] for the image to be written at `path`.
+fn bad_image(path: &Path, message: String) -> ExportError {
+    ExportError::BadImage {
+        path: path.to_path_buf(),
+        message,
+    }
+}
+
+/// The image writers' refusals of their arguments: an empty image, or `pixels` that are not
+/// `width × height`.
+fn check_image(path: &Path, width: usize, height: usize, pixels: usize) -> Result<(), ExportError> {
+    if width == 0 || height == 0 {
+        return Err(bad_image(path, format!("empty image ({width}×{height})")));
+    }
+    if width.checked_mul(height) != Some(pixels) {
+        return Err(bad_image(
+            path,
+            format!("{pixels} pixels given for a {width}×{height} image"),
+        ));
+    }
+    Ok(())
+}
+
 /// Writes a linear RGB image as a 32-bit float OpenEXR file at `path` (atomically).
 ///
 /// `rgb` is row-major, row 0 on top (pixel `(x, y)` is `rgb[y * width + x]`), as the atlas
@@ -203,19 +229,9 @@ pub fn write_gltf(scene: &Scene, lightmap_uvs: &[[Vec2; 3]], path: &Path) -> Res
 /// refused; an existing target that is not a regular file is left alone. Values are stored
 /// as they are (NaN included).
 pub fn write_exr_rgb(path: &Path, width: usize, height: usize, rgb: &[[f32; 3]]) -> Result<(), ExportError> {
-    let bad = |message: String| ExportError::BadImage {
-        path: path.to_path_buf(),
-        message,
-    };
-    if width == 0 || height == 0 {
-        return Err(bad(format!("empty image ({width}×{height})")));
-    }
-    match width.checked_mul(height) {
-        Some(n) if n == rgb.len() => {}
-        _ => return Err(bad(format!("{} pixels given for a {width}×{height} image", rgb.len()))),
-    }
+    check_image(path, width, height, rgb.len())?;
     if path.file_name().is_none() {
-        return Err(bad("not a file name".into()));
+        return Err(bad_image(path, "not a file name".into()));
     }
     check_target(path)?;
     let channels = exr::prelude::SpecificChannels::rgb(|p: exr::prelude::Vec2<usize>| {
@@ -381,6 +397,47 @@ fn build(
     path: &Path,
     uri: Option<&str>,
 ) -> Result<(Value, Vec<u8>), ExportError> {
+    check_triangles(scene, lightmap_uvs, path)?;
+    let mut buffer = Buffer::with_vertex_data(&scene.triangles, lightmap_uvs);
+    let (materials, images) = buffer.write_materials(scene, path)?;
+    buffer.pad();
+    let (accessors, primitives) = primitives(&scene.triangles);
+
+    let name = path
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "scene".into());
+    let Buffer { bin, views } = buffer;
+    let mut buffer = json!({ "byteLength": bin.len() });
+    if let Some(uri) = uri {
+        buffer["uri"] = json!(uri);
+    }
+    let mut root = json!({
+        "asset": { "version": "2.0", "generator": concat!("prm-scene ", env!("CARGO_PKG_VERSION")) },
+        "scene": 0,
+        "scenes": [{ "nodes": [0] }],
+        "nodes": [{ "mesh": 0, "name": name }],
+        "meshes": [{ "name": name, "primitives": primitives }],
+        "materials": materials,
+        "accessors": accessors,
+        "bufferViews": views,
+        "buffers": [buffer],
+    });
+    if !images.is_empty() {
+        let textures: Vec<Value> = (0..images.len())
+            .map(|i| json!({ "sampler": 0, "source": i }))
+            .collect();
+        root["images"] = json!(images);
+        root["textures"] = json!(textures);
+        // Repeat wrapping and bilinear filtering, as the baker samples.
+        root["samplers"] = json!([{ "magFilter": 9729, "minFilter": 9987, "wrapS": 10497, "wrapT": 10497 }]);
+    }
+    Ok((root, bin))
+}
+
+/// Refuses a scene that cannot be exported: no triangles, a lightmap UV count that differs
+/// from the triangle count, a non-finite vertex attribute or a material out of range.
+fn check_triangles(scene: &Scene, lightmap_uvs: &[[Vec2; 3]], path: &Path) -> Result<(), ExportError> {
     let tris = &scene.triangles;
     let n = tris.len();
     if n == 0 {
@@ -420,98 +477,120 @@ fn build(
             });
         }
     }
+    Ok(())
+}
 
-    // The vertex data: four tightly packed sections (one bufferView each), three vertices per
-    // triangle in the scene's order. Every element is a multiple of 4 bytes, so every section
-    // and every accessor offset is 4-aligned.
-    let verts = 3 * n;
-    let mut bin: Vec<u8> = Vec::with_capacity(verts * (12 + 12 + 8 + 8));
-    let put = |bin: &mut Vec<u8>, xs: &[f32]| xs.iter().for_each(|x| bin.extend_from_slice(&x.to_le_bytes()));
-    for t in tris {
-        for p in t.positions {
-            put(&mut bin, &p.to_array());
+/// The vertex attributes: semantic and bytes per element, in the order of their bufferViews.
+const ATTRIBUTES: [(usize, &str); 4] = [(12, "POSITION"), (12, "NORMAL"), (8, "TEXCOORD_0"), (8, "TEXCOORD_1")];
+
+/// The binary buffer being written and the bufferViews into it.
+struct Buffer {
+    bin: Vec<u8>,
+    views: Vec<Value>,
+}
+
+impl Buffer {
+    /// The vertex data: four tightly packed sections (one bufferView each), three vertices per
+    /// triangle in the scene's order. Every element is a multiple of 4 bytes, so every section
+    /// and every accessor offset is 4-aligned.
+    fn with_vertex_data(tris: &[Triangle], lightmap_uvs: &[[Vec2; 3]]) -> Buffer {
+        let verts = 3 * tris.len();
+        let mut bin: Vec<u8> = Vec::with_capacity(verts * (12 + 12 + 8 + 8));
+        let put = |bin: &mut Vec<u8>, xs: &[f32]| xs.iter().for_each(|x| bin.extend_from_slice(&x.to_le_bytes()));
+        for t in tris {
+            for p in t.positions {
+                put(&mut bin, &p.to_array());
+            }
         }
-    }
-    for t in tris {
-        for nrm in t.normals {
-            put(&mut bin, &unit_normal(nrm, t.normal()).to_array());
+        for t in tris {
+            for nrm in t.normals {
+                put(&mut bin, &unit_normal(nrm, t.normal()).to_array());
+            }
         }
-    }
-    for t in tris {
-        for uv in t.uvs {
-            put(&mut bin, &[uv.x, flip_v(uv.y)]);
+        for t in tris {
+            for uv in t.uvs {
+                put(&mut bin, &[uv.x, flip_v(uv.y)]);
+            }
         }
-    }
-    for luv in lightmap_uvs {
-        for uv in luv {
-            put(&mut bin, &uv.to_array());
+        for luv in lightmap_uvs {
+            for uv in luv {
+                put(&mut bin, &uv.to_array());
+            }
         }
-    }
-    let sections = [
-        (12usize, "positions"),
-        (12, "normals"),
-        (8, "TEXCOORD_0"),
-        (8, "TEXCOORD_1"),
-    ];
-    let mut buffer_views = Vec::new();
-    let mut offset = 0usize;
-    for (size, name) in sections {
-        buffer_views.push(json!({
-            "buffer": 0, "byteOffset": offset, "byteLength": size * verts,
-            "target": ARRAY_BUFFER, "name": name,
-        }));
-        offset += size * verts;
+        let sections = ["positions", "normals", "TEXCOORD_0", "TEXCOORD_1"];
+        let mut views = Vec::new();
+        let mut offset = 0usize;
+        for ((size, _), name) in ATTRIBUTES.into_iter().zip(sections) {
+            views.push(json!({
+                "buffer": 0, "byteOffset": offset, "byteLength": size * verts,
+                "target": ARRAY_BUFFER, "name": name,
+            }));
+            offset += size * verts;
+        }
+        Buffer { bin, views }
     }
 
-    // Textures used by a material, embedded as PNG after the vertex data.
-    let mut images = Vec::new();
-    let mut image_of_texture: Vec<Option<usize>> = vec![None; scene.textures.len()];
-    let mut materials = Vec::with_capacity(scene.materials.len());
-    for (mi, m) in scene.materials.iter().enumerate() {
-        let bad = |message: String| ExportError::BadMaterial {
-            path: path.to_path_buf(),
-            material: mi,
-            name: m.name.clone(),
-            message,
-        };
-        if !m.albedo.is_finite() {
-            return Err(bad(format!("non-finite albedo {}", m.albedo)));
+    /// Zero bytes up to the next multiple of 4.
+    fn pad(&mut self) {
+        while !self.bin.len().is_multiple_of(4) {
+            self.bin.push(0);
         }
-        let a = m.albedo.clamp(Vec3::ZERO, Vec3::ONE);
-        let mut pbr = Map::new();
-        pbr.insert("baseColorFactor".into(), json!([num(a.x), num(a.y), num(a.z), 1.0]));
-        pbr.insert("metallicFactor".into(), json!(0.0));
-        pbr.insert("roughnessFactor".into(), json!(1.0));
-        if let Some(ti) = m.texture {
-            let slot = image_of_texture.get_mut(ti as usize).ok_or_else(|| {
-                bad(format!(
-                    "texture {ti} out of range (the scene has {})",
-                    scene.textures.len()
-                ))
-            })?;
-            let image = match *slot {
-                Some(i) => i,
-                None => {
-                    let png = png_bytes(&scene.textures[ti as usize]).map_err(|e| bad(format!("texture {ti}: {e}")))?;
-                    while !bin.len().is_multiple_of(4) {
-                        bin.push(0);
-                    }
-                    buffer_views.push(json!({ "buffer": 0, "byteOffset": bin.len(), "byteLength": png.len() }));
-                    bin.extend_from_slice(&png);
-                    images.push(json!({ "bufferView": buffer_views.len() - 1, "mimeType": "image/png" }));
-                    *slot = Some(images.len() - 1);
-                    images.len() - 1
-                }
+    }
+
+    /// The glTF materials, and the images of the textures they use, embedded as PNG after the
+    /// data written so far (each once).
+    fn write_materials(&mut self, scene: &Scene, path: &Path) -> Result<(Vec<Value>, Vec<Value>), ExportError> {
+        let mut images = Vec::new();
+        let mut image_of_texture: Vec<Option<usize>> = vec![None; scene.textures.len()];
+        let mut materials = Vec::with_capacity(scene.materials.len());
+        for (mi, m) in scene.materials.iter().enumerate() {
+            let bad = |message: String| ExportError::BadMaterial {
+                path: path.to_path_buf(),
+                material: mi,
+                name: m.name.clone(),
+                message,
             };
-            pbr.insert("baseColorTexture".into(), json!({ "index": image, "texCoord": 0 }));
+            if !m.albedo.is_finite() {
+                return Err(bad(format!("non-finite albedo {}", m.albedo)));
+            }
+            let a = m.albedo.clamp(Vec3::ZERO, Vec3::ONE);
+            let mut pbr = Map::new();
+            pbr.insert("baseColorFactor".into(), json!([num(a.x), num(a.y), num(a.z), 1.0]));
+            pbr.insert("metallicFactor".into(), json!(0.0));
+            pbr.insert("roughnessFactor".into(), json!(1.0));
+            if let Some(ti) = m.texture {
+                let slot = image_of_texture.get_mut(ti as usize).ok_or_else(|| {
+                    bad(format!(
+                        "texture {ti} out of range (the scene has {})",
+                        scene.textures.len()
+                    ))
+                })?;
+                let image = match *slot {
+                    Some(i) => i,
+                    None => {
+                        let png =
+                            png_bytes(&scene.textures[ti as usize]).map_err(|e| bad(format!("texture {ti}: {e}")))?;
+                        self.pad();
+                        self.views
+                            .push(json!({ "buffer": 0, "byteOffset": self.bin.len(), "byteLength": png.len() }));
+                        self.bin.extend_from_slice(&png);
+                        images.push(json!({ "bufferView": self.views.len() - 1, "mimeType": "image/png" }));
+                        *slot = Some(images.len() - 1);
+                        images.len() - 1
+                    }
+                };
+                pbr.insert("baseColorTexture".into(), json!({ "index": image, "texCoord": 0 }));
+            }
+            materials.push(json!({ "name": m.name, "pbrMetallicRoughness": pbr }));
         }
-        materials.push(json!({ "name": m.name, "pbrMetallicRoughness": pbr }));
+        Ok((materials, images))
     }
-    while !bin.len().is_multiple_of(4) {
-        bin.push(0);
-    }
+}
 
-    // One primitive per run of consecutive triangles with the same material.
+/// The accessors and primitives of the mesh: one primitive per run of consecutive triangles
+/// with the same material, its accessors ranges of the four vertex bufferViews.
+fn primitives(tris: &[Triangle]) -> (Vec<Value>, Vec<Value>) {
+    let n = tris.len();
     let mut accessors = Vec::new();
     let mut primitives = Vec::new();
     let mut start = 0;
@@ -527,10 +606,7 @@ fn build(
             }
         }
         let mut attributes = Map::new();
-        for (view, (size, semantic)) in [(12, "POSITION"), (12, "NORMAL"), (8, "TEXCOORD_0"), (8, "TEXCOORD_1")]
-            .into_iter()
-            .enumerate()
-        {
+        for (view, (size, semantic)) in ATTRIBUTES.into_iter().enumerate() {
             let mut acc = json!({
                 "bufferView": view, "byteOffset": first * size, "componentType": FLOAT,
                 "count": count, "type": if size == 12 { "VEC3" } else { "VEC2" },
@@ -545,36 +621,7 @@ fn build(
         primitives.push(json!({ "attributes": attributes, "material": material, "mode": 4 }));
         start = end;
     }
-
-    let name = path
-        .file_stem()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "scene".into());
-    let mut buffer = json!({ "byteLength": bin.len() });
-    if let Some(uri) = uri {
-        buffer["uri"] = json!(uri);
-    }
-    let mut root = json!({
-        "asset": { "version": "2.0", "generator": concat!("prm-scene ", env!("CARGO_PKG_VERSION")) },
-        "scene": 0,
-        "scenes": [{ "nodes": [0] }],
-        "nodes": [{ "mesh": 0, "name": name }],
-        "meshes": [{ "name": name, "primitives": primitives }],
-        "materials": materials,
-        "accessors": accessors,
-        "bufferViews": buffer_views,
-        "buffers": [buffer],
-    });
-    if !images.is_empty() {
-        let textures: Vec<Value> = (0..images.len())
-            .map(|i| json!({ "sampler": 0, "source": i }))
-            .collect();
-        root["images"] = json!(images);
-        root["textures"] = json!(textures);
-        // Repeat wrapping and bilinear filtering, as the baker samples.
-        root["samplers"] = json!([{ "magFilter": 9729, "minFilter": 9987, "wrapS": 10497, "wrapT": 10497 }]);
-    }
-    Ok((root, bin))
+    (accessors, primitives)
 }
 
 /// A unit shading normal: `n` when already unit length (kept bit-exact), else normalised, else

@@ -43,82 +43,124 @@ fn ignored_extensions(path: &Path, document: &gltf::Document) -> Vec<String> {
         .collect()
 }
 
-pub(crate) fn load(path: &Path) -> Result<Scene, SceneError> {
-    let malformed = |message: String| SceneError::Malformed {
+/// A `Malformed` error about the file at `path`, with no line number.
+fn malformed(path: &Path, message: String) -> SceneError {
+    SceneError::Malformed {
         path: path.to_path_buf(),
         line: None,
         message,
+    }
+}
+
+/// Loads a `.gltf` or `.glb` scene: materials, node hierarchy, lights, cameras and triangles.
+pub(crate) fn load(path: &Path) -> Result<Scene, SceneError> {
+    let (document, buffers) = parse_document(path)?;
+    let base = path.parent().unwrap_or(Path::new("."));
+    let mut report = LoadReport::default();
+    report.warnings.extend(ignored_extensions(path, &document));
+    let (materials, textures) = read_materials(path, base, &document, &buffers, &mut report.warnings);
+    let nodes = flatten_nodes(path, &document)?;
+
+    let mut geometry = Geometry {
+        path,
+        buffers: &buffers,
+        default_material: materials.len() as u32 - 1,
+        warnings: &mut report.warnings,
+        raw: Vec::new(),
+        bounds: Aabb::EMPTY,
     };
+    let mut lights = Vec::new();
+    let mut cameras = Vec::new();
+    for (node, world) in &nodes {
+        let origin = world.transform_point3(Vec3::ZERO);
+        let forward = world.transform_vector3(-Vec3::Z).normalize_or_zero();
+        if let Some(cam) = node.camera() {
+            match cam.projection() {
+                gltf::camera::Projection::Perspective(p) => cameras.push(Camera {
+                    eye: origin,
+                    target: origin + forward,
+                    fov_y_deg: p.yfov().to_degrees(),
+                }),
+                gltf::camera::Projection::Orthographic(_) => geometry
+                    .warnings
+                    .push(format!("{}: orthographic camera ignored", path.display())),
+            }
+        }
+        if let Some(light) = node.light() {
+            lights.push(read_light(&light, origin, forward));
+        }
+        if let Some(mesh) = node.mesh() {
+            geometry.read_mesh(&mesh, world)?;
+        }
+    }
+    let Geometry { raw, bounds, .. } = geometry;
+
+    let scene = Scene {
+        source: path.to_path_buf(),
+        triangles: Vec::with_capacity(raw.len()),
+        lightmap_uvs: None,
+        materials,
+        textures,
+        lights,
+        cameras,
+        report,
+    };
+    add_triangles(scene, raw, bounds).finish_load()
+}
+
+/// Reads the file and parses its document (checked before `gltf`'s own validation can index
+/// out of bounds), then loads and checks its buffers and buffer views.
+fn parse_document(path: &Path) -> Result<(gltf::Document, Vec<gltf::buffer::Data>), SceneError> {
     let bytes = crate::obj::read_regular_file(path).map_err(|source| SceneError::Io {
         path: path.to_path_buf(),
         source,
     })?;
     // `gltf`'s validation indexes the accessor of every POSITION without a bounds check: parse
     // without validation first and check those indices, then parse again with validation.
-    let unvalidated = gltf::Gltf::from_slice_without_validation(&bytes).map_err(|e| malformed(e.to_string()))?;
-    check_position_indices(&unvalidated.document).map_err(malformed)?;
+    let unvalidated = gltf::Gltf::from_slice_without_validation(&bytes).map_err(|e| malformed(path, e.to_string()))?;
+    check_position_indices(&unvalidated.document).map_err(|m| malformed(path, m))?;
     drop(unvalidated);
-    let gltf::Gltf { document, blob } = gltf::Gltf::from_slice(&bytes).map_err(|e| malformed(e.to_string()))?;
+    let gltf::Gltf { document, blob } = gltf::Gltf::from_slice(&bytes).map_err(|e| malformed(path, e.to_string()))?;
     drop(bytes);
     let base = path.parent().unwrap_or(Path::new("."));
     let buffers = load_buffers(path, base, &document, blob)?;
     check_views(path, &document, &buffers)?;
+    Ok((document, buffers))
+}
 
-    let mut report = LoadReport::default();
-    report.warnings.extend(ignored_extensions(path, &document));
-    // Images are decoded lazily, once each, only when a material uses them.
-    let mut textures = Vec::new();
-    let mut image_ids: HashMap<usize, Option<u32>> = HashMap::new();
+/// The document's materials followed by a white `default` one, and the textures they use.
+/// Images are decoded lazily, once each, only when a material uses them.
+fn read_materials(
+    path: &Path,
+    base: &Path,
+    document: &gltf::Document,
+    buffers: &[gltf::buffer::Data],
+    warnings: &mut Vec<String>,
+) -> (Vec<Material>, Vec<Texture>) {
+    let mut images = Images {
+        path,
+        base,
+        buffers,
+        textures: Vec::new(),
+        ids: HashMap::new(),
+    };
     let mut materials = Vec::new();
     for m in document.materials() {
         let f = m.pbr_metallic_roughness().base_color_factor();
         let mut texture = None;
         if let Some(info) = m.pbr_metallic_roughness().base_color_texture() {
             if info.tex_coord() != 0 {
-                report.warnings.push(format!(
+                warnings.push(format!(
                     "{}: material '{}' samples its base colour with TEXCOORD_{}; only TEXCOORD_0 is supported, using it",
                     path.display(),
                     m.name().unwrap_or("?"),
                     info.tex_coord()
                 ));
             }
-            let img = info.texture().source();
-            texture = *image_ids.entry(img.index()).or_insert_with(|| {
-                let data = match img.source() {
-                    // `gltf` panics on a relative URI that percent-decodes to invalid UTF-8.
-                    gltf::image::Source::Uri { uri, .. } if !uri.contains(':') && percent_decode(uri).is_none() => {
-                        Err(gltf::Error::UnsupportedScheme)
-                    }
-                    source => gltf::image::Data::from_source(source, Some(base), &buffers),
-                };
-                match data {
-                    Ok(data) => match texture_from_gltf(data) {
-                        Some(t) => {
-                            textures.push(t);
-                            Some(textures.len() as u32 - 1)
-                        }
-                        None => {
-                            report.warnings.push(format!(
-                                "{}: image {} has an unsupported pixel format; ignored",
-                                path.display(),
-                                img.index()
-                            ));
-                            None
-                        }
-                    },
-                    Err(e) => {
-                        report.warnings.push(format!(
-                            "{}: image {} could not be read ({e}); using the base colour factor",
-                            path.display(),
-                            img.index()
-                        ));
-                        None
-                    }
-                }
-            });
+            texture = images.texture(&info.texture().source(), warnings);
         }
         if m.emissive_texture().is_some() && m.emissive_factor() != [0.0; 3] {
-            report.warnings.push(format!(
+            warnings.push(format!(
                 "{}: material {} has an emissive texture; its emission is the factor alone",
                 path.display(),
                 m.name().unwrap_or("(unnamed)")
@@ -134,15 +176,79 @@ pub(crate) fn load(path: &Path) -> Result<Scene, SceneError> {
             emission: Vec3::from_array(m.emissive_factor()) * m.emissive_strength().unwrap_or(1.0),
         });
     }
-    let default_material = materials.len() as u32;
     materials.push(Material {
         name: "default".into(),
         albedo: Vec3::ONE,
         texture: None,
         emission: Vec3::ZERO,
     });
+    (materials, images.textures)
+}
 
-    // Flatten the node hierarchy of the default scene (or of every scene when none is marked).
+/// The images that materials use, decoded into textures lazily, once each.
+struct Images<'a> {
+    path: &'a Path,
+    /// The directory relative URIs start from.
+    base: &'a Path,
+    buffers: &'a [gltf::buffer::Data],
+    textures: Vec<Texture>,
+    /// Per image decoded so far, its texture (`None` when it could not be used).
+    ids: HashMap<usize, Option<u32>>,
+}
+
+impl Images<'_> {
+    /// The texture of `img`, decoding it the first time.
+    fn texture(&mut self, img: &gltf::Image, warnings: &mut Vec<String>) -> Option<u32> {
+        if let Some(&id) = self.ids.get(&img.index()) {
+            return id;
+        }
+        let id = self.decode(img, warnings);
+        self.ids.insert(img.index(), id);
+        id
+    }
+
+    /// Decodes `img` into a new texture and returns its index, or warns and returns `None`
+    /// when it cannot be read or has an unsupported pixel format.
+    fn decode(&mut self, img: &gltf::Image, warnings: &mut Vec<String>) -> Option<u32> {
+        let (path, textures) = (self.path, &mut self.textures);
+        let data = match img.source() {
+            // `gltf` panics on a relative URI that percent-decodes to invalid UTF-8.
+            gltf::image::Source::Uri { uri, .. } if !uri.contains(':') && percent_decode(uri).is_none() => {
+                Err(gltf::Error::UnsupportedScheme)
+            }
+            source => gltf::image::Data::from_source(source, Some(self.base), self.buffers),
+        };
+        match data {
+            Ok(data) => match texture_from_gltf(data) {
+                Some(t) => {
+                    textures.push(t);
+                    Some(textures.len() as u32 - 1)
+                }
+                None => {
+                    warnings.push(format!(
+                        "{}: image {} has an unsupported pixel format; ignored",
+                        path.display(),
+                        img.index()
+                    ));
+                    None
+                }
+            },
+            Err(e) => {
+                warnings.push(format!(
+                    "{}: image {} could not be read ({e}); using the base colour factor",
+                    path.display(),
+                    img.index()
+                ));
+                None
+            }
+        }
+    }
+}
+
+/// Flattens the node hierarchy of the default scene (or of the first scene when none is
+/// marked) into `(node, world transform)` pairs in node order, refusing cycles, shared
+/// children, dangling light references and non-finite transforms.
+fn flatten_nodes<'d>(path: &Path, document: &'d gltf::Document) -> Result<Vec<(gltf::Node<'d>, Mat4)>, SceneError> {
     let mut nodes = Vec::new();
     let roots: Vec<gltf::Node> = match document.default_scene().or_else(|| document.scenes().next()) {
         Some(s) => s.nodes().collect(),
@@ -154,17 +260,23 @@ pub(crate) fn load(path: &Path) -> Result<Scene, SceneError> {
     while let Some((node, parent)) = stack.pop() {
         // A node reached twice is a cycle (which would never end) or a shared child: both invalid.
         if std::mem::replace(&mut visited[node.index()], true) {
-            return Err(malformed(format!(
-                "node {} appears twice in the node hierarchy (a cycle or a shared child)",
-                node.index()
-            )));
-        }
-        if let Some(l) = node_light_index(&document, node.index()) {
-            if l >= light_count {
-                return Err(malformed(format!(
-                    "node {} refers to light {l}, but the file has {light_count} lights",
+            return Err(malformed(
+                path,
+                format!(
+                    "node {} appears twice in the node hierarchy (a cycle or a shared child)",
                     node.index()
-                )));
+                ),
+            ));
+        }
+        if let Some(l) = node_light_index(document, node.index()) {
+            if l >= light_count {
+                return Err(malformed(
+                    path,
+                    format!(
+                        "node {} refers to light {l}, but the file has {light_count} lights",
+                        node.index()
+                    ),
+                ));
             }
         }
         let world = parent * Mat4::from_cols_array_2d(&node.transform().matrix());
@@ -180,55 +292,65 @@ pub(crate) fn load(path: &Path) -> Result<Scene, SceneError> {
         nodes.push((node, world));
     }
     nodes.sort_by_key(|(n, _)| n.index());
+    Ok(nodes)
+}
 
-    let mut raw: Vec<(Triangle, Option<[Vec2; 3]>)> = Vec::new();
-    let mut lights = Vec::new();
-    let mut cameras = Vec::new();
-    let mut bounds = Aabb::EMPTY;
-    for (node, world) in &nodes {
-        let origin = world.transform_point3(Vec3::ZERO);
-        let forward = world.transform_vector3(-Vec3::Z).normalize_or_zero();
-        if let Some(cam) = node.camera() {
-            match cam.projection() {
-                gltf::camera::Projection::Perspective(p) => cameras.push(Camera {
-                    eye: origin,
-                    target: origin + forward,
-                    fov_y_deg: p.yfov().to_degrees(),
-                }),
-                gltf::camera::Projection::Orthographic(_) => report
-                    .warnings
-                    .push(format!("{}: orthographic camera ignored", path.display())),
-            }
-        }
-        if let Some(light) = node.light() {
-            let power = Vec3::from_array(light.color()) * light.intensity();
-            lights.push(match light.kind() {
-                gltf::khr_lights_punctual::Kind::Point => Light::Point {
-                    position: origin,
-                    intensity: power,
-                },
-                gltf::khr_lights_punctual::Kind::Spot { outer_cone_angle, .. } => Light::Spot {
-                    position: origin,
-                    direction: forward,
-                    angle: outer_cone_angle,
-                    intensity: power,
-                },
-                gltf::khr_lights_punctual::Kind::Directional => Light::Directional {
-                    direction: forward,
-                    irradiance: power,
-                },
-            });
-        }
-        let Some(mesh) = node.mesh() else { continue };
-        let normal_matrix = Mat3::from_mat4(*world).inverse().transpose();
-        let mirrored = Mat3::from_mat4(*world).determinant() < 0.0;
+/// A `KHR_lights_punctual` light placed at `origin`, facing `forward`, its colour scaled by its
+/// intensity.
+fn read_light(light: &gltf::khr_lights_punctual::Light, origin: Vec3, forward: Vec3) -> Light {
+    let power = Vec3::from_array(light.color()) * light.intensity();
+    match light.kind() {
+        gltf::khr_lights_punctual::Kind::Point => Light::Point {
+            position: origin,
+            intensity: power,
+        },
+        gltf::khr_lights_punctual::Kind::Spot { outer_cone_angle, .. } => Light::Spot {
+            position: origin,
+            direction: forward,
+            angle: outer_cone_angle,
+            intensity: power,
+        },
+        gltf::khr_lights_punctual::Kind::Directional => Light::Directional {
+            direction: forward,
+            irradiance: power,
+        },
+    }
+}
+
+/// A world-space triangle and, where its primitive has `TEXCOORD_1`, its lightmap UVs.
+type RawTriangle = (Triangle, Option<[Vec2; 3]>);
+
+/// The triangles read from the scene's meshes so far, with their bounds.
+struct Geometry<'a> {
+    path: &'a Path,
+    buffers: &'a [gltf::buffer::Data],
+    /// The material of primitives that name none.
+    default_material: u32,
+    warnings: &'a mut Vec<String>,
+    raw: Vec<RawTriangle>,
+    bounds: Aabb,
+}
+
+/// A primitive's per-vertex attributes, in world space.
+struct Vertices {
+    positions: Vec<Vec3>,
+    normals: Option<Vec<Vec3>>,
+    uv0: Option<Vec<Vec2>>,
+    uv1: Option<Vec<Vec2>>,
+}
+
+impl Geometry<'_> {
+    /// Reads every triangle primitive of `mesh`, placed by `world`; warns about and skips the
+    /// others.
+    fn read_mesh(&mut self, mesh: &gltf::Mesh, world: &Mat4) -> Result<(), SceneError> {
+        let path = self.path;
         for prim in mesh.primitives() {
             let mode = prim.mode();
             if !matches!(
                 mode,
                 gltf::mesh::Mode::Triangles | gltf::mesh::Mode::TriangleStrip | gltf::mesh::Mode::TriangleFan
             ) {
-                report.warnings.push(format!(
+                self.warnings.push(format!(
                     "{}: mesh {} has a {mode:?} primitive; only triangles are lit, skipped",
                     path.display(),
                     mesh.index()
@@ -236,122 +358,156 @@ pub(crate) fn load(path: &Path) -> Result<Scene, SceneError> {
                 continue;
             }
             let Some(pos_acc) = prim.get(&gltf::Semantic::Positions) else {
-                report.warnings.push(format!(
+                self.warnings.push(format!(
                     "{}: mesh {} has a primitive without positions; skipped",
                     path.display(),
                     mesh.index()
                 ));
                 continue;
             };
-            let local: Vec<[f32; 3]> = read_floats(path, &pos_acc, &buffers, "POSITION")?;
-            let positions: Vec<Vec3> = local
-                .iter()
-                .map(|&p| world.transform_point3(Vec3::from_array(p)))
-                .collect();
-            if let Some(i) = positions.iter().position(|p| !p.is_finite()) {
-                return Err(SceneError::NonFinite {
-                    path: path.to_path_buf(),
-                    what: format!("mesh {}, vertex {i}", mesh.index()),
-                });
-            }
-            positions.iter().for_each(|&p| bounds.grow(p));
-            // Every other attribute has one element per position.
-            let attribute = |semantic: gltf::Semantic,
-                             what: &'static str|
-             -> Result<Option<(gltf::Accessor, &'static str)>, SceneError> {
-                let Some(acc) = prim.get(&semantic) else {
-                    return Ok(None);
-                };
-                if acc.count() != positions.len() {
-                    return Err(SceneError::Accessor {
-                        path: path.to_path_buf(),
-                        accessor: acc.index(),
-                        message: format!(
-                            "{what} has {} elements but POSITION (accessor {}) has {}",
-                            acc.count(),
-                            pos_acc.index(),
-                            positions.len()
-                        ),
-                    });
-                }
-                Ok(Some((acc, what)))
-            };
-            let normals: Option<Vec<Vec3>> = map_floats(
-                path,
-                &buffers,
-                attribute(gltf::Semantic::Normals, "NORMAL")?,
-                |n: [f32; 3]| (normal_matrix * Vec3::from_array(n)).normalize_or_zero(),
-            )?;
-            let uv0: Option<Vec<Vec2>> = map_floats(
-                path,
-                &buffers,
-                attribute(gltf::Semantic::TexCoords(0), "TEXCOORD_0")?,
-                |[u, v]| Vec2::new(u, 1.0 - v),
-            )?;
-            let uv1: Option<Vec<Vec2>> = map_floats(
-                path,
-                &buffers,
-                attribute(gltf::Semantic::TexCoords(1), "TEXCOORD_1")?,
-                Vec2::from_array,
-            )?;
-            let indices: Vec<u32> = match prim.indices() {
-                Some(acc) => read_indices(path, &acc, &buffers)?,
-                None => (0..positions.len() as u32).collect(),
-            };
-            if let Some(&bad) = indices.iter().find(|&&i| i as usize >= positions.len()) {
-                return Err(malformed(format!(
-                    "mesh {}: index {bad} out of range ({} vertices)",
-                    mesh.index(),
-                    positions.len()
-                )));
-            }
-            let corners: Vec<[u32; 3]> = match mode {
-                gltf::mesh::Mode::TriangleStrip => (2..indices.len())
-                    .map(|i| {
-                        if i % 2 == 0 {
-                            [indices[i - 2], indices[i - 1], indices[i]]
-                        } else {
-                            [indices[i - 1], indices[i - 2], indices[i]]
-                        }
-                    })
-                    .collect(),
-                gltf::mesh::Mode::TriangleFan => (2..indices.len())
-                    .map(|i| [indices[0], indices[i - 1], indices[i]])
-                    .collect(),
-                _ => indices.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
-            };
-            let material = prim.material().index().map_or(default_material, |i| i as u32);
-            for mut c in corners {
-                if mirrored {
-                    c.swap(1, 2);
-                }
-                let at = |i: u32| i as usize;
-                let tri = Triangle {
-                    positions: c.map(|i| positions[at(i)]),
-                    normals: normals.as_ref().map_or([Vec3::ZERO; 3], |n| c.map(|i| n[at(i)])),
-                    uvs: uv0.as_ref().map_or([Vec2::ZERO; 3], |t| c.map(|i| t[at(i)])),
-                    material,
-                };
-                raw.push((tri, uv1.as_ref().map(|t| c.map(|i| t[at(i)]))));
-            }
+            let vertices = self.read_vertices(mesh, &prim, &pos_acc, world)?;
+            let corners = self.read_corners(mesh, &prim, vertices.positions.len())?;
+            let material = prim.material().index().map_or(self.default_material, |i| i as u32);
+            let mirrored = Mat3::from_mat4(*world).determinant() < 0.0;
+            self.push_triangles(&vertices, corners, material, mirrored);
         }
+        Ok(())
     }
 
-    let mut scene = Scene {
-        source: path.to_path_buf(),
-        triangles: Vec::with_capacity(raw.len()),
-        lightmap_uvs: None,
-        materials,
-        textures,
-        lights,
-        cameras,
-        report,
-    };
+    /// Reads a primitive's positions (growing the bounds), normals and both UV sets, checking
+    /// that every attribute has one element per position.
+    fn read_vertices(
+        &mut self,
+        mesh: &gltf::Mesh,
+        prim: &gltf::Primitive,
+        pos_acc: &gltf::Accessor,
+        world: &Mat4,
+    ) -> Result<Vertices, SceneError> {
+        let (path, buffers) = (self.path, self.buffers);
+        let local: Vec<[f32; 3]> = read_floats(path, pos_acc, buffers, "POSITION")?;
+        let positions: Vec<Vec3> = local
+            .iter()
+            .map(|&p| world.transform_point3(Vec3::from_array(p)))
+            .collect();
+        if let Some(i) = positions.iter().position(|p| !p.is_finite()) {
+            return Err(SceneError::NonFinite {
+                path: path.to_path_buf(),
+                what: format!("mesh {}, vertex {i}", mesh.index()),
+            });
+        }
+        positions.iter().for_each(|&p| self.bounds.grow(p));
+        // Every other attribute has one element per position.
+        let attribute = |semantic: gltf::Semantic,
+                         what: &'static str|
+         -> Result<Option<(gltf::Accessor, &'static str)>, SceneError> {
+            let Some(acc) = prim.get(&semantic) else {
+                return Ok(None);
+            };
+            if acc.count() != positions.len() {
+                return Err(SceneError::Accessor {
+                    path: path.to_path_buf(),
+                    accessor: acc.index(),
+                    message: format!(
+                        "{what} has {} elements but POSITION (accessor {}) has {}",
+                        acc.count(),
+                        pos_acc.index(),
+                        positions.len()
+                    ),
+                });
+            }
+            Ok(Some((acc, what)))
+        };
+        let normal_matrix = Mat3::from_mat4(*world).inverse().transpose();
+        let normals = map_floats(
+            path,
+            buffers,
+            attribute(gltf::Semantic::Normals, "NORMAL")?,
+            |n: [f32; 3]| (normal_matrix * Vec3::from_array(n)).normalize_or_zero(),
+        )?;
+        let uv0 = map_floats(
+            path,
+            buffers,
+            attribute(gltf::Semantic::TexCoords(0), "TEXCOORD_0")?,
+            |[u, v]| Vec2::new(u, 1.0 - v),
+        )?;
+        let uv1 = map_floats(
+            path,
+            buffers,
+            attribute(gltf::Semantic::TexCoords(1), "TEXCOORD_1")?,
+            Vec2::from_array,
+        )?;
+        Ok(Vertices {
+            positions,
+            normals,
+            uv0,
+            uv1,
+        })
+    }
+
+    /// A primitive's triangles as corner indices (its index accessor, or its vertices in
+    /// order), with strips and fans unrolled; an index beyond `vertex_count` is an error.
+    fn read_corners(
+        &self,
+        mesh: &gltf::Mesh,
+        prim: &gltf::Primitive,
+        vertex_count: usize,
+    ) -> Result<Vec<[u32; 3]>, SceneError> {
+        let indices: Vec<u32> = match prim.indices() {
+            Some(acc) => read_indices(self.path, &acc, self.buffers)?,
+            None => (0..vertex_count as u32).collect(),
+        };
+        if let Some(&bad) = indices.iter().find(|&&i| i as usize >= vertex_count) {
+            return Err(malformed(
+                self.path,
+                format!(
+                    "mesh {}: index {bad} out of range ({vertex_count} vertices)",
+                    mesh.index()
+                ),
+            ));
+        }
+        Ok(match prim.mode() {
+            gltf::mesh::Mode::TriangleStrip => (2..indices.len())
+                .map(|i| {
+                    if i % 2 == 0 {
+                        [indices[i - 2], indices[i - 1], indices[i]]
+                    } else {
+                        [indices[i - 1], indices[i - 2], indices[i]]
+                    }
+                })
+                .collect(),
+            gltf::mesh::Mode::TriangleFan => (2..indices.len())
+                .map(|i| [indices[0], indices[i - 1], indices[i]])
+                .collect(),
+            _ => indices.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
+        })
+    }
+
+    /// Appends one triangle per corner triple, wound the other way under a mirroring transform.
+    fn push_triangles(&mut self, v: &Vertices, corners: Vec<[u32; 3]>, material: u32, mirrored: bool) {
+        for mut c in corners {
+            if mirrored {
+                c.swap(1, 2);
+            }
+            let at = |i: u32| i as usize;
+            let tri = Triangle {
+                positions: c.map(|i| v.positions[at(i)]),
+                normals: v.normals.as_ref().map_or([Vec3::ZERO; 3], |n| c.map(|i| n[at(i)])),
+                uvs: v.uv0.as_ref().map_or([Vec2::ZERO; 3], |t| c.map(|i| t[at(i)])),
+                material,
+            };
+            self.raw.push((tri, v.uv1.as_ref().map(|t| c.map(|i| t[at(i)]))));
+        }
+    }
+}
+
+/// Adds the triangles to `scene`, keeping their lightmap UVs only when every primitive has
+/// `TEXCOORD_1` (and warning when only some do).
+fn add_triangles(mut scene: Scene, raw: Vec<RawTriangle>, bounds: Aabb) -> Scene {
     let all_have_lightmap_uvs = !raw.is_empty() && raw.iter().all(|(_, l)| l.is_some());
     if !all_have_lightmap_uvs && raw.iter().any(|(_, l)| l.is_some()) {
         scene.report.warnings.push(format!(
             "{}: only some primitives have TEXCOORD_1; an atlas will be generated instead",
-            path.display()
+            scene.source.display()
         ));
     }
     let eps = area_epsilon(bounds.diagonal());
@@ -364,7 +520,7 @@ pub(crate) fn load(path: &Path) -> Result<Scene, SceneError> {
     if all_have_lightmap_uvs {
         scene.lightmap_uvs = Some(lightmap_uvs);
     }
-    scene.finish_load()
+    scene
 }
 
 /// Most elements an accessor without a bufferView (all zeros, plus any sparse values) may have:
@@ -386,11 +542,10 @@ fn load_buffers(
             gltf::buffer::Source::Bin => match blob.take() {
                 Some(b) => (b, path.to_path_buf()),
                 None => {
-                    return Err(SceneError::Malformed {
-                        path: path.to_path_buf(),
-                        line: None,
-                        message: format!("buffer {index} refers to the GLB binary chunk, which is missing"),
-                    })
+                    return Err(malformed(
+                        path,
+                        format!("buffer {index} refers to the GLB binary chunk, which is missing"),
+                    ))
                 }
             },
             gltf::buffer::Source::Uri(uri) => match external_file(base, uri) {
@@ -403,21 +558,10 @@ fn load_buffers(
                     })?;
                     (data, file)
                 }
-                Some(Err(message)) => {
-                    return Err(SceneError::Malformed {
-                        path: path.to_path_buf(),
-                        line: None,
-                        message: format!("buffer {index}: {message}"),
-                    })
-                }
+                Some(Err(message)) => return Err(malformed(path, format!("buffer {index}: {message}"))),
                 None => {
-                    let data = gltf::buffer::Data::from_source(buffer.source(), Some(base)).map_err(|e| {
-                        SceneError::Malformed {
-                            path: path.to_path_buf(),
-                            line: None,
-                            message: format!("buffer {index}: {e}"),
-                        }
-                    })?;
+                    let data = gltf::buffer::Data::from_source(buffer.source(), Some(base))
+                        .map_err(|e| malformed(path, format!("buffer {index}: {e}")))?;
                     (data.0, path.to_path_buf())
                 }
             },

@@ -7,6 +7,10 @@
 //!
 //! Light comes from punctual [`Light`]s, from emissive materials (`Ke` in MTL, `emissiveFactor`
 //! in glTF, see [`Material`]) and from a [`Sky`].
+//!
+//! Shared by the bake and the players beside the scene: [`DeeperOperator`], the CPU model of
+//! the near field's deeper share and its series, and the binaries' checks of their output
+//! paths ([`check_destination`], [`check_output_path`], [`same_destination`]).
 
 #![warn(missing_docs)]
 
@@ -15,7 +19,9 @@ mod atlas;
 mod error;
 pub mod export;
 mod gltf_load;
+mod near_series;
 mod obj;
+mod output;
 mod scene;
 mod sky;
 mod spec;
@@ -23,7 +29,11 @@ mod texture;
 
 pub use atlas::{barycentric, Atlas, AtlasParams, AtlasStats, ExitPoint, Sizing, EMPTY_TEXEL};
 pub use error::SceneError;
-pub use export::{read_exr_rgb, write_exr_rgb, write_gltf, ExportError};
+pub use export::{read_exr_rgb, write_exr_rgb, write_gltf, write_ktx2_rgb9e5, ExportError};
+pub use near_series::{
+    DeeperOperator, MergeNearHits, MergedHit, TAIL_TERMS as NEAR_TAIL_TERMS, TAIL_TOLERANCE as NEAR_TAIL_TOLERANCE,
+};
+pub use output::{check_destination, check_output_path, same_destination};
 pub use scene::{Aabb, Camera, Light, LoadReport, Material, Scene, Triangle, MAX_COORDINATE, RECT_MAX_HALF_ANGLE_DEG};
 pub use sky::{Sky, SkyMap, SkySource, MAX_SKY_MAP_SIDE, MIN_SKY_MAP};
 pub use spec::{parse_camera, parse_emitter_scale, parse_light, parse_size, resolve_emitter_scales, SpecError};

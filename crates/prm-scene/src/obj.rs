@@ -20,17 +20,48 @@ use crate::SceneError;
 /// Albedo given to faces without a material, or whose MTL could not be read.
 pub(crate) const DEFAULT_GREY: Vec3 = Vec3::splat(0.5);
 
+/// Loads a Wavefront `.obj` scene and the MTL libraries and textures it names.
 pub(crate) fn load(path: &Path) -> Result<Scene, SceneError> {
+    let mut report = LoadReport::default();
+    let prepared = read_and_check(path, &mut report.warnings)?;
+    let dir = path.parent().unwrap_or(Path::new("."));
+    let (models, obj_materials) = parse(path, dir, &prepared.text, &mut report.warnings)?;
+    let (materials, textures) = read_materials(path, dir, &obj_materials, &mut report.warnings);
+    let default_material = materials.len() as u32 - 1;
+    let bounds = vertex_bounds(path, &prepared.text, &models)?;
+    let eps = area_epsilon(bounds.diagonal());
+
+    let mut scene = Scene {
+        source: path.to_path_buf(),
+        triangles: Vec::new(),
+        lightmap_uvs: None,
+        materials,
+        textures,
+        lights: Vec::new(),
+        cameras: Vec::new(),
+        report,
+    };
+    for model in &models {
+        let material = model
+            .mesh
+            .material_id
+            .filter(|&id| id < obj_materials.len())
+            .map_or(default_material, |id| id as u32);
+        push_mesh(&mut scene, &model.mesh, material, eps);
+    }
+    scene.finish_load()
+}
+
+/// Reads the file and prepares it for `tobj`, warning about each line with non-UTF-8 bytes;
+/// the first malformed line is an error.
+fn read_and_check(path: &Path, warnings: &mut Vec<String>) -> Result<Prepared, SceneError> {
     let bytes = read_regular_file(path).map_err(|source| SceneError::Io {
         path: path.to_path_buf(),
         source,
     })?;
-    let mut report = LoadReport::default();
     let prepared = prepare(&bytes);
     for line in &prepared.lossy_lines {
-        report
-            .warnings
-            .push(format!("{}:{line}: non-UTF-8 bytes replaced by U+FFFD", path.display()));
+        warnings.push(format!("{}:{line}: non-UTF-8 bytes replaced by U+FFFD", path.display()));
     }
     if let Some((line, why)) = first_bad_line(&prepared.text) {
         let why = if prepared.lossy_lines.contains(&line) {
@@ -44,13 +75,23 @@ pub(crate) fn load(path: &Path) -> Result<Scene, SceneError> {
             message: why,
         });
     }
+    Ok(prepared)
+}
+
+/// Parses the prepared text with `tobj`: its models, and the materials of its libraries (none,
+/// with a warning, when a library cannot be read).
+fn parse(
+    path: &Path,
+    dir: &Path,
+    text: &str,
+    warnings: &mut Vec<String>,
+) -> Result<(Vec<tobj::Model>, Vec<tobj::Material>), SceneError> {
     let options = tobj::LoadOptions {
         triangulate: true,
         single_index: true,
         ignore_points: true,
         ignore_lines: true,
     };
-    let dir = path.parent().unwrap_or(Path::new("."));
     // MTL files too are read as bytes and decoded lossily, so one stray byte cannot lose them,
     // and their colour lines are checked first (`tobj` panics on `Kd` with 2 numbers).
     let mtl_warnings = std::cell::RefCell::new(Vec::new());
@@ -60,16 +101,16 @@ pub(crate) fn load(path: &Path) -> Result<Scene, SceneError> {
         let text = prepare_mtl(&file, &bytes, &mut mtl_warnings.borrow_mut());
         tobj::load_mtl_buf(&mut std::io::Cursor::new(text.as_bytes()))
     };
-    let mut reader = std::io::Cursor::new(prepared.text.as_bytes());
+    let mut reader = std::io::Cursor::new(text.as_bytes());
     let (models, materials) = match tobj::load_obj_buf(&mut reader, &options, load_mtl) {
         Ok(r) => r,
-        Err(e) => return Err(locate_error(path, &prepared.text, &e.to_string())),
+        Err(e) => return Err(locate_error(path, text, &e.to_string())),
     };
-    report.warnings.append(&mut mtl_warnings.into_inner());
+    warnings.append(&mut mtl_warnings.into_inner());
     let obj_materials = match materials {
         Ok(m) => m,
         Err(e) => {
-            report.warnings.push(format!(
+            warnings.push(format!(
                 "{}: material library could not be read ({e}); every face is grey {}",
                 path.display(),
                 DEFAULT_GREY.x
@@ -77,12 +118,21 @@ pub(crate) fn load(path: &Path) -> Result<Scene, SceneError> {
             Vec::new()
         }
     };
+    Ok((models, obj_materials))
+}
 
-    // Material table: the file's materials, then one default grey for faces without one.
+/// The material table (the file's materials, then one default grey for faces without one) and
+/// the textures it uses, each image read once; an unreadable one is a warning.
+fn read_materials(
+    path: &Path,
+    dir: &Path,
+    obj_materials: &[tobj::Material],
+    warnings: &mut Vec<String>,
+) -> (Vec<Material>, Vec<Texture>) {
     let mut textures = Vec::new();
     let mut texture_ids: HashMap<PathBuf, Option<u32>> = HashMap::new();
     let mut scene_materials = Vec::with_capacity(obj_materials.len() + 1);
-    for m in &obj_materials {
+    for m in obj_materials {
         let kd = m.diffuse.map(Vec3::from_array);
         let mut texture = None;
         if let Some(name) = &m.diffuse_texture {
@@ -95,7 +145,7 @@ pub(crate) fn load(path: &Path) -> Result<Scene, SceneError> {
                         Some(textures.len() as u32 - 1)
                     }
                     Err(e) => {
-                        report.warnings.push(format!(
+                        warnings.push(format!(
                             "{}: texture {} of material '{}' could not be read ({e}); using its Kd or grey",
                             path.display(),
                             file.display(),
@@ -120,20 +170,24 @@ pub(crate) fn load(path: &Path) -> Result<Scene, SceneError> {
             emission,
         });
     }
-    let default_material = scene_materials.len() as u32;
     scene_materials.push(Material {
         name: "default-grey".into(),
         albedo: DEFAULT_GREY,
         texture: None,
         emission: Vec3::ZERO,
     });
+    (scene_materials, textures)
+}
 
+/// The bounds of every model's vertices; a non-finite one is an error, named by its line where
+/// it can be found.
+fn vertex_bounds(path: &Path, text: &str, models: &[tobj::Model]) -> Result<Aabb, SceneError> {
     let mut bounds = Aabb::EMPTY;
-    for model in &models {
+    for model in models {
         for (i, p) in model.mesh.positions.chunks_exact(3).enumerate() {
             let p = Vec3::new(p[0], p[1], p[2]);
             if !p.is_finite() {
-                let err = locate_error(path, &prepared.text, "non-finite coordinate");
+                let err = locate_error(path, text, "non-finite coordinate");
                 if matches!(err, SceneError::Malformed { line: Some(_), .. }) {
                     return Err(err);
                 }
@@ -145,61 +199,47 @@ pub(crate) fn load(path: &Path) -> Result<Scene, SceneError> {
             bounds.grow(p);
         }
     }
-    let eps = area_epsilon(bounds.diagonal());
+    Ok(bounds)
+}
 
-    let mut scene = Scene {
-        source: path.to_path_buf(),
-        triangles: Vec::new(),
-        lightmap_uvs: None,
-        materials: scene_materials,
-        textures,
-        lights: Vec::new(),
-        cameras: Vec::new(),
-        report,
+/// Adds a triangulated mesh's faces to `scene` with `material`; normals and UVs are kept only
+/// when the mesh has one per vertex.
+fn push_mesh(scene: &mut Scene, mesh: &tobj::Mesh, material: u32, eps: f32) {
+    let pos = |i: u32| {
+        let i = i as usize * 3;
+        Vec3::new(mesh.positions[i], mesh.positions[i + 1], mesh.positions[i + 2])
     };
-    for model in &models {
-        let mesh = &model.mesh;
-        let material = mesh
-            .material_id
-            .filter(|&id| id < obj_materials.len())
-            .map_or(default_material, |id| id as u32);
-        let pos = |i: u32| {
-            let i = i as usize * 3;
-            Vec3::new(mesh.positions[i], mesh.positions[i + 1], mesh.positions[i + 2])
+    let has_normals = mesh.normals.len() == mesh.positions.len();
+    let has_uvs = mesh.texcoords.len() / 2 == mesh.positions.len() / 3;
+    for f in mesh.indices.chunks_exact(3) {
+        let f = [f[0], f[1], f[2]];
+        let positions = [pos(f[0]), pos(f[1]), pos(f[2])];
+        let normals = if has_normals {
+            f.map(|i| {
+                let i = i as usize * 3;
+                Vec3::new(mesh.normals[i], mesh.normals[i + 1], mesh.normals[i + 2])
+            })
+        } else {
+            [Vec3::ZERO; 3]
         };
-        let has_normals = mesh.normals.len() == mesh.positions.len();
-        let has_uvs = mesh.texcoords.len() / 2 == mesh.positions.len() / 3;
-        for f in mesh.indices.chunks_exact(3) {
-            let f = [f[0], f[1], f[2]];
-            let positions = [pos(f[0]), pos(f[1]), pos(f[2])];
-            let normals = if has_normals {
-                f.map(|i| {
-                    let i = i as usize * 3;
-                    Vec3::new(mesh.normals[i], mesh.normals[i + 1], mesh.normals[i + 2])
-                })
-            } else {
-                [Vec3::ZERO; 3]
-            };
-            let uvs = if has_uvs {
-                f.map(|i| {
-                    let i = i as usize * 2;
-                    Vec2::new(mesh.texcoords[i], mesh.texcoords[i + 1])
-                })
-            } else {
-                [Vec2::ZERO; 3]
-            };
-            scene.push_triangle(
-                Triangle {
-                    positions,
-                    normals,
-                    uvs,
-                    material,
-                },
-                eps,
-            );
-        }
+        let uvs = if has_uvs {
+            f.map(|i| {
+                let i = i as usize * 2;
+                Vec2::new(mesh.texcoords[i], mesh.texcoords[i + 1])
+            })
+        } else {
+            [Vec2::ZERO; 3]
+        };
+        scene.push_triangle(
+            Triangle {
+                positions,
+                normals,
+                uvs,
+                material,
+            },
+            eps,
+        );
     }
-    scene.finish_load()
 }
 
 /// Reads a regular file whole (a device or a directory is refused rather than read forever).

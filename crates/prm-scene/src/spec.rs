@@ -366,24 +366,26 @@ mod tests {
 
     #[test]
     fn rejects_bad_specs_clearly() {
-        let e = parse_light("area:0,0,0:1,1,1").unwrap_err();
-        assert!(e.to_string().contains("unknown light kind"), "{e}");
-        let e = parse_light("point:0,0:1,1,1").unwrap_err();
-        assert!(e.to_string().contains("3 comma-separated"), "{e}");
-        let e = parse_light("point:0,0,0").unwrap_err();
-        assert!(e.to_string().contains("expected 3"), "{e}");
-        assert!(parse_light("spot:0,0,0:0,0,0:30:1,1,1").is_err());
-        assert!(parse_light("spot:0,0,0:0,-1,0:0:1,1,1").is_err());
-        assert!(parse_light("point:0,0,0:-1,1,1").is_err());
-        let e = parse_light("rect:0,0,0:0,-1,0:0,2,0:30,20:1,1,1").unwrap_err();
-        assert!(e.to_string().contains("parallel"), "{e}");
-        let e = parse_light("rect:0,0,0:0,-1,0:0,0,1:30:1,1,1").unwrap_err();
-        assert!(e.to_string().contains("2 comma-separated"), "{e}");
-        let e = parse_light("rect:0,0,0:0,-1,0:0,0,1:30,90:1,1,1").unwrap_err();
-        assert!(e.to_string().contains("(0, 85)"), "{e}");
-        let e = parse_light("rect:0,0,0:0,-1,0:30,20:1,1,1").unwrap_err();
-        assert!(e.to_string().contains("expected 6"), "{e}");
-        assert!(parse_light("point:0,0,x:1,1,1").is_err());
+        for (spec, says) in [
+            ("area:0,0,0:1,1,1", "unknown light kind"),
+            ("point:0,0:1,1,1", "3 comma-separated"),
+            ("point:0,0,0", "expected 3"),
+            ("rect:0,0,0:0,-1,0:0,2,0:30,20:1,1,1", "parallel"),
+            ("rect:0,0,0:0,-1,0:0,0,1:30:1,1,1", "2 comma-separated"),
+            ("rect:0,0,0:0,-1,0:0,0,1:30,90:1,1,1", "(0, 85)"),
+            ("rect:0,0,0:0,-1,0:30,20:1,1,1", "expected 6"),
+        ] {
+            let e = parse_light(spec).unwrap_err();
+            assert!(e.to_string().contains(says), "{spec}: {e}");
+        }
+        for spec in [
+            "spot:0,0,0:0,0,0:30:1,1,1",
+            "spot:0,0,0:0,-1,0:0:1,1,1",
+            "point:0,0,0:-1,1,1",
+            "point:0,0,x:1,1,1",
+        ] {
+            assert!(parse_light(spec).is_err(), "{spec}");
+        }
         assert!(parse_camera("0,0,0:0,0,0:40").is_err());
         assert!(parse_camera("0,0,0:0,0,1:0").is_err());
         assert!(parse_size("640").is_err());

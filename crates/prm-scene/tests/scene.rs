@@ -3,7 +3,7 @@
 //! Long on purpose: one test per scene and per malformed input, each spelled out.
 
 mod common;
-use common::temp_case;
+use common::{temp_case, TempDir};
 use glam::Vec3;
 use prm_scene::{Atlas, AtlasParams, Scene, SceneError, Sizing, EMPTY_TEXEL};
 use std::path::{Path, PathBuf};
@@ -191,6 +191,23 @@ fn third_party_scenes_load_and_pack() {
     check_atlas(&holodeck, &atlas, 1);
 }
 
+/// Asserts that some load warning of `scene` contains every one of `parts`.
+fn assert_warned(scene: &Scene, parts: &[&str]) {
+    let warnings = &scene.report.warnings;
+    assert!(
+        warnings.iter().any(|w| parts.iter().all(|p| w.contains(p))),
+        "no warning with {parts:?} in {warnings:?}"
+    );
+}
+
+/// Loads `text`, written as file `name` in a fresh directory for `case` (returned, so that it
+/// outlives the load).
+fn load_text(case: &str, name: &str, text: &str) -> (TempDir, Result<Scene, SceneError>) {
+    let dir = temp_case(case);
+    let loaded = prm_scene::load(&write(&dir, name, text));
+    (dir, loaded)
+}
+
 fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
     let p = dir.join(name);
     std::fs::write(&p, text).unwrap();
@@ -199,21 +216,16 @@ fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
 
 #[test]
 fn obj_features_negative_indices_groups_and_missing_files() {
-    let dir = scratch("obj-features");
-    let obj = write(
-        &dir,
+    let (dir, loaded) = load_text(
+        "obj-features",
         "quads.obj",
         "mtllib missing.mtl\no first\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf -4 -3 -2 -1\n\
          g second\nv 0 0 1\nv 1 0 1\nv 1 1 1\nf 5 6 7\n",
     );
-    let scene = prm_scene::load(&obj).unwrap();
+    let scene = loaded.unwrap();
     assert_eq!(scene.triangles.len(), 3, "a quad triangulated plus a triangle");
     assert!((scene.area() - 1.5).abs() < 1e-6);
-    assert!(
-        scene.report.warnings.iter().any(|w| w.contains("material library")),
-        "{:?}",
-        scene.report.warnings
-    );
+    assert_warned(&scene, &["material library"]);
     assert!(scene
         .triangles
         .iter()
@@ -234,11 +246,7 @@ fn obj_features_negative_indices_groups_and_missing_files() {
         scene.materials[scene.triangles[0].material as usize].albedo,
         Vec3::new(0.8, 0.1, 0.1)
     );
-    assert!(
-        scene.report.warnings.iter().any(|w| w.contains("nowhere.png")),
-        "{:?}",
-        scene.report.warnings
-    );
+    assert_warned(&scene, &["nowhere.png"]);
 
     // A texture that exists: a 2x2 PNG written here; the albedo is sampled from it.
     let img = image::RgbImage::from_fn(2, 2, |_, _| image::Rgb([255, 255, 255]));
@@ -254,39 +262,42 @@ fn obj_features_negative_indices_groups_and_missing_files() {
     assert!((scene.albedo(0, 0.3, 0.3) - Vec3::ONE).abs().max_element() < 1e-5);
 }
 
+/// Degenerate triangles, and a triangle listed again, are dropped, counted and warned of.
+/// McGuire's boxes list a face twice ("f -12 -11 -10 -9" after four new vertices); the same
+/// corners in the other winding are a two-sided wall, not a copy, and stay.
 #[test]
-fn degenerate_triangles_are_dropped_and_counted() {
-    let dir = scratch("degenerate");
-    let obj = write(
-        &dir,
-        "d.obj",
-        "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 2 0 0\nf 1 2 3\nf 1 2 4\nf 1 1 3\n",
-    );
-    let scene = prm_scene::load(&obj).unwrap();
-    assert_eq!(scene.triangles.len(), 1);
-    assert_eq!(scene.report.degenerate_dropped, 2);
-    assert!(scene.report.warnings.iter().any(|w| w.contains("2 degenerate")));
-}
-
-#[test]
-fn duplicate_triangles_are_dropped_and_counted() {
-    // McGuire's boxes list a face twice ("f -12 -11 -10 -9" after four new vertices); the same
-    // corners in the other winding are a two-sided wall, not a copy, and stay.
-    let dir = scratch("duplicates");
-    let obj = write(
-        &dir,
-        "d.obj",
-        "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1 2 3\nf 2 3 1\nf 1 3 2\nf 2 4 3\nf 1 2 3\n",
-    );
-    let scene = prm_scene::load(&obj).unwrap();
-    assert_eq!(scene.triangles.len(), 3);
-    assert_eq!(scene.report.duplicates_dropped, 2);
-    assert!(scene
-        .report
-        .warnings
-        .iter()
-        .any(|w| w.contains("2 duplicate triangles dropped")));
-    assert!(scene.triangles[1].normal().z < 0.0 && scene.triangles[2].normal().z > 0.0);
+fn degenerate_and_duplicate_triangles_are_dropped_and_counted() {
+    let cases = [
+        (
+            "degenerate",
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 2 0 0\nf 1 2 3\nf 1 2 4\nf 1 1 3\n",
+            1,
+            (2, 0),
+            "2 degenerate",
+        ),
+        (
+            "duplicates",
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1 2 3\nf 2 3 1\nf 1 3 2\nf 2 4 3\nf 1 2 3\n",
+            3,
+            (0, 2),
+            "2 duplicate triangles dropped",
+        ),
+    ];
+    for (case, text, kept, dropped, warning) in cases {
+        let (_dir, loaded) = load_text(case, "d.obj", text);
+        let scene = loaded.unwrap();
+        assert_eq!(scene.triangles.len(), kept, "{case}");
+        let report = &scene.report;
+        assert_eq!(
+            (report.degenerate_dropped, report.duplicates_dropped),
+            dropped,
+            "{case}"
+        );
+        assert_warned(&scene, &[warning]);
+        if case == "duplicates" {
+            assert!(scene.triangles[1].normal().z < 0.0 && scene.triangles[2].normal().z > 0.0);
+        }
+    }
 }
 
 #[test]
@@ -584,11 +595,18 @@ fn thirty_triangles() -> Vec<u8> {
     bin
 }
 
+/// [`thirty_triangles`] as an indexed glTF in a fresh directory for `case`: its buffer file
+/// holds the first `stored` bytes and declares `declared`, its accessors have `counts`.
+fn thirty_triangles_gltf(case: &str, stored: usize, declared: usize, counts: [u64; 2]) -> (TempDir, PathBuf) {
+    let dir = temp_case(case);
+    let bin = thirty_triangles();
+    let p = indexed_gltf(&dir, &bin[..stored], declared, [(0, 36), (36, 360)], counts);
+    (dir, p)
+}
+
 #[test]
 fn gltf_valid_indexed_mesh_loads() {
-    let dir = temp_case("gltf-indexed-ok");
-    let bin = thirty_triangles();
-    let p = indexed_gltf(&dir, &bin, bin.len(), [(0, 36), (36, 360)], [3, 90]);
+    let (_dir, p) = thirty_triangles_gltf("gltf-indexed-ok", 396, 396, [3, 90]);
     let scene = prm_scene::load(&p).unwrap();
     // All 30 read; they are one triangle thirty times, so 29 are dropped as its copies.
     assert_eq!((scene.triangles.len(), scene.report.duplicates_dropped), (1, 29));
@@ -596,11 +614,8 @@ fn gltf_valid_indexed_mesh_loads() {
 
 #[test]
 fn gltf_buffer_shorter_than_its_views_is_an_error() {
-    let dir = temp_case("gltf-short-buffer");
-    let full = thirty_triangles();
     // The buffer really holds (and declares) half of what the index view needs.
-    let bin = &full[..36 + 180];
-    let p = indexed_gltf(&dir, bin, bin.len(), [(0, 36), (36, 360)], [3, 90]);
+    let (_dir, p) = thirty_triangles_gltf("gltf-short-buffer", 36 + 180, 36 + 180, [3, 90]);
     let e = prm_scene::load(&p).expect_err("a truncated buffer must not bake half the mesh");
     assert!(
         matches!(
@@ -624,9 +639,7 @@ fn gltf_buffer_shorter_than_its_views_is_an_error() {
 
 #[test]
 fn gltf_accessor_count_overrunning_its_view_is_an_error() {
-    let dir = temp_case("gltf-huge-count");
-    let bin = thirty_triangles();
-    let p = indexed_gltf(&dir, &bin, bin.len(), [(0, 36), (36, 360)], [1_000_000, 90]);
+    let (_dir, p) = thirty_triangles_gltf("gltf-huge-count", 396, 396, [1_000_000, 90]);
     let e = prm_scene::load(&p).expect_err("count 1e6 over a 36-byte view");
     assert!(matches!(e, SceneError::Accessor { accessor: 0, .. }), "{e}");
     assert!(e.to_string().contains("accessor 0"), "{e}");
@@ -635,9 +648,7 @@ fn gltf_accessor_count_overrunning_its_view_is_an_error() {
 
 #[test]
 fn gltf_index_accessor_with_count_4e9_is_an_error() {
-    let dir = temp_case("gltf-4e9-indices");
-    let bin = thirty_triangles();
-    let p = indexed_gltf(&dir, &bin, bin.len(), [(0, 36), (36, 360)], [3, 4_000_000_000]);
+    let (_dir, p) = thirty_triangles_gltf("gltf-4e9-indices", 396, 396, [3, 4_000_000_000]);
     let e = prm_scene::load(&p).expect_err("4e9 indices in a 360-byte view");
     assert!(matches!(e, SceneError::Accessor { accessor: 1, .. }), "{e}");
     assert!(e.to_string().contains("accessor 1"), "{e}");
@@ -645,9 +656,7 @@ fn gltf_index_accessor_with_count_4e9_is_an_error() {
 
 #[test]
 fn gltf_missing_bin_is_named() {
-    let dir = temp_case("gltf-missing-bin");
-    let bin = thirty_triangles();
-    let p = indexed_gltf(&dir, &bin, bin.len(), [(0, 36), (36, 360)], [3, 90]);
+    let (dir, p) = thirty_triangles_gltf("gltf-missing-bin", 396, 396, [3, 90]);
     std::fs::remove_file(dir.join("buffer.bin")).unwrap();
     let e = prm_scene::load(&p).expect_err("missing buffer file");
     match &e {
@@ -668,9 +677,7 @@ fn gltf_missing_bin_is_named() {
 
 #[test]
 fn gltf_buffer_shorter_than_declared_is_an_error() {
-    let dir = temp_case("gltf-declared-length");
-    let bin = thirty_triangles();
-    let p = indexed_gltf(&dir, &bin[..100], bin.len(), [(0, 36), (36, 360)], [3, 90]);
+    let (_dir, p) = thirty_triangles_gltf("gltf-declared-length", 100, 396, [3, 90]);
     let e = prm_scene::load(&p).expect_err("buffer shorter than its byteLength");
     assert!(
         matches!(
@@ -704,39 +711,44 @@ fn obj_error_at(name: &str, text: &[u8], line: usize) -> String {
 
 const TRIANGLE: &str = "v 0 0 0\nv 1 0 0\nv 0 1 0\n";
 
+/// Malformed OBJ lines are errors naming the file and the line, and what is wrong where the
+/// case gives it.
 #[test]
-fn obj_face_with_two_vertices_is_an_error() {
-    let s = obj_error_at("two-vertex-face", format!("{TRIANGLE}f 1 2 3\nf 1 2\n").as_bytes(), 5);
-    assert!(s.contains("3 vertices"), "{s}");
-}
-
-#[test]
-fn obj_face_with_one_vertex_is_an_error() {
-    obj_error_at("one-vertex-face", format!("{TRIANGLE}f 1\nf 1 2 3\n").as_bytes(), 4);
-}
-
-#[test]
-fn obj_texcoord_index_without_vt_is_an_error() {
-    let s = obj_error_at("no-vt", format!("{TRIANGLE}f 1/2 2 3\n").as_bytes(), 4);
-    assert!(s.contains("no 'vt'"), "{s}");
-}
-
-#[test]
-fn obj_texcoord_index_out_of_range_is_an_error() {
-    obj_error_at(
-        "vt-range",
-        format!("{TRIANGLE}vt 0 0\nvt 1 0\nf 1/1 2/2 3/3\n").as_bytes(),
-        6,
-    );
-}
-
-#[test]
-fn obj_normal_index_out_of_range_is_an_error() {
-    obj_error_at(
-        "vn-range",
-        format!("{TRIANGLE}vn 0 0 1\nf 1//1 2//2 3//1\n").as_bytes(),
-        5,
-    );
+fn obj_malformed_lines_are_errors_with_their_line() {
+    let cases: [(&str, Vec<u8>, usize, Option<&str>); 6] = [
+        (
+            "two-vertex-face",
+            format!("{TRIANGLE}f 1 2 3\nf 1 2\n").into(),
+            5,
+            Some("3 vertices"),
+        ),
+        ("one-vertex-face", format!("{TRIANGLE}f 1\nf 1 2 3\n").into(), 4, None),
+        ("no-vt", format!("{TRIANGLE}f 1/2 2 3\n").into(), 4, Some("no 'vt'")),
+        (
+            "vt-range",
+            format!("{TRIANGLE}vt 0 0\nvt 1 0\nf 1/1 2/2 3/3\n").into(),
+            6,
+            None,
+        ),
+        (
+            "vn-range",
+            format!("{TRIANGLE}vn 0 0 1\nf 1//1 2//2 3//1\n").into(),
+            5,
+            None,
+        ),
+        (
+            "non-utf8-vertex",
+            b"v 0 0 0\nv 1 \xff 0\nv 0 1 0\nf 1 2 3\n".to_vec(),
+            2,
+            Some("non-UTF-8"),
+        ),
+    ];
+    for (name, text, line, what) in cases {
+        let s = obj_error_at(name, &text, line);
+        if let Some(what) = what {
+            assert!(s.contains(what), "{name}: {s}");
+        }
+    }
 }
 
 #[test]
@@ -761,32 +773,17 @@ fn obj_non_utf8_in_a_name_is_a_warning_with_its_line() {
     std::fs::write(&p, text).unwrap();
     let scene = prm_scene::load(&p).unwrap();
     assert_eq!(scene.triangles.len(), 1);
-    assert!(
-        scene
-            .report
-            .warnings
-            .iter()
-            .any(|w| w.contains("n.obj:1") && w.contains("non-UTF-8")),
-        "{:?}",
-        scene.report.warnings
-    );
-}
-
-#[test]
-fn obj_non_utf8_in_a_vertex_is_an_error_with_its_line() {
-    let s = obj_error_at("non-utf8-vertex", b"v 0 0 0\nv 1 \xff 0\nv 0 1 0\nf 1 2 3\n", 2);
-    assert!(s.contains("non-UTF-8"), "{s}");
+    assert_warned(&scene, &["n.obj:1", "non-UTF-8"]);
 }
 
 #[test]
 fn obj_trailing_comments_and_vertex_colours_load() {
-    let dir = temp_case("obj-comments-colours");
-    let p = write(
-        &dir,
+    let (_dir, loaded) = load_text(
+        "obj-comments-colours",
         "c.obj",
         "v 0 0 0 1 0 0 # red\nv 1 0 0\nv 0 1 0 0 0 1\nl 1 2 3\nf 1 2 3 # one\n",
     );
-    let scene = prm_scene::load(&p).unwrap();
+    let scene = loaded.unwrap();
     assert_eq!(scene.triangles.len(), 1, "the polyline is not a triangle");
 }
 
@@ -837,15 +834,7 @@ fn mtl_colour_with_two_numbers_is_a_warning_not_a_panic() {
         "mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl a\nf 1 2 3\nusemtl b\nf 1 3 2\n",
     );
     let scene = prm_scene::load(&p).unwrap();
-    assert!(
-        scene
-            .report
-            .warnings
-            .iter()
-            .any(|w| w.contains("m.mtl:2") && w.contains("Kd")),
-        "{:?}",
-        scene.report.warnings
-    );
+    assert_warned(&scene, &["m.mtl:2", "Kd"]);
     let b = &scene.materials[scene.triangles[1].material as usize];
     assert_eq!(b.albedo, Vec3::splat(0.3), "one number means grey");
 }
@@ -853,27 +842,25 @@ fn mtl_colour_with_two_numbers_is_a_warning_not_a_panic() {
 #[test]
 fn gltf_position_accessor_out_of_range_is_an_error_not_a_panic() {
     // Found by the fuzzer: gltf's validation indexes the POSITION accessor unchecked.
-    let dir = temp_case("gltf-position-index");
-    let p = write(
-        &dir,
+    let (_dir, loaded) = load_text(
+        "gltf-position-index",
         "s.gltf",
         r#"{"asset": {"version": "2.0"}, "meshes": [{"primitives": [{"attributes": {"POSITION": 7}}]}],
             "nodes": [{"mesh": 0}], "scenes": [{"nodes": [0]}]}"#,
     );
-    let e = prm_scene::load(&p).expect_err("no accessor 7");
+    let e = loaded.expect_err("no accessor 7");
     assert!(e.to_string().contains("accessor 7"), "{e}");
 }
 
 #[test]
 fn gltf_node_cycle_is_an_error() {
-    let dir = temp_case("gltf-node-cycle");
-    let p = write(
-        &dir,
+    let (_dir, loaded) = load_text(
+        "gltf-node-cycle",
         "s.gltf",
         r#"{"asset": {"version": "2.0"}, "nodes": [{"children": [1]}, {"children": [0]}],
             "scenes": [{"nodes": [0]}]}"#,
     );
-    let e = prm_scene::load(&p).expect_err("a cycle");
+    let e = loaded.expect_err("a cycle");
     assert!(e.to_string().contains("appears twice"), "{e}");
 }
 
@@ -892,14 +879,7 @@ fn emission_loads_from_obj_ke_and_gltf_emissive_factor_and_strength() {
     assert_eq!(by_name("lamp"), Vec3::new(17.0, 12.0, 4.0));
     assert_eq!(by_name("wall"), Vec3::ZERO);
     assert_eq!(by_name("bad"), Vec3::ZERO);
-    assert!(
-        s.report
-            .warnings
-            .iter()
-            .any(|w| w.contains("'bad'") && w.contains("does not emit")),
-        "{:?}",
-        s.report.warnings
-    );
+    assert_warned(&s, &["'bad'", "does not emit"]);
 
     let bin: Vec<u8> = [0.0f32, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0]
         .iter()

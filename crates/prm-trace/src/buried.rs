@@ -217,7 +217,7 @@ pub fn unbury_exits(scene: &Scene, bvh: &Bvh, atlas: &mut Atlas) -> Unburied {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use prm_scene::{AtlasParams, ExitPoint, Material, Sizing, Triangle};
+    use prm_scene::{AtlasParams, ExitPoint, Sizing};
 
     /// The cube's extent on x and z: its sides cut through floor texels.
     const LO: f32 = 0.55;
@@ -226,18 +226,17 @@ mod tests {
     /// A floor `[0, 2]²` at y = 0 under a closed cube standing on `[LO, HI]²`.
     fn box_on_floor() -> Scene {
         let v = |x: f32, y: f32, z: f32| Vec3::new(x, y, z);
-        let quad = |a: Vec3, b: Vec3, c: Vec3, d: Vec3| [Triangle::flat([a, b, c], 0), Triangle::flat([a, c, d], 0)];
-        let mut t = Vec::new();
-        t.extend(quad(v(0., 0., 0.), v(0., 0., 2.), v(2., 0., 2.), v(2., 0., 0.)));
         let (lo, hi) = (LO, HI);
-        // Outward faces of the cube (counter-clockwise seen from outside).
-        t.extend(quad(v(lo, 1., lo), v(lo, 1., hi), v(hi, 1., hi), v(hi, 1., lo)));
-        t.extend(quad(v(lo, 0., lo), v(hi, 0., lo), v(hi, 0., hi), v(lo, 0., hi)));
-        t.extend(quad(v(lo, 0., lo), v(lo, 1., lo), v(hi, 1., lo), v(hi, 0., lo)));
-        t.extend(quad(v(lo, 0., hi), v(hi, 0., hi), v(hi, 1., hi), v(lo, 1., hi)));
-        t.extend(quad(v(lo, 0., lo), v(lo, 0., hi), v(lo, 1., hi), v(lo, 1., lo)));
-        t.extend(quad(v(hi, 0., lo), v(hi, 1., lo), v(hi, 1., hi), v(hi, 0., hi)));
-        Scene::from_parts(t, vec![Material::diffuse("m", Vec3::splat(0.5))])
+        crate::grey_quads(&[
+            [v(0., 0., 0.), v(0., 0., 2.), v(2., 0., 2.), v(2., 0., 0.)],
+            // Outward faces of the cube (counter-clockwise seen from outside).
+            [v(lo, 1., lo), v(lo, 1., hi), v(hi, 1., hi), v(hi, 1., lo)],
+            [v(lo, 0., lo), v(hi, 0., lo), v(hi, 0., hi), v(lo, 0., hi)],
+            [v(lo, 0., lo), v(lo, 1., lo), v(hi, 1., lo), v(hi, 0., lo)],
+            [v(lo, 0., hi), v(hi, 0., hi), v(hi, 1., hi), v(lo, 1., hi)],
+            [v(lo, 0., lo), v(lo, 0., hi), v(lo, 1., hi), v(lo, 1., lo)],
+            [v(hi, 0., lo), v(hi, 1., lo), v(hi, 1., hi), v(hi, 0., hi)],
+        ])
     }
 
     #[test]

@@ -8,7 +8,7 @@
 //! in our scenes, so it does not leak through them.
 //!
 //! Both obvhs layouts are available ([`BvhKind`]); the default is the compressed wide BVH8
-//! (CWBVH). In `examples/bench_trace.rs` (release, 2 cores shared with other jobs) it traced
+//! (CWBVH). In `cargo xtask eval experiment bench_trace` (release, 2 cores shared with other jobs) it traced
 //! incoherent rays 10–20 % faster than BVH2 on the largest scene, sibenik (75k triangles: closest
 //! hit 0.98 vs 0.84 Mrays/s, shadow rays 1.09 vs 0.90, walks 0.54 vs 0.40 M/s), and was
 //! equal or faster on cornell-box and chairs within run-to-run noise; BVH2 builds about 30 %
@@ -207,6 +207,17 @@ impl Bvh {
         }
     }
 
+    /// The ray `origin + t·dir`, `tmin ≤ t ≤ tmax`, in the BVH's units.
+    #[inline(always)]
+    fn scaled_ray(&self, origin: Vec3, dir: Vec3, tmin: f32, tmax: f32) -> Ray {
+        Ray::new(
+            (origin * self.scale).into(),
+            dir.into(),
+            tmin * self.scale,
+            tmax * self.scale,
+        )
+    }
+
     /// Closest hit of the ray `origin + t·dir` (`dir` unit), `t < tmax`, ignoring triangle `ignore`
     /// (pass `u32::MAX` to ignore none).
     pub fn closest_hit(&self, origin: Vec3, dir: Vec3, tmax: f32, ignore: u32) -> Option<Hit> {
@@ -229,7 +240,7 @@ impl Bvh {
     #[inline(always)]
     fn closest_hit_inline(&self, origin: Vec3, dir: Vec3, tmax: f32, ignore: u32) -> Option<Hit> {
         let o = origin * self.scale;
-        let ray = Ray::new(o.into(), dir.into(), 0.0, tmax * self.scale);
+        let ray = self.scaled_ray(origin, dir, 0.0, tmax);
         let mut hit = RayHit::none();
         let f = |r: &Ray, i: usize| {
             if self.ids[i] == ignore {
@@ -281,46 +292,26 @@ impl Bvh {
         ignore: [u32; 2],
         cache: &mut u32,
     ) -> bool {
+        let ray = self.scaled_ray(origin, dir, tmin, tmax);
         #[cfg(target_arch = "x86_64")]
         if crate::isa::avx2() {
             // SAFETY: `isa::avx2` checked that the CPU has every feature the variant is built for.
-            return unsafe { self.occluded_cached_avx2(origin, dir, tmin, tmax, ignore, cache) };
+            return unsafe { self.occluded_cached_avx2(&ray, ignore, cache) };
         }
-        self.occluded_cached_inline(origin, dir, tmin, tmax, ignore, cache)
+        self.occluded_cached_inline(&ray, ignore, cache)
     }
 
-    /// [`Bvh::occluded_cached`] built for AVX2 and FMA ([`crate::isa`]).
+    /// [`Bvh::occluded_cached`] built for AVX2 and FMA ([`crate::isa`]), on the ray in BVH units.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma,bmi1,bmi2,lzcnt")]
-    fn occluded_cached_avx2(
-        &self,
-        origin: Vec3,
-        dir: Vec3,
-        tmin: f32,
-        tmax: f32,
-        ignore: [u32; 2],
-        cache: &mut u32,
-    ) -> bool {
-        self.occluded_cached_inline(origin, dir, tmin, tmax, ignore, cache)
+    fn occluded_cached_avx2(&self, ray: &Ray, ignore: [u32; 2], cache: &mut u32) -> bool {
+        self.occluded_cached_inline(ray, ignore, cache)
     }
 
     /// The body of [`Bvh::occluded_cached`], inlined into each instruction-set variant.
     #[inline(always)]
-    fn occluded_cached_inline(
-        &self,
-        origin: Vec3,
-        dir: Vec3,
-        tmin: f32,
-        tmax: f32,
-        ignore: [u32; 2],
-        cache: &mut u32,
-    ) -> bool {
-        let ray = Ray::new(
-            (origin * self.scale).into(),
-            dir.into(),
-            tmin * self.scale,
-            tmax * self.scale,
-        );
+    fn occluded_cached_inline(&self, ray: &Ray, ignore: [u32; 2], cache: &mut u32) -> bool {
+        let ray = *ray;
         let blocks = |r: &Ray, i: usize| {
             let id = self.ids[i];
             if id == ignore[0] || id == ignore[1] {
@@ -516,9 +507,10 @@ mod tests {
                 let avx2 = unsafe { bvh.closest_hit_avx2(o, d, far, ignore) };
                 assert_eq!(portable, avx2);
                 hits += usize::from(portable.is_some());
-                let portable = bvh.occluded_cached_inline(o, d, 0.0, tmax, [ignore, u32::MAX], &mut c1);
+                let ray = bvh.scaled_ray(o, d, 0.0, tmax);
+                let portable = bvh.occluded_cached_inline(&ray, [ignore, u32::MAX], &mut c1);
                 // SAFETY: as above.
-                let avx2 = unsafe { bvh.occluded_cached_avx2(o, d, 0.0, tmax, [ignore, u32::MAX], &mut c2) };
+                let avx2 = unsafe { bvh.occluded_cached_avx2(&ray, [ignore, u32::MAX], &mut c2) };
                 assert_eq!((portable, c1), (avx2, c2));
                 blocked += usize::from(portable);
             }

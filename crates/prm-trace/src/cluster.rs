@@ -10,11 +10,12 @@
 //! A cluster's pane is the sum of its members' panes and its run-time weight their direct
 //! irradiances weighed by their pane energies ([`Clustering::weights_by_energy`]; the paper's
 //! plain mean is [`Clustering::weights`]). Measured with exact visibility on McGuire's
-//! CornellBox-Original, a light 0.26 under the ceiling (`examples/cluster_weights.rs`, lightmap
+//! CornellBox-Original, a light 0.26 under the ceiling (`cargo xtask eval experiment cluster_weights`, lightmap
 //! space, 1024 entries in 64 clusters): unclustered 12.4% error, energy 0.97; the mean 21.8%,
 //! 0.82; weighed by energy 11.8%, 0.97.
 
 use glam::Vec3;
+use prm_scene::Light;
 use rayon::prelude::*;
 
 use crate::rng::Rng;
@@ -326,6 +327,31 @@ pub fn energy_weight(
         den += entry_energy[k];
     }
     Vec3::select(den.cmpgt(Vec3::ZERO), num / den, Vec3::ZERO)
+}
+
+/// Every cluster of an archive weighed as the player weighs it under `lights`: each entry
+/// point's direct irradiance bounded by the entry disk of radius² `disk`
+/// ([`crate::bounded_irradiance`]), then [`energy_weight`] over each cluster's members with the
+/// entries' pane energies `entry_energy`.
+pub fn archive_weights(
+    bvh: &Bvh,
+    lights: &[Light],
+    entries: &[prm_format::Entry],
+    entry_energy: &[Vec3],
+    clusters: &[prm_format::Cluster],
+    disk: f32,
+) -> Vec<Vec3> {
+    let irradiance: Vec<Vec3> = entries
+        .par_iter()
+        .map(|en| {
+            let (p, n) = (Vec3::from(en.position), Vec3::from(en.normal));
+            crate::bounded_irradiance(bvh, lights, p, n, n, u32::MAX, disk)
+        })
+        .collect();
+    clusters
+        .iter()
+        .map(|c| energy_weight(c.members(), &irradiance, entry_energy))
+        .collect()
 }
 
 #[cfg(test)]

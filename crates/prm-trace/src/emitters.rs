@@ -22,7 +22,7 @@
 //! is the path's own next segment, so only the emitter sample costs a ray.
 
 use glam::{Vec2, Vec3};
-use prm_scene::Scene;
+use prm_scene::{ExitPoint, Scene};
 
 use crate::bvh::{Bvh, Hit};
 use crate::rng::Rng;
@@ -197,21 +197,10 @@ impl Emitters {
         }
     }
 
-    /// The emitter-sampling half of the estimate at `p` on triangle `tri` (geometric normal
-    /// `ng`, receiving normal `n`), with a shadow ray, weighed against cosine sampling: the
+    /// The emitter-sampling half of the estimate at receiver `r`, with a shadow ray, weighed against cosine sampling: the
     /// caller adds the other half ([`Emitters::cosine_hit`] of its cosine sample).
-    #[allow(clippy::too_many_arguments)]
-    pub fn sample_weighted(
-        &self,
-        scene: &Scene,
-        bvh: &Bvh,
-        p: Vec3,
-        ng: Vec3,
-        n: Vec3,
-        tri: u32,
-        rng: &mut Rng,
-    ) -> Vec3 {
-        self.sample(scene, bvh, p, ng, n, tri, rng, Strategy::Weighted)
+    pub fn sample_weighted(&self, scene: &Scene, bvh: &Bvh, r: &Receiver, rng: &mut Rng) -> Vec3 {
+        self.sample(scene, bvh, r, rng, Strategy::Weighted)
     }
 
     /// The cosine half of the estimate: what the cosine-sampled direction `dir` (receiving
@@ -230,22 +219,12 @@ impl Emitters {
         le * (std::f32::consts::PI * w)
     }
 
-    /// One emitter sample at `p`, weighed by `strategy`.
-    #[allow(clippy::too_many_arguments)]
-    fn sample(
-        &self,
-        scene: &Scene,
-        bvh: &Bvh,
-        p: Vec3,
-        ng: Vec3,
-        n: Vec3,
-        tri: u32,
-        rng: &mut Rng,
-        strategy: Strategy,
-    ) -> Vec3 {
+    /// One emitter sample at receiver `r`, weighed by `strategy`.
+    fn sample(&self, scene: &Scene, bvh: &Bvh, r: &Receiver, rng: &mut Rng, strategy: Strategy) -> Vec3 {
         if self.is_empty() {
             return Vec3::ZERO;
         }
+        let (p, ng, n, tri) = (r.position, r.ng, r.n, r.triangle);
         let u = rng.next_f32();
         let k = self.cdf.partition_point(|&c| c <= u).min(self.cdf.len() - 1);
         let e = self.triangle[k];
@@ -276,14 +255,14 @@ impl Emitters {
         self.radiance[k] * (weight * cx * ce * t.area() / (r2 * self.pick[k]))
     }
 
-    /// One two-strategy estimate (module docs) of the direct irradiance at `p`: an emitter
-    /// sample and a cosine sample (a closest-hit ray), weighed.
-    #[allow(clippy::too_many_arguments)]
-    pub fn sample_both(&self, scene: &Scene, bvh: &Bvh, p: Vec3, ng: Vec3, n: Vec3, tri: u32, rng: &mut Rng) -> Vec3 {
+    /// One two-strategy estimate (module docs) of the direct irradiance at receiver `r`: an
+    /// emitter sample and a cosine sample (a closest-hit ray), weighed.
+    pub fn sample_both(&self, scene: &Scene, bvh: &Bvh, r: &Receiver, rng: &mut Rng) -> Vec3 {
         if self.is_empty() {
             return Vec3::ZERO;
         }
-        let mut e = self.sample_weighted(scene, bvh, p, ng, n, tri, rng);
+        let (p, ng, n, tri) = (r.position, r.ng, r.n, r.triangle);
+        let mut e = self.sample_weighted(scene, bvh, r, rng);
         let dir = crate::sampling::cosine_hemisphere(rng.next_vec2(), n);
         if dir.dot(ng) > 0.0 {
             if let Some(hit) = bvh.closest_hit(bvh.spawn(p, ng, dir), dir, f32::INFINITY, tri) {
@@ -293,7 +272,8 @@ impl Emitters {
         e
     }
 
-    /// Mean of `samples` two-strategy estimates ([`Emitters::sample_both`]).
+    /// Mean of `samples` two-strategy estimates ([`Emitters::sample_both`]) at `p` on triangle
+    /// `tri` (geometric normal `ng`, receiving normal `n`): [`Emitters::irradiance_at`] by parts.
     #[allow(clippy::too_many_arguments)]
     pub fn irradiance(
         &self,
@@ -306,12 +286,21 @@ impl Emitters {
         samples: u32,
         rng: &mut Rng,
     ) -> Vec3 {
+        let r = Receiver {
+            position: p,
+            ng,
+            n,
+            triangle: tri,
+        };
+        self.irradiance_at(scene, bvh, &r, samples, rng)
+    }
+
+    /// Mean of `samples` two-strategy estimates ([`Emitters::sample_both`]) at receiver `r`.
+    pub fn irradiance_at(&self, scene: &Scene, bvh: &Bvh, r: &Receiver, samples: u32, rng: &mut Rng) -> Vec3 {
         if self.is_empty() || samples == 0 {
             return Vec3::ZERO;
         }
-        let s: Vec3 = (0..samples)
-            .map(|_| self.sample_both(scene, bvh, p, ng, n, tri, rng))
-            .sum();
+        let s: Vec3 = (0..samples).map(|_| self.sample_both(scene, bvh, r, rng)).sum();
         s / samples as f32
     }
 
@@ -337,7 +326,7 @@ impl Emitters {
                     .enumerate()
                     .map(|(i, r)| {
                         let mut rng = Rng::new(seed, i as u64, g as u64);
-                        alone.irradiance(scene, bvh, r.position, r.ng, r.n, r.triangle, samples, &mut rng)
+                        alone.irradiance_at(scene, bvh, r, samples, &mut rng)
                     })
                     .collect()
             })
@@ -371,7 +360,8 @@ impl Emitters {
     }
 }
 
-/// A surface point that receives the emitters' light ([`Emitters::group_irradiance`]).
+/// A surface point that receives light ([`Emitters::group_irradiance`]), or a point of empty
+/// space with `triangle` `u32::MAX`.
 #[derive(Clone, Copy, Debug)]
 pub struct Receiver {
     /// World position.
@@ -382,6 +372,18 @@ pub struct Receiver {
     pub n: Vec3,
     /// Its triangle (skipped by its own rays).
     pub triangle: u32,
+}
+
+impl Receiver {
+    /// Exit point `x`, receiving with its shading normal.
+    pub fn at_exit(bvh: &Bvh, x: &ExitPoint) -> Receiver {
+        Receiver {
+            position: x.position,
+            ng: bvh.geometric_normal(x.triangle),
+            n: x.normal,
+            triangle: x.triangle,
+        }
+    }
 }
 
 #[cfg(test)]
@@ -454,9 +456,15 @@ mod tests {
             (Vec3::new(a / 2.0, 0.0, b / 2.0), corner_form_factor(a, b, c)),
         ] {
             let exact = le * std::f32::consts::PI * exact;
-            let both = e.irradiance(&scene, &bvh, p, Vec3::Y, Vec3::Y, 0, 1 << 16, &mut rng);
+            let r = Receiver {
+                position: p,
+                ng: Vec3::Y,
+                n: Vec3::Y,
+                triangle: 0,
+            };
+            let both = e.irradiance_at(&scene, &bvh, &r, 1 << 16, &mut rng);
             let alone: Vec3 = (0..1 << 16)
-                .map(|_| e.sample(&scene, &bvh, p, Vec3::Y, Vec3::Y, 0, &mut rng, Strategy::Alone))
+                .map(|_| e.sample(&scene, &bvh, &r, &mut rng, Strategy::Alone))
                 .sum::<Vec3>()
                 / (1 << 16) as f32;
             for (name, v) in [("both strategies", both), ("emitter sampling", alone)] {

@@ -37,7 +37,7 @@ pub mod walk;
 pub use buried::{bake_atlas, is_buried, unbury_exits, Unburied};
 pub use bvh::{BuildQuality, Bvh, BvhKind, BvhParams, Hit, NO_OCCLUDER};
 pub use check::{check_accuracy, check_exits, check_lights, CheckParams, CheckedArchive};
-pub use cluster::{energy_weight, ClusterParams, Clustering};
+pub use cluster::{archive_weights, energy_weight, ClusterParams, Clustering};
 pub use direct::{bounded_irradiance, direct_irradiance, entry_irradiance};
 pub use emitters::{EmitterGroup, Emitters, Receiver};
 pub use error::TraceError;
@@ -52,3 +52,15 @@ pub use sampling::{cosine_hemisphere, sample_surface, sobol2, EntryParams, Surfa
 pub use sky::sky_transfer_at_exits;
 pub use vpl::VplBound;
 pub use walk::{trace_walks, DeepDisk, Roulette, Vpl, VplSet, WalkParams, WalkStats};
+
+/// For tests: a grey (albedo 0.5) scene of quads `[a, b, c, d]`, each split into the triangles
+/// `abc` and `acd`.
+#[cfg(test)]
+pub(crate) fn grey_quads(quads: &[[glam::Vec3; 4]]) -> prm_scene::Scene {
+    use prm_scene::{Material, Triangle};
+    let tris = quads
+        .iter()
+        .flat_map(|&[a, b, c, d]| [Triangle::flat([a, b, c], 0), Triangle::flat([a, c, d], 0)])
+        .collect();
+    prm_scene::Scene::from_parts(tris, vec![Material::diffuse("grey", glam::Vec3::splat(0.5))])
+}

@@ -22,7 +22,7 @@
 //!
 //! Measured by `cargo xtask eval --targets` (indirect light, 4×4 error): the fireplace room's
 //! default bake under its lamp is 5.5% and 6.3% off at seeds 0 and 1; per exit point on the CPU,
-//! `cargo run --release -p prm-trace --example near_field -- SCENE ARCHIVE FX FY FZ`.
+//! `cargo xtask eval experiment near_field SCENE ARCHIVE FX FY FZ`.
 
 use glam::Vec3;
 use prm_format::{NearExit, NearField, NearHit, NEAR_MIN_WEIGHT};
@@ -116,28 +116,15 @@ pub fn near_field(scene: &Scene, bvh: &Bvh, atlas: &Atlas, rays: u32, disk: f32,
 mod tests {
     use super::*;
     use crate::BvhParams;
-    use prm_scene::{AtlasParams, Material, Sizing, Triangle};
+    use prm_scene::{AtlasParams, Sizing, Triangle};
 
     /// A floor and a wall meeting at a right angle along x = 0.
     fn corner() -> Scene {
-        let mut tris = Vec::new();
-        let mut quad = |a: Vec3, b: Vec3, c: Vec3, d: Vec3| {
-            tris.push(Triangle::flat([a, b, c], 0));
-            tris.push(Triangle::flat([a, c, d], 0));
-        };
-        quad(
-            Vec3::new(0.0, 0.0, 0.0),
-            Vec3::new(0.0, 0.0, 1.0),
-            Vec3::new(1.0, 0.0, 1.0),
-            Vec3::new(1.0, 0.0, 0.0),
-        );
-        quad(
-            Vec3::new(0.0, 0.0, 0.0),
-            Vec3::new(0.0, 1.0, 0.0),
-            Vec3::new(0.0, 1.0, 1.0),
-            Vec3::new(0.0, 0.0, 1.0),
-        );
-        Scene::from_parts(tris, vec![Material::diffuse("grey", Vec3::splat(0.5))])
+        let v = Vec3::new;
+        crate::grey_quads(&[
+            [v(0.0, 0.0, 0.0), v(0.0, 0.0, 1.0), v(1.0, 0.0, 1.0), v(1.0, 0.0, 0.0)],
+            [v(0.0, 0.0, 0.0), v(0.0, 1.0, 0.0), v(0.0, 1.0, 1.0), v(0.0, 0.0, 1.0)],
+        ])
     }
 
     #[test]

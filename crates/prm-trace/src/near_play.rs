@@ -5,7 +5,7 @@
 //! prm-runtime adds to the blend the near field's direct share (its gather points' direct light
 //! through the shadow maps; here ray-cast) and then gathers the deeper share from the lightmap,
 //! [`NEAR_GATHERS`] times by default, each time from the lightmap the previous gather
-//! completed, and extrapolates the rest of that series ([`prm_format::DeeperOperator`]). With
+//! completed, and extrapolates the rest of that series ([`prm_scene::DeeperOperator`]). With
 //! `S` the blend plus the direct share and `N` the deeper share's operator, an exit point plays
 //! `Σ_{k ≤ K} Nᵏ S + f ⊙ Nᴷ S`, linear in `S`: so each pane's part of it is taken once, when
 //! the pane is made ([`NearPlay::series`]), the direct share's once per light
@@ -19,8 +19,8 @@
 //! player's lightmap is 15–16% off.
 
 use glam::Vec3;
-use prm_format::{DeeperOperator, NearField};
-use prm_scene::Light;
+use prm_format::NearField;
+use prm_scene::{DeeperOperator, Light, MergeNearHits};
 use rayon::prelude::*;
 
 use crate::bvh::Bvh;

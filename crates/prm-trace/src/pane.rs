@@ -23,7 +23,7 @@
 //!   term is evaluated at every exit point. With `step: 1` it is the exact evaluator, bit for
 //!   bit.
 //!
-//! Measured (release, 2 cores, `cargo run --release -p prm-trace --example lattice -- SCENE
+//! Measured (release, 2 cores, `cargo xtask eval experiment lattice SCENE
 //! ENTRIES CLUSTERS RES WALKS` with the bake's sizes; difference = relative L2 of all pane values
 //! against exact, worst pane in brackets):
 //!
@@ -138,6 +138,18 @@ struct Kernel<'a> {
     entries: usize,
 }
 
+/// Where [`Kernel::sum_exit`] adds one exit point's sums.
+struct ExitSums<'s> {
+    /// Per cluster, the pane value at the exit.
+    acc: &'s mut [Vec3],
+    /// Per entry point, the energy its VPLs delivered.
+    entry_energy: &'s mut [Vec3],
+    /// Each VPL's last occluder ([`Kernel::occluder_cache`]).
+    cache: &'s mut [u32],
+    /// Shadow rays cast.
+    rays: &'s mut u64,
+}
+
 impl<'a> Kernel<'a> {
     fn new(bvh: &'a Bvh, vpls: &'a VplSet, clustering: &Clustering, bound: VplBound) -> Result<Kernel<'a>, TraceError> {
         if clustering.of_entry.len() != vpls.entries() {
@@ -225,60 +237,54 @@ impl<'a> Kernel<'a> {
         vec![crate::NO_OCCLUDER; self.px.len()]
     }
 
-    /// Sums every VPL at exit `x` into `acc` (per cluster) and `entry_energy`. `corners` gives,
+    /// Sums every VPL at exit `x` into `sums`, per cluster and per entry point. `corners` gives,
     /// per word, the VPLs that the lattice corners all see and all miss; every other VPL facing
     /// `x` costs a shadow ray, whose answer is recorded in `bits` (known, visible) when given.
-    /// `cache` holds each VPL's last occluder ([`Kernel::occluder_cache`]); a VPL's rays go
+    /// `sums.cache` holds each VPL's last occluder ([`Kernel::occluder_cache`]); a VPL's rays go
     /// through it in a fixed order, so the answers do not depend on which other VPLs are summed.
-    #[allow(clippy::too_many_arguments)]
     fn sum_exit(
         &self,
         x: &ExitPoint,
         corners: Option<(&[u64], &[u64])>,
         bits: Option<(&mut [u64], &mut [u64])>,
-        acc: &mut [Vec3],
-        entry_energy: &mut [Vec3],
-        cache: &mut [u32],
-        rays: &mut u64,
+        sums: ExitSums<'_>,
     ) {
         #[cfg(target_arch = "x86_64")]
         if crate::isa::avx2() {
             // SAFETY: `isa::avx2` checked that the CPU has every feature the variant is built for.
-            return unsafe { self.sum_exit_avx2(x, corners, bits, acc, entry_energy, cache, rays) };
+            return unsafe { self.sum_exit_avx2(x, corners, bits, sums) };
         }
-        self.sum_exit_inline(x, corners, bits, acc, entry_energy, cache, rays)
+        self.sum_exit_inline(x, corners, bits, sums)
     }
 
     /// [`Kernel::sum_exit`] built for AVX2 and FMA ([`crate::isa`]).
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma,bmi1,bmi2,lzcnt")]
-    #[allow(clippy::too_many_arguments)]
     fn sum_exit_avx2(
         &self,
         x: &ExitPoint,
         corners: Option<(&[u64], &[u64])>,
         bits: Option<(&mut [u64], &mut [u64])>,
-        acc: &mut [Vec3],
-        entry_energy: &mut [Vec3],
-        cache: &mut [u32],
-        rays: &mut u64,
+        sums: ExitSums<'_>,
     ) {
-        self.sum_exit_inline(x, corners, bits, acc, entry_energy, cache, rays)
+        self.sum_exit_inline(x, corners, bits, sums)
     }
 
     /// The body of [`Kernel::sum_exit`], inlined into each instruction-set variant.
     #[inline(always)]
-    #[allow(clippy::too_many_arguments)]
     fn sum_exit_inline(
         &self,
         x: &ExitPoint,
         corners: Option<(&[u64], &[u64])>,
         mut bits: Option<(&mut [u64], &mut [u64])>,
-        acc: &mut [Vec3],
-        entry_energy: &mut [Vec3],
-        cache: &mut [u32],
-        rays: &mut u64,
+        sums: ExitSums<'_>,
     ) {
+        let ExitSums {
+            acc,
+            entry_energy,
+            cache,
+            rays,
+        } = sums;
         let ng = self.bvh.geometric_normal(x.triangle);
         let mut g = [0.0f32; BLOCK];
         for w in 0..self.words() {
@@ -355,7 +361,13 @@ pub fn evaluate_panes(
             out.accs = vec![Vec3::ZERO; chunk.len() * c];
             let mut cache = kernel.occluder_cache();
             for (x, acc) in chunk.iter().zip(out.accs.chunks_mut(c.max(1))) {
-                kernel.sum_exit(x, None, None, acc, &mut out.entry_energy, &mut cache, &mut out.rays);
+                let sums = ExitSums {
+                    acc,
+                    entry_energy: &mut out.entry_energy,
+                    cache: &mut cache,
+                    rays: &mut out.rays,
+                };
+                kernel.sum_exit(x, None, None, sums);
             }
             out
         })
@@ -539,6 +551,78 @@ struct Tiler<'a> {
     atlas: &'a Atlas,
 }
 
+/// Visibility bits, per VPL word, of an item's lattice points that are corners of finer points:
+/// which VPLs' visibility is known there, and which of those are visible.
+struct CornerBits {
+    words: usize,
+    /// Points per row: the item's width plus its far edge.
+    width: usize,
+    known: Vec<u64>,
+    vis: Vec<u64>,
+}
+
+impl CornerBits {
+    /// Room for every point of `item` when it has lattices finer than its coarsest (none
+    /// otherwise, as no point is then a corner).
+    fn new(item: &Item, words: usize) -> CornerBits {
+        let width = (item.tx + 1) as usize;
+        let known = if item.step > 1 {
+            vec![0u64; width * (item.ty + 1) as usize * words]
+        } else {
+            Vec::new()
+        };
+        CornerBits {
+            words,
+            width,
+            vis: known.clone(),
+            known,
+        }
+    }
+
+    /// The first word of point `(x, y)`.
+    fn slot(&self, x: u32, y: u32) -> usize {
+        (y as usize * self.width + x as usize) * self.words
+    }
+
+    /// Point `(x, y)`'s bits (known, visible), for [`Kernel::sum_exit`] to record.
+    fn at_mut(&mut self, x: u32, y: u32) -> (&mut [u64], &mut [u64]) {
+        let at = self.slot(x, y);
+        (&mut self.known[at..at + self.words], &mut self.vis[at..at + self.words])
+    }
+
+    /// Sets `seen` and `missed` to the VPLs that every one of `corners` knows it sees, and
+    /// knows it misses.
+    fn agree(&self, corners: impl Iterator<Item = (u32, u32)>, seen: &mut [u64], missed: &mut [u64]) {
+        seen.fill(!0);
+        missed.fill(!0);
+        for (cx, cy) in corners {
+            let at = self.slot(cx, cy);
+            let (k, v) = (&self.known[at..at + self.words], &self.vis[at..at + self.words]);
+            for w in 0..self.words {
+                seen[w] &= k[w] & v[w];
+                missed[w] &= k[w] & !v[w];
+            }
+        }
+    }
+}
+
+/// The corners of point `(dx, dy)` of `item`, new on the lattice of spacing `h`: along an axis
+/// where the point lies on the coarser lattice, its own coordinate; along the other, the
+/// coarser points either side, `d − h` and `min(d + h, far edge)`.
+fn corner_points(item: &Item, h: u32, (dx, dy): (u32, u32), (coarse_x, coarse_y): (bool, bool)) -> [(u32, u32); 4] {
+    let xs = if coarse_x {
+        [dx, dx]
+    } else {
+        [dx - h, (dx + h).min(item.tx)]
+    };
+    let ys = if coarse_y {
+        [dy, dy]
+    } else {
+        [dy - h, (dy + h).min(item.ty)]
+    };
+    [(xs[0], ys[0]), (xs[1], ys[0]), (xs[0], ys[1]), (xs[1], ys[1])]
+}
+
 impl Tiler<'_> {
     /// Whether exit `c` may stand for exit `x` as a lattice corner `spacing` texels away.
     fn corner_fits(&self, x: &ExitPoint, c: &ExitPoint, spacing: u32) -> bool {
@@ -549,33 +633,29 @@ impl Tiler<'_> {
             && x.position.distance(c.position) <= max_d
     }
 
+    /// The exit at local point `(x, y)` of `item`, if the texel has one on the item's chart.
+    fn exit_at(&self, item: &Item, x: u32, y: u32) -> Option<u32> {
+        let res = self.atlas.resolution;
+        let (gx, gy) = (item.x0 + x, item.y0 + y);
+        (gx < res && gy < res)
+            .then(|| self.atlas.texel_exit[(gy * res + gx) as usize])
+            .filter(|&i| {
+                i != EMPTY_TEXEL
+                    && self.atlas.chart_of_triangle[self.atlas.exits[i as usize].triangle as usize] == item.chart
+            })
+    }
+
     /// Evaluates `item`: first the points of the coarsest lattice (every ray), then each finer
     /// lattice's new points from the corners around them on the coarser one. A lattice of
     /// spacing `h` is the multiples of `h` below the far edge, and the far edge itself; so a new
     /// point `d` (an odd multiple of `h`) has its corners at `d − h` and `min(d + h, far edge)`.
     fn evaluate_item(&self, item: &Item) -> WorkPanes {
-        let (res, s) = (self.atlas.resolution, item.step);
+        let s = item.step;
         let words = self.kernel.words();
         let c = self.kernel.clusters;
-        let exit_at = |x: u32, y: u32| -> Option<u32> {
-            let (gx, gy) = (item.x0 + x, item.y0 + y);
-            (gx < res && gy < res)
-                .then(|| self.atlas.texel_exit[(gy * res + gx) as usize])
-                .filter(|&i| {
-                    i != EMPTY_TEXEL
-                        && self.atlas.chart_of_triangle[self.atlas.exits[i as usize].triangle as usize] == item.chart
-                })
-        };
         let mut out = WorkPanes::new(self.kernel.entries);
         // Visibility bits of every point that is a corner of a finer one.
-        let width = (item.tx + 1) as usize;
-        let slot = |x: u32, y: u32| (y as usize * width + x as usize) * words;
-        let mut known = if s > 1 {
-            vec![0u64; width * (item.ty + 1) as usize * words]
-        } else {
-            Vec::new()
-        };
-        let mut vis = known.clone();
+        let mut bits = CornerBits::new(item, words);
         let mut seen = vec![0u64; words];
         let mut missed = vec![0u64; words];
         let mut scratch = vec![Vec3::ZERO; c];
@@ -590,8 +670,8 @@ impl Tiler<'_> {
             let (xs_h, ys_h) = (lattice(h, item.tx), lattice(h, item.ty));
             for &dy in &ys_h {
                 for &dx in &xs_h {
-                    let (coarse_x, coarse_y) = (on(dx, 2 * h, item.tx), on(dy, 2 * h, item.ty));
-                    if !top && coarse_x && coarse_y {
+                    let coarse = (on(dx, 2 * h, item.tx), on(dy, 2 * h, item.ty));
+                    if !top && coarse.0 && coarse.1 {
                         continue;
                     }
                     let inside = (dx < item.tx || item.end_x) && (dy < item.ty || item.end_y);
@@ -599,73 +679,43 @@ impl Tiler<'_> {
                     if !inside && h == 1 {
                         continue;
                     }
-                    let Some(e) = exit_at(dx, dy) else { continue };
+                    let Some(e) = self.exit_at(item, dx, dy) else { continue };
                     let exit = &self.atlas.exits[e as usize];
                     let corners = if top {
                         None
                     } else {
-                        let xs = if coarse_x {
-                            [dx, dx]
-                        } else {
-                            [dx - h, (dx + h).min(item.tx)]
-                        };
-                        let ys = if coarse_y {
-                            [dy, dy]
-                        } else {
-                            [dy - h, (dy + h).min(item.ty)]
-                        };
                         // Every corner must stand for the point; at chart borders and creases
                         // some do not, and the point casts its own rays. (Taking the corners
                         // that fit, if two or more do, saved 11 % of the rays on chairs and
                         // raised its difference from exact from 2.5 % to 3.3 %; at the finest
                         // spacing only, 8 % and 3.0 %, for no faster bake.)
-                        let corners = ys.into_iter().flat_map(|cy| xs.into_iter().map(move |cx| (cx, cy)));
-                        let fits = corners.clone().all(|(cx, cy)| {
-                            exit_at(cx, cy).is_some_and(|ce| self.corner_fits(exit, &self.atlas.exits[ce as usize], h))
+                        let corners = corner_points(item, h, (dx, dy), coarse);
+                        let fits = corners.iter().all(|&(cx, cy)| {
+                            self.exit_at(item, cx, cy)
+                                .is_some_and(|ce| self.corner_fits(exit, &self.atlas.exits[ce as usize], h))
                         });
                         fits.then(|| {
-                            seen.fill(!0);
-                            missed.fill(!0);
-                            for (cx, cy) in corners {
-                                let at = slot(cx, cy);
-                                let (k, v) = (&known[at..at + words], &vis[at..at + words]);
-                                for w in 0..words {
-                                    seen[w] &= k[w] & v[w];
-                                    missed[w] &= k[w] & !v[w];
-                                }
-                            }
+                            bits.agree(corners.into_iter(), &mut seen, &mut missed);
                             (seen.as_slice(), missed.as_slice())
                         })
                     };
-                    let bits = (h > 1).then(|| {
-                        let at = slot(dx, dy);
-                        (&mut known[at..at + words], &mut vis[at..at + words])
-                    });
-                    if inside {
+                    let point_bits = (h > 1).then(|| bits.at_mut(dx, dy));
+                    let (acc, entry_energy) = if inside {
                         let at = out.accs.len();
                         out.accs.resize(at + c, Vec3::ZERO);
                         out.exits.push(e);
-                        self.kernel.sum_exit(
-                            exit,
-                            corners,
-                            bits,
-                            &mut out.accs[at..],
-                            &mut out.entry_energy,
-                            &mut cache,
-                            &mut out.rays,
-                        );
+                        (&mut out.accs[at..], &mut out.entry_energy[..])
                     } else {
                         scratch.fill(Vec3::ZERO);
-                        self.kernel.sum_exit(
-                            exit,
-                            corners,
-                            bits,
-                            &mut scratch,
-                            &mut scratch_energy,
-                            &mut cache,
-                            &mut out.rays,
-                        );
-                    }
+                        (&mut scratch[..], &mut scratch_energy[..])
+                    };
+                    let sums = ExitSums {
+                        acc,
+                        entry_energy,
+                        cache: &mut cache,
+                        rays: &mut out.rays,
+                    };
+                    self.kernel.sum_exit(exit, corners, point_bits, sums);
                 }
             }
             if h == 1 {
@@ -775,11 +825,17 @@ mod tests {
             let mut cache = kernel.occluder_cache();
             let mut rays = 0;
             for (x, acc) in atlas.exits.iter().zip(acc.chunks_mut(kernel.clusters)) {
+                let sums = ExitSums {
+                    acc,
+                    entry_energy: &mut energy,
+                    cache: &mut cache,
+                    rays: &mut rays,
+                };
                 if avx2 {
                     // SAFETY: `isa::avx2` said the CPU runs the variant.
-                    unsafe { kernel.sum_exit_avx2(x, None, None, acc, &mut energy, &mut cache, &mut rays) };
+                    unsafe { kernel.sum_exit_avx2(x, None, None, sums) };
                 } else {
-                    kernel.sum_exit_inline(x, None, None, acc, &mut energy, &mut cache, &mut rays);
+                    kernel.sum_exit_inline(x, None, None, sums);
                 }
             }
             (acc, energy, rays)

@@ -18,7 +18,7 @@
 //! as `Σ_i T_i Y_i(n)` ([`prm_format::sh_irradiance`]). The cost is one shadow ray per probe and
 //! VPL (0.3 s for the Cornell box's 473 probes and 10,668 VPLs).
 //!
-//! Measured (`cargo run --release -p prm-trace --example probe_split -- SCENE ENTRIES WALKS
+//! Measured (`cargo xtask eval experiment probe_split SCENE ENTRIES WALKS
 //! DISK`, our Cornell box, 473 probes, one point light, no clustering, six axis normals per
 //! probe; error = relative L2 against `ReferenceTracer::indirect_at_points` at 16,384 paths):
 //!
@@ -38,8 +38,8 @@
 
 use glam::Vec3;
 use prm_format::{
-    probe_ray_direction, sh_basis, GatherPoint, ProbeGrid, ProbeRays, ProbeSkyTransfer, NO_EMITTER, RAY_BLOCKED,
-    RAY_SKY, SH_COEFFS, SH_COSINE_LOBE,
+    probe_ray_direction, sh_basis, sh_irradiance, GatherPoint, ProbeGrid, ProbeRays, ProbeSkyTransfer, AXIS_NORMALS,
+    NO_EMITTER, RAY_BLOCKED, RAY_SKY, SH_COEFFS, SH_COSINE_LOBE,
 };
 use prm_scene::Scene;
 use prm_scene::{Atlas, EMPTY_TEXEL};
@@ -52,6 +52,24 @@ use crate::rng::Rng;
 use crate::vpl::VplBound;
 use crate::walk::VplSet;
 use crate::TraceError;
+
+/// Every probe position paired with each of the six axis normals ([`AXIS_NORMALS`]), probe by
+/// probe: the points at which a probe's irradiance is compared with the reference.
+pub fn axis_points(positions: &[[f32; 3]]) -> Vec<(Vec3, Vec3)> {
+    positions
+        .iter()
+        .flat_map(|p| AXIS_NORMALS.map(|n| (Vec3::from(*p), Vec3::from(n))))
+        .collect()
+}
+
+/// Each probe's irradiance at the six axis normals, in [`axis_points`]' order, negative values
+/// clamped as `probe_volume.wgsl` does.
+pub fn axis_irradiance(coeffs: &[[[f32; 3]; SH_COEFFS]]) -> Vec<Vec3> {
+    coeffs
+        .iter()
+        .flat_map(|c| AXIS_NORMALS.map(|n| Vec3::from(sh_irradiance(c, n)).max(Vec3::ZERO)))
+        .collect()
+}
 
 /// Rays per candidate of the inside test.
 pub const INSIDE_DIRECTIONS: u32 = 32;
@@ -428,26 +446,21 @@ pub fn probe_rays(scene: &Scene, bvh: &Bvh, atlas: &Atlas, positions: &[Vec3], r
 #[cfg(test)]
 mod tests {
     use super::*;
-    use prm_scene::{Material, Triangle};
 
     /// A closed unit cube (faces outward) around the origin, and a floor below it.
     fn cube_over_floor() -> Scene {
-        let mut tris = Vec::new();
-        let mut quad = |a: Vec3, b: Vec3, c: Vec3, d: Vec3| {
-            tris.push(Triangle::flat([a, b, c], 0));
-            tris.push(Triangle::flat([a, c, d], 0));
-        };
         let v = |x: f32, y: f32, z: f32| Vec3::new(x, y, z) * 0.5;
-        // Each face wound counter-clockwise seen from outside.
-        quad(v(-1., -1., 1.), v(1., -1., 1.), v(1., 1., 1.), v(-1., 1., 1.));
-        quad(v(1., -1., -1.), v(-1., -1., -1.), v(-1., 1., -1.), v(1., 1., -1.));
-        quad(v(1., -1., 1.), v(1., -1., -1.), v(1., 1., -1.), v(1., 1., 1.));
-        quad(v(-1., -1., -1.), v(-1., -1., 1.), v(-1., 1., 1.), v(-1., 1., -1.));
-        quad(v(-1., 1., 1.), v(1., 1., 1.), v(1., 1., -1.), v(-1., 1., -1.));
-        quad(v(-1., -1., -1.), v(1., -1., -1.), v(1., -1., 1.), v(-1., -1., 1.));
         let f = |x: f32, z: f32| Vec3::new(x, -2.0, z);
-        quad(f(-4., 4.), f(4., 4.), f(4., -4.), f(-4., -4.));
-        Scene::from_parts(tris, vec![Material::diffuse("grey", Vec3::splat(0.5))])
+        crate::grey_quads(&[
+            // Each face wound counter-clockwise seen from outside.
+            [v(-1., -1., 1.), v(1., -1., 1.), v(1., 1., 1.), v(-1., 1., 1.)],
+            [v(1., -1., -1.), v(-1., -1., -1.), v(-1., 1., -1.), v(1., 1., -1.)],
+            [v(1., -1., 1.), v(1., -1., -1.), v(1., 1., -1.), v(1., 1., 1.)],
+            [v(-1., -1., -1.), v(-1., -1., 1.), v(-1., 1., 1.), v(-1., 1., -1.)],
+            [v(-1., 1., 1.), v(1., 1., 1.), v(1., 1., -1.), v(-1., 1., -1.)],
+            [v(-1., -1., -1.), v(1., -1., -1.), v(1., -1., 1.), v(-1., -1., 1.)],
+            [f(-4., 4.), f(4., 4.), f(4., -4.), f(-4., -4.)],
+        ])
     }
 
     #[test]

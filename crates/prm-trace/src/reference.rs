@@ -59,7 +59,7 @@ use rayon::prelude::*;
 
 use crate::bvh::Bvh;
 use crate::direct::direct_irradiance;
-use crate::emitters::Emitters;
+use crate::emitters::{Emitters, Receiver};
 use crate::rng::Rng;
 use crate::sampling::cosine_hemisphere;
 use crate::walk::Roulette;
@@ -215,12 +215,13 @@ impl<'a> ReferenceTracer<'a> {
         ReferenceTracer { sky: Some(sky), ..self }
     }
 
-    /// The sky's direct irradiance at `p`, `samples` cosine samples about `n` (zero without a
-    /// sky): `π·L(ω)` for each ray `ω` that leaves the scene.
-    pub(crate) fn sky_direct(&self, p: Vec3, ng: Vec3, n: Vec3, tri: u32, samples: u32, rng: &mut Rng) -> Vec3 {
+    /// The sky's direct irradiance at receiver `r`, `samples` cosine samples about `r.n` (zero
+    /// without a sky): `π·L(ω)` for each ray `ω` that leaves the scene.
+    pub(crate) fn sky_direct(&self, r: &Receiver, samples: u32, rng: &mut Rng) -> Vec3 {
         let Some(sky) = self.sky else {
             return Vec3::ZERO;
         };
+        let (p, ng, n, tri) = (r.position, r.ng, r.n, r.triangle);
         let mut sum = Vec3::ZERO;
         for _ in 0..samples {
             let dir = cosine_hemisphere(rng.next_vec2(), n);
@@ -244,52 +245,48 @@ impl<'a> ReferenceTracer<'a> {
     }
 
     /// The lighting's direct irradiance (deterministic).
-    fn direct(&self, p: Vec3, ng: Vec3, n: Vec3, tri: u32) -> Vec3 {
+    fn direct(&self, r: &Receiver) -> Vec3 {
         match self.lighting {
-            Lighting::Lights(l) => direct_irradiance(self.bvh, l, p, ng, n, tri),
+            Lighting::Lights(l) => direct_irradiance(self.bvh, l, r.position, r.ng, r.n, r.triangle),
             Lighting::UniformIrradiance(e) => e,
         }
     }
 
     /// The emitters' direct irradiance, `samples` next-event samples (zero without emitters).
-    #[allow(clippy::too_many_arguments)]
-    fn emitted(&self, p: Vec3, ng: Vec3, n: Vec3, tri: u32, samples: u32, rng: &mut Rng) -> Vec3 {
-        self.emitters.map_or(Vec3::ZERO, |e| {
-            e.irradiance(self.scene, self.bvh, p, ng, n, tri, samples, rng)
-        })
+    fn emitted(&self, r: &Receiver, samples: u32, rng: &mut Rng) -> Vec3 {
+        self.emitters
+            .map_or(Vec3::ZERO, |e| e.irradiance_at(self.scene, self.bvh, r, samples, rng))
+    }
+
+    /// `f(i, exit i as a receiver)` at every exit point, in parallel.
+    fn at_exits(&self, exits: &[ExitPoint], f: impl Fn(usize, &Receiver) -> Vec3 + Sync) -> Vec<Vec3> {
+        exits
+            .par_iter()
+            .enumerate()
+            .map(|(i, x)| f(i, &Receiver::at_exit(self.bvh, x)))
+            .collect()
     }
 
     /// Direct irradiance at every exit point (receiving with the exit point's normal): the
     /// lighting's, plus [`EMITTER_DIRECT_SAMPLES`] emitter samples with emitters and
     /// [`SKY_DIRECT_SAMPLES`] sky samples with a sky.
     pub fn direct_at_exits(&self, exits: &[ExitPoint]) -> Vec<Vec3> {
-        exits
-            .par_iter()
-            .enumerate()
-            .map(|(i, x)| {
-                let ng = self.bvh.geometric_normal(x.triangle);
-                let mut rng = Rng::new(0, i as u64, u64::MAX);
-                let mut sky_rng = Rng::new(1, i as u64, u64::MAX);
-                self.direct(x.position, ng, x.normal, x.triangle)
-                    + self.emitted(x.position, ng, x.normal, x.triangle, EMITTER_DIRECT_SAMPLES, &mut rng)
-                    + self.sky_direct(x.position, ng, x.normal, x.triangle, SKY_DIRECT_SAMPLES, &mut sky_rng)
-            })
-            .collect()
+        self.at_exits(exits, |i, r| {
+            let mut rng = Rng::new(0, i as u64, u64::MAX);
+            let mut sky_rng = Rng::new(1, i as u64, u64::MAX);
+            self.direct(r)
+                + self.emitted(r, EMITTER_DIRECT_SAMPLES, &mut rng)
+                + self.sky_direct(r, SKY_DIRECT_SAMPLES, &mut sky_rng)
+        })
     }
 
     /// The sky's direct irradiance alone at every exit point, `samples` cosine samples each
     /// (stream `(1, exit, u64::MAX)`, as in [`ReferenceTracer::direct_at_exits`]; zero without
     /// a sky).
     pub fn sky_direct_at_exits(&self, exits: &[ExitPoint], samples: u32) -> Vec<Vec3> {
-        exits
-            .par_iter()
-            .enumerate()
-            .map(|(i, x)| {
-                let ng = self.bvh.geometric_normal(x.triangle);
-                let mut rng = Rng::new(1, i as u64, u64::MAX);
-                self.sky_direct(x.position, ng, x.normal, x.triangle, samples, &mut rng)
-            })
-            .collect()
+        self.at_exits(exits, |i, r| {
+            self.sky_direct(r, samples, &mut Rng::new(1, i as u64, u64::MAX))
+        })
     }
 
     /// The sky's direct irradiance alone at points of empty space, each `(position, unit
@@ -300,8 +297,13 @@ impl<'a> ReferenceTracer<'a> {
             .par_iter()
             .enumerate()
             .map(|(i, &(x, n))| {
-                let mut rng = Rng::new(1, i as u64, u64::MAX);
-                self.sky_direct(x, n, n, u32::MAX, samples, &mut rng)
+                let r = Receiver {
+                    position: x,
+                    ng: n,
+                    n,
+                    triangle: u32::MAX,
+                };
+                self.sky_direct(&r, samples, &mut Rng::new(1, i as u64, u64::MAX))
             })
             .collect()
     }
@@ -324,10 +326,16 @@ impl<'a> ReferenceTracer<'a> {
                     if let (Some(e), true) = (self.emitters, v.bounce > 0) {
                         sum += v.throughput * e.cosine_hit(self.scene, self.bvh, v.hit, v.dir, v.cos_from);
                     }
-                    let emitted = self.emitters.map_or(Vec3::ZERO, |e| {
-                        e.sample_weighted(self.scene, self.bvh, v.pos, v.ng, v.ng, v.tri, rng)
-                    });
-                    sum += v.throughput * v.rho * (self.direct(v.pos, v.ng, v.ng, v.tri) + emitted);
+                    let r = Receiver {
+                        position: v.pos,
+                        ng: v.ng,
+                        n: v.ng,
+                        triangle: v.tri,
+                    };
+                    let emitted = self
+                        .emitters
+                        .map_or(Vec3::ZERO, |e| e.sample_weighted(self.scene, self.bvh, &r, rng));
+                    sum += v.throughput * v.rho * (self.direct(&r) + emitted);
                 }
                 // Likewise the sky seen from a vertex is that vertex's direct sky light, sampled by
                 // the cosine; from x it is x's own direct light.
@@ -441,9 +449,15 @@ impl<'a> ReferenceTracer<'a> {
                 let ng = self.bvh.geometric_normal(hit.triangle);
                 let ns = self.scene.triangles[hit.triangle as usize].shading_normal(hit.b1, hit.b2);
                 let rho = self.scene.albedo(hit.triangle as usize, hit.b1, hit.b2);
+                let receiver = Receiver {
+                    position: p,
+                    ng,
+                    n: ns,
+                    triangle: hit.triangle,
+                };
                 let (direct, emission) = match mode {
                     ImageMode::Full => (
-                        self.direct(p, ng, ns, hit.triangle),
+                        self.direct(&receiver),
                         self.emitters.map_or(Vec3::ZERO, |e| e.emission(hit.triangle)),
                     ),
                     ImageMode::IndirectOnly => (Vec3::ZERO, Vec3::ZERO),
@@ -470,18 +484,22 @@ impl<'a> ReferenceTracer<'a> {
             else {
                 return Vec3::ZERO;
             };
-            let ng = self.bvh.geometric_normal(tri);
+            let r = Receiver {
+                position: p,
+                ng: self.bvh.geometric_normal(tri),
+                n: ns,
+                triangle: tri,
+            };
             let emitted = match mode {
                 ImageMode::Full => {
-                    self.emitted(p, ng, ns, tri, params.samples_per_pass, rng)
-                        + self.sky_direct(p, ng, ns, tri, params.samples_per_pass, rng)
+                    self.emitted(&r, params.samples_per_pass, rng) + self.sky_direct(&r, params.samples_per_pass, rng)
                 }
                 ImageMode::IndirectOnly => Vec3::ZERO,
             };
             emission
                 + rho
                     * std::f32::consts::FRAC_1_PI
-                    * (direct + emitted + self.indirect_mean(p, ng, ns, tri, params, rng))
+                    * (direct + emitted + self.indirect_mean(p, r.ng, ns, tri, params, rng))
         }))
     }
 }

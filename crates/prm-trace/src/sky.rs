@@ -170,7 +170,7 @@ pub fn sky_transfer_at_exits(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::{BvhParams, Lighting, ReferenceTracer};
+    use crate::{BvhParams, Lighting, Receiver, ReferenceTracer};
     use prm_scene::{Material, Sky, Triangle};
 
     /// A floor (albedo 0.5) and a red wall standing on it along x = 0, facing +x: the floor
@@ -285,17 +285,7 @@ mod tests {
         let direct: Vec<Vec3> = x
             .iter()
             .enumerate()
-            .map(|(i, e)| {
-                let ng = bvh.geometric_normal(e.triangle);
-                tracer.sky_direct(
-                    e.position,
-                    ng,
-                    e.normal,
-                    e.triangle,
-                    1 << 16,
-                    &mut Rng::new(3, i as u64, 0),
-                )
-            })
+            .map(|(i, e)| tracer.sky_direct(&Receiver::at_exit(&bvh, e), 1 << 16, &mut Rng::new(3, i as u64, 0)))
             .collect();
         for (i, direct) in direct.iter().enumerate() {
             let (d, ind) = t.irradiance(i, &sky.sh());

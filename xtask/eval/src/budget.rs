@@ -223,13 +223,7 @@ fn cpu_blend(archive: &Path, tracer: &Tracer, light: Light, texels: &[u32], entr
     let area: f32 = tracer.scene.triangles.iter().map(|t| t.area()).sum();
     let disk = entry_disk * area / (entries.len() as f32 * std::f32::consts::PI);
     let lights = [light];
-    let e: Vec<Vec3> = entries
-        .iter()
-        .map(|en| {
-            let (p, n) = (Vec3::from_array(en.position), Vec3::from_array(en.normal));
-            prm_trace::bounded_irradiance(&tracer.bvh, &lights, p, n, n, u32::MAX, disk)
-        })
-        .collect();
+    let weights = prm_trace::archive_weights(&tracer.bvh, &lights, &entries, &energy, &clusters, disk);
     // The near field as the player sums it (`prm_trace::NearPlay`, over the atlas's texels),
     // with ray-cast direct light: each pane with its deeper share's series.
     let near = a.near_field().cloned();
@@ -239,8 +233,7 @@ fn cpu_blend(archive: &Path, tracer: &Tracer, light: Light, texels: &[u32], entr
         .as_ref()
         .map(|n| prm_trace::NearPlay::new(n, &identity, texels, prm_trace::NEAR_GATHERS));
     let mut out = vec![Vec3::ZERO; texels.len()];
-    for (c, cl) in clusters.iter().enumerate() {
-        let w = prm_trace::energy_weight(cl.members(), &e, &energy);
+    for (c, &w) in weights.iter().enumerate() {
         if w == Vec3::ZERO {
             continue;
         }

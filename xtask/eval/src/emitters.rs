@@ -18,7 +18,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use crate::plan;
-use crate::sky::{metric_cells, Playback};
+use crate::sky::{case_row, Bench, Playback};
 
 /// Reference paths per pixel: its noise after the downsample stays under a fifth of the
 /// errors measured (0.2–0.4% against 5–11%).
@@ -65,7 +65,6 @@ fn frame_costs(archive: &Path, scene_path: &Path) -> Result<(f64, f64, f64)> {
 
 /// Runs the emitter cases; returns the Markdown table.
 pub fn run(bake_bin: &Path, cache: &Path, root: &Path, out: &Path) -> Result<String> {
-    let play_bin = bake_bin.with_file_name(format!("prm-play{}", std::env::consts::EXE_SUFFIX));
     let mut cases = Vec::new();
     let original = root.join("../shared/scenes/cornell-box/CornellBox-Original.obj");
     if original.is_file() {
@@ -88,10 +87,16 @@ pub fn run(bake_bin: &Path, cache: &Path, root: &Path, out: &Path) -> Result<Str
     let mut md = String::from(
         "| case | scales | indirect error (4×4) | full res. | energy | shape | full image error (4×4) | bake s | frame ms: scales change / light moves |\n| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n",
     );
+    let bench = Bench::new(bake_bin, cache, "emitters", (SIZE, SPP));
     for case in &cases {
         let (baked, bake_s) = plan::bake_case(bake_bin, cache, &case.name, &case.scene, &[])?;
         println!("emitters: {}: baked ({:.1} s)", case.name, bake_s);
         let (scaled_ms, moved_ms, alone_ms) = frame_costs(&baked.archive, &case.scene)?;
+        let playback = Playback::new(bench, &baked.archive, &case.scene, case.camera);
+        let (bake, frames) = (
+            format!("{bake_s:.1}"),
+            format!("{scaled_ms:.1} / {moved_ms:.1} ({alone_ms:.2} for the scales)"),
+        );
         for (row, scales) in case.scales.iter().enumerate() {
             let play_args: Vec<String> = scales
                 .iter()
@@ -100,38 +105,14 @@ pub fn run(bake_bin: &Path, cache: &Path, root: &Path, out: &Path) -> Result<Str
             let reference_args: Vec<String> = std::iter::once("--emitters".to_string())
                 .chain(play_args.iter().cloned())
                 .collect();
-            let playback = Playback {
-                bake_bin,
-                play_bin: &play_bin,
-                cache,
-                name: "emitters",
-                archive: &baked.archive,
-                scene: &case.scene,
-                camera: case.camera,
-                size: SIZE,
-                spp: SPP,
-            };
-            let (mi, mf) = playback.compare(
-                &play_args,
-                &reference_args,
-                &out.join(format!("{}-{row}", plan::case_name(&case.name))),
-            )?;
+            let out = out.join(format!("{}-{row}", plan::case_name(&case.name)));
+            let metrics = playback.compare(&play_args, &reference_args, &out)?;
             let label = if scales.is_empty() {
                 "1".to_string()
             } else {
                 scales.join(" ")
             };
-            let _ = writeln!(
-                md,
-                "| {} | {label} | {} | {bake_s:.1} | {} |",
-                case.name,
-                metric_cells(&mi, &mf),
-                if row == 0 {
-                    format!("{scaled_ms:.1} / {moved_ms:.1} ({alone_ms:.2} for the scales)")
-                } else {
-                    String::new()
-                }
-            );
+            let _ = writeln!(md, "{}", case_row(&case.name, &label, &metrics, &bake, row, &frames));
         }
     }
     Ok(md)

@@ -17,6 +17,7 @@ mod budget;
 mod charts;
 mod compare;
 mod emitters;
+mod experiments;
 mod measure;
 mod plan;
 mod probes;
@@ -116,9 +117,12 @@ impl Row {
     }
 }
 
+/// The studies besides the sweep, by flag name (`--budget` …): each writes `NAME.md`.
+const STUDIES: [&str; 5] = ["budget", "targets", "emitters", "sky", "probes"];
+
 fn usage() -> ! {
     eprintln!(
-        "usage: cargo xtask eval [--quick|--full|--budget|--targets|--emitters|--sky|--probes] [--out DIR]\n       cargo xtask eval compare TEST.exr REFERENCE.exr   (error, energy, shape and local error as ../shared/notes/metrics.md defines them)\n\n  --quick   Cornell box, a handful of settings, small references (CI; dev-profile binaries); default\n  --full    all scenes and sweeps (release binaries; the README's charts)\n  --budget  the error budget of the default bake, one idealised stage at a time (release; the README's budget table)\n  --targets the accuracy targets as ../shared/notes/metrics.md measures them: default bakes of McGuire's boxes, chairs and the fireplace room against the reference in image space, bake time and the gi/direct frame ratio (release)\n  --emitters emissive surfaces (McGuire's CornellBox-Original by its own lamp, two lamps in our Cornell box) against the reference, and the frame cost of a scale change (release)\n  --sky     the sky and a sun (our courtyard; Sponza) against the reference, and the frame cost of turning the sky (release)\n  --probes  irradiance probes (our Cornell box, two rooms) against the reference at the probe positions, and their cost (release)\n  --out DIR output directory (default target/eval-quick, eval-full, eval-budget, eval-targets, eval-emitters, eval-sky or eval-probes)\n\nBakes and references are cached under target/eval/ (delete it to start over)."
+        "usage: cargo xtask eval [--quick|--full|--budget|--targets|--emitters|--sky|--probes] [--out DIR]\n       cargo xtask eval compare TEST.exr REFERENCE.exr   (error, energy, shape and local error as ../shared/notes/metrics.md defines them)\n       cargo xtask eval experiment NAME [ARGS]   (the experiments the crates' docs cite; without NAME, the list)\n\n  --quick   Cornell box, a handful of settings, small references (CI; dev-profile binaries); default\n  --full    all scenes and sweeps (release binaries; the README's charts)\n  --budget  the error budget of the default bake, one idealised stage at a time (release; the README's budget table)\n  --targets the accuracy targets as ../shared/notes/metrics.md measures them: default bakes of McGuire's boxes, chairs and the fireplace room against the reference in image space, bake time and the gi/direct frame ratio (release)\n  --emitters emissive surfaces (McGuire's CornellBox-Original by its own lamp, two lamps in our Cornell box) against the reference, and the frame cost of a scale change (release)\n  --sky     the sky and a sun (our courtyard; Sponza) against the reference, and the frame cost of turning the sky (release)\n  --probes  irradiance probes (our Cornell box, two rooms) against the reference at the probe positions, and their cost (release)\n  --out DIR output directory (default target/eval-quick, eval-full, eval-budget, eval-targets, eval-emitters, eval-sky or eval-probes)\n\nBakes and references are cached under target/eval/ (delete it to start over)."
     );
     std::process::exit(2);
 }
@@ -147,40 +151,24 @@ fn run(args: &[String]) -> Result<()> {
     if args.first().map(String::as_str) == Some("compare") {
         return compare::run(&args[1..]);
     }
+    if args.first().map(String::as_str) == Some("experiment") {
+        return experiments::run(&args[1..]);
+    }
     let mut mode = Mode::Quick;
-    let mut budget = false;
-    let mut emitters = false;
-    let mut sky = false;
-    let mut probes = false;
-    let mut targets = false;
+    // A study (`--budget`, `--targets`, …) writes one Markdown table instead of the sweep.
+    let mut study: Option<&'static str> = None;
     let mut out = None;
     let mut it = args.iter();
     while let Some(a) = it.next() {
         match a.as_str() {
             "--quick" => mode = Mode::Quick,
             "--full" => mode = Mode::Full,
-            "--budget" => {
-                budget = true;
-                mode = Mode::Full;
-            }
-            "--emitters" => {
-                emitters = true;
-                mode = Mode::Full;
-            }
-            "--sky" => {
-                sky = true;
-                mode = Mode::Full;
-            }
-            "--probes" => {
-                probes = true;
-                mode = Mode::Full;
-            }
-            "--targets" => {
-                targets = true;
-                mode = Mode::Full;
-            }
             "--out" => out = Some(PathBuf::from(it.next().unwrap_or_else(|| usage()))),
-            _ => usage(),
+            flag => {
+                let name = flag.strip_prefix("--").unwrap_or_else(|| usage());
+                study = Some(STUDIES.into_iter().find(|s| *s == name).unwrap_or_else(|| usage()));
+                mode = Mode::Full;
+            }
         }
     }
     let root = Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -198,14 +186,10 @@ fn run(args: &[String]) -> Result<()> {
     });
     std::env::set_current_dir(&root)?;
     let out = out.unwrap_or_else(|| {
-        target.join(match (budget, mode) {
-            _ if emitters => "eval-emitters",
-            _ if sky => "eval-sky",
-            _ if probes => "eval-probes",
-            _ if targets => "eval-targets",
-            (true, _) => "eval-budget",
-            (false, Mode::Quick) => "eval-quick",
-            (false, Mode::Full) => "eval-full",
+        target.join(match (study, mode) {
+            (Some(study), _) => format!("eval-{study}"),
+            (None, Mode::Quick) => "eval-quick".to_string(),
+            (None, Mode::Full) => "eval-full".to_string(),
         })
     });
     std::fs::create_dir_all(&out)?;
@@ -238,20 +222,15 @@ fn run(args: &[String]) -> Result<()> {
         );
         Ok(())
     };
-    if emitters {
-        return table("emitters", emitters::run(&bin, &cache, &root, &out)?);
-    }
-    if sky {
-        return table("sky", sky::run(&bin, &cache, &root, &out)?);
-    }
-    if probes {
-        return table("probes", probes::run(&bin, &cache, &root)?);
-    }
-    if targets {
-        return table("targets", targets::run(&bin, &cache, &root, &out)?);
-    }
-    if budget {
-        return table("budget", budget::run(&bin, &cache, &root)?);
+    if let Some(study) = study {
+        let markdown = match study {
+            "emitters" => emitters::run(&bin, &cache, &root, &out)?,
+            "sky" => sky::run(&bin, &cache, &root, &out)?,
+            "probes" => probes::run(&bin, &cache, &root)?,
+            "targets" => targets::run(&bin, &cache, &root, &out)?,
+            _ => budget::run(&bin, &cache, &root)?,
+        };
+        return table(study, markdown);
     }
     let scenes = plan::scenes(mode, &root);
     let mut rows: Vec<Row> = Vec::new();

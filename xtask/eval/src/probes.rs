@@ -27,7 +27,6 @@ use prm_trace::{Bvh, BvhParams, Lighting, ReferenceParams, ReferenceTracer};
 const SPP: u32 = 16384;
 /// Frames timed with and without the probes pass.
 const FRAMES: usize = 24;
-use prm_format::AXIS_NORMALS as NORMALS;
 
 fn rel(t: &[Vec3], r: &[Vec3]) -> f64 {
     let num: f64 = t.iter().zip(r).map(|(a, b)| (*a - *b).length_squared() as f64).sum();
@@ -149,11 +148,7 @@ pub fn run(bake_bin: &Path, cache: &Path, root: &Path) -> Result<String> {
             mode: Mode::Gi,
         };
         let read = |r: &prm_play::Renderer| -> Result<Vec<Vec3>> {
-            Ok(r.runtime()
-                .read_probes()?
-                .iter()
-                .flat_map(|c| NORMALS.map(|n| Vec3::from(prm_format::sh_irradiance(c, n)).max(Vec3::ZERO)))
-                .collect())
+            Ok(prm_trace::probes::axis_irradiance(&r.runtime().read_probes()?))
         };
         r.render(&input)?;
         let played = read(&r)?;
@@ -206,11 +201,7 @@ pub fn run(bake_bin: &Path, cache: &Path, root: &Path) -> Result<String> {
         let (with_ms, without_ms) = (per_frame(with_ms), per_frame(without_ms));
 
         let bvh = Bvh::build(&scene, &BvhParams::DEFAULT)?;
-        let points: Vec<(Vec3, Vec3)> = probes
-            .positions
-            .iter()
-            .flat_map(|p| NORMALS.map(|n| (Vec3::from(*p), Vec3::from(n))))
-            .collect();
+        let points = prm_trace::probes::axis_points(&probes.positions);
         let emitters = prm_trace::Emitters::from_scene(&scene);
         let mut tracer = ReferenceTracer::new(&scene, &bvh, Lighting::Lights(&lights));
         if let Some(s) = &sky {

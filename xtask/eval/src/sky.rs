@@ -65,7 +65,7 @@ fn gradient_map(cache: &Path) -> Result<PathBuf> {
 /// the camera, the image size and the reference's paths per pixel.
 pub(crate) struct Playback<'a> {
     pub bake_bin: &'a Path,
-    pub play_bin: &'a Path,
+    pub play_bin: PathBuf,
     pub cache: &'a Path,
     /// Names the reference cache (`cache/refs-NAME`).
     pub name: &'a str,
@@ -76,7 +76,53 @@ pub(crate) struct Playback<'a> {
     pub spp: u32,
 }
 
-impl Playback<'_> {
+/// What the playbacks of one evaluation share: the `prm-bake` binary (the `prm-play` beside it
+/// plays), the cache, the name of the reference cache (`cache/refs-NAME`), and the image size and
+/// the reference's paths per pixel.
+#[derive(Clone, Copy)]
+pub(crate) struct Bench<'a> {
+    bake_bin: &'a Path,
+    cache: &'a Path,
+    name: &'a str,
+    quality: (&'a str, u32),
+}
+
+impl<'a> Bench<'a> {
+    /// The playbacks of the evaluation `name`, by the `prm-play` beside `bake_bin`, with the
+    /// reference cache under `cache`, at `quality` (image size, reference paths per pixel).
+    pub fn new(bake_bin: &'a Path, cache: &'a Path, name: &'a str, quality: (&'a str, u32)) -> Bench<'a> {
+        Bench {
+            bake_bin,
+            cache,
+            name,
+            quality,
+        }
+    }
+}
+
+impl<'a> Playback<'a> {
+    /// The playback on `bench` of `archive`, baked from `scene`, seen by `camera` (the scene's
+    /// own without one).
+    pub fn new(bench: Bench<'a>, archive: &'a Path, scene: &'a Path, camera: Option<&'a str>) -> Playback<'a> {
+        let Bench {
+            bake_bin,
+            cache,
+            name,
+            quality: (size, spp),
+        } = bench;
+        Playback {
+            bake_bin,
+            play_bin: bake_bin.with_file_name(format!("prm-play{}", std::env::consts::EXE_SUFFIX)),
+            cache,
+            name,
+            archive,
+            scene,
+            camera,
+            size,
+            spp,
+        }
+    }
+
     /// The archive played (indirect, then gi) with `play_args` into `out`, against the
     /// reference with `reference_args` (indirect-only, then full): the two comparisons.
     pub fn compare(
@@ -95,7 +141,7 @@ impl Playback<'_> {
     /// The archive played headless in `mode` with `play_args` into `out`: the frame's EXR.
     pub fn play(&self, play_args: &[String], mode: &str, out: &Path) -> Result<PathBuf> {
         play_image(
-            self.play_bin,
+            &self.play_bin,
             self.archive,
             self.camera,
             play_args,
@@ -103,6 +149,23 @@ impl Playback<'_> {
             out,
         )
     }
+}
+
+/// A row of a table of cases played against their references: the case, its lighting `label`,
+/// [`metric_cells`], the bake time and, on the case's first row (`row` 0) only, the frame costs.
+pub(crate) fn case_row(
+    case: &str,
+    label: &str,
+    (indirect, full): &(compare::Metrics, compare::Metrics),
+    bake: &str,
+    row: usize,
+    frames: &str,
+) -> String {
+    let frames = if row == 0 { frames } else { "" };
+    format!(
+        "| {case} | {label} | {} | {bake} | {frames} |",
+        metric_cells(indirect, full)
+    )
 }
 
 /// The table cells of an indirect and a full comparison: indirect error (4×4), at full
@@ -197,7 +260,6 @@ fn frame_costs(archive: &Path, scene_path: &Path) -> Result<(f64, f64, f64)> {
 
 /// Runs the sky cases; returns the Markdown table.
 pub fn run(bake_bin: &Path, cache: &Path, root: &Path, out: &Path) -> Result<String> {
-    let play_bin = bake_bin.with_file_name(format!("prm-play{}", std::env::consts::EXE_SUFFIX));
     let map = gradient_map(cache)?;
     let mut cases = vec![Case {
         name: "courtyard",
@@ -263,40 +325,22 @@ pub fn run(bake_bin: &Path, cache: &Path, root: &Path, out: &Path) -> Result<Str
     let mut md = String::from(
         "| case | lighting | indirect error (4×4) | full res. | energy | shape | full image error (4×4) | bake s (sky step) | frame ms: sky turns / light moves |\n| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n",
     );
+    let bench = Bench::new(bake_bin, cache, "sky", (SIZE, SPP));
     for case in &cases {
         let case_label = format!("sky-{}", case.name);
         let (baked, bake_s) = plan::bake_case(bake_bin, cache, &case_label, &case.scene, &case.bake_args)?;
         let sky_s = baked.report["timings"]["sky"].as_f64().unwrap_or(f64::NAN);
         println!("sky: {}: baked ({bake_s:.1} s, sky {sky_s:.1} s)", case.name);
         let (turned_ms, moved_ms, alone_ms) = frame_costs(&baked.archive, &case.scene)?;
+        let playback = Playback::new(bench, &baked.archive, &case.scene, case.camera);
+        let (bake, frames) = (
+            format!("{bake_s:.1} ({sky_s:.1})"),
+            format!("{turned_ms:.1} / {moved_ms:.1} ({alone_ms:.2} for the sky)"),
+        );
         for (row, (label, lighting)) in case.rows.iter().enumerate() {
-            let playback = Playback {
-                bake_bin,
-                play_bin: &play_bin,
-                cache,
-                name: "sky",
-                archive: &baked.archive,
-                scene: &case.scene,
-                camera: case.camera,
-                size: SIZE,
-                spp: SPP,
-            };
-            let (mi, mf) = playback.compare(
-                lighting,
-                lighting,
-                &out.join(format!("{}-{row}", plan::case_name(&case_label))),
-            )?;
-            let _ = writeln!(
-                md,
-                "| {} | {label} | {} | {bake_s:.1} ({sky_s:.1}) | {} |",
-                case.name,
-                metric_cells(&mi, &mf),
-                if row == 0 {
-                    format!("{turned_ms:.1} / {moved_ms:.1} ({alone_ms:.2} for the sky)")
-                } else {
-                    String::new()
-                }
-            );
+            let out = out.join(format!("{}-{row}", plan::case_name(&case_label)));
+            let metrics = playback.compare(lighting, lighting, &out)?;
+            let _ = writeln!(md, "{}", case_row(case.name, label, &metrics, &bake, row, &frames));
         }
     }
     Ok(md)

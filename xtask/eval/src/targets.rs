@@ -23,7 +23,7 @@ use std::path::{Path, PathBuf};
 
 use crate::compare;
 use crate::plan;
-use crate::sky::{reference_image, Playback};
+use crate::sky::{reference_image, Bench, Playback};
 
 /// Reference paths per pixel where a case sets none: enough on chairs and the fireplace room,
 /// whose references' noise (1.1% and 1.0% after the downsample) is under a fifth of the error
@@ -238,7 +238,6 @@ fn against(value: String, ok: Option<bool>, target: String) -> String {
 
 /// Runs the cases; returns the Markdown table.
 pub fn run(bake_bin: &Path, cache: &Path, root: &Path, out: &Path) -> Result<String> {
-    let play_bin = bake_bin.with_file_name(format!("prm-play{}", std::env::consts::EXE_SUFFIX));
     let mut md = String::from(
         "| case | light | indirect error (4×4) | full res. | energy | shape | local (worst 8×8 window's corner, its reference's RMS over the image's) | ref. noise | bake s | bake's own estimate (its 3 lights, exit points) | gi / direct frame |\n| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n",
     );
@@ -259,18 +258,10 @@ pub fn run(bake_bin: &Path, cache: &Path, root: &Path, out: &Path) -> Result<Str
                     a.mean_energy()
                 )
             });
+        let bench = Bench::new(bake_bin, cache, "targets", (case.size, case.spp));
         for (row, (label, light)) in case.lights.iter().enumerate() {
-            let playback = Playback {
-                bake_bin,
-                play_bin: &play_bin,
-                cache,
-                name: "targets",
-                archive: &baked.archive,
-                scene: &case.scene,
-                camera: case.camera.as_deref(),
-                size: case.size,
-                spp: case.spp,
-            };
+            let camera = case.camera.as_deref();
+            let playback = Playback::new(bench, &baked.archive, &case.scene, camera);
             let dir = out.join(format!("{}-{row}", plan::case_name(&name)));
             let played = playback.play(&["--light".into(), light.clone()], "indirect", &dir)?;
             let args = ["--light".to_string(), light.clone()];

@@ -7,34 +7,21 @@
 //! of 1.0 gives (white balance to the equal-energy illuminant E), so that a grey reflectance of
 //! 0.7 comes out exactly as (0.7, 0.7, 0.7). Negative channels (out of the sRGB gamut) clamp to 0.
 
-/// Cornell box reflectance spectra, 400..=700 nm every 4 nm (76 samples): white, green, red.
-/// Source: Cornell University Program of Computer Graphics, "Cornell Box Data" page,
-/// section "Surface reflectances".
-pub const CORNELL_WHITE: [f64; 76] = [
-    0.343, 0.445, 0.551, 0.624, 0.665, 0.687, 0.708, 0.723, 0.715, 0.710, 0.745, 0.758, 0.739, 0.767, 0.777, 0.765,
-    0.751, 0.745, 0.748, 0.729, 0.745, 0.757, 0.753, 0.750, 0.746, 0.747, 0.735, 0.732, 0.739, 0.734, 0.725, 0.721,
-    0.733, 0.725, 0.732, 0.743, 0.744, 0.748, 0.728, 0.716, 0.733, 0.726, 0.713, 0.740, 0.754, 0.764, 0.752, 0.736,
-    0.734, 0.741, 0.740, 0.732, 0.745, 0.755, 0.751, 0.744, 0.731, 0.733, 0.744, 0.731, 0.712, 0.708, 0.729, 0.730,
-    0.727, 0.707, 0.703, 0.729, 0.750, 0.760, 0.751, 0.739, 0.724, 0.730, 0.740, 0.737,
-];
+/// Cornell box reflectance spectra, 400..=700 nm every 4 nm (76 samples), one surface a line:
+/// its name (`white`, `green`, `red`) then its samples. Source: Cornell University Program of
+/// Computer Graphics, "Cornell Box Data" page, section "Surface reflectances".
+const CORNELL_SPECTRA: &str = include_str!("cornell_spectra.txt");
 
-/// Green wall reflectance, same sampling and source as [`CORNELL_WHITE`].
-pub const CORNELL_GREEN: [f64; 76] = [
-    0.092, 0.096, 0.098, 0.097, 0.098, 0.095, 0.095, 0.097, 0.095, 0.094, 0.097, 0.098, 0.096, 0.101, 0.103, 0.104,
-    0.107, 0.109, 0.112, 0.115, 0.125, 0.140, 0.160, 0.187, 0.229, 0.285, 0.343, 0.390, 0.435, 0.464, 0.472, 0.476,
-    0.481, 0.462, 0.447, 0.441, 0.426, 0.406, 0.373, 0.347, 0.337, 0.314, 0.285, 0.277, 0.266, 0.250, 0.230, 0.207,
-    0.186, 0.171, 0.160, 0.148, 0.141, 0.136, 0.130, 0.126, 0.123, 0.121, 0.122, 0.119, 0.114, 0.115, 0.117, 0.117,
-    0.118, 0.120, 0.122, 0.128, 0.132, 0.139, 0.144, 0.146, 0.150, 0.152, 0.157, 0.159,
-];
-
-/// Red wall reflectance, same sampling and source as [`CORNELL_WHITE`].
-pub const CORNELL_RED: [f64; 76] = [
-    0.040, 0.046, 0.048, 0.053, 0.049, 0.050, 0.053, 0.055, 0.057, 0.056, 0.059, 0.057, 0.061, 0.061, 0.060, 0.062,
-    0.062, 0.062, 0.061, 0.062, 0.060, 0.059, 0.057, 0.058, 0.058, 0.058, 0.056, 0.055, 0.056, 0.059, 0.057, 0.055,
-    0.059, 0.059, 0.058, 0.059, 0.061, 0.061, 0.063, 0.063, 0.067, 0.068, 0.072, 0.080, 0.090, 0.099, 0.124, 0.154,
-    0.192, 0.255, 0.287, 0.349, 0.402, 0.443, 0.487, 0.513, 0.558, 0.584, 0.620, 0.606, 0.609, 0.651, 0.612, 0.610,
-    0.650, 0.638, 0.627, 0.620, 0.630, 0.628, 0.642, 0.639, 0.657, 0.639, 0.635, 0.642,
-];
+/// The measured reflectance spectrum of the Cornell box's surface `name` (`white`, `green` or
+/// `red`) from [`CORNELL_SPECTRA`].
+pub fn cornell_reflectance(name: &str) -> [f64; 76] {
+    let line = CORNELL_SPECTRA
+        .lines()
+        .find(|l| l.split_whitespace().next() == Some(name))
+        .unwrap_or_else(|| panic!("no spectrum `{name}` in cornell_spectra.txt"));
+    let samples: Vec<f64> = line.split_whitespace().skip(1).map(|v| v.parse().unwrap()).collect();
+    samples.try_into().expect("76 samples a spectrum")
+}
 
 /// Cornell lamp emission, (wavelength nm, value) pairs, piecewise linear. Same source
 /// ("Light" section; radiance in the page's units).
@@ -140,9 +127,9 @@ mod tests {
 
     #[test]
     fn cornell_colours_have_the_expected_hues() {
-        let red = spectrum_to_rgb(sampled_4nm(&CORNELL_RED));
-        let green = spectrum_to_rgb(sampled_4nm(&CORNELL_GREEN));
-        let white = spectrum_to_rgb(sampled_4nm(&CORNELL_WHITE));
+        let red = spectrum_to_rgb(sampled_4nm(&cornell_reflectance("red")));
+        let green = spectrum_to_rgb(sampled_4nm(&cornell_reflectance("green")));
+        let white = spectrum_to_rgb(sampled_4nm(&cornell_reflectance("white")));
         assert!(red[0] > 0.4 && red[1] < 0.1 && red[2] < 0.1, "{red:?}");
         assert!(green[1] > 0.35 && green[0] < 0.2 && green[2] < 0.15, "{green:?}");
         assert!(white.iter().all(|v| (0.65..0.8).contains(v)), "{white:?}");
@@ -150,7 +137,8 @@ mod tests {
 
     #[test]
     fn interpolation_hits_samples() {
-        let f = sampled_4nm(&CORNELL_WHITE);
+        let white = cornell_reflectance("white");
+        let f = sampled_4nm(&white);
         assert_eq!(f(400.0), 0.343);
         assert_eq!(f(700.0), 0.737);
         assert!((f(402.0) - 0.394).abs() < 1e-12);

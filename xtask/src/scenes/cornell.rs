@@ -7,9 +7,7 @@
 //! millimetres → metres. The page's vertex order is kept; it is counter-clockwise seen from the
 //! inside of the room and from outside the blocks, i.e. every face faces the open volume.
 
-use super::color::{
-    piecewise, round4, sampled_4nm, spectrum_to_rgb, CORNELL_GREEN, CORNELL_LAMP, CORNELL_RED, CORNELL_WHITE,
-};
+use super::color::{cornell_reflectance, piecewise, round4, sampled_4nm, spectrum_to_rgb, CORNELL_LAMP};
 use super::mesh::{CameraSpec, Material, Part, PointLight, SceneDesc, V3};
 
 /// The point light's position (m): below the lamp centre, 48.8 mm under the ceiling.
@@ -21,132 +19,25 @@ pub const FILM_HEIGHT: f64 = 0.025;
 
 type Quad = [[f64; 3]; 4];
 
-/// (part name, material, quads in mm) exactly as listed on the data page.
+/// The surfaces exactly as listed on the data page, one quad a line: part name, material, then
+/// the four corners' x y z in mm.
+const MEASURED: &str = include_str!("cornell_box.txt");
+
+/// (part name, material, quads in mm) from [`MEASURED`], the parts in the page's order.
 fn measured() -> Vec<(&'static str, &'static str, Vec<Quad>)> {
-    vec![
-        (
-            "floor",
-            "white",
-            vec![[
-                [552.8, 0.0, 0.0],
-                [0.0, 0.0, 0.0],
-                [0.0, 0.0, 559.2],
-                [549.6, 0.0, 559.2],
-            ]],
-        ),
-        (
-            "ceiling",
-            "white",
-            vec![[
-                [556.0, 548.8, 0.0],
-                [556.0, 548.8, 559.2],
-                [0.0, 548.8, 559.2],
-                [0.0, 548.8, 0.0],
-            ]],
-        ),
-        (
-            "back",
-            "white",
-            vec![[
-                [549.6, 0.0, 559.2],
-                [0.0, 0.0, 559.2],
-                [0.0, 548.8, 559.2],
-                [556.0, 548.8, 559.2],
-            ]],
-        ),
-        (
-            "left",
-            "red",
-            vec![[
-                [552.8, 0.0, 0.0],
-                [549.6, 0.0, 559.2],
-                [556.0, 548.8, 559.2],
-                [556.0, 548.8, 0.0],
-            ]],
-        ),
-        (
-            "right",
-            "green",
-            vec![[
-                [0.0, 0.0, 559.2],
-                [0.0, 0.0, 0.0],
-                [0.0, 548.8, 0.0],
-                [0.0, 548.8, 559.2],
-            ]],
-        ),
-        (
-            "short_block",
-            "white",
-            vec![
-                [
-                    [130.0, 165.0, 65.0],
-                    [82.0, 165.0, 225.0],
-                    [240.0, 165.0, 272.0],
-                    [290.0, 165.0, 114.0],
-                ],
-                [
-                    [290.0, 0.0, 114.0],
-                    [290.0, 165.0, 114.0],
-                    [240.0, 165.0, 272.0],
-                    [240.0, 0.0, 272.0],
-                ],
-                [
-                    [130.0, 0.0, 65.0],
-                    [130.0, 165.0, 65.0],
-                    [290.0, 165.0, 114.0],
-                    [290.0, 0.0, 114.0],
-                ],
-                [
-                    [82.0, 0.0, 225.0],
-                    [82.0, 165.0, 225.0],
-                    [130.0, 165.0, 65.0],
-                    [130.0, 0.0, 65.0],
-                ],
-                [
-                    [240.0, 0.0, 272.0],
-                    [240.0, 165.0, 272.0],
-                    [82.0, 165.0, 225.0],
-                    [82.0, 0.0, 225.0],
-                ],
-            ],
-        ),
-        (
-            "tall_block",
-            "white",
-            vec![
-                [
-                    [423.0, 330.0, 247.0],
-                    [265.0, 330.0, 296.0],
-                    [314.0, 330.0, 456.0],
-                    [472.0, 330.0, 406.0],
-                ],
-                [
-                    [423.0, 0.0, 247.0],
-                    [423.0, 330.0, 247.0],
-                    [472.0, 330.0, 406.0],
-                    [472.0, 0.0, 406.0],
-                ],
-                [
-                    [472.0, 0.0, 406.0],
-                    [472.0, 330.0, 406.0],
-                    [314.0, 330.0, 456.0],
-                    [314.0, 0.0, 456.0],
-                ],
-                [
-                    [314.0, 0.0, 456.0],
-                    [314.0, 330.0, 456.0],
-                    [265.0, 330.0, 296.0],
-                    [265.0, 0.0, 296.0],
-                ],
-                [
-                    [265.0, 0.0, 296.0],
-                    [265.0, 330.0, 296.0],
-                    [423.0, 330.0, 247.0],
-                    [423.0, 0.0, 247.0],
-                ],
-            ],
-        ),
-    ]
+    let mut parts: Vec<(&'static str, &'static str, Vec<Quad>)> = Vec::new();
+    for line in MEASURED.lines().filter(|l| !l.starts_with('#') && !l.trim().is_empty()) {
+        let mut words = line.split_whitespace();
+        let (name, material) = (words.next().unwrap(), words.next().unwrap());
+        let v: Vec<f64> = words.map(|w| w.parse().unwrap()).collect();
+        assert_eq!(v.len(), 12, "a quad is four corners: {line}");
+        let quad: Quad = std::array::from_fn(|i| [v[3 * i], v[3 * i + 1], v[3 * i + 2]]);
+        match parts.last_mut() {
+            Some((last, _, quads)) if *last == name => quads.push(quad),
+            _ => parts.push((name, material, vec![quad])),
+        }
+    }
+    parts
 }
 
 /// Lamp emission as linear RGB (the page's radiance units), from its emission spectrum.
@@ -165,13 +56,9 @@ pub fn scene() -> SceneDesc {
             Part::new(name, material, quads.iter().map(metres).collect())
         })
         .collect();
-    let materials = [
-        ("white", &CORNELL_WHITE),
-        ("red", &CORNELL_RED),
-        ("green", &CORNELL_GREEN),
-    ]
-    .map(|(name, spectrum)| Material::diffuse(name, round4(spectrum_to_rgb(sampled_4nm(spectrum)))))
-    .into();
+    let materials = ["white", "red", "green"]
+        .map(|name| Material::diffuse(name, round4(spectrum_to_rgb(sampled_4nm(&cornell_reflectance(name))))))
+        .into();
     SceneDesc {
         name: "cornell-box".into(),
         parts,

@@ -12,33 +12,21 @@ const BLOCK: [V3; 2] = [[1.5, 0.0, 1.5], [2.5, 1.0, 2.5]];
 pub fn scene() -> SceneDesc {
     let (h, s) = (WALL, WALL / 2.0);
     let [[x0, y0, z0], [x1, y1, z1]] = BLOCK;
-    // Every quad is counter-clockwise seen from the side it faces.
+    // Every quad is counter-clockwise seen from the side it faces. A wall runs from corner `a`
+    // to corner `b` (x, z) and up to `top`; each faces into the yard.
+    let wall = |[ax, az]: [f64; 2], [bx, bz]: [f64; 2], top: f64| {
+        vec![vec![[ax, 0.0, az], [ax, top, az], [bx, top, bz], [bx, 0.0, bz]]]
+    };
     let parts = vec![
         Part::new(
             "floor",
             "stone",
             vec![vec![[0.0, 0.0, 0.0], [0.0, 0.0, 4.0], [4.0, 0.0, 4.0], [4.0, 0.0, 0.0]]],
         ),
-        Part::new(
-            "north_wall",
-            "white",
-            vec![vec![[0.0, 0.0, 4.0], [0.0, h, 4.0], [4.0, h, 4.0], [4.0, 0.0, 4.0]]],
-        ),
-        Part::new(
-            "south_wall",
-            "white",
-            vec![vec![[4.0, 0.0, 0.0], [4.0, s, 0.0], [0.0, s, 0.0], [0.0, 0.0, 0.0]]],
-        ),
-        Part::new(
-            "west_wall",
-            "red",
-            vec![vec![[0.0, 0.0, 0.0], [0.0, h, 0.0], [0.0, h, 4.0], [0.0, 0.0, 4.0]]],
-        ),
-        Part::new(
-            "east_wall",
-            "white",
-            vec![vec![[4.0, 0.0, 4.0], [4.0, h, 4.0], [4.0, h, 0.0], [4.0, 0.0, 0.0]]],
-        ),
+        Part::new("north_wall", "white", wall([0.0, 4.0], [4.0, 4.0], h)),
+        Part::new("south_wall", "white", wall([4.0, 0.0], [0.0, 0.0], s)),
+        Part::new("west_wall", "red", wall([0.0, 0.0], [0.0, 4.0], h)),
+        Part::new("east_wall", "white", wall([4.0, 4.0], [4.0, 0.0], h)),
         Part::new(
             "block",
             "green",

@@ -1,6 +1,6 @@
 //! Experiment: how a cluster's run-time weight should combine its members' entry irradiance.
 //!
-//! `cargo run --release -p prm-trace --example cluster_weights -- [SCENE] [ENTRIES] [CLUSTERS] [RES]`
+//! `cargo xtask eval experiment cluster_weights [SCENE] [ENTRIES] [CLUSTERS] [RES]`
 //!
 //! Everything on the CPU with exact visibility, so only the representation differs: per-entry
 //! panes `P_i` (the identity clustering), their sums per k-means cluster `P_c = Σ_{i∈c} P_i`,
@@ -38,11 +38,9 @@ use prm_trace::{
     Bvh, BvhParams, Clustering, EntryParams, Lighting, PaneParams, ReferenceParams, ReferenceTracer, WalkParams,
 };
 
-mod common;
-use common::{env_or, rel_rmse};
+use super::common::{env_or, rel_rmse};
 
-fn main() {
-    let args: Vec<String> = std::env::args().skip(1).collect();
+pub fn run(args: Vec<String>) {
     let scene_path = args
         .first()
         .cloned()

@@ -1,6 +1,6 @@
 //! Ray-casting benchmark: BVH build time, walks/s and rays/s on our scenes (run with --release).
 //!
-//! `cargo run --release -p prm-trace --example bench_trace`
+//! `cargo xtask eval experiment bench_trace`
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -97,10 +97,10 @@ fn bench(path: &Path) {
     }
 }
 
-fn main() {
+pub fn run(_args: Vec<String>) {
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..");
     for rel in ["scenes/cornell-box/cornell-box.obj", "scenes/chairs/chairs.obj"] {
         bench(&root.join(rel));
     }
-    bench(Path::new("/work/shared/scenes/sibenik/sibenik.obj"));
+    bench(&root.join("../shared/scenes/sibenik/sibenik.obj"));
 }

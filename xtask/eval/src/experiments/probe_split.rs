@@ -1,7 +1,7 @@
 //! Splits the probes' error against the reference, as `probes.rs` records: the order-2
 //! truncation of the spherical harmonics, and the VPL estimator itself.
 //!
-//! `cargo run --release -p prm-trace --example probe_split -- SCENE ENTRIES WALKS DISK`
+//! `cargo xtask eval experiment probe_split SCENE ENTRIES WALKS DISK`
 //!
 //! Places probes as `prm-bake bake --probes` does (512 cells), samples ENTRIES entry points
 //! (seed 1), traces WALKS walks from each, lights them with one point light at (0.36, 0.82,
@@ -17,8 +17,6 @@ use prm_trace::{
     ReferenceParams, ReferenceTracer, VplBound, WalkParams,
 };
 
-use prm_format::AXIS_NORMALS as NORMALS;
-
 fn rel(t: &[Vec3], r: &[Vec3]) -> f64 {
     let num: f64 = t.iter().zip(r).map(|(a, b)| (*a - *b).length_squared() as f64).sum();
     let den: f64 = r.iter().map(|b| b.length_squared() as f64).sum();
@@ -30,8 +28,7 @@ fn energy(t: &[Vec3], r: &[Vec3]) -> f64 {
     s(t) / s(r)
 }
 
-fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let args: Vec<String> = std::env::args().skip(1).collect();
+pub fn run(args: Vec<String>) -> Result<(), Box<dyn std::error::Error>> {
     if args.len() != 4 {
         return Err("usage: probe_split SCENE ENTRIES WALKS DISK".into());
     }
@@ -73,16 +70,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .iter()
         .map(|m| e_in[m[0] as usize].to_array())
         .collect();
-    let sh: Vec<Vec3> = set
-        .irradiance_sh(&w)
-        .iter()
-        .flat_map(|c| NORMALS.map(|n| Vec3::from(prm_format::sh_irradiance(c, n)).max(Vec3::ZERO)))
-        .collect();
-    let points: Vec<(Vec3, Vec3)> = layout
-        .positions
-        .iter()
-        .flat_map(|p| NORMALS.map(|n| (*p, Vec3::from(n))))
-        .collect();
+    let sh = probes::axis_irradiance(&set.irradiance_sh(&w));
+    let points = probes::axis_points(&set.positions);
     let exact: Vec<Vec3> = points
         .iter()
         .map(|&(p, n)| {

@@ -1,6 +1,6 @@
 //! Measures shared visibility ([`prm_trace::Lattice`]) against exact panes, as `pane.rs` records.
 //!
-//! `cargo run --release -p prm-trace --example lattice -- SCENE ENTRIES CLUSTERS RESOLUTION WALKS`
+//! `cargo xtask eval experiment lattice SCENE ENTRIES CLUSTERS RESOLUTION WALKS`
 //!
 //! Builds what `prm-bake bake` builds for those sizes (seed 0: the same atlas, entry points,
 //! walks and clusters), evaluates the panes exactly and with lattice steps 2, 4 and 8, and prints
@@ -37,8 +37,7 @@ fn difference(a: &Panes, b: &Panes) -> (f64, f64, f64) {
     ((d2 / r2.max(1e-300)).sqrt(), worst, sa / sb.max(1e-300))
 }
 
-fn main() {
-    let args: Vec<String> = std::env::args().skip(1).collect();
+pub fn run(args: Vec<String>) {
     let [scene, entries, clusters, resolution, walks] = &args[..] else {
         eprintln!("usage: lattice SCENE ENTRIES CLUSTERS RESOLUTION WALKS (e.g. scenes/cornell-box/cornell-box.obj 1024 64 256 8)");
         std::process::exit(2);

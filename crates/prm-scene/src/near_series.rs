@@ -9,7 +9,7 @@
 //! the series is extrapolated at every record from its last term, `f ⊙ Nᴷ S` with the factor `f`
 //! of [`DeeperOperator::series_tail`].
 
-use crate::NearField;
+use prm_format::NearField;
 
 /// Below this share of the sum so far a term of the uniform light's series ends it
 /// ([`DeeperOperator::series_tail`]): at the fireplace room's 0.87 a term, after about 85 terms
@@ -30,12 +30,18 @@ pub struct MergedHit {
     pub indirect_weight: f32,
 }
 
-impl NearField {
+/// The near field's hits merged per exit record and gather point, the input of
+/// [`DeeperOperator::new`].
+pub trait MergeNearHits {
     /// Every exit record's hits with the ones on one gather point merged, their weights summed
-    /// in f32, and each record's end in them (as [`crate::NearExit::end`]). Several of an exit
-    /// point's rays often end on one texel: 5.0 M hits make 2.25 M on the fireplace room, 225 k
-    /// make 133 k on McGuire's box.
-    pub fn merged_hits(&self) -> (Vec<u32>, Vec<MergedHit>) {
+    /// in f32, and each record's end in them (as [`prm_format::NearExit::end`]). Several of an
+    /// exit point's rays often end on one texel: 5.0 M hits make 2.25 M on the fireplace room,
+    /// 225 k make 133 k on McGuire's box.
+    fn merged_hits(&self) -> (Vec<u32>, Vec<MergedHit>);
+}
+
+impl MergeNearHits for NearField {
+    fn merged_hits(&self) -> (Vec<u32>, Vec<MergedHit>) {
         let mut ends = Vec::with_capacity(self.exits.len());
         let mut merged: Vec<MergedHit> = Vec::with_capacity(self.hits.len() / 2);
         for i in 0..self.exits.len() {
@@ -72,7 +78,7 @@ pub struct DeeperOperator {
 }
 
 impl DeeperOperator {
-    /// The operator of `near` with its `merged` hits ([`NearField::merged_hits`]).
+    /// The operator of `near` with its `merged` hits ([`MergeNearHits::merged_hits`]).
     pub fn new(near: &NearField, ends: &[u32], merged: &[MergedHit]) -> DeeperOperator {
         let scale = 1.0 / near.rays_per_exit.max(1) as f32;
         let terms = merged
@@ -182,7 +188,7 @@ impl DeeperOperator {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::{GatherPoint, NearExit, NearHit};
+    use prm_format::{GatherPoint, NearExit, NearHit};
 
     /// Two exit records that see each other's texels (and one hit twice), albedo ½.
     fn pair() -> NearField {

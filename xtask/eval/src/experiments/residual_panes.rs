@@ -1,6 +1,6 @@
 //! Experiment: what the run time's top-K should do with the clusters it drops.
 //!
-//! `cargo run --release -p prm-trace --example residual_panes -- SCENE ARCHIVE.prm [K] [GROUPS]`
+//! `cargo xtask eval experiment residual_panes SCENE ARCHIVE.prm [K] [GROUPS]`
 //!
 //! The archive's panes (as stored) are blended on the CPU at a random sample of exit points
 //! (`POINTS`, 2048) for the bake check's test lights, with ray-cast, disk-bounded entry
@@ -23,30 +23,14 @@
 //! run time's residual groups (`prm_format::residual_groups`, 4 by default).
 
 use glam::Vec3;
+
+use super::common::{denoised_error, entry_energy, env_or};
 use prm_scene::{Atlas, AtlasParams, Light, Sizing};
 use prm_trace::check::{check_exits, check_lights, select_top_k, select_with_residuals, FADE_BAND};
 use prm_trace::{Bvh, BvhParams, Lighting, ReferenceParams, ReferenceTracer};
 use std::path::Path;
 
-fn env_or(name: &str, default: u32) -> u32 {
-    std::env::var(name).ok().map_or(default, |s| s.parse().unwrap())
-}
-
-/// Error with the reference's noise removed from both sums, and energy.
-fn error(test: &[Vec3], mean: &[Vec3], variance: &[Vec3]) -> (f64, f64) {
-    let (mut e2, mut n2, mut v, mut st, mut sr) = (0f64, 0f64, 0f64, 0f64, 0f64);
-    for ((t, r), var) in test.iter().zip(mean).zip(variance) {
-        e2 += f64::from((*t - *r).length_squared());
-        n2 += f64::from(r.length_squared());
-        v += f64::from(var.element_sum());
-        st += f64::from(t.element_sum());
-        sr += f64::from(r.element_sum());
-    }
-    (((e2 - v).max(0.0) / (n2 - v)).sqrt(), st / sr)
-}
-
-fn main() {
-    let args: Vec<String> = std::env::args().skip(1).collect();
+pub fn run(args: Vec<String>) {
     let scene_path = Path::new(&args[0]);
     let archive_path = Path::new(&args[1]);
     let scene = prm_scene::load(scene_path).unwrap();
@@ -63,12 +47,7 @@ fn main() {
     let exits: Vec<_> = sample.iter().map(|&i| atlas.exits[i]).collect();
     let clusters = archive.clusters().to_vec();
     let entries = archive.entries().to_vec();
-    let entry_energy: Vec<Vec3> = archive
-        .entry_energy()
-        .unwrap()
-        .iter()
-        .map(|e| Vec3::from_array(*e))
-        .collect();
+    let entry_energy = entry_energy(&archive);
     let energy: Vec<Vec3> = clusters.iter().map(|c| Vec3::from_array(c.energy)).collect();
     let panes: Vec<Vec<Vec3>> = (0..clusters.len())
         .map(|c| {
@@ -124,17 +103,7 @@ fn main() {
             ..ReferenceParams::with_spp(refspp)
         };
         let r = tracer.indirect_at_exits(&exits, &reference, &mut |_, _| {}).unwrap();
-        let e: Vec<Vec3> = entries
-            .iter()
-            .map(|en| {
-                let (p, n) = (Vec3::from_array(en.position), Vec3::from_array(en.normal));
-                prm_trace::bounded_irradiance(&bvh, &lights, p, n, n, u32::MAX, disk)
-            })
-            .collect();
-        let weights: Vec<Vec3> = clusters
-            .iter()
-            .map(|c| prm_trace::energy_weight(c.members(), &e, &entry_energy))
-            .collect();
+        let weights = prm_trace::archive_weights(&bvh, &lights, &entries, &entry_energy, &clusters, disk);
         let mut rows: Vec<(String, Vec<Vec3>)> = vec![
             (
                 format!("top-{k}"),
@@ -161,7 +130,7 @@ fn main() {
         rows.push(("all".into(), blend(&weights, &[])));
         println!("light {li} at {position:.3}:");
         for (name, v) in &rows {
-            let (err, en) = error(v, &r.mean, &r.variance);
+            let (err, en) = denoised_error(v, &r.mean, &r.variance, |_| true);
             println!("  {name:<20} {:6.2}%  energy {en:.3}", 100.0 * err);
             match totals.iter_mut().find(|t| &t.0 == name) {
                 Some(t) => {

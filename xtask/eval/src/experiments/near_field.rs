@@ -1,6 +1,6 @@
 //! Experiment: gathering back what the VPL disk bound removes, from the lightmap's own light.
 //!
-//! `cargo run --release -p prm-trace --example near_field -- SCENE ARCHIVE.prm FX FY FZ`
+//! `cargo xtask eval experiment near_field SCENE ARCHIVE.prm FX FY FZ`
 //!
 //! A VPL of area `a` at distance `r` gives `1/(r² + a/π)` instead of `1/r²`: what is missing is,
 //! in expectation over the VPLs, `∫ L(y) · R²/(r² + R²) cos θ dω` with `R² = a/π`, the near
@@ -15,6 +15,8 @@
 //! `prm_trace::near`; the bake ships the direct part at 64 rays and `1/16`.
 
 use glam::Vec3;
+
+use super::common::{denoised_error, entry_energy};
 use prm_scene::{Atlas, AtlasParams, Light, Sizing};
 use prm_trace::check::check_exits;
 use prm_trace::{cosine_hemisphere, Bvh, BvhParams, Lighting, ReferenceParams, ReferenceTracer, Rng};
@@ -24,24 +26,7 @@ fn env_or(name: &str, default: u32) -> u32 {
     std::env::var(name).ok().map_or(default, |s| s.parse().unwrap())
 }
 
-/// Error with the reference's noise removed from both sums, and energy.
-fn error(test: &[Vec3], mean: &[Vec3], variance: &[Vec3], only: &dyn Fn(usize) -> bool) -> (f64, f64) {
-    let (mut e2, mut n2, mut v, mut st, mut sr) = (0f64, 0f64, 0f64, 0f64, 0f64);
-    for (i, ((t, r), var)) in test.iter().zip(mean).zip(variance).enumerate() {
-        if !only(i) {
-            continue;
-        }
-        e2 += f64::from((*t - *r).length_squared());
-        n2 += f64::from(r.length_squared());
-        v += f64::from(var.element_sum());
-        st += f64::from(t.element_sum());
-        sr += f64::from(r.element_sum());
-    }
-    (((e2 - v).max(0.0) / (n2 - v)).sqrt(), st / sr)
-}
-
-fn main() {
-    let args: Vec<String> = std::env::args().skip(1).collect();
+pub fn run(args: Vec<String>) {
     let scene = prm_scene::load(Path::new(&args[0])).unwrap();
     let bvh = Bvh::build(&scene, &BvhParams::DEFAULT).unwrap();
     let mut archive = prm_format::Archive::open(Path::new(&args[1])).unwrap();
@@ -59,12 +44,7 @@ fn main() {
         .unwrap_or_else(|| panic!("no paths_per_entry in {params:?}")) as f32;
     let clusters = archive.clusters().to_vec();
     let entries = archive.entries().to_vec();
-    let entry_energy: Vec<Vec3> = archive
-        .entry_energy()
-        .unwrap()
-        .iter()
-        .map(|e| Vec3::from_array(*e))
-        .collect();
+    let entry_energy = entry_energy(&archive);
     let panes: Vec<Vec<[f32; 3]>> = (0..clusters.len()).map(|c| archive.read_pane(c).unwrap()).collect();
     let area: f32 = scene.triangles.iter().map(|t| t.area()).sum();
     let n = entries.len() as f32;
@@ -82,17 +62,7 @@ fn main() {
     };
     let lights = [light];
     // Played, K = all: every texel's indirect and direct irradiance.
-    let e: Vec<Vec3> = entries
-        .iter()
-        .map(|en| {
-            let (p, nn) = (Vec3::from_array(en.position), Vec3::from_array(en.normal));
-            prm_trace::bounded_irradiance(&bvh, &lights, p, nn, nn, u32::MAX, disk)
-        })
-        .collect();
-    let weights: Vec<Vec3> = clusters
-        .iter()
-        .map(|c| prm_trace::energy_weight(c.members(), &e, &entry_energy))
-        .collect();
+    let weights = prm_trace::archive_weights(&bvh, &lights, &entries, &entry_energy, &clusters, disk);
     let exits = &atlas.exits;
     let played: Vec<Vec3> = exits
         .iter()
@@ -234,9 +204,9 @@ fn main() {
     );
     rows.extend(rows2.into_iter().map(|(n, v)| (n.to_string(), v)));
     for (name, v) in &rows {
-        let (err, en) = error(v, &r.mean, &r.variance, &|_| true);
-        let (ee, _) = error(v, &r.mean, &r.variance, &|i| edge[i]);
-        let (ei, _) = error(v, &r.mean, &r.variance, &|i| !edge[i]);
+        let (err, en) = denoised_error(v, &r.mean, &r.variance, |_| true);
+        let (ee, _) = denoised_error(v, &r.mean, &r.variance, |i| edge[i]);
+        let (ei, _) = denoised_error(v, &r.mean, &r.variance, |i| !edge[i]);
         println!(
             "{name:<28} {:6.2}%  energy {en:.3}   at edges {:6.2}%  away {:6.2}%",
             100.0 * err,

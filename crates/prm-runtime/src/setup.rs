@@ -1,0 +1,399 @@
+//! The phases of [`Runtime::new`](crate::Runtime::new): checking the archive against the scene,
+//! uploading the scene's geometry, the entries, clusters and panes, and building the lightmap and
+//! the passes that need more than their constructor (the near field, the probes).
+
+use std::io::{Read, Seek};
+
+use prm_format::{Archive, NearField};
+use prm_gpu_kit::pipeline;
+use prm_scene::Scene;
+
+use crate::shadow::ShadowMaps;
+use crate::{
+    baked, blend, irradiance, near_field, probes, Buffers, GpuCluster, GpuEntry, GpuFrame, GpuGatherPoint, GpuLight,
+    GpuNearExit, GpuNearHit, GpuView, NearLight, ProbeLight, RuntimeError, RuntimeOptions, LIGHTMAP_FORMAT, MAX_LIGHTS,
+};
+
+/// Refuses one shard of a split bake, and an archive whose atlas has not one UV triangle per
+/// scene triangle.
+pub(crate) fn check_archive<R: Read + Seek>(archive: &Archive<R>, scene: &Scene) -> Result<(), RuntimeError> {
+    if let Some(shard) = archive.metadata().params.get("shard") {
+        let field = |k: &str| shard.get(k).map_or("?".to_string(), |v| v.to_string());
+        return Err(RuntimeError::PartialArchive(format!(
+            "{}/{}",
+            field("index"),
+            field("count")
+        )));
+    }
+    let uvs = archive.atlas().triangle_uvs.len();
+    if uvs != scene.triangles.len() {
+        return Err(RuntimeError::Mismatch(format!(
+            "the archive's atlas has {} triangles, the scene {}",
+            uvs,
+            scene.triangles.len()
+        )));
+    }
+    Ok(())
+}
+
+/// Every cluster's residual group ([`prm_format::residual_groups`]; all 0 without groups).
+pub(crate) fn residual_group_of<R: Read + Seek>(archive: &Archive<R>, group_count: u32) -> Vec<u32> {
+    if group_count > 0 {
+        prm_format::residual_groups(archive.clusters(), group_count)
+    } else {
+        vec![0; archive.clusters().len()]
+    }
+}
+
+/// The scene's corners on the GPU: positions for the shadow maps, and position, normal and
+/// lightmap UV for the irradiance pass.
+pub(crate) struct SceneGeometry {
+    pub positions: wgpu::Buffer,
+    pub atlas_vertices: wgpu::Buffer,
+    pub vertex_count: u32,
+}
+
+impl SceneGeometry {
+    /// Uploads the corners of `scene`'s triangles with their lightmap UVs `triangle_uvs`.
+    pub fn upload(device: &wgpu::Device, scene: &Scene, triangle_uvs: &[[[f32; 2]; 3]]) -> SceneGeometry {
+        let positions: Vec<[f32; 3]> = scene
+            .triangles
+            .iter()
+            .flat_map(|t| t.positions.map(|p| p.to_array()))
+            .collect();
+        let vertex_count = positions.len() as u32;
+        let atlas_vertices: Vec<irradiance::AtlasVertex> = scene
+            .triangles
+            .iter()
+            .zip(triangle_uvs)
+            .flat_map(|(t, uv)| {
+                (0..3).map(move |i| irradiance::AtlasVertex {
+                    position: t.positions[i].to_array(),
+                    normal: t.normals[i].to_array(),
+                    uv: uv[i],
+                })
+            })
+            .collect();
+        let atlas_vertices = pipeline::vertex_buffer(device, "prm atlas vertices", &atlas_vertices);
+        let positions = pipeline::vertex_buffer(device, "prm positions", &positions);
+        SceneGeometry {
+            positions,
+            atlas_vertices,
+            vertex_count,
+        }
+    }
+}
+
+/// The archive's entry points as the weights pass reads them, each standing for a disk of area
+/// A/N (its irradiance bound, see `weights.wgsl`), before the emitters' irradiance is added.
+pub(crate) fn gpu_entries<R: Read + Seek>(archive: &Archive<R>, scene: &Scene) -> Vec<GpuEntry> {
+    let disk =
+        prm_scene::ENTRY_DISK * (scene.area() / archive.entries().len().max(1) as f64 / std::f64::consts::PI) as f32;
+    let energy = archive.entry_energy();
+    archive
+        .entries()
+        .iter()
+        .enumerate()
+        .map(|(i, e)| GpuEntry {
+            position: e.position,
+            disk,
+            normal: e.normal,
+            energy: energy.map_or([1.0; 3], |en| en[i]),
+            ..Default::default()
+        })
+        .collect()
+}
+
+/// The archive's clusters with their residual groups `group_of`.
+pub(crate) fn gpu_clusters<R: Read + Seek>(archive: &Archive<R>, group_of: &[u32]) -> Vec<GpuCluster> {
+    archive
+        .clusters()
+        .iter()
+        .zip(group_of)
+        .map(|(c, &group)| GpuCluster {
+            first: c.first,
+            count: c.count,
+            group,
+            energy: c.energy,
+            ..Default::default()
+        })
+        .collect()
+}
+
+impl Buffers {
+    /// The frame's buffers (empty until [`Runtime::update`](crate::Runtime::update)), `clusters`
+    /// and `entries` uploaded, and room for the weights, ranks and selection of
+    /// `cluster_count` clusters and `group_count` residual groups.
+    pub(crate) fn new(
+        device: &wgpu::Device,
+        clusters: &[GpuCluster],
+        entries: &[GpuEntry],
+        group_count: u32,
+    ) -> Buffers {
+        let cluster_count = clusters.len() as u32;
+        let st = wgpu::BufferUsages::STORAGE;
+        let src = wgpu::BufferUsages::COPY_SRC;
+        let per_cluster = cluster_count.max(1) as u64 * 16;
+        Buffers {
+            frame: pipeline::uniform(device, "prm frame", std::mem::size_of::<GpuFrame>() as u64),
+            lights: pipeline::storage(
+                device,
+                "prm lights",
+                (MAX_LIGHTS * std::mem::size_of::<GpuLight>()) as u64,
+                wgpu::BufferUsages::empty(),
+            ),
+            views: pipeline::storage(
+                device,
+                "prm views",
+                // At most six views a light (update refuses more, whatever the sun tiles).
+                (MAX_LIGHTS * 6 * std::mem::size_of::<GpuView>()) as u64,
+                wgpu::BufferUsages::empty(),
+            ),
+            clusters: pipeline::buffer_init(device, "prm clusters", bytemuck::cast_slice(clusters), st),
+            entries: pipeline::buffer_init(
+                device,
+                "prm entries",
+                bytemuck::cast_slice(entries),
+                st | wgpu::BufferUsages::COPY_DST,
+            ),
+            weights: pipeline::storage(device, "prm weights", per_cluster, src),
+            ranks: pipeline::storage(device, "prm ranks", cluster_count.max(1) as u64 * 4, src),
+            threshold: pipeline::storage(device, "prm threshold", 16, src),
+            selected: pipeline::storage(
+                device,
+                "prm selected",
+                (cluster_count + group_count).max(1) as u64 * 16,
+                src,
+            ),
+            effective: pipeline::storage(device, "prm effective", per_cluster, src),
+            group_energy: pipeline::storage(
+                device,
+                "prm group energy",
+                group_count.max(1) as u64 * 16,
+                wgpu::BufferUsages::COPY_DST,
+            ),
+        }
+    }
+}
+
+/// The panes the blend reads: the clusters' RGB9E5 words, then the residual groups' summed
+/// panes (their energies written to `b.group_energy`). Also returns the texels any pane lights.
+pub(crate) fn upload_panes<R: Read + Seek>(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    archive: &mut Archive<R>,
+    b: &Buffers,
+    group_of: &[u32],
+    group_count: u32,
+    options: &RuntimeOptions,
+) -> Result<(blend::Panes, Vec<bool>), RuntimeError> {
+    let cluster_count = archive.clusters().len() as u32;
+    let res = archive.atlas().resolution;
+    let texels = (res * res) as usize;
+    let panes = blend::Panes::new(
+        device,
+        (cluster_count + group_count).max(1) as usize,
+        texels,
+        options.pane_chunk_bytes,
+    )?;
+    // Group by group (the groups partition the clusters), so one sum is held at a time.
+    let mut order: Vec<u32> = (0..cluster_count).collect();
+    order.sort_by_key(|&c| group_of[c as usize]);
+    let mut sum = vec![[0f32; 3]; if group_count > 0 { texels } else { 0 }];
+    let mut group_energy = Vec::with_capacity(group_count as usize);
+    let mut words = Vec::with_capacity(texels);
+    // The texels the blend writes: any pane, the traced indirect light or the near field
+    // lights them (the rest of the lightmap stays zero).
+    let mut lit = vec![false; texels];
+    for (i, &p) in order.iter().enumerate() {
+        let pane = archive
+            .read_pane_rgb9e5(p as usize)
+            .map_err(|source| RuntimeError::Pane {
+                pane: p as usize,
+                source,
+            })?;
+        for (l, &w) in lit.iter_mut().zip(&pane) {
+            *l |= w & prm_format::RGB9E5_MANTISSAS != 0;
+        }
+        panes.write(queue, p, &pane);
+        if group_count == 0 {
+            continue;
+        }
+        for (s, &w) in sum.iter_mut().zip(&pane) {
+            let v = prm_format::decode_rgb9e5(w);
+            (0..3).for_each(|k| s[k] += v[k]);
+        }
+        let g = group_of[p as usize];
+        if order.get(i + 1).is_some_and(|&next| group_of[next as usize] == g) {
+            continue;
+        }
+        // The group's last member: store its summed pane and the energy of the pane as
+        // stored (as the writer computes a cluster's).
+        words.clear();
+        prm_format::encode_rgb9e5_slice(&sum, &mut words);
+        group_energy.push(stored_energy(&words));
+        panes.write(queue, cluster_count + g, &words);
+        sum.fill([0.0; 3]);
+    }
+    if !group_energy.is_empty() {
+        queue.write_buffer(&b.group_energy, 0, bytemuck::cast_slice(&group_energy));
+    }
+    Ok((panes, lit))
+}
+
+/// The energy (RGB, then 0) of a pane as stored: the sum of its decoded RGB9E5 `words`.
+fn stored_energy(words: &[u32]) -> [f32; 4] {
+    let mut energy = [0f64; 3];
+    for &w in words {
+        let v = prm_format::decode_rgb9e5(w);
+        (0..3).for_each(|k| energy[k] += f64::from(v[k]));
+    }
+    [energy[0] as f32, energy[1] as f32, energy[2] as f32, 0.0]
+}
+
+/// The run time's lightmap, `res`² texels of [`LIGHTMAP_FORMAT`], and its view.
+pub(crate) fn create_lightmap(device: &wgpu::Device, res: u32) -> (wgpu::Texture, wgpu::TextureView) {
+    let lightmap = pipeline::texture(
+        device,
+        "prm lightmap",
+        [res, res, 1],
+        LIGHTMAP_FORMAT,
+        // COPY_DST: an engine may seed or clear it (and the tests of GiUpdate do).
+        wgpu::TextureUsages::STORAGE_BINDING
+            | wgpu::TextureUsages::TEXTURE_BINDING
+            | wgpu::TextureUsages::COPY_SRC
+            | wgpu::TextureUsages::COPY_DST,
+    );
+    let view = lightmap.create_view(&Default::default());
+    (lightmap, view)
+}
+
+/// What the near field's and the probes' passes read besides the shared buffers.
+pub(crate) struct PassInputs<'a> {
+    pub maps: &'a ShadowMaps,
+    pub lightmap: &'a wgpu::TextureView,
+    pub emitters: &'a baked::BakedLights,
+    pub resolution: u32,
+}
+
+/// The near lightmap the blend adds (1×1 and unused without a near field) and, when `near` is
+/// given, the near field's passes; refused when its hits, exit records or gather points exceed
+/// the device's storage binding size.
+pub(crate) fn build_near_field(
+    device: &wgpu::Device,
+    b: &Buffers,
+    near: Option<&NearField>,
+    inputs: &PassInputs,
+    options: &RuntimeOptions,
+) -> Result<(wgpu::TextureView, Option<near_field::NearFieldPass>), RuntimeError> {
+    let res = inputs.resolution;
+    let near_map = pipeline::texture(
+        device,
+        "prm near lightmap",
+        if near.is_some() { [res, res, 1] } else { [1, 1, 1] },
+        LIGHTMAP_FORMAT,
+        wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::TEXTURE_BINDING,
+    );
+    let near_view = near_map.create_view(&Default::default());
+    let Some(n) = near else {
+        return Ok((near_view, None));
+    };
+    let merged = near_field::Merged::new(n);
+    check_near_field_size(device, n, &merged)?;
+    let pass = near_field::NearFieldPass::new(
+        device,
+        b,
+        n,
+        &merged,
+        &inputs.maps.array,
+        near_field::NearTargets {
+            near_map: &near_view,
+            lightmap: inputs.lightmap,
+            emitted: &inputs.emitters.indirect_view,
+            resolution: res,
+        },
+        near_field::NearSeries {
+            gathers: options.near_bounces,
+            tail: options.near_tail,
+        },
+    );
+    Ok((near_view, Some(pass)))
+}
+
+/// Refuses a near field whose merged hits, exit records or gather points need a storage
+/// binding larger than the device's.
+fn check_near_field_size(
+    device: &wgpu::Device,
+    n: &NearField,
+    merged: &near_field::Merged,
+) -> Result<(), RuntimeError> {
+    let limits = device.limits();
+    let mib = |b: u64| b as f64 / (1 << 20) as f64;
+    for (what, count, size) in [
+        ("merged near hits", merged.hits.len(), std::mem::size_of::<GpuNearHit>()),
+        (
+            "near exit records",
+            merged.ends.len(),
+            std::mem::size_of::<GpuNearExit>(),
+        ),
+        (
+            "near gather points",
+            n.points.len(),
+            std::mem::size_of::<GpuGatherPoint>(),
+        ),
+    ] {
+        let bytes = count as u64 * size as u64;
+        if bytes > limits.max_storage_buffer_binding_size {
+            return Err(RuntimeError::NearField(format!(
+                "{count} {what} take {:.1} MiB, over the device's {:.1} MiB storage binding (play with `NearLight::Off`)",
+                mib(bytes),
+                mib(limits.max_storage_buffer_binding_size)
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// The near field the options gather, if the archive holds one.
+pub(crate) fn gathered_near_field<'a, R: Read + Seek>(
+    archive: &'a Archive<R>,
+    options: &RuntimeOptions,
+) -> Option<&'a NearField> {
+    archive.near_field().filter(|_| options.near_light == NearLight::Gather)
+}
+
+/// Marks the texels of `near`'s exit records in `lit`: the near field lights them.
+pub(crate) fn mark_near_exits(near: Option<&NearField>, lit: &mut [bool]) {
+    for x in near.iter().flat_map(|n| &n.exits) {
+        if let Some(l) = lit.get_mut(x.texel as usize) {
+            *l = true;
+        }
+    }
+}
+
+/// The probes' passes when the archive holds probes (along their rays when it holds them and
+/// the options gather them).
+pub(crate) fn build_probes<R: Read + Seek>(
+    device: &wgpu::Device,
+    b: &Buffers,
+    archive: &Archive<R>,
+    inputs: &PassInputs,
+    options: &RuntimeOptions,
+) -> Result<Option<probes::ProbesPass>, RuntimeError> {
+    let Some(p) = archive.probes() else {
+        return Ok(None);
+    };
+    probes::ProbesPass::new(
+        device,
+        b,
+        p,
+        archive.probe_rays().filter(|_| options.probe_light == ProbeLight::Rays),
+        probes::RayInputs {
+            shadow_maps: &inputs.maps.array,
+            lightmap: inputs.lightmap,
+            baked_direct: &inputs.emitters.view,
+            groups: inputs.emitters.scales.len(),
+        },
+    )
+    .map(Some)
+}

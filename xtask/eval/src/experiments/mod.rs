@@ -1,0 +1,59 @@
+//! Experiments behind the tuned choices that the crates' docs cite: each prints the measurement
+//! the doc quotes. They run in release: `cargo xtask eval experiment NAME [ARGS]`.
+
+mod bench_trace;
+mod cluster_weights;
+mod common;
+mod lattice;
+mod near_field;
+mod probe_split;
+mod residual_panes;
+
+use anyhow::{anyhow, bail, Result};
+
+/// The experiments by name, with the arguments each takes.
+const EXPERIMENTS: [(&str, &str); 6] = [
+    (
+        "bench_trace",
+        "(no arguments) ray throughput of the BVH on the bundled scenes",
+    ),
+    (
+        "cluster_weights",
+        "[SCENE] [ENTRIES] [CLUSTERS] [RES]  how a cluster's weight combines its members",
+    ),
+    (
+        "lattice",
+        "SCENE ENTRIES CLUSTERS RESOLUTION WALKS  the pane evaluation lattice",
+    ),
+    (
+        "near_field",
+        "SCENE ARCHIVE.prm FX FY FZ  the near field against the reference at one light",
+    ),
+    (
+        "probe_split",
+        "SCENE ENTRIES WALKS DISK  the probes' split between VPLs and rays",
+    ),
+    ("residual_panes", "SCENE ARCHIVE.prm [K] [GROUPS]  residual pane groups"),
+];
+
+/// Runs the experiment named by `args[0]` with the rest of `args`.
+pub fn run(args: &[String]) -> Result<()> {
+    let Some(name) = args.first() else {
+        bail!("usage: cargo xtask eval experiment NAME [ARGS]\n{}", listing());
+    };
+    let rest = args[1..].to_vec();
+    match name.as_str() {
+        "bench_trace" => bench_trace::run(rest),
+        "cluster_weights" => cluster_weights::run(rest),
+        "lattice" => lattice::run(rest),
+        "near_field" => near_field::run(rest),
+        "probe_split" => probe_split::run(rest).map_err(|e| anyhow!("{e}"))?,
+        "residual_panes" => residual_panes::run(rest),
+        other => bail!("no experiment named {other:?}\n{}", listing()),
+    }
+    Ok(())
+}
+
+fn listing() -> String {
+    EXPERIMENTS.iter().map(|(n, a)| format!("  {n} {a}\n")).collect()
+}
