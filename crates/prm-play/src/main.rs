@@ -294,7 +294,13 @@ fn run() -> Result<()> {
         };
         let e = prm_play::export::export(&mut renderer, &scene, &lights, dir)
             .with_context(|| format!("exporting lightmaps to {}", dir.display()))?;
-        for p in [&e.indirect, &e.irradiance, &e.indirect_ktx2, &e.irradiance_ktx2, &e.gltf] {
+        for p in [
+            &e.indirect,
+            &e.irradiance,
+            &e.indirect_ktx2,
+            &e.irradiance_ktx2,
+            &e.gltf,
+        ] {
             eprintln!("wrote {}", p.display());
         }
         return Ok(());
