@@ -10,7 +10,7 @@ use glam::Vec3;
 use prm_gpu_kit::GpuContext;
 use prm_runtime::synthetic::{cornell_box_path, write_archive, SyntheticParams};
 use prm_runtime::{Runtime, RuntimeOptions, Shadows};
-use prm_scene::{Light, ENTRY_DISK};
+use prm_scene::Light;
 use prm_tests::{gpu, temp_dir};
 use prm_trace::{bounded_irradiance, Bvh, BvhParams};
 use std::path::{Path, PathBuf};
@@ -79,7 +79,7 @@ fn shadow_maps_agree_with_shadow_rays_for_every_light_kind() {
     let mut rt = Runtime::new(&ctx.device, &ctx.queue, &mut archive, &scene, options).unwrap();
     let bvh = Bvh::build(&scene, &BvhParams::DEFAULT).unwrap();
     let far = Bvh::build(&prm_scene::analytic::furnace_box(1, 0.5), &BvhParams::DEFAULT).unwrap();
-    let disk = ENTRY_DISK * (scene.area() / entries.len() as f64 / std::f64::consts::PI) as f32;
+    let disk = scene.entry_disk(entries.len());
 
     let b = scene.bounds();
     let at = |x: f32, y: f32, z: f32| b.min + b.extent() * Vec3::new(x, y, z);
@@ -193,7 +193,7 @@ fn a_low_sun_s_shadow_map_lets_through_the_shadow_rays_light() {
     let options = RuntimeOptions::for_archive(&archive);
     let mut rt = Runtime::new(&ctx.device, &ctx.queue, &mut archive, &scene, options).unwrap();
     let bvh = Bvh::build(&scene, &BvhParams::DEFAULT).unwrap();
-    let disk = ENTRY_DISK * (scene.area() / entries.len() as f64 / std::f64::consts::PI) as f32;
+    let disk = scene.entry_disk(entries.len());
     for (name, direction) in [
         ("low", Vec3::new(0.8, -0.35, 0.5)),
         ("high", Vec3::new(-0.25, -0.9, 0.35)),

@@ -95,8 +95,7 @@ impl CpuArchive {
         let (group_panes, group_energy) = group_sums(&panes, &cluster_energy, &groups);
         let atlas = archive.atlas();
         Ok(CpuArchive {
-            entry_disk: prm_scene::ENTRY_DISK
-                * (scene.area() / entries.len().max(1) as f64 / std::f64::consts::PI) as f32,
+            entry_disk: scene.entry_disk(entries.len()),
             entries,
             entry_energy,
             clusters,

@@ -87,8 +87,7 @@ impl SceneGeometry {
 /// The archive's entry points as the weights pass reads them, each standing for a disk of area
 /// A/N (its irradiance bound, see `weights.wgsl`), before the emitters' irradiance is added.
 pub(crate) fn gpu_entries<R: Read + Seek>(archive: &Archive<R>, scene: &Scene) -> Vec<GpuEntry> {
-    let disk =
-        prm_scene::ENTRY_DISK * (scene.area() / archive.entries().len().max(1) as f64 / std::f64::consts::PI) as f32;
+    let disk = scene.entry_disk(archive.entries().len());
     let energy = archive.entry_energy();
     archive
         .entries()

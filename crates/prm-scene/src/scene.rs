@@ -323,6 +323,12 @@ impl Scene {
         self.triangles.iter().map(|t| t.area() as f64).sum()
     }
 
+    /// Radius² of the disk each of `entries` uniformly sampled entry points stands for in the
+    /// run time's bound on its irradiance: [`crate::ENTRY_DISK`] × A/(Nπ).
+    pub fn entry_disk(&self, entries: usize) -> f32 {
+        crate::ENTRY_DISK * (self.area() / entries.max(1) as f64 / std::f64::consts::PI) as f32
+    }
+
     /// Diffuse albedo of triangle `tri` at barycentric `(b1, b2)`: material albedo times texture.
     pub fn albedo(&self, tri: usize, b1: f32, b2: f32) -> Vec3 {
         let t = &self.triangles[tri];
