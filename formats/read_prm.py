@@ -1,12 +1,15 @@
 #!/usr/bin/env python3
-"""Independent reader of .prm archives (format v1), written from formats/prm.md.
+"""Independent reader of .prm archives (format 2.0), written from formats/prm.md.
 
 Usage: read_prm.py [--pane N] [--no-verify] ARCHIVE
 
 Parses and validates ARCHIVE and prints a JSON summary on stdout. With
---pane N, the decoded texels of pane N are included. Checksums are verified
-unless --no-verify is given (the pure-Python XXH3 used when the `xxhash`
-module is missing is slow on large archives).
+--pane N, pane N is decoded from its tiles' bases by the rule of section 7.2
+(binary32 products and sums in order, emulated in Python's binary64) and its
+texels, energy and peak are included. Checksums are verified unless
+--no-verify is given (the pure-Python XXH3 used when the `xxhash` module is
+missing is slow on large archives). A format 1 archive is refused: it must be
+baked again.
 
 Needs only the Python 3 standard library plus a zstd decoder: the
 `zstandard` module if importable, otherwise the `zstd` command-line tool.
@@ -22,8 +25,8 @@ import subprocess
 import sys
 
 MAGIC = b"\x89PRM\r\n\x1a\n"
-SUPPORTED_MAJOR = 1
-SUPPORTED_MINOR = 9
+SUPPORTED_MAJOR = 2
+SUPPORTED_MINOR = 0
 KINDS = {1: "metadata", 2: "atlas", 3: "entries", 4: "clusters", 5: "panes", 6: "entry_energy",
          7: "emitters", 8: "sky", 9: "probes", 10: "probe_rays",
          11: "near_field"}
@@ -230,22 +233,25 @@ def decode_rgb9e5(t):
     return [(t & 0x1FF) * scale, ((t >> 9) & 0x1FF) * scale, ((t >> 18) & 0x1FF) * scale]
 
 
-def unfilter(raw, n, tile_filter):
-    """Inverts the tile filter: returns the n row-major RGB9E5 words."""
-    if tile_filter == 0:
-        return struct.unpack(f"<{n}I", raw)
-    # 1: four byte planes of the differences d[k] = w[k] - w[k-1] mod 2^32
-    words = []
-    prev = 0
-    for k in range(n):
-        d = raw[k] | (raw[n + k] << 8) | (raw[2 * n + k] << 16) | (raw[3 * n + k] << 24)
-        prev = (prev + d) & 0xFFFFFFFF
-        words.append(prev)
-    return words
+_F32 = struct.Struct("<f")
 
 
 def to_f32(x):
-    return struct.unpack("<f", struct.pack("<f", x))[0]
+    """x rounded to the nearest binary32 (an overflow gives the infinity of its sign)."""
+    try:
+        return _F32.unpack(_F32.pack(x))[0]
+    except OverflowError:
+        return float("inf") if x > 0 else float("-inf")
+
+
+def decode_value(u, c):
+    """The spec's decoded value (section 7.2): v = 0, then v = f32(v + f32(u[k] * c[k])) for
+    k = 0, 1, ...; then v if v > 0 else +0. A binary32 product or sum computed in binary64 and
+    rounded once more to binary32 is the correctly rounded binary32 result (53 >= 2*24 + 2)."""
+    v = 0.0
+    for x, y in zip(u, c):
+        v = to_f32(v + to_f32(x * y))
+    return v if v > 0 else 0.0
 
 
 # ------------------------------------------------------------------ reader
@@ -285,6 +291,10 @@ class Reader:
         if n < 64:
             raise InvalidArchive("truncated: shorter than the header")
         major, minor = struct.unpack_from("<HH", d, 8)
+        if major == 1:
+            raise InvalidArchive(f"this archive is .prm format {major}.{minor}, and this reader reads "
+                                 f"format {SUPPORTED_MAJOR}.x only: re-bake the scene with a prm-bake "
+                                 f"that writes format {SUPPORTED_MAJOR}")
         if major != SUPPORTED_MAJOR:
             raise InvalidArchive(f"unsupported version {major}.{minor}")
         (count, table_off, file_len, res0, res1, table_sum, head_sum) = struct.unpack_from("<IQQQQQQ", d, 12)
@@ -319,13 +329,8 @@ class Reader:
             if a[1] > b[0]:
                 raise InvalidArchive("overlapping sections")
         by_kind = {}
-        # Kind 7 is the emitters section from 1.2 on, kind 8 the sky from 1.3 on, kind 9 the
-        # probes from 1.4 on, kind 10 the probe rays from 1.6 on, kind 11 the near field from 1.7
-        # on; before, they were unassigned.
-        since = {7: 2, 8: 3, 9: 4, 10: 6, 11: 7}
-        known = {k: v for k, v in KINDS.items() if minor >= since.get(k, 0)}
         for s in sections:
-            if s["kind"] in known:
+            if s["kind"] in KINDS:
                 if s["kind"] in by_kind:
                     raise InvalidArchive(f"duplicate {s['name']} section")
                 by_kind[s["kind"]] = s
@@ -354,14 +359,14 @@ class Reader:
         fp = meta.get("scene_fingerprint")
         if not (isinstance(fp, str) and len(fp) == 16 and all(c in "0123456789abcdefABCDEF" for c in fp)):
             raise InvalidArchive("metadata: scene_fingerprint must be 16 hex digits")
-        self.accuracy = self.parse_accuracy(meta.get("accuracy")) if minor >= 5 else None
+        self.accuracy = self.parse_accuracy(meta.get("accuracy"))
         self.metadata = meta
 
         self.parse_atlas(raw[2])
         self.parse_entries_clusters(raw[3], raw[4])
         self.entry_energy = None
         if 6 in by_kind:
-            # 1.1: one RGB f32 record per entry, finite and >= 0.
+            # One RGB f32 record per entry, finite and >= 0.
             er = self.load(by_kind[6], 12 * len(self.entries))
             if len(er) != 12 * len(self.entries):
                 raise InvalidArchive("entry_energy: not one record per entry")
@@ -389,10 +394,9 @@ class Reader:
         self.parse_panes(by_kind[5])
 
     def parse_near_field(self, s):
-        # 1.7: 32-byte header (exits E, rays per exit M, gather points G, flags = 0, atlas
-        # resolution, hits H, disk R^2 f32, reserved; from 1.8 the deeper VPLs' disk R1^2 f32
-        # there, 0 <= R1^2 <= R^2; from 1.9 flag bit 0: the weights complement the panes' kernel),
-        # G gather point records as in probe_rays,
+        # 32-byte header (exits E, rays per exit M, gather points G, flags (bit 0: the weights
+        # complement the panes' kernel), atlas resolution, hits H, disk R^2 f32, the deeper VPLs'
+        # disk R1^2 f32, 0 <= R1^2 <= R^2), G gather point records as in probe_rays,
         # E exit records (texel u32, end of its hits u32), then H hits (gather point u32, r^2 f32).
         texels = self.resolution * self.resolution
         groups = len(self.emitters or [])
@@ -400,13 +404,9 @@ class Reader:
         if len(raw) < 32:
             raise InvalidArchive("near_field: shorter than its header")
         e, m, g, flags, res, h = struct.unpack_from("<6I", raw, 0)
-        disk, reserved = struct.unpack_from("<fI", raw, 24)
-        indirect_disk = 0.0
-        if self.minor >= 8:
-            (indirect_disk,), reserved = struct.unpack_from("<f", raw, 28), 0
-        known = 1 if self.minor >= 9 else 0
-        if flags & ~known or (self.strict and reserved):
-            raise InvalidArchive("near_field: unknown flags or a non-zero reserved field")
+        disk, indirect_disk = struct.unpack_from("<ff", raw, 24)
+        if flags & ~1:
+            raise InvalidArchive("near_field: unknown flags")
         if res != self.resolution or not 1 <= m <= MAX_NEAR_RAYS or g > texels or e > texels or h > e * m:
             raise InvalidArchive("near_field: resolution, ray, point, exit or hit count out of range")
         if not (disk > 0 and disk != float("inf")):
@@ -437,7 +437,7 @@ class Reader:
                                points=points, exits=exits, hits=hits)
 
     def parse_probe_rays(self, s):
-        # 1.6: 32-byte header (probes N, rays per probe M, gather points G, flags = 0, atlas
+        # 32-byte header (probes N, rays per probe M, gather points G, flags = 0, atlas
         # resolution, 3 reserved), G records (texel u32, position, normal, albedo, emission
         # 3 f32 each, emitter group u32), then N x M hits (u32): a gather point, RAY_SKY or
         # RAY_BLOCKED.
@@ -461,7 +461,7 @@ class Reader:
         self.probe_rays = dict(rays_per_probe=m, points=points, hits=hits)
 
     def parse_probes(self, s):
-        # 1.4: 48-byte header (probes N, clusters C, coefficient count = 9, flags (bit 0: sky),
+        # 48-byte header (probes N, clusters C, coefficient count = 9, flags (bit 0: sky),
         # grid nx ny nz, reserved, origin xyz, spacing), N records (cell u32, position 3 f32),
         # C x N transfers of 9 RGB binary16, cluster by cluster, then with the sky flag N sky
         # transfers of 9 x 9 RGB binary16.
@@ -504,7 +504,7 @@ class Reader:
                                 for p in range(n)] if has_sky else None)
 
     def parse_sky(self, s):
-        # 1.3: header (resolution, coefficient count = 9, flags = 0, reserved), then per texel
+        # Header (resolution, coefficient count = 9, flags = 0, reserved), then per texel
         # 9 direct coefficients, then per texel 9 RGB indirect triples, all IEEE binary16.
         texels = self.resolution * self.resolution
         size = 16 + texels * SH_COEFFS * 8
@@ -526,7 +526,7 @@ class Reader:
                                   for t in range(texels)])
 
     def parse_emitters(self, s):
-        # 1.2: header (groups, entries, resolution, reserved), 88-byte group records, then per
+        # Header (groups, entries, resolution, reserved), 88-byte group records, then per
         # group an RGB f32 triple per entry and two RGB9E5 words per atlas texel (direct, then
         # indirect: zeros unless flag bit 0 is set).
         n_entries, texels = len(self.entries), self.resolution * self.resolution
@@ -636,70 +636,65 @@ class Reader:
         self.entries, self.clusters = entries, clusters
 
     def parse_panes(self, s):
-        if s["compression"] != 0 or s["raw_size"] != s["stored_size"]:
-            raise InvalidArchive("panes section must be uncompressed")
-        base, size = s["offset"], s["stored_size"]
-        tps = self.resolution // self.tile_size
-        k = len(self.clusters) * tps * tps
-        data_start = 32 + 24 * k
-        if size < data_start:
-            raise InvalidArchive("panes section too small for its tile index")
-        sec = self.d[base:base + size]
-        (index_sum,) = struct.unpack_from("<Q", sec, 0)
-        self.check(sec[8:data_start], index_sum, "panes tile index")
-        count, stps, fmt, tile_filter, reserved = struct.unpack_from("<IIIIQ", sec, 8)
-        if count != len(self.clusters) or stps != tps or fmt != 1:
+        # Section 7: 16-byte header (pane count P, tiles per side S, largest rank, reserved), S^2
+        # ranks r_t (u32), then per tile 3P*r_t f32 coefficients (index (3c + ch)*r_t + k), then
+        # per tile T^2*r_t f16 basis values (index texel*r_t + k).
+        p_count, t = len(self.clusters), self.tile_size
+        tps = self.resolution // t
+        tiles = tps * tps
+        bound = min(t * t, 3 * p_count)
+        per_rank = 12 * p_count + 2 * t * t
+        raw = self.load(s, 16 + 4 * tiles + tiles * bound * per_rank)
+        if len(raw) < 16 + 4 * tiles:
+            raise InvalidArchive("panes: shorter than its header and ranks")
+        count, stps, max_rank, reserved = struct.unpack_from("<4I", raw, 0)
+        if count != p_count or stps != tps:
             raise InvalidArchive("panes header disagrees with atlas/clusters")
-        if tile_filter not in (0, 1):
-            raise InvalidArchive(f"unknown tile filter {tile_filter}")
         if self.strict and reserved:
             raise InvalidArchive("panes reserved field not zero")
-        self.tile_filter = tile_filter
-        tiles = []
-        for i in range(k):
-            off, csize, reserved, csum = struct.unpack_from("<QIIQ", sec, 32 + 24 * i)
-            if self.strict and reserved:
-                raise InvalidArchive("tile reserved field not zero")
-            if csize == 0:
-                if off or csum:
-                    raise InvalidArchive("omitted tile with offset or checksum")
-            elif off < data_start or off + csize > size:
-                raise InvalidArchive("tile outside the data area")
-            tiles.append((off, csize, csum))
-        self.panes_section = sec
-        self.tiles = tiles
+        ranks = list(struct.unpack_from(f"<{tiles}I", raw, 16))
+        if any(r > bound for r in ranks) or max(ranks, default=0) != max_rank:
+            raise InvalidArchive("panes: a rank over min(T^2, 3P), or the largest rank differs from the header's")
+        if len(raw) != 16 + 4 * tiles + sum(ranks) * per_rank:
+            raise InvalidArchive("panes: raw size differs from what the ranks give")
+        at = 16 + 4 * tiles
+        coefficients, bases = [], []
+        for r in ranks:
+            coefficients.append(struct.unpack_from(f"<{3 * p_count * r}f", raw, at))
+            at += 12 * p_count * r
+        for r in ranks:
+            bases.append(struct.unpack_from(f"<{t * t * r}e", raw, at))
+            at += 2 * t * t * r
+        if any(v != v or abs(v) == float("inf") for part in coefficients + bases for v in part):
+            raise InvalidArchive("panes: coefficients and basis values must be finite")
+        self.ranks, self.coefficients, self.bases = ranks, coefficients, bases
         self.tps = tps
-        if self.verify:
-            self.check(sec, s["_sum"], "panes")
 
     def read_pane(self, p):
-        """Decoded pane as a row-major list of [r, g, b], plus energy and peak."""
+        """Decoded pane as a row-major list of [r, g, b], plus energy and peak (section 6: binary64
+        sums over the tiles in tile order, texels row-major within a tile)."""
         res, t, tps = self.resolution, self.tile_size, self.tps
         texels = [[0.0, 0.0, 0.0] for _ in range(res * res)]
         energy = [0.0, 0.0, 0.0]
         peak = [0.0, 0.0, 0.0]
-        for ty in range(tps):
-            for tx in range(tps):
-                off, csize, csum = self.tiles[p * tps * tps + ty * tps + tx]
-                if csize == 0:
-                    continue
-                what = f"pane {p} tile ({tx}, {ty})"
-                stored = self.panes_section[off:off + csize]
-                self.check(stored, csum, what)
-                raw = zstd_decompress(stored, t * t * 4, what)
-                words = unfilter(raw, t * t, self.tile_filter)
-                for j in range(t):
-                    for i in range(t):
-                        v = decode_rgb9e5(words[j * t + i])
-                        texels[(ty * t + j) * res + tx * t + i] = v
-                        for c in range(3):
-                            energy[c] += v[c]
-                            peak[c] = max(peak[c], v[c])
+        for tile, r in enumerate(self.ranks):
+            if r == 0:
+                continue
+            tx, ty = tile % tps, tile // tps
+            c, u = self.coefficients[tile], self.bases[tile]
+            rows = [c[(3 * p + ch) * r:(3 * p + ch + 1) * r] for ch in range(3)]
+            for i in range(t * t):
+                ui = u[i * r:(i + 1) * r]
+                v = [decode_value(ui, rows[ch]) for ch in range(3)]
+                texels[(ty * t + i // t) * res + tx * t + i % t] = v
+                for ch in range(3):
+                    energy[ch] += v[ch]
+                    peak[ch] = max(peak[ch], v[ch])
         return texels, [to_f32(e) for e in energy], peak
 
     @staticmethod
     def parse_accuracy(a):
-        # 1.5: the bake's own accuracy estimate, optional (formats/prm.md section 3).
+        # The bake's own accuracy estimate, optional (formats/prm.md section 3).
         if a is None:
             return None
         def number(v, what):
@@ -749,9 +744,9 @@ class Reader:
             near_field=self.near_field,
             accuracy=self.accuracy,
             clusters=self.clusters,
-            tile_filter=self.tile_filter,
-            stored_tiles=sum(1 for t in self.tiles if t[1]),
-            tiles_per_pane=self.tps * self.tps,
+            panes=dict(tiles=self.tps * self.tps, ranks=self.ranks, max_rank=max(self.ranks, default=0),
+                       basis_bytes=2 * self.tile_size ** 2 * sum(self.ranks),
+                       coefficient_bytes=12 * len(self.clusters) * sum(self.ranks)),
         )
         if pane is not None:
             if not 0 <= pane < len(self.clusters):

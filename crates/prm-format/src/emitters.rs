@@ -1,4 +1,4 @@
-//! The emitters section (format 1.2): every emitter group's name, radiance, irradiance at the
+//! The emitters section (kind 7): every emitter group's name, radiance, irradiance at the
 //! entry points, and direct and (when baked) indirect irradiance at the atlas texels, per unit of
 //! the group's scale.
 //!

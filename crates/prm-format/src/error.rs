@@ -12,7 +12,7 @@
 ///
 /// The variants keep apart the causes a caller may want to react to
 /// differently: an I/O failure, a file that ends too early, a file that is
-/// not an archive at all, an archive of a newer major version, damaged bytes
+/// not an archive at all, an archive of another major version, damaged bytes
 /// (checksum), a damaged compressed stream, and bytes that are intact but
 /// describe something impossible.
 #[derive(Debug, thiserror::Error)]
@@ -42,10 +42,22 @@ pub enum Error {
         /// Minor version found in the file.
         minor: u16,
     },
+    /// The archive is of format 1, whose panes this library does not read: the scene must be
+    /// baked again.
+    #[error(
+        "this archive is .prm format {major}.{minor}, and this reader reads format {}.x only: re-bake the scene with this version of prm-bake",
+        crate::VERSION_MAJOR
+    )]
+    Rebake {
+        /// Major version found in the file (1).
+        major: u16,
+        /// Minor version found in the file.
+        minor: u16,
+    },
     /// Stored bytes do not match their xxh3-64 checksum.
     #[error("checksum mismatch in {section}")]
     ChecksumMismatch {
-        /// The damaged structure, e.g. `"header"`, `"atlas"`, `"pane 3 tile (1, 0)"`.
+        /// The damaged structure, e.g. `"header"`, `"atlas"`, `"panes"`.
         section: String,
     },
     /// A zstd stream with a valid checksum failed to decompress or

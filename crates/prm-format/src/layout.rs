@@ -1,4 +1,4 @@
-//! On-disk constants, limits and little-endian byte helpers of the v1 layout.
+//! On-disk constants, limits and little-endian byte helpers of the format 2 layout.
 
 use crate::error::{Error, Result};
 
@@ -8,14 +8,12 @@ use crate::error::{Error, Result};
 /// CR LF / ^Z / LF sequence catches newline translation.
 pub const MAGIC: [u8; 8] = *b"\x89PRM\r\n\x1a\n";
 
-/// Major version written by this library; a reader refuses any other major.
-pub const VERSION_MAJOR: u16 = 1;
-/// Highest minor version this library writes (and knows); a reader accepts every minor. The
-/// writer writes the lowest minor whose features an archive uses: 1.1 adds the entry energy
-/// section, 1.2 the emitters section, 1.3 the sky section, 1.4 the probes section, 1.5 the
-/// metadata's `accuracy` key, 1.6 the probe rays section, 1.7 the near field section, 1.8 its
-/// deeper VPLs' disk.
-pub const VERSION_MINOR: u16 = 9;
+/// Major version written by this library; a reader refuses any other major (format 1 archives
+/// with [`Error::Rebake`]).
+pub const VERSION_MAJOR: u16 = 2;
+/// Minor version this library writes, and the highest it knows; a reader accepts every minor of
+/// its major (a later minor only adds what this reader may ignore, formats/prm.md §2.1).
+pub const VERSION_MINOR: u16 = 0;
 
 /// Size of the fixed file header.
 pub const HEADER_SIZE: usize = 64;
@@ -25,16 +23,10 @@ pub const SECTION_RECORD_SIZE: usize = 48;
 pub const ATLAS_HEADER_SIZE: usize = 16;
 /// Size of one entry record.
 pub const ENTRY_RECORD_SIZE: usize = 28;
-/// Size of one entry energy record (since 1.1).
+/// Size of one entry energy record.
 pub const ENTRY_ENERGY_RECORD_SIZE: usize = 12;
 /// Size of one cluster record.
 pub const CLUSTER_RECORD_SIZE: usize = 56;
-/// Size of the panes section's fixed header.
-pub const PANES_HEADER_SIZE: usize = 32;
-/// Size of one tile index record.
-pub const TILE_RECORD_SIZE: usize = 24;
-/// Texel format code of RGB9E5 in the panes section header.
-pub const TEXEL_FORMAT_RGB9E5: u32 = 1;
 
 /// Section kind codes.
 pub mod kind {
@@ -46,27 +38,26 @@ pub mod kind {
     pub const ENTRIES: u32 = 3;
     /// Clusters of entry points.
     pub const CLUSTERS: u32 = 4;
-    /// Tiled, per-tile compressed panes.
+    /// The panes, as a low-rank basis per atlas tile.
     pub const PANES: u32 = 5;
-    /// Per-entry pane energy (since 1.1, optional).
+    /// Per-entry pane energy (optional).
     pub const ENTRY_ENERGY: u32 = 6;
-    /// Emitter groups: entry irradiance and direct lightmaps (since 1.2, optional).
+    /// Emitter groups: entry irradiance and direct lightmaps (optional).
     pub const EMITTERS: u32 = 7;
-    /// The sky's spherical-harmonic transfer at the atlas texels (since 1.3, optional).
+    /// The sky's spherical-harmonic transfer at the atlas texels (optional).
     pub const SKY: u32 = 8;
-    /// Irradiance probes and every cluster's spherical-harmonic transfer to them (since 1.4,
-    /// optional).
+    /// Irradiance probes and every cluster's spherical-harmonic transfer to them (optional).
     pub const PROBES: u32 = 9;
-    /// Where every probe's rays meet the scene, to gather its light from the surfaces (since
-    /// 1.6, optional; only beside the probes section).
+    /// Where every probe's rays meet the scene, to gather its light from the surfaces
+    /// (optional; only beside the probes section).
     pub const PROBE_RAYS: u32 = 10;
     /// Where every exit point's near rays end, to gather back what the VPL bound removes
-    /// (since 1.7, optional).
+    /// (optional).
     pub const NEAR_FIELD: u32 = 11;
     /// First kind reserved for private extensions (never assigned by the spec).
     pub const PRIVATE_FIRST: u32 = 0x8000_0000;
 
-    /// Human-readable name of a kind defined by v1, `None` for others.
+    /// Human-readable name of a kind defined by the format, `None` for others.
     pub fn name(kind: u32) -> Option<&'static str> {
         match kind {
             METADATA => Some("metadata"),
@@ -102,7 +93,7 @@ pub mod compression {
     }
 }
 
-/// Hard limits of format v1; archives beyond them are rejected, which bounds
+/// Hard limits of the format; archives beyond them are rejected, which bounds
 /// what a hostile file can make a reader allocate.
 pub mod limits {
     /// Largest atlas resolution (texels per side).
@@ -339,7 +330,8 @@ impl Header {
 
     /// Parses and checks a header: magic, then version, then checksum (the
     /// version is checked first because another major may lay the header out
-    /// differently).
+    /// differently). A format 1 archive is [`Error::Rebake`], another major
+    /// [`Error::UnsupportedVersion`].
     pub(crate) fn decode(b: &[u8]) -> Result<Header> {
         let prefix = b.len().min(MAGIC.len());
         if b[..prefix] != MAGIC[..prefix] {
@@ -355,6 +347,9 @@ impl Header {
         c.bytes(MAGIC.len())?;
         let major = c.u16()?;
         let minor = c.u16()?;
+        if major == 1 {
+            return Err(Error::Rebake { major, minor });
+        }
         if major != VERSION_MAJOR {
             return Err(Error::UnsupportedVersion { major, minor });
         }
@@ -376,6 +371,10 @@ impl Header {
 
     /// Whether reserved fields must be zero: only for minors this library
     /// knows (a later minor may give them a meaning).
+    #[allow(
+        clippy::absurd_extreme_comparisons,
+        reason = "the rule is for every minor this library knows, the first of which is 0"
+    )]
     pub(crate) fn strict_reserved(&self) -> bool {
         self.minor <= VERSION_MINOR
     }
@@ -403,24 +402,6 @@ record_codec!(SectionRecord {
     reserved
 });
 
-/// One record of the panes section's tile index.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub(crate) struct TileRecord {
-    /// Offset from the start of the panes section.
-    pub offset: u64,
-    /// Compressed size; 0 means the tile is omitted (all texels zero).
-    pub size: u32,
-    pub reserved: u32,
-    pub checksum: u64,
-}
-
-record_codec!(TileRecord {
-    offset,
-    size,
-    reserved,
-    checksum
-});
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -428,7 +409,7 @@ mod tests {
     #[test]
     fn header_round_trip_and_checks() {
         let h = Header {
-            major: 1,
+            major: 2,
             minor: 0,
             section_count: 5,
             table_offset: 1000,
@@ -448,11 +429,17 @@ mod tests {
         assert!(matches!(Header::decode(&b[..30]), Err(Error::Truncated { .. })));
         assert!(matches!(Header::decode(&b[..3]), Err(Error::Truncated { .. })));
         let mut newer = b.clone();
-        newer[8] = 2;
+        newer[8] = 3;
         assert!(matches!(
             Header::decode(&newer),
-            Err(Error::UnsupportedVersion { major: 2, minor: 0 })
+            Err(Error::UnsupportedVersion { major: 3, minor: 0 })
         ));
+        let mut older = b.clone();
+        older[8] = 1;
+        older[10] = 9;
+        let err = Header::decode(&older).unwrap_err();
+        assert!(matches!(err, Error::Rebake { major: 1, minor: 9 }), "{err}");
+        assert!(err.to_string().contains("re-bake"), "{err}");
     }
 
     #[test]
@@ -477,8 +464,5 @@ mod tests {
         }
         .encode_into(&mut b);
         assert_eq!(b.len(), SECTION_RECORD_SIZE);
-        b.clear();
-        TileRecord::default().encode_into(&mut b);
-        assert_eq!(b.len(), TILE_RECORD_SIZE);
     }
 }

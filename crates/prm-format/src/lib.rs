@@ -1,37 +1,41 @@
-//! Reader and writer of `.prm` Precomputed Radiance Map archives (format v1).
+//! Reader and writer of `.prm` Precomputed Radiance Map archives (format 2.0).
 //!
 //! An archive holds the lightmap atlas of a scene, its entry points and
 //! their clusters, and one *pane* per cluster: the indirect irradiance at
-//! every atlas texel, stored as RGB9E5 texels in independently zstd-compressed
-//! tiles. The byte layout is specified in `formats/prm.md`.
+//! every atlas texel. The panes are stored as a low-rank basis per atlas tile
+//! ([`PaneBasis`]): per tile, `f16` basis images shared by every pane and `f32`
+//! coefficients per pane and channel, which decode exactly the same on every
+//! reader. The byte layout is specified in `formats/prm.md`.
 //!
-//! * [`ArchiveWriter`] streams panes tile by tile into a temporary file and
-//!   renames it into place atomically; [`resolve_destination`] and
-//!   [`probe_directory`] let a binary refuse a bad destination before any work.
+//! * [`ArchiveWriter`] collects the panes, compresses them (a randomized SVD per
+//!   tile, within [`WriterOptions::pane_tolerance`]) and writes the archive into a
+//!   temporary file that it renames into place atomically;
+//!   [`resolve_destination`] and [`probe_directory`] let a binary refuse a bad
+//!   destination before any work.
 //! * [`Archive`] opens an archive from a path, a byte slice or any
-//!   `Read + Seek`, validates it as it goes and reads panes on demand;
+//!   `Read + Seek` and validates it as it goes; [`Archive::read_pane`] decodes a
+//!   pane, [`Archive::read_pane_rgb9e5`] encodes it for a GPU texture, and
 //!   [`Archive::verify`] checks everything.
-//! * [`EmitterGroup`]: the optional emitters section (1.2), what emissive surfaces give the
+//! * [`EmitterGroup`]: the optional emitters section, what emissive surfaces give the
 //!   entry points and the atlas texels per unit of their run-time scale.
-//! * [`SkyTransfer`]: the optional sky section (1.3), the sky's transfer at the atlas texels
+//! * [`SkyTransfer`]: the optional sky section, the sky's transfer at the atlas texels
 //!   in the spherical-harmonic basis [`sh_basis`], which [`sh_rotate_y`] turns about the vertical.
-//! * [`Probes`]: the optional probes section (1.4), irradiance probes on a grid in the scene's
+//! * [`Probes`]: the optional probes section, irradiance probes on a grid in the scene's
 //!   empty space and every cluster's transfer to them, so the run-time weights light them too.
-//! * [`ProbeRays`]: the optional probe rays section (1.6), where each probe's rays meet the
+//! * [`ProbeRays`]: the optional probe rays section, where each probe's rays meet the
 //!   scene, so a run time gathers the probes' light from the surfaces' radiance instead.
-//! * [`NearField`]: the optional near field section (1.7; 1.8 adds the deeper VPLs' disk),
-//!   where short cosine rays from the exit points end, so a run time gathers back the light the
-//!   panes' VPL bound removes.
+//! * [`NearField`]: the optional near field section, where short cosine rays from the exit
+//!   points end, so a run time gathers back the light the panes' VPL bound removes.
 //! * [`residual_groups`]: the clusters' spatial groups whose summed panes carry the light of the
 //!   clusters a run time drops from its top K.
-//! * [`encode_rgb9e5`] / [`decode_rgb9e5`] implement the texel encoding,
-//!   bit-exact with WebGPU's `rgb9e5ufloat`.
+//! * [`encode_rgb9e5`] / [`decode_rgb9e5`] implement the RGB9E5 texel encoding,
+//!   bit-exact with WebGPU's `rgb9e5ufloat`, of the emitters' lightmaps and of
+//!   the panes a GPU run time uploads.
 #![warn(missing_docs)]
 
+mod basis;
 mod emitters;
-mod encode;
 mod error;
-mod filter;
 mod groups;
 mod layout;
 mod metadata;
@@ -48,10 +52,9 @@ mod sky;
 mod splitmix;
 mod writer;
 
+pub use basis::{PaneBasis, MAX_PANE_RANK, PANE_TOLERANCE};
 pub use emitters::{EmitterGroup, EMITTER_NAME_BYTES};
-pub use encode::{EncodedPane, PaneEncoder};
 pub use error::{Error, Result};
-pub use filter::TileFilter;
 pub use groups::{residual_group_count, residual_groups, CLUSTERS_PER_GROUP, RESIDUAL_GROUPS};
 pub use layout::{checksum, compression, kind, limits, MAGIC, VERSION_MAJOR, VERSION_MINOR};
 pub use metadata::{Accuracy, Generator, LightAccuracy, Metadata, Units};

@@ -54,18 +54,18 @@ pub struct Metadata {
     /// Fingerprint of the source scene; stored as 16 hex digits.
     #[serde(with = "hex_u64")]
     pub scene_fingerprint: u64,
-    /// Texel encoding name; always `"rgb9e5ufloat"` in v1 (set by the writer).
+    /// Texel encoding name: `"rgb9e5ufloat"`, the encoding of the emitters' lightmaps and of
+    /// the panes a GPU run time uploads (set by the writer).
     pub texel_encoding: String,
     /// Relative error bound of the largest channel of a texel (set by the
     /// writer: `2^-9` for RGB9E5).
     pub texel_relative_error_bound: f64,
-    /// The bake's estimate of its own accuracy (since 1.5, optional; absent from the JSON when
-    /// `None`).
+    /// The bake's estimate of its own accuracy (optional; absent from the JSON when `None`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub accuracy: Option<Accuracy>,
 }
 
-/// The bake's estimate of its own accuracy (metadata key `accuracy`, since 1.5): the archive's
+/// The bake's estimate of its own accuracy (metadata key `accuracy`): the archive's
 /// indirect light, blended as the player blends it, against a reference path tracer at a sample
 /// of exit points, for a few point lights the bake placed itself (formats/prm.md §3).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -197,7 +197,7 @@ impl Metadata {
         }
         if self.texel_encoding != RGB9E5_NAME {
             return Err(format!(
-                "texel_encoding is {:?}, v1 only has {RGB9E5_NAME:?}",
+                "texel_encoding is {:?}, the format has only {RGB9E5_NAME:?}",
                 self.texel_encoding
             ));
         }

@@ -1,5 +1,4 @@
-//! The near field section (format 1.7, 1.8, 1.9): what the panes' VPL bound removes next to every exit
-//! point, as cosine rays that end close by, so that a run time gathers it back from the
+//! The near field section (kind 11): what the panes' VPL bound removes next to every exit point, as cosine rays that end close by, so that a run time gathers it back from the
 //! surfaces' radiance of the frame.
 //!
 //! A VPL standing for the area `a` reaches an exit point at distance `r` through `1/(r² + R²)`
@@ -13,15 +12,15 @@
 //! point sends from the lights' direct light, `albedo/π × irradiance` (emitters and the sky
 //! reach the lightmap traced, not through the VPLs, when the archive holds their indirect
 //! light). Rays whose weight would be under [`MIN_WEIGHT`] are not
-//! stored: they miss or end too far away to matter. From 1.8 the bake bounds the deeper VPLs
-//! (the ones its walks leave after the entry point) by a disk `R₁²` =
-//! [`NearField::indirect_disk`] too, and the player adds their share, `π/M · Σ I_g · R₁²/(r² +
-//! R₁²)` along the same rays, `I_g` the radiance the gather point sends from the lights' indirect
-//! light of the frame (albedo/π × the blended lightmap there). In 1.7 that word is reserved: the
-//! deeper VPLs' disks were the area one walk stands for, `A/(N·W)`, too small to gather.
+//! stored: they miss or end too far away to matter. The bake may bound the deeper VPLs (the ones
+//! its walks leave after the entry point) by a disk `R₁²` = [`NearField::indirect_disk`] too,
+//! and the player then adds their share, `π/M · Σ I_g · R₁²/(r² + R₁²)` along the same rays,
+//! `I_g` the radiance the gather point sends from the lights' indirect light of the frame
+//! (albedo/π × the blended lightmap there). `R₁² = 0` leaves that share out (disks of the area
+//! one walk stands for, `A/(N·W)`, are too small to gather).
 //!
 //! The cut at [`MIN_WEIGHT`] loses what the bound removes beyond it (up to a sixteenth of every
-//! VPL's light there), a loss that grows with the disk. From 1.9 the section may say
+//! VPL's light there), a loss that grows with the disk. The section may say
 //! ([`NearField::complement`], flag bit 0) that the panes were rendered with the kernel that
 //! completes the cut weights instead: `1/max(r², (1 − w₀)(r² + R²))` (prm-trace's
 //! `VplBound::Near`), `w₀` = [`MIN_WEIGHT`], against the weight `(R²/(r² + R²) − w₀)/(1 − w₀)`
@@ -29,8 +28,8 @@
 //! lost at the cut and nothing counted twice; the same holds for the deeper VPLs with `R₁²`.
 //!
 //! Layout (formats/prm.md §5.6), little-endian: a 32-byte header (exit count `E`, rays per exit
-//! `M`, gather point count `G`, flags = 0, the atlas resolution `R`, hit count `H`, `R²` as
-//! `f32`, `R₁²` as `f32` (1.8; a reserved `u32` = 0 in 1.7)), `G` gather point records of 56
+//! `M`, gather point count `G`, flags (bit 0: [`FLAG_COMPLEMENT`]), the atlas resolution `R`, hit
+//! count `H`, `R²` as `f32`, `R₁²` as `f32`), `G` gather point records of 56
 //! bytes (as the probe rays', §5.5), `E` exit records of 8 bytes (texel `u32`, the end of its hits `u32`: exit `i`'s hits are
 //! `[end[i−1], end[i])`), then `H` hits of 8 bytes (gather point `u32`, `r²` `f32`).
 
@@ -47,7 +46,7 @@ pub(crate) const NEAR_HIT_SIZE: usize = 8;
 pub const MAX_NEAR_RAYS: u32 = 1 << 16;
 /// The smallest depth-0 weight `R₀²/(r² + R₀²)` a stored hit has: farther hits are left out.
 pub const MIN_WEIGHT: f32 = 1.0 / 16.0;
-/// Header flag (1.9): the weights complement the panes' kernel at the cut ([`NearField::complement`]).
+/// Header flag: the weights complement the panes' kernel at the cut ([`NearField::complement`]).
 pub const FLAG_COMPLEMENT: u32 = 1;
 
 /// An exit point with near hits.
@@ -76,11 +75,11 @@ pub struct NearField {
     /// The depth-0 VPLs' disk, `R² = A/(N·π)` (scene units²).
     pub disk: f32,
     /// The deeper VPLs' disk `R₁²` (scene units², at most [`NearField::disk`]), whose share
-    /// the player gathers from the lightmap's indirect light; 0: none (format 1.7, whose deeper
-    /// VPLs' disks were too small to gather).
+    /// the player gathers from the lightmap's indirect light; 0: none (the deeper VPLs' disks
+    /// too small to gather).
     pub indirect_disk: f32,
     /// The weights are cut at [`MIN_WEIGHT`] and rescaled to complete the panes' kernel
-    /// (format 1.9, module docs); false: `R²/(r² + R²)` beside `1/(r² + R²)` (1.7, 1.8).
+    /// (module docs); false: `R²/(r² + R²)` beside `1/(r² + R²)`.
     pub complement: bool,
     /// The surface points the rays end at.
     pub points: Vec<GatherPoint>,
@@ -257,22 +256,13 @@ pub(crate) struct Header {
     pub complement: bool,
 }
 
-/// Parses and checks the header's own fields in a file of `minor` version; `strict` refuses a
-/// non-zero reserved field (the indirect disk's bytes before 1.8).
-pub(crate) fn decode_header(head: &[u8], minor: u16, strict: bool) -> Result<Header, String> {
+/// Parses and checks the header's own fields (the section has no reserved field).
+pub(crate) fn decode_header(head: &[u8]) -> Result<Header, String> {
     let mut c = Cursor::new(head, "near field");
     let [exits, rays_per_exit, points, flags, resolution, hits] = c.u32s().map_err(|e| e.to_string())?;
     let disk = c.f32().map_err(|e| e.to_string())?;
-    let last = c.u32().map_err(|e| e.to_string())?;
-    // Reserved until 1.8, which gives the word the deeper VPLs' disk.
-    let (reserved, indirect_disk) = if minor >= 8 {
-        (0, f32::from_bits(last))
-    } else {
-        (last, 0.0)
-    };
-    // 1.9 defines bit 0.
-    let known = if minor >= 9 { FLAG_COMPLEMENT } else { 0 };
-    check_flags("near field", flags, known, strict && reserved != 0)?;
+    let indirect_disk = c.f32().map_err(|e| e.to_string())?;
+    check_flags("near field", flags, FLAG_COMPLEMENT, false)?;
     check_ray_count("near field", rays_per_exit, "exit", MAX_NEAR_RAYS)?;
     Ok(Header {
         exits,
@@ -344,7 +334,7 @@ mod tests {
         validate(&n, 4, 0).unwrap();
         let raw = encode(&n, 4);
         assert_eq!(raw.len() as u64, raw_size_for(2, 2, 3).unwrap());
-        let h = decode_header(&raw[..NEAR_FIELD_HEADER_SIZE], 8, true).unwrap();
+        let h = decode_header(&raw[..NEAR_FIELD_HEADER_SIZE]).unwrap();
         assert_eq!(
             h,
             Header {
@@ -365,11 +355,7 @@ mod tests {
             },
             4,
         );
-        assert!(decode_header(&c[..NEAR_FIELD_HEADER_SIZE], 9, true).unwrap().complement);
-        assert!(
-            decode_header(&c[..NEAR_FIELD_HEADER_SIZE], 8, false).is_err(),
-            "flag before 1.9"
-        );
+        assert!(decode_header(&c[..NEAR_FIELD_HEADER_SIZE]).unwrap().complement);
         let a = NEAR_FIELD_HEADER_SIZE + 2 * GATHER_POINT_SIZE;
         let b = a + 2 * NEAR_EXIT_SIZE;
         let back = NearField {
@@ -479,14 +465,10 @@ mod tests {
         n.rays_per_exit = 0;
         assert!(validate(&n, 4, 0).is_err(), "no rays");
         let mut head = encode(&near(), 4)[..NEAR_FIELD_HEADER_SIZE].to_vec();
+        head[12..16].copy_from_slice(&2u32.to_le_bytes());
+        assert!(decode_header(&head).is_err(), "unknown flags");
         head[12..16].copy_from_slice(&1u32.to_le_bytes());
-        assert!(decode_header(&head, 8, false).is_err(), "unknown flags");
-        let mut head = encode(&near(), 4)[..NEAR_FIELD_HEADER_SIZE].to_vec();
-        head[28..32].copy_from_slice(&1u32.to_le_bytes());
-        assert!(decode_header(&head, 7, true).is_err(), "reserved field in 1.7");
-        assert!(decode_header(&head, 7, false).is_ok(), "reserved field, lenient");
-        let h = decode_header(&head, 7, false).unwrap();
-        assert_eq!(h.indirect_disk, 0.0, "1.7 has no indirect disk");
+        assert!(decode_header(&head).unwrap().complement);
         let mut n = near();
         n.indirect_disk = 0.02;
         assert!(validate(&n, 4, 0).is_err(), "indirect disk over the disk");

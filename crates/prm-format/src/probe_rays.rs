@@ -1,4 +1,4 @@
-//! The probe rays section (format 1.6): where each of a fixed set of directions from every probe
+//! The probe rays section (kind 10): where each of a fixed set of directions from every probe
 //! meets the scene, so that the run time gathers each probe's irradiance from the surfaces'
 //! radiance of the frame (their direct light, the lightmap's indirect light and the emitters'
 //! and sky's baked light) instead of from the panes' VPLs.

@@ -1,4 +1,4 @@
-//! The probes section (format 1.4): irradiance probes in the scene's empty space, baked as extra
+//! The probes section (kind 9): irradiance probes in the scene's empty space, baked as extra
 //! exit points of the same panes. For every cluster `c` and probe `p` it stores the nine
 //! spherical-harmonic coefficients (RGB, basis [`crate::sh_basis`]) of the indirect irradiance
 //! the cluster's VPLs give the probe per unit weight, already convolved with the clamped cosine:

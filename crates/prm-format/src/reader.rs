@@ -10,17 +10,16 @@ use std::path::Path;
 
 use xxhash_rust::xxh3::Xxh3Default;
 
+use crate::basis::{self, PaneBasis, PANES_HEADER_SIZE};
 use crate::emitters::EmitterGroup;
 use crate::error::{Error, Result};
-use crate::filter::TileFilter;
 use crate::layout::{
-    checksum, compression, kind, limits, Cursor, Header, SectionRecord, TileRecord, ATLAS_HEADER_SIZE,
-    CLUSTER_RECORD_SIZE, ENTRY_ENERGY_RECORD_SIZE, ENTRY_RECORD_SIZE, HEADER_SIZE, PANES_HEADER_SIZE,
-    SECTION_RECORD_SIZE, TEXEL_FORMAT_RGB9E5, TILE_RECORD_SIZE,
+    checksum, compression, kind, limits, Cursor, Header, SectionRecord, ATLAS_HEADER_SIZE, CLUSTER_RECORD_SIZE,
+    ENTRY_ENERGY_RECORD_SIZE, ENTRY_RECORD_SIZE, HEADER_SIZE, SECTION_RECORD_SIZE,
 };
 use crate::metadata::Metadata;
 use crate::probes::Probes;
-use crate::rgb9e5::decode_rgb9e5;
+use crate::rgb9e5::encode_rgb9e5;
 use crate::sections::{
     decode_clusters, decode_entries, decode_entry_energy, entries_covered, validate_entries_clusters, AtlasSection,
     Cluster, Entry,
@@ -63,13 +62,18 @@ pub struct ArchiveInfo {
     pub sections: Vec<SectionInfo>,
     /// Number of panes (= clusters).
     pub pane_count: u32,
-    /// Tiles per pane (`(resolution / tile_size)²`).
-    pub tiles_per_pane: u64,
-    /// Tiles stored (not omitted as all-zero) over all panes.
-    pub stored_tiles: u64,
-    /// Compressed bytes of all stored tiles.
-    pub stored_tile_bytes: u64,
-    /// Uncompressed RGB9E5 bytes of all panes (`pane_count × resolution² × 4`).
+    /// Atlas tiles (`(resolution / tile_size)²`), each with its own basis.
+    pub tiles: u64,
+    /// The largest rank of a tile's basis.
+    pub max_rank: u32,
+    /// The ranks of all tiles summed (their mean is this over [`tiles`](Self::tiles)).
+    pub rank_sum: u64,
+    /// Bytes of the tiles' bases (`f16`) in the panes section.
+    pub basis_bytes: u64,
+    /// Bytes of the tiles' coefficients (`f32`) in the panes section.
+    pub coefficient_bytes: u64,
+    /// Bytes of all panes as dense RGB9E5 texels (`pane_count × resolution² × 4`), what a run
+    /// time that uploads them whole holds.
     pub pane_texel_bytes: u64,
 }
 
@@ -80,16 +84,13 @@ pub struct VerifyReport {
     pub sections: usize,
     /// Panes decoded and checked against their cluster's energy and peak.
     pub panes: u32,
-    /// Tiles decompressed.
-    pub stored_tiles: u64,
-    /// Tiles omitted as all-zero.
-    pub omitted_tiles: u64,
     /// Bytes hashed.
     pub bytes_hashed: u64,
 }
 
-/// An open archive. Metadata, atlas, entries, clusters and the tile index
-/// are read and validated on open; pane data is read on demand.
+/// An open archive. Every section it interprets (metadata, atlas, entries, clusters, the panes'
+/// bases and the optional ones) is read and validated on open; [`verify`](Self::verify) also
+/// checks every checksum and the clusters' energy and peak.
 pub struct Archive<R> {
     src: R,
     info: ArchiveInfo,
@@ -99,10 +100,7 @@ pub struct Archive<R> {
     entries: Vec<Entry>,
     optional: OptionalSections,
     clusters: Vec<Cluster>,
-    tiles: Vec<TileRecord>,
-    panes_offset: u64,
-    tile_filter: TileFilter,
-    decompressor: zstd::bulk::Decompressor<'static>,
+    panes: PaneBasis,
 }
 
 impl Archive<BufReader<File>> {
@@ -239,11 +237,10 @@ struct SectionRecords {
 }
 
 impl SectionRecords {
-    /// Finds the required sections and the optional ones of an archive of minor version
-    /// `minor`; each kind at most once.
-    fn find(records: &[SectionRecord], minor: u16) -> Result<SectionRecords> {
+    /// Finds the required sections and the optional ones; each kind at most once.
+    fn find(records: &[SectionRecord]) -> Result<SectionRecords> {
         let required = |k: u32| {
-            optional_section(records, k, 0, minor)?
+            optional_section(records, k)?
                 .ok_or_else(|| Error::inconsistent(format!("required {} section is missing", section_name(k))))
         };
         Ok(SectionRecords {
@@ -252,21 +249,19 @@ impl SectionRecords {
             entries: required(kind::ENTRIES)?,
             clusters: required(kind::CLUSTERS)?,
             panes: required(kind::PANES)?,
-            entry_energy: optional_section(records, kind::ENTRY_ENERGY, 1, minor)?,
-            emitters: optional_section(records, kind::EMITTERS, 2, minor)?,
-            sky: optional_section(records, kind::SKY, 3, minor)?,
-            probes: optional_section(records, kind::PROBES, 4, minor)?,
-            probe_rays: optional_section(records, kind::PROBE_RAYS, 6, minor)?,
-            near_field: optional_section(records, kind::NEAR_FIELD, 7, minor)?,
+            entry_energy: optional_section(records, kind::ENTRY_ENERGY)?,
+            emitters: optional_section(records, kind::EMITTERS)?,
+            sky: optional_section(records, kind::SKY)?,
+            probes: optional_section(records, kind::PROBES)?,
+            probe_rays: optional_section(records, kind::PROBE_RAYS)?,
+            near_field: optional_section(records, kind::NEAR_FIELD)?,
         })
     }
 }
 
-/// The one record of `kind`, a kind defined from minor version `since` on: in an archive of an
-/// older `minor` a section of that kind is a private one (the writers of those versions allowed
-/// it), skipped like any unknown one.
-fn optional_section(records: &[SectionRecord], kind: u32, since: u16, minor: u16) -> Result<Option<SectionRecord>> {
-    let mut of_kind = records.iter().filter(|r| r.kind == kind && minor >= since);
+/// The one record of `kind`, if any; a kind twice is refused.
+fn optional_section(records: &[SectionRecord], kind: u32) -> Result<Option<SectionRecord>> {
+    let mut of_kind = records.iter().filter(|r| r.kind == kind);
     let first = of_kind.next().cloned();
     if of_kind.next().is_some() {
         return Err(Error::inconsistent(format!(
@@ -278,7 +273,7 @@ fn optional_section(records: &[SectionRecord], kind: u32, since: u16, minor: u16
 }
 
 /// Reads the metadata section (at most 16 MiB of JSON) and validates it.
-fn read_metadata<R: Read + Seek>(src: &mut R, rec: &SectionRecord, minor: u16) -> Result<Metadata> {
+fn read_metadata<R: Read + Seek>(src: &mut R, rec: &SectionRecord) -> Result<Metadata> {
     let meta = open_section(src, rec)?;
     if meta.record.raw_size > limits::MAX_METADATA_BYTES {
         return Err(Error::inconsistent(format!(
@@ -290,134 +285,60 @@ fn read_metadata<R: Read + Seek>(src: &mut R, rec: &SectionRecord, minor: u16) -
     let raw = meta.read_all()?;
     drop(meta);
     let json = |e: serde_json::Error| Error::inconsistent(format!("metadata JSON: {e}"));
-    let mut value: serde_json::Value = serde_json::from_slice(&raw).map_err(json)?;
-    if minor < 5 {
-        // Before 1.5 an `accuracy` key is not the bake's estimate (§3.1): ignored.
-        if let Some(object) = value.as_object_mut() {
-            object.remove("accuracy");
-        }
-    }
-    let metadata: Metadata = serde_json::from_value(value).map_err(json)?;
+    let metadata: Metadata = serde_json::from_slice(&raw).map_err(json)?;
     metadata
         .validate()
         .map_err(|e| Error::inconsistent(format!("metadata: {e}")))?;
     Ok(metadata)
 }
 
-/// The panes section's fixed header and tile index.
-struct PanesIndex {
-    pane_count: u32,
-    tiles_per_pane: u64,
-    tiles: Vec<TileRecord>,
-    stored_tiles: u64,
-    stored_tile_bytes: u64,
-    tile_filter: TileFilter,
-}
-
-/// Reads the panes section's fixed header and tile index (checked by the index checksum) and
-/// checks that every stored tile lies in the section's data area.
-fn read_panes_index<R: Read + Seek>(
+/// Reads the panes section (formats/prm.md §7): its 16-byte header and the tiles' ranks first,
+/// checked against the atlas, then the raw size they imply, before the coefficients and the
+/// bases are decompressed.
+fn read_panes<R: Read + Seek>(
     src: &mut R,
     rec: &SectionRecord,
     atlas: &AtlasSection,
     strict: bool,
-) -> Result<PanesIndex> {
-    if rec.compression != compression::NONE {
-        return Err(Error::inconsistent(
-            "the panes section must not be compressed as a whole",
-        ));
-    }
-    if rec.raw_size != rec.stored_size {
-        return Err(Error::inconsistent("panes section raw size differs from stored size"));
-    }
-    if rec.stored_size < PANES_HEADER_SIZE as u64 {
-        return Err(Error::inconsistent(format!(
-            "panes section has {} bytes, less than its {PANES_HEADER_SIZE}-byte header",
-            rec.stored_size
-        )));
-    }
-    let fixed = read_at(src, rec.offset, PANES_HEADER_SIZE as u64, "panes header")?;
-    let declared_panes = Cursor::new(&fixed[8..12], "panes header").u32()?;
-    if u64::from(declared_panes) > limits::MAX_CLUSTERS {
-        return Err(Error::inconsistent(format!(
-            "{declared_panes} panes exceed the limit {}",
-            limits::MAX_CLUSTERS
-        )));
-    }
-    let tps = u64::from(atlas.tiles_per_side());
-    let tiles_per_pane = tps * tps;
-    let tile_count = u64::from(declared_panes) * tiles_per_pane;
-    let index_len = tile_count * TILE_RECORD_SIZE as u64;
-    let data_start = PANES_HEADER_SIZE as u64 + index_len;
-    if rec.stored_size < data_start {
-        return Err(Error::inconsistent(format!(
-            "panes section ({} bytes) is smaller than its tile index ({declared_panes} panes × {tiles_per_pane} tiles)",
-            rec.stored_size,
-        )));
-    }
-    let head = read_at(src, rec.offset, data_start, "panes tile index")?;
-    let mut c = Cursor::new(&head, "panes header");
-    let index_sum = c.u64()?;
-    if checksum(&head[8..]) != index_sum {
-        return Err(Error::checksum("panes tile index"));
-    }
-    let pane_count = c.u32()?;
-    let stored_tps = c.u32()?;
-    let texel_format = c.u32()?;
-    let filter_code = c.u32()?;
-    let reserved = c.u64()?;
-    if u64::from(stored_tps) != tps {
-        return Err(Error::inconsistent(format!(
-            "panes have {stored_tps} tiles per side, the atlas implies {tps}"
-        )));
-    }
-    if texel_format != TEXEL_FORMAT_RGB9E5 {
-        return Err(Error::inconsistent(format!("unknown texel format {texel_format}")));
-    }
-    let tile_filter = TileFilter::from_code(filter_code)
-        .ok_or_else(|| Error::inconsistent(format!("unknown tile filter {filter_code}")))?;
-    if strict && reserved != 0 {
-        return Err(Error::inconsistent("panes header reserved fields are not zero"));
-    }
-    let mut index = PanesIndex {
-        pane_count,
-        tiles_per_pane,
-        tiles: Vec::with_capacity(tile_count as usize),
-        stored_tiles: 0,
-        stored_tile_bytes: 0,
-        tile_filter,
-    };
-    for i in 0..tile_count {
-        let t = TileRecord::decode(&mut c)?;
-        let where_ = || {
-            let pane = i / tiles_per_pane;
-            let k = i % tiles_per_pane;
-            format!("pane {pane} tile ({}, {})", k % tps, k / tps)
-        };
-        if strict && t.reserved != 0 {
-            return Err(Error::inconsistent(format!("{}: reserved field is not zero", where_())));
+) -> Result<PaneBasis> {
+    let header = |head: &[u8; PANES_HEADER_SIZE]| basis::decode_header(head, strict);
+    read_headed_section(src, rec, header, |section, raw, h| {
+        let s = atlas.tiles_per_side();
+        if h.tiles_per_side != s {
+            return Err(Error::inconsistent(format!(
+                "panes have {} tiles per side, the atlas implies {s}",
+                h.tiles_per_side
+            )));
         }
-        if t.size == 0 {
-            if t.offset != 0 || t.checksum != 0 {
-                return Err(Error::inconsistent(format!(
-                    "{}: omitted tile with non-zero offset or checksum",
-                    where_()
-                )));
-            }
-        } else {
-            let end = t.offset.checked_add(u64::from(t.size));
-            if t.offset < data_start || end.is_none_or(|e| e > rec.stored_size) {
-                return Err(Error::inconsistent(format!(
-                    "{}: tile data lies outside the panes section's data area",
-                    where_()
-                )));
-            }
-            index.stored_tiles += 1;
-            index.stored_tile_bytes += u64::from(t.size);
+        let tiles = s as usize * s as usize;
+        let at_least = (PANES_HEADER_SIZE + 4 * tiles) as u64;
+        if section.record.raw_size < at_least {
+            return Err(Error::inconsistent(format!(
+                "panes section declares {} raw bytes, less than its header and {tiles} ranks",
+                section.record.raw_size
+            )));
         }
-        index.tiles.push(t);
-    }
-    Ok(index)
+        let ranks = raw.records(tiles, 4, basis::decode_ranks)?;
+        let t = atlas.tile_size;
+        basis::check_ranks(&h, t, &ranks).map_err(Error::inconsistent)?;
+        let expected = basis::raw_size_for(h.pane_count, t, &ranks).unwrap_or(u64::MAX);
+        section.expect_raw_size(expected, || {
+            format!(
+                "{} panes in {tiles} tiles of {t}² texels with these ranks",
+                h.pane_count
+            )
+        })?;
+        let mut coefficients = Vec::with_capacity(tiles);
+        for &r in &ranks {
+            let n = 3 * h.pane_count as usize * r as usize;
+            coefficients.push(raw.records(n, 4, basis::decode_coefficients)?);
+        }
+        let mut bases = Vec::with_capacity(tiles);
+        for &r in &ranks {
+            bases.push(raw.records(t as usize * t as usize * r as usize, 2, basis::decode_basis)?);
+        }
+        Ok(PaneBasis::from_parts(&h, t, ranks, coefficients, bases))
+    })
 }
 
 /// Reads a section of exactly `count` records of `size` bytes: its raw size must be that
@@ -463,7 +384,7 @@ fn read_entries<R: Read + Seek>(src: &mut R, rec: &SectionRecord, clusters: &[Cl
     Ok(entries)
 }
 
-/// The optional sections of 1.1 and later.
+/// The optional sections.
 struct OptionalSections {
     entry_energy: Option<Vec<[f32; 3]>>,
     emitters: Vec<EmitterGroup>,
@@ -477,7 +398,6 @@ struct OptionalSections {
 /// headers are checked.
 #[derive(Clone, Copy)]
 struct Fixed {
-    minor: u16,
     strict: bool,
     /// The atlas's.
     resolution: u32,
@@ -493,7 +413,7 @@ fn read_optional_sections<R: Read + Seek>(
     fixed: &Fixed,
 ) -> Result<OptionalSections> {
     let entry_count = fixed.entry_count;
-    // Entry energy (1.1): exactly one record per entry.
+    // Entry energy: exactly one record per entry.
     let entry_energy = match &found.entry_energy {
         None => None,
         Some(rec) => Some(read_record_section(
@@ -505,20 +425,20 @@ fn read_optional_sections<R: Read + Seek>(
             decode_entry_energy,
         )?),
     };
-    // Emitters (1.2): sizes fixed by its header, the entry count and the atlas.
+    // Emitters: sizes fixed by its header, the entry count and the atlas.
     let emitters = match &found.emitters {
         None => Vec::new(),
         Some(rec) => read_emitters(src, rec, fixed)?,
     };
-    // Sky (1.3): its size is fixed by the atlas resolution.
+    // Sky: its size is fixed by the atlas resolution.
     let sky = found.sky.as_ref().map(|rec| read_sky(src, rec, fixed)).transpose()?;
-    // Probes (1.4): sizes fixed by its header and the cluster count.
+    // Probes: sizes fixed by its header and the cluster count.
     let probes = found
         .probes
         .as_ref()
         .map(|rec| read_probes(src, rec, fixed))
         .transpose()?;
-    // Probe rays (1.6, only beside the probes): sizes fixed by its header.
+    // Probe rays (only beside the probes): sizes fixed by its header.
     let probe_rays = match (&found.probe_rays, &probes) {
         (None, _) => None,
         (Some(_), None) => {
@@ -526,7 +446,7 @@ fn read_optional_sections<R: Read + Seek>(
         }
         (Some(rec), Some(p)) => Some(read_probe_rays(src, rec, fixed, p.len(), emitters.len())?),
     };
-    // Near field (1.7): sizes fixed by its header and the atlas.
+    // Near field: sizes fixed by its header and the atlas.
     let near_field = (found.near_field.as_ref())
         .map(|rec| read_near_field(src, rec, fixed, emitters.len()))
         .transpose()?;
@@ -541,8 +461,8 @@ fn read_optional_sections<R: Read + Seek>(
 }
 
 impl ArchiveInfo {
-    fn new(header: &Header, file_length: u64, records: &[SectionRecord], panes: &PanesIndex, tile_size: u32) -> Self {
-        let tile_bytes = u64::from(tile_size) * u64::from(tile_size) * 4;
+    fn new(header: &Header, file_length: u64, records: &[SectionRecord], panes: &PaneBasis) -> Self {
+        let texels = u64::from(panes.resolution()) * u64::from(panes.resolution());
         ArchiveInfo {
             major: header.major,
             minor: header.minor,
@@ -559,11 +479,13 @@ impl ArchiveInfo {
                     checksum: r.checksum,
                 })
                 .collect(),
-            pane_count: panes.pane_count,
-            tiles_per_pane: panes.tiles_per_pane,
-            stored_tiles: panes.stored_tiles,
-            stored_tile_bytes: panes.stored_tile_bytes,
-            pane_texel_bytes: u64::from(panes.pane_count) * panes.tiles_per_pane * tile_bytes,
+            pane_count: panes.pane_count() as u32,
+            tiles: panes.tile_count() as u64,
+            max_rank: panes.max_rank(),
+            rank_sum: panes.ranks().iter().map(|&r| u64::from(r)).sum(),
+            basis_bytes: panes.basis_bytes(),
+            coefficient_bytes: panes.coefficient_bytes(),
+            pane_texel_bytes: panes.pane_count() as u64 * texels * 4,
         }
     }
 }
@@ -574,28 +496,27 @@ impl<R: Read + Seek> Archive<R> {
     /// Every section's raw size is checked against what the counts read so far imply *before*
     /// it is decompressed, so a small stream cannot make the reader produce (or hold) more than
     /// those counts need. Hence the order: metadata (16 MiB cap), atlas (its own 16-byte header
-    /// gives R and N), the panes header and tile index (uncompressed, bounded by real file
-    /// bytes; gives the pane count), clusters (56 × panes), last entries (28 × the entries the
+    /// gives R and N), panes (its header and the tiles' ranks, checked against the atlas, give
+    /// its size and the pane count), clusters (56 × panes), last entries (28 × the entries the
     /// cluster ranges cover), then the optional sections.
     pub fn from_reader(mut src: R) -> Result<Self> {
         let (header, file_length) = read_header(&mut src)?;
         let strict = header.strict_reserved();
         let records = read_section_table(&mut src, &header, file_length)?;
-        let found = SectionRecords::find(&records, header.minor)?;
-        let metadata = read_metadata(&mut src, &found.metadata, header.minor)?;
+        let found = SectionRecords::find(&records)?;
+        let metadata = read_metadata(&mut src, &found.metadata)?;
         let atlas = read_atlas(&mut src, &found.atlas, strict)?;
-        let panes = read_panes_index(&mut src, &found.panes, &atlas, strict)?;
-        let clusters = read_clusters(&mut src, &found.clusters, panes.pane_count)?;
+        let panes = read_panes(&mut src, &found.panes, &atlas, strict)?;
+        let clusters = read_clusters(&mut src, &found.clusters, panes.pane_count() as u32)?;
         let entries = read_entries(&mut src, &found.entries, &clusters)?;
         let fixed = Fixed {
-            minor: header.minor,
             strict,
             resolution: atlas.resolution,
             entry_count: entries.len() as u64,
             clusters: clusters.len(),
         };
         let optional = read_optional_sections(&mut src, &found, &fixed)?;
-        let info = ArchiveInfo::new(&header, file_length, &records, &panes, atlas.tile_size);
+        let info = ArchiveInfo::new(&header, file_length, &records, &panes);
         Ok(Archive {
             src,
             info,
@@ -605,10 +526,7 @@ impl<R: Read + Seek> Archive<R> {
             entries,
             optional,
             clusters,
-            tiles: panes.tiles,
-            panes_offset: found.panes.offset,
-            tile_filter: panes.tile_filter,
-            decompressor: zstd::bulk::Decompressor::new()?,
+            panes,
         })
     }
 
@@ -649,20 +567,20 @@ impl<R: Read + Seek> Archive<R> {
     }
 
     /// Where every probe's rays meet the scene (formats/prm.md §5.5), when the bake traced
-    /// them (1.6): a run time gathers the probes' light from the surfaces with them.
+    /// them: a run time gathers the probes' light from the surfaces with them.
     pub fn probe_rays(&self) -> Option<&crate::ProbeRays> {
         self.optional.probe_rays.as_ref()
     }
 
-    /// Where every exit point's near rays end (formats/prm.md §5.6), when the bake traced them
-    /// (1.7): a run time gathers back with them what the panes' VPL bound removes.
+    /// Where every exit point's near rays end (formats/prm.md §5.6), when the bake traced them:
+    /// a run time gathers back with them what the panes' VPL bound removes.
     pub fn near_field(&self) -> Option<&crate::NearField> {
         self.optional.near_field.as_ref()
     }
 
     /// Every entry's pane energy (RGB, the sum over the atlas of the indirect irradiance its
-    /// own VPLs give for unit irradiance on it), in [`entries`](Self::entries)' order; `None` in
-    /// archives before 1.1. A player weighs a cluster's members by it, so that the cluster gives
+    /// own VPLs give for unit irradiance on it), in [`entries`](Self::entries)' order; `None` when
+    /// the archive has no entry energy section. A player weighs a cluster's members by it, so that the cluster gives
     /// the indirect energy its members would give unclustered (formats/prm.md §5.1).
     pub fn entry_energy(&self) -> Option<&[[f32; 3]]> {
         self.optional.entry_energy.as_deref()
@@ -678,117 +596,24 @@ impl<R: Read + Seek> Archive<R> {
         self.clusters.len()
     }
 
-    /// Whether tile `(tile_x, tile_y)` of `pane` is stored (`false`: all zero).
-    pub fn tile_is_stored(&self, pane: usize, tile_x: u32, tile_y: u32) -> Result<bool> {
-        Ok(self.tiles[self.tile_slot(pane, tile_x, tile_y)?].size != 0)
+    /// The panes as stored: a low-rank basis per atlas tile (formats/prm.md §7).
+    pub fn pane_basis(&self) -> &PaneBasis {
+        &self.panes
     }
 
-    fn tile_slot(&self, pane: usize, tile_x: u32, tile_y: u32) -> Result<usize> {
-        let tps = self.atlas.tiles_per_side();
-        if pane >= self.clusters.len() || tile_x >= tps || tile_y >= tps {
-            return Err(Error::InvalidInput(format!(
-                "pane {pane} tile ({tile_x}, {tile_y}) out of range ({} panes, {tps}×{tps} tiles)",
-                self.clusters.len()
-            )));
-        }
-        let tps = tps as usize;
-        Ok(pane * tps * tps + tile_y as usize * tps + tile_x as usize)
+    /// Decodes one pane to linear RGB, `resolution²` texels, row-major (formats/prm.md §7.2).
+    /// [`Error::InvalidInput`] if there is no such pane.
+    pub fn read_pane(&self, pane: usize) -> Result<Vec<[f32; 3]>> {
+        self.panes.decode_pane(pane)
     }
 
-    /// Reads, checks, decompresses and unfilters one tile into `words`
-    /// (`tile_size²` texels, row-major); `bytes` is scratch space.
-    fn read_tile_into(
-        &mut self,
-        pane: usize,
-        tile_x: u32,
-        tile_y: u32,
-        bytes: &mut Vec<u8>,
-        words: &mut [u32],
-    ) -> Result<()> {
-        let rec = self.tiles[self.tile_slot(pane, tile_x, tile_y)?];
-        let want = words.len() * 4;
-        if rec.size == 0 {
-            words.fill(0);
-            return Ok(());
-        }
-        let what = format!("pane {pane} tile ({tile_x}, {tile_y})");
-        let stored = read_at(
-            &mut self.src,
-            self.panes_offset + rec.offset,
-            u64::from(rec.size),
-            &what,
-        )?;
-        if checksum(&stored) != rec.checksum {
-            return Err(Error::checksum(what));
-        }
-        // Decompress into exactly the tile's size: a longer stream fails.
-        bytes.clear();
-        bytes.reserve_exact(want);
-        let n = self
-            .decompressor
-            .decompress_to_buffer(&stored[..], bytes)
-            .map_err(|e| Error::Decompress {
-                section: what.clone(),
-                reason: e.to_string(),
-            })?;
-        if n != want || bytes.len() != want {
-            return Err(Error::Decompress {
-                section: what,
-                reason: format!("decompressed to {n} bytes, a tile has {want}"),
-            });
-        }
-        self.tile_filter.invert(bytes, words);
-        Ok(())
+    /// Decodes one pane and encodes it as RGB9E5 texels (`rgb9e5ufloat`, formats/prm.md §7.3),
+    /// `resolution²` of them, row-major: what a GPU run time uploads.
+    pub fn read_pane_rgb9e5(&self, pane: usize) -> Result<Vec<u32>> {
+        Ok(self.read_pane(pane)?.into_iter().map(encode_rgb9e5).collect())
     }
 
-    /// Reads one tile as RGB9E5 texels, `tile_size²` of them, row-major.
-    pub fn read_tile_rgb9e5(&mut self, pane: usize, tile_x: u32, tile_y: u32) -> Result<Vec<u32>> {
-        let t = self.atlas.tile_size as usize;
-        let mut words = vec![0u32; t * t];
-        self.read_tile_into(pane, tile_x, tile_y, &mut Vec::new(), &mut words)?;
-        Ok(words)
-    }
-
-    /// Reads one pane as RGB9E5 texels, `resolution²` of them, row-major.
-    pub fn read_pane_rgb9e5(&mut self, pane: usize) -> Result<Vec<u32>> {
-        let res = self.atlas.resolution as usize;
-        let t = self.atlas.tile_size as usize;
-        let tps = self.atlas.tiles_per_side();
-        if pane >= self.clusters.len() {
-            return Err(Error::InvalidInput(format!(
-                "pane {pane} out of range ({} panes)",
-                self.clusters.len()
-            )));
-        }
-        let mut texels = vec![0u32; res * res];
-        let mut bytes = Vec::with_capacity(t * t * 4);
-        let mut words = vec![0u32; t * t];
-        for ty in 0..tps {
-            for tx in 0..tps {
-                if !self.tile_is_stored(pane, tx, ty)? {
-                    continue;
-                }
-                self.read_tile_into(pane, tx, ty, &mut bytes, &mut words)?;
-                for (j, row) in words.chunks_exact(t).enumerate() {
-                    let start = (ty as usize * t + j) * res + tx as usize * t;
-                    texels[start..start + t].copy_from_slice(row);
-                }
-            }
-        }
-        Ok(texels)
-    }
-
-    /// The filter applied to tiles before compression.
-    pub fn tile_filter(&self) -> TileFilter {
-        self.tile_filter
-    }
-
-    /// Reads one pane decoded to linear RGB, `resolution²` texels, row-major.
-    pub fn read_pane(&mut self, pane: usize) -> Result<Vec<[f32; 3]>> {
-        Ok(self.read_pane_rgb9e5(pane)?.into_iter().map(decode_rgb9e5).collect())
-    }
-
-    /// Reads the first section of a kind v1 does not define, decompressed;
+    /// Reads the first section of a kind the format does not define, decompressed;
     /// `Ok(None)` if there is none.
     pub fn read_custom_section(&mut self, kind: u32) -> Result<Option<Vec<u8>>> {
         let Some(rec) = self.records.iter().find(|r| r.kind == kind).cloned() else {
@@ -809,15 +634,11 @@ impl<R: Read + Seek> Archive<R> {
         section.read_all().map(Some)
     }
 
-    /// Checks everything: every tile's checksum and decompression, every
-    /// cluster's energy and peak against its decoded pane, and every
+    /// Checks everything: every cluster's energy and peak against its decoded pane, and every
     /// section's checksum (unknown sections too).
     pub fn verify(&mut self) -> Result<VerifyReport> {
         let mut report = VerifyReport::default();
-        // Panes first, so that damaged tile data is reported by tile.
-        for pane in 0..self.clusters.len() {
-            let texels = self.read_pane_rgb9e5(pane)?;
-            let (energy, peak) = pane_energy_peak(&texels, self.atlas.resolution, self.atlas.tile_size);
+        for (pane, (energy, peak)) in self.panes.energy_peak().into_iter().enumerate() {
             let c = &self.clusters[pane];
             if energy.map(f32::to_bits) != c.energy.map(f32::to_bits) {
                 return Err(Error::inconsistent(format!(
@@ -854,16 +675,14 @@ impl<R: Read + Seek> Archive<R> {
             report.sections += 1;
             report.bytes_hashed += r.stored_size;
         }
-        report.stored_tiles = self.info.stored_tiles;
-        report.omitted_tiles = self.tiles.len() as u64 - self.info.stored_tiles;
         Ok(report)
     }
 }
 
-/// Energy (sum) and peak (per-channel max) of a decoded pane, summed in f64
-/// in tile order, texels row-major within a tile, then rounded to f32: the
-/// exact order the spec prescribes.
-pub fn pane_energy_peak(texels: &[u32], resolution: u32, tile_size: u32) -> ([f32; 3], [f32; 3]) {
+/// Energy (sum) and peak (per-channel max) of a decoded pane, `resolution²` texels row-major,
+/// as the cluster table records them (formats/prm.md §6): summed in binary64 in tile order, texels
+/// row-major within a tile, then rounded to binary32. NaN if the sizes do not fit.
+pub fn pane_energy_peak(texels: &[[f32; 3]], resolution: u32, tile_size: u32) -> ([f32; 3], [f32; 3]) {
     let res = resolution as usize;
     let t = tile_size as usize;
     let mut energy = [0f64; 3];
@@ -876,8 +695,7 @@ pub fn pane_energy_peak(texels: &[u32], resolution: u32, tile_size: u32) -> ([f3
         for tx in 0..tps {
             for j in 0..t {
                 let start = (ty * t + j) * res + tx * t;
-                for &texel in &texels[start..start + t] {
-                    let d = decode_rgb9e5(texel);
+                for d in &texels[start..start + t] {
                     for c in 0..3 {
                         energy[c] += f64::from(d[c]);
                         peak[c] = peak[c].max(d[c]);
@@ -1249,13 +1067,8 @@ fn read_near_field<R: Read + Seek>(
 ) -> Result<crate::NearField> {
     use crate::near_field::{self, NEAR_EXIT_SIZE, NEAR_FIELD_HEADER_SIZE, NEAR_HIT_SIZE};
     use crate::probe_rays::{self, GATHER_POINT_SIZE};
-    let Fixed {
-        minor,
-        strict,
-        resolution,
-        ..
-    } = *fixed;
-    let header = |head: &[u8; NEAR_FIELD_HEADER_SIZE]| near_field::decode_header(head, minor, strict);
+    let resolution = fixed.resolution;
+    let header = |head: &[u8; NEAR_FIELD_HEADER_SIZE]| near_field::decode_header(head);
     let out = read_headed_section(src, rec, header, |section, raw, h| {
         let texels = u64::from(resolution) * u64::from(resolution);
         if h.resolution != resolution

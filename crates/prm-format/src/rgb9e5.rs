@@ -54,7 +54,7 @@ const EXP_BIAS: i32 = 15;
 
 /// Clamps one channel to `[0, RGB9E5_MAX]`; NaN and negatives become 0.
 #[inline]
-fn clamp_channel(c: f32) -> f32 {
+pub(crate) fn clamp_channel(c: f32) -> f32 {
     if c > 0.0 {
         c.min(RGB9E5_MAX)
     } else {

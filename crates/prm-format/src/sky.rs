@@ -1,4 +1,4 @@
-//! The sky section (format 1.3): at every atlas texel, how much irradiance each of the nine
+//! The sky section (kind 8): at every atlas texel, how much irradiance each of the nine
 //! spherical-harmonic basis functions of [`crate::sh_basis`] gives when the sky's radiance is
 //! that function, directly (visibility times cosine, one scalar) and after one or more bounces
 //! (RGB, the albedos colour it). A sky with coefficients `L_i` (RGB) then gives the texel the

@@ -1,4 +1,4 @@
-//! Streaming, atomic archive writer: panes are encoded and compressed tile by tile.
+//! Atomic archive writer: the panes are collected, then compressed to a low-rank basis per tile.
 //!
 //! Over 600 lines on purpose: the destination rules, the temporary-file discipline and the
 //! section writers share one invariant (nothing but a complete archive ever appears at the
@@ -39,14 +39,10 @@ use std::io::{BufWriter, Read, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 
-use xxhash_rust::xxh3::Xxh3Default;
-
-use crate::encode::{EncodedPane, PaneEncoder};
+use crate::basis::{DenseTiles, PaneBasis, MAX_PANE_RANK, PANE_TOLERANCE};
 use crate::error::{Error, Result};
-use crate::filter::TileFilter;
 use crate::layout::{
-    checksum, compression, kind, Header, PutLe, SectionRecord, TileRecord, HEADER_SIZE, MAGIC, PANES_HEADER_SIZE,
-    TEXEL_FORMAT_RGB9E5, TILE_RECORD_SIZE, VERSION_MAJOR,
+    checksum, compression, kind, Header, SectionRecord, HEADER_SIZE, MAGIC, VERSION_MAJOR, VERSION_MINOR,
 };
 use crate::metadata::Metadata;
 use crate::rgb9e5::{RGB9E5_MAX_RELATIVE_ERROR, RGB9E5_NAME};
@@ -57,14 +53,19 @@ use crate::sections::{
 /// Tuning knobs of [`ArchiveWriter`].
 #[derive(Clone, Debug)]
 pub struct WriterOptions {
-    /// zstd level for tiles and sections (1..=19 recommended; default 3).
+    /// zstd level for the sections (1..=19 recommended; default 3).
     pub zstd_level: i32,
-    /// Compress the metadata, atlas, entries and clusters sections with zstd
-    /// (each is stored uncompressed anyway when that is not smaller).
+    /// Compress the sections with zstd (each is stored uncompressed anyway when that is not
+    /// smaller).
     pub compress_sections: bool,
-    /// Filter applied to every tile before compression (default
-    /// [`TileFilter::DeltaShuffle`]).
-    pub tile_filter: TileFilter,
+    /// Relative tolerance ε of the panes' low-rank basis, in `[0, 1)`: each tile keeps the fewest
+    /// basis vectors whose discarded singular values hold at most ε of the tile's Frobenius norm
+    /// (default [`PANE_TOLERANCE`], whose docs say how it was chosen; 0 keeps every vector the
+    /// sketch finds, up to [`max_pane_rank`](Self::max_pane_rank)).
+    pub pane_tolerance: f32,
+    /// Largest rank of a tile's basis, at least 1 (default [`MAX_PANE_RANK`]): it bounds a
+    /// tile's size and the compression's work whatever the tolerance asks.
+    pub max_pane_rank: u32,
 }
 
 impl Default for WriterOptions {
@@ -72,7 +73,8 @@ impl Default for WriterOptions {
         WriterOptions {
             zstd_level: 3,
             compress_sections: true,
-            tile_filter: TileFilter::DeltaShuffle,
+            pane_tolerance: PANE_TOLERANCE,
+            max_pane_rank: MAX_PANE_RANK,
         }
     }
 }
@@ -344,10 +346,10 @@ pub fn own_temp_files(path: impl AsRef<Path>) -> Vec<PathBuf> {
 /// `finish`, the temporary file is removed and an older archive at the
 /// destination is left untouched.
 ///
-/// Panes are added in cluster order, one per cluster. Each tile is encoded to
-/// RGB9E5, compressed and written as soon as it is produced, so at most one
-/// tile is held in memory by the writer; [`add_pane_with`](Self::add_pane_with)
-/// lets the caller produce a pane tile by tile as well.
+/// Panes are added in cluster order, one per cluster, and held in memory (`f32`, 12 bytes per
+/// texel and pane) until [`compress_panes`](Self::compress_panes) or [`finish`](Self::finish)
+/// turns them into a low-rank basis per atlas tile ([`PaneBasis`], formats/prm.md §7) and fills
+/// in the clusters' energy and peak from the decoded panes.
 ///
 /// ```no_run
 /// # use prm_format::*;
@@ -355,7 +357,7 @@ pub fn own_temp_files(path: impl AsRef<Path>) -> Vec<PathBuf> {
 /// let entries = vec![Entry { position: [0.0; 3], normal: [0.0, 1.0, 0.0], cluster: 0 }];
 /// let clusters = vec![Cluster::new(0, 1, [0.0; 3], [0.0, 1.0, 0.0])];
 /// let mut w = ArchiveWriter::create("out.prm", Metadata::new("doc", "0"), &atlas, &entries, &clusters)?;
-/// w.add_pane_with(|_tile_x, _tile_y, tile| tile.fill([0.5, 0.5, 0.5]))?;
+/// w.add_pane(&vec![[0.5, 0.5, 0.5]; 128 * 128])?;
 /// w.finish()?;
 /// # Ok::<(), prm_format::Error>(())
 /// ```
@@ -380,15 +382,14 @@ pub struct ArchiveWriter {
     records: Vec<SectionRecord>,
     resolution: u32,
     tile_size: u32,
-    tiles_per_side: u32,
     /// Current end of written data.
     pos: u64,
-    panes_offset: u64,
-    tiles: Vec<TileRecord>,
+    /// The panes added so far, until they are compressed.
+    dense: DenseTiles,
+    /// The compressed panes, once every pane was added and compressed.
+    basis: Option<PaneBasis>,
     panes_done: usize,
     poisoned: bool,
-    /// Encodes the panes given to [`ArchiveWriter::add_pane`].
-    encoder: PaneEncoder,
 }
 
 impl ArchiveWriter {
@@ -408,9 +409,10 @@ impl ArchiveWriter {
     ///
     /// `metadata.texel_encoding` and `metadata.texel_relative_error_bound`
     /// are set by the writer, as are the `energy` and `peak` of every cluster
-    /// (computed from the pane data). Entries must be sorted by cluster and
+    /// (computed from the decoded panes). Entries must be sorted by cluster and
     /// the cluster ranges must tile the entry list in order. One pane per
-    /// cluster must then be added before [`finish`](Self::finish).
+    /// cluster must then be added before [`finish`](Self::finish). Options outside
+    /// their documented ranges are refused.
     pub fn create_with_options(
         path: impl AsRef<Path>,
         mut metadata: Metadata,
@@ -423,6 +425,7 @@ impl ArchiveWriter {
         metadata.texel_relative_error_bound = RGB9E5_MAX_RELATIVE_ERROR;
         metadata.validate().map_err(Error::InvalidInput)?;
         atlas.validate().map_err(Error::InvalidInput)?;
+        crate::basis::check_options(options.pane_tolerance, options.max_pane_rank)?;
         let mut clusters = clusters.to_vec();
         for c in &mut clusters {
             c.energy = [0.0; 3];
@@ -456,14 +459,7 @@ impl ArchiveWriter {
             file: Some(BufWriter::with_capacity(1 << 20, file)),
         };
 
-        let tiles_per_side = atlas.tiles_per_side();
-        let tile_count = clusters.len() * tiles_per_side as usize * tiles_per_side as usize;
-        let encoder = PaneEncoder::new(
-            atlas.resolution,
-            atlas.tile_size,
-            options.tile_filter,
-            options.zstd_level,
-        )?;
+        let dense = DenseTiles::new(atlas.resolution, atlas.tile_size, clusters.len());
         let mut w = ArchiveWriter {
             given,
             dest,
@@ -483,24 +479,16 @@ impl ArchiveWriter {
             records: Vec::new(),
             resolution: atlas.resolution,
             tile_size: atlas.tile_size,
-            tiles_per_side,
             pos: 0,
-            panes_offset: 0,
-            tiles: Vec::with_capacity(tile_count),
+            dense,
+            basis: None,
             panes_done: 0,
             poisoned: false,
-            encoder,
         };
         // Placeholder header, rewritten by `finish`.
         w.write_all(&[0u8; HEADER_SIZE])?;
         w.write_section(kind::ATLAS, &atlas.encode())?;
         w.write_section(kind::ENTRIES, &encode_entries(entries))?;
-        // The panes section starts here; its header and tile index are
-        // written by `finish`, tile data streams in after them.
-        w.panes_offset = w.pos;
-        w.pos += (PANES_HEADER_SIZE + tile_count * TILE_RECORD_SIZE) as u64;
-        let pos = w.pos;
-        w.file()?.seek(SeekFrom::Start(pos))?;
         Ok(w)
     }
 
@@ -534,8 +522,9 @@ impl ArchiveWriter {
         self.clusters.len() - self.panes_done
     }
 
-    /// The cluster table as it will be written: the energy and peak of every pane added so far
-    /// are filled in (of the decoded texels, as the spec prescribes), the rest still 0.
+    /// The cluster table as it will be written. The energy and peak of the panes (of their
+    /// decoded texels, as the spec prescribes) are known once the panes are compressed: filled in
+    /// after [`compress_panes`](Self::compress_panes), 0 before.
     pub fn clusters(&self) -> &[Cluster] {
         &self.clusters
     }
@@ -547,8 +536,7 @@ impl ArchiveWriter {
     }
 
     /// Records every entry's pane energy (RGB, in the entries' order; finite, ≥ 0), written as the
-    /// entry energy section of format 1.1 (formats/prm.md §5.1). An archive with it is 1.1, one
-    /// without stays 1.0.
+    /// entry energy section (formats/prm.md §5.1).
     pub fn set_entry_energy(&mut self, energy: Vec<[f32; 3]>) -> Result<()> {
         if energy.len() != self.entry_count {
             return Err(Error::InvalidInput(format!(
@@ -572,7 +560,7 @@ impl ArchiveWriter {
 
     /// Records the emitter groups (formats/prm.md §5.2): one per emissive material, each with
     /// an irradiance per entry (in the entries' order) and a direct irradiance per atlas texel
-    /// (row-major), all finite and non-negative. An archive with them is 1.2.
+    /// (row-major), all finite and non-negative.
     pub fn set_emitters(&mut self, groups: Vec<crate::EmitterGroup>) -> Result<()> {
         crate::emitters::validate(&groups, self.entry_count, self.resolution).map_err(Error::InvalidInput)?;
         if let Some(rays) = &self.probe_rays {
@@ -589,7 +577,7 @@ impl ArchiveWriter {
     }
 
     /// Records the sky's transfer at the atlas texels (formats/prm.md §5.3): `resolution²` texels
-    /// each, row-major, all finite. An archive with it is 1.3.
+    /// each, row-major, all finite.
     pub fn set_sky(&mut self, sky: crate::SkyTransfer) -> Result<()> {
         crate::sky::validate(&sky, self.resolution).map_err(Error::InvalidInput)?;
         self.sky = Some(sky);
@@ -597,8 +585,7 @@ impl ArchiveWriter {
     }
 
     /// Records the probes and every cluster's transfer to them (formats/prm.md §5.4): one
-    /// transfer per cluster of the table and probe, cluster by cluster, all finite. An archive
-    /// with them is 1.4.
+    /// transfer per cluster of the table and probe, cluster by cluster, all finite.
     pub fn set_probes(&mut self, probes: crate::Probes) -> Result<()> {
         crate::probes::validate(&probes, self.clusters.len()).map_err(Error::InvalidInput)?;
         if let Some(rays) = &self.probe_rays {
@@ -616,8 +603,7 @@ impl ArchiveWriter {
 
     /// Records where every probe's rays meet the scene (formats/prm.md §5.5), after
     /// [`ArchiveWriter::set_probes`] (and [`ArchiveWriter::set_emitters`] when gather points
-    /// name emitter groups): one ray set per probe, gather points on texels of this atlas. An
-    /// archive with them is 1.6.
+    /// name emitter groups): one ray set per probe, gather points on texels of this atlas.
     pub fn set_probe_rays(&mut self, rays: crate::ProbeRays) -> Result<()> {
         let probes = self.probes.as_ref().map_or(0, |p| p.len());
         if probes == 0 {
@@ -631,7 +617,7 @@ impl ArchiveWriter {
 
     /// Records where every exit point's near rays end (formats/prm.md §5.6), after
     /// [`ArchiveWriter::set_emitters`] when gather points name emitter groups: exits and gather
-    /// points on texels of this atlas. An archive with it is 1.7.
+    /// points on texels of this atlas.
     pub fn set_near_field(&mut self, near: crate::NearField) -> Result<()> {
         let groups = self.emitters.as_ref().map_or(0, |g| g.len());
         crate::near_field::validate(&near, self.resolution, groups).map_err(Error::InvalidInput)?;
@@ -639,7 +625,7 @@ impl ArchiveWriter {
         Ok(())
     }
 
-    /// Queues an extension section of a kind v1 does not define (not 0 and not
+    /// Queues an extension section of a kind the format does not define (not 0 and not
     /// one of [`kind`](crate::kind)'s); readers that do not know it skip it.
     pub fn add_custom_section(&mut self, kind: u32, data: Vec<u8>) -> Result<()> {
         if kind == 0 || crate::kind::name(kind).is_some() {
@@ -651,88 +637,45 @@ impl ArchiveWriter {
         Ok(())
     }
 
-    /// Adds the next pane, produced tile by tile.
-    ///
-    /// `fill(tile_x, tile_y, texels)` is called for every tile in row-major
-    /// tile order with a zeroed buffer of `tile_size²` RGB texels (row-major
-    /// within the tile) to fill: texel `(i, j)` of tile `(tile_x, tile_y)` is
-    /// atlas texel `(tile_x·tile_size + i, tile_y·tile_size + j)`.
-    pub fn add_pane_with<F>(&mut self, fill: F) -> Result<()>
-    where
-        F: FnMut(u32, u32, &mut [[f32; 3]]),
-    {
-        self.check_pane_wanted()?;
-        let pane = self.encoder.encode_with(fill)?;
-        self.add_encoded_pane(pane)
-    }
-
-    /// Adds the next pane from a full `resolution²` row-major RGB image.
+    /// Adds the next pane (in cluster order) from a full `resolution²` row-major RGB image. It is
+    /// held until the panes are compressed; channels are taken as [`PaneBasis::compress`] takes
+    /// them (NaN and negatives as 0, values above [`RGB9E5_MAX`](crate::RGB9E5_MAX) as that).
     pub fn add_pane(&mut self, texels: &[[f32; 3]]) -> Result<()> {
         self.check_pane_wanted()?;
-        let pane = self.encoder.encode(texels)?;
-        self.add_encoded_pane(pane)
-    }
-
-    /// An encoder for this archive's panes, to encode them on other threads
-    /// (module `encode`) and add them with [`ArchiveWriter::add_encoded_pane`].
-    pub fn pane_encoder(&self) -> Result<PaneEncoder> {
-        PaneEncoder::new(
-            self.resolution,
-            self.tile_size,
-            self.options.tile_filter,
-            self.options.zstd_level,
-        )
-    }
-
-    /// Adds the next pane, encoded by [`ArchiveWriter::pane_encoder`]'s encoder (or another of
-    /// the same atlas layout and options): the same bytes as [`ArchiveWriter::add_pane`].
-    pub fn add_encoded_pane(&mut self, pane: EncodedPane) -> Result<()> {
-        self.check_pane_wanted()?;
-        let per_side = self.tiles_per_side as usize;
-        if (pane.resolution, pane.tile_size) != (self.resolution, self.tile_size)
-            || pane.tiles.len() != per_side * per_side
-        {
-            return Err(Error::InvalidInput(format!(
-                "pane encoded for {}² texels in {}² tiles, the archive has {}² in {}²",
-                pane.resolution, pane.tile_size, self.resolution, self.tile_size
-            )));
-        }
-        // The header names one filter for every tile: a tile filtered otherwise would decode
-        // to other texels under valid checksums.
-        if (pane.filter, pane.zstd_level) != (self.options.tile_filter, self.options.zstd_level) {
-            return Err(Error::InvalidInput(format!(
-                "pane encoded with the {} filter at zstd level {}, the archive uses {} at {}",
-                pane.filter.name(),
-                pane.zstd_level,
-                self.options.tile_filter.name(),
-                self.options.zstd_level
-            )));
-        }
-        // Any failure below leaves a partial pane in the file.
-        self.poisoned = true;
-        for compressed in &pane.tiles {
-            let record = if compressed.is_empty() {
-                TileRecord::default()
-            } else {
-                let size = u32::try_from(compressed.len())
-                    .map_err(|_| Error::InvalidInput("compressed tile exceeds 4 GiB".into()))?;
-                let record = TileRecord {
-                    offset: self.pos - self.panes_offset,
-                    size,
-                    reserved: 0,
-                    checksum: checksum(compressed),
-                };
-                self.write_all(compressed)?;
-                record
-            };
-            self.tiles.push(record);
-        }
-        let cluster = &mut self.clusters[self.panes_done];
-        cluster.energy = pane.energy();
-        cluster.peak = pane.peak;
+        self.dense.set_pane(self.panes_done, texels)?;
         self.panes_done += 1;
-        self.poisoned = false;
         Ok(())
+    }
+
+    /// Compresses the panes, once all of them were added: the low-rank basis that
+    /// [`finish`](Self::finish) writes, whose decoded panes give the clusters' energy and peak
+    /// ([`clusters`](Self::clusters) has them from now on). For a caller that needs the stored
+    /// panes before the archive is finished, e.g. to measure them into the metadata; `finish`
+    /// compresses them itself otherwise. Compressing again returns the same basis.
+    pub fn compress_panes(&mut self) -> Result<&PaneBasis> {
+        self.check_usable()?;
+        if self.panes_done != self.clusters.len() {
+            return Err(Error::InvalidInput(format!(
+                "{} of {} panes were added",
+                self.panes_done,
+                self.clusters.len()
+            )));
+        }
+        let basis = match self.basis.take() {
+            Some(basis) => basis,
+            None => {
+                let (tolerance, max_rank) = (self.options.pane_tolerance, self.options.max_pane_rank);
+                let basis = PaneBasis::from_dense(&self.dense, tolerance, max_rank)?;
+                for (c, (energy, peak)) in self.clusters.iter_mut().zip(basis.energy_peak()) {
+                    c.energy = energy;
+                    c.peak = peak;
+                }
+                // The dense panes are not needed any more.
+                self.dense = DenseTiles::new(self.resolution, self.tile_size, 0);
+                basis
+            }
+        };
+        Ok(self.basis.insert(basis))
     }
 
     /// [`ArchiveWriter::check_usable`], and a pane is still to come.
@@ -747,20 +690,14 @@ impl ArchiveWriter {
         Ok(())
     }
 
-    /// Writes the remaining sections, the section table and the header,
-    /// fsyncs, and atomically renames the archive into place. Returns the
-    /// archive's size in bytes.
+    /// Compresses the panes (unless [`compress_panes`](Self::compress_panes) did), writes the
+    /// panes section and the remaining sections, the section table and the header, fsyncs, and
+    /// atomically renames the archive into place. Returns the archive's size in bytes.
     pub fn finish(mut self) -> Result<u64> {
-        self.check_usable()?;
-        if self.panes_done != self.clusters.len() {
-            return Err(Error::InvalidInput(format!(
-                "{} of {} panes were added",
-                self.panes_done,
-                self.clusters.len()
-            )));
-        }
+        let panes = self.compress_panes()?.encode();
         self.poisoned = true;
-        self.write_panes_index()?;
+        self.write_section(kind::PANES, &panes)?;
+        drop(panes);
         let clusters = encode_clusters(&self.clusters);
         self.write_section(kind::CLUSTERS, &clusters)?;
         self.metadata.validate().map_err(Error::InvalidInput)?;
@@ -769,106 +706,42 @@ impl ArchiveWriter {
             return Err(Error::InvalidInput("metadata JSON exceeds 16 MiB".into()));
         }
         self.write_section(kind::METADATA, &json)?;
-        let minor = self.write_optional_sections()?;
+        self.write_optional_sections()?;
         for (k, data) in std::mem::take(&mut self.custom) {
             self.write_section(k, &data)?;
         }
-        let file_length = self.write_table_and_header(minor)?;
+        let file_length = self.write_table_and_header()?;
         self.rename_into_place()?;
         Ok(file_length)
     }
 
-    /// Writes the panes section's header and tile index into the space reserved for them and
-    /// records the section, hashed whole.
-    fn write_panes_index(&mut self) -> Result<()> {
-        let panes_end = self.pos;
-        let mut head = Vec::with_capacity(PANES_HEADER_SIZE + self.tiles.len() * TILE_RECORD_SIZE);
-        head.put_u64(0); // index checksum, patched below
-        head.put_u32(self.clusters.len() as u32);
-        head.put_u32(self.tiles_per_side);
-        head.put_u32(TEXEL_FORMAT_RGB9E5);
-        head.put_u32(self.options.tile_filter.code());
-        head.put_u64(0);
-        for t in &self.tiles {
-            t.encode_into(&mut head);
+    /// Writes the optional sections that were set.
+    fn write_optional_sections(&mut self) -> Result<()> {
+        if let Some(e) = self.entry_energy.take() {
+            self.write_section(kind::ENTRY_ENERGY, &encode_entry_energy(&e))?;
         }
-        let index_sum = checksum(&head[8..]);
-        head[..8].copy_from_slice(&index_sum.to_le_bytes());
-        let panes_offset = self.panes_offset;
-        let file = self.file()?;
-        file.seek(SeekFrom::Start(panes_offset))?;
-        file.write_all(&head)?;
-        file.flush()?;
-        let inner = file.get_mut();
-        inner.seek(SeekFrom::Start(panes_offset))?;
-        let mut hasher = Xxh3Default::new();
-        let mut remaining = panes_end - panes_offset;
-        let mut buf = vec![0u8; 1 << 20];
-        while remaining > 0 {
-            let n = remaining.min(buf.len() as u64) as usize;
-            inner.read_exact(&mut buf[..n])?;
-            hasher.update(&buf[..n]);
-            remaining -= n as u64;
-        }
-        inner.seek(SeekFrom::Start(panes_end))?;
-        self.records.push(SectionRecord {
-            kind: kind::PANES,
-            compression: compression::NONE,
-            offset: panes_offset,
-            stored_size: panes_end - panes_offset,
-            raw_size: panes_end - panes_offset,
-            checksum: hasher.digest(),
-            reserved: 0,
-        });
-        Ok(())
-    }
-
-    /// Writes the optional sections that were set; returns the minor version they make the
-    /// archive.
-    fn write_optional_sections(&mut self) -> Result<u16> {
-        let mut minor = match self.entry_energy.take() {
-            Some(e) => {
-                self.write_section(kind::ENTRY_ENERGY, &encode_entry_energy(&e))?;
-                1
-            }
-            None => 0,
-        };
         if let Some(groups) = self.emitters.take() {
             let raw = crate::emitters::encode(&groups, self.entry_count, self.resolution);
             self.write_section(kind::EMITTERS, &raw)?;
-            minor = 2;
         }
         if let Some(sky) = self.sky.take() {
             self.write_section(kind::SKY, &crate::sky::encode(&sky, self.resolution))?;
-            minor = 3;
         }
         if let Some(probes) = self.probes.take() {
             self.write_section(kind::PROBES, &crate::probes::encode(&probes))?;
-            minor = 4;
-        }
-        if self.metadata.accuracy.is_some() {
-            minor = 5;
         }
         if let Some(rays) = self.probe_rays.take() {
             self.write_section(kind::PROBE_RAYS, &crate::probe_rays::encode(&rays, self.resolution))?;
-            minor = 6;
         }
         if let Some(near) = self.near_field.take() {
             self.write_section(kind::NEAR_FIELD, &crate::near_field::encode(&near, self.resolution))?;
-            minor = if near.complement {
-                9
-            } else if near.indirect_disk > 0.0 {
-                8
-            } else {
-                7
-            };
         }
-        Ok(minor)
+        Ok(())
     }
 
     /// Writes the section table, then the header over its placeholder, and fsyncs the file;
     /// returns the archive's size in bytes.
-    fn write_table_and_header(&mut self, minor: u16) -> Result<u64> {
+    fn write_table_and_header(&mut self) -> Result<u64> {
         let mut table = Vec::with_capacity(self.records.len() * crate::layout::SECTION_RECORD_SIZE);
         for r in &self.records {
             r.encode_into(&mut table);
@@ -877,7 +750,7 @@ impl ArchiveWriter {
         self.write_all(&table)?;
         let header = Header {
             major: VERSION_MAJOR,
-            minor,
+            minor: VERSION_MINOR,
             section_count: self.records.len() as u32,
             table_offset,
             file_length: self.pos,

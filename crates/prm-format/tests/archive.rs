@@ -74,11 +74,12 @@ impl Rng {
     }
 }
 
-/// Nothing compressed or filtered: sections and tiles as they are.
+/// Nothing compressed: every section as it is.
 const UNCOMPRESSED: WriterOptions = WriterOptions {
     zstd_level: 1,
     compress_sections: false,
-    tile_filter: TileFilter::None,
+    pane_tolerance: PANE_TOLERANCE,
+    max_pane_rank: MAX_PANE_RANK,
 };
 
 /// A fresh, empty directory under cargo's per-target temp dir.
@@ -222,9 +223,9 @@ fn written_with(name: &str, s: &Scene, set: impl FnOnce(&mut ArchiveWriter)) -> 
 }
 
 /// Writes `s` with one optional section, `value`, that `set` puts in, after `set` refused a copy
-/// of it that `spoil` made unfit for the archive; checks that the archive is 1.`minor` and that
-/// `get` reads `value` back from it, and that an archive without the section has none. Returns
-/// the archive's bytes.
+/// of it that `spoil` made unfit for the archive; checks that the archive is 2.0 and that `get`
+/// reads `value` back from it, and that an archive without the section has none. Returns the
+/// archive's bytes.
 fn optional_section_round_trip<T: Clone + PartialEq + std::fmt::Debug>(
     name: &str,
     s: &Scene,
@@ -232,7 +233,6 @@ fn optional_section_round_trip<T: Clone + PartialEq + std::fmt::Debug>(
     spoil: impl FnOnce(&mut T),
     set: impl Fn(&mut ArchiveWriter, T) -> Result<()>,
     get: impl for<'a, 'b> Fn(&'a Archive<std::io::Cursor<&'b [u8]>>) -> Option<&'a T>,
-    minor: u16,
 ) -> Vec<u8> {
     let bytes = written_with(name, s, |w| {
         let mut wrong = value.clone();
@@ -241,7 +241,7 @@ fn optional_section_round_trip<T: Clone + PartialEq + std::fmt::Debug>(
         set(w, value.clone()).unwrap();
     });
     let a = Archive::from_bytes(&bytes).unwrap();
-    assert_eq!(a.info().minor, minor);
+    assert_eq!((a.info().major, a.info().minor), (2, 0));
     assert_eq!(get(&a), Some(value));
     let (plain, _) = small_archive(&format!("{name}-none"), WriterOptions::default());
     assert!(get(&Archive::from_bytes(&plain).unwrap()).is_none());
@@ -272,13 +272,13 @@ struct Contents {
     atlas: AtlasSection,
     entries: Vec<Entry>,
     clusters: Vec<Cluster>,
-    panes: Vec<Vec<u32>>,
+    panes: Vec<Vec<[f32; 3]>>,
 }
 
 fn read_all(bytes: &[u8]) -> Result<Contents> {
-    let mut a = Archive::from_bytes(bytes)?;
+    let a = Archive::from_bytes(bytes)?;
     let panes = (0..a.pane_count())
-        .map(|p| a.read_pane_rgb9e5(p))
+        .map(|p| a.read_pane(p))
         .collect::<Result<Vec<_>>>()?;
     Ok(Contents {
         metadata: a.metadata().clone(),
@@ -332,37 +332,11 @@ fn sections(b: &[u8]) -> Vec<Sec> {
         .collect()
 }
 
-/// Recomputes every checksum after a mutation (tiles, tile index, sections,
-/// table, header), so that the mutation reaches structural validation.
-/// Robust against any garbage: skips whatever does not parse.
+/// Recomputes every checksum after a mutation (sections, table, header), so
+/// that the mutation reaches structural validation. Robust against any
+/// garbage: skips whatever does not parse.
 fn resign(b: &mut [u8]) {
     let secs = sections(b);
-    if let Some(p) = secs.iter().find(|s| s.kind == kind::PANES) {
-        let at = |k: usize| p.offset.saturating_add(k);
-        if let (Some(pc), Some(tps)) = (u32_at(b, at(8)), u32_at(b, at(12))) {
-            let count = (pc as u64)
-                .saturating_mul(tps as u64)
-                .saturating_mul(tps as u64)
-                .min(1 << 20) as usize;
-            for i in 0..count {
-                let r = at(32 + i * 24);
-                let (Some(off), Some(size)) = (u64_at(b, r), u32_at(b, r.saturating_add(8))) else {
-                    break;
-                };
-                let start = p.offset.saturating_add(off as usize);
-                if size > 0 {
-                    if let Some(data) = b.get(start..start.saturating_add(size as usize)) {
-                        let sum = checksum(data);
-                        put_u64(b, r + 16, sum);
-                    }
-                }
-            }
-            if let Some(region) = b.get(at(8)..at(32 + count * 24)) {
-                let sum = checksum(region);
-                put_u64(b, p.offset, sum);
-            }
-        }
-    }
     let table = u64_at(b, 16).unwrap_or(0) as usize;
     for (i, s) in secs.iter().enumerate() {
         if let Some(data) = b.get(s.offset..s.offset.saturating_add(s.size)) {
@@ -383,6 +357,62 @@ fn resign(b: &mut [u8]) {
 
 // ---------------------------------------------------------------- tests
 
+/// Per tile of the atlas, `‖M − M̂‖_F / ‖M‖_F` over every pane and channel: `panes` the dense
+/// panes, `decoded` what the archive gives back (0 for a tile where `panes` are all zero).
+fn tile_errors(panes: &[Vec<[f32; 3]>], decoded: &[Vec<[f32; 3]>], res: usize, t: usize) -> Vec<f64> {
+    let s = res / t;
+    (0..s * s)
+        .map(|tile| {
+            let (x0, y0) = (tile % s * t, tile / s * t);
+            let (mut diff, mut norm) = (0f64, 0f64);
+            for (p, d) in panes.iter().zip(decoded) {
+                for j in 0..t {
+                    for i in 0..t {
+                        let k = (y0 + j) * res + x0 + i;
+                        for ch in 0..3 {
+                            diff += (f64::from(p[k][ch]) - f64::from(d[k][ch])).powi(2);
+                            norm += f64::from(p[k][ch]).powi(2);
+                        }
+                    }
+                }
+            }
+            if norm == 0.0 {
+                assert_eq!(diff, 0.0, "tile {tile} of zeros decodes to zeros");
+                0.0
+            } else {
+                (diff / norm).sqrt()
+            }
+        })
+        .collect()
+}
+
+/// Whether a tile's relative error `e` is what the format promises for tolerance `eps`: the
+/// truncation's `ε`, with the `f16` rounding of the basis (relative `2⁻¹¹` at most per value)
+/// added in quadrature.
+fn within_tolerance(e: f64, eps: f32) -> bool {
+    e <= (f64::from(eps).powi(2) + 2f64.powi(-20)).sqrt()
+}
+
+/// Energy and peak of a decoded pane, recomputed here from the spec's words (§6): binary64 sums
+/// over the tiles in tile order, texels row-major within a tile, rounded to binary32.
+fn spec_energy_peak(pane: &[[f32; 3]], res: usize, t: usize) -> ([f32; 3], [f32; 3]) {
+    let mut energy = [0f64; 3];
+    let mut peak = [0f32; 3];
+    for tile in 0..(res / t) * (res / t) {
+        let (x0, y0) = (tile % (res / t) * t, tile / (res / t) * t);
+        for j in 0..t {
+            for i in 0..t {
+                let v = pane[(y0 + j) * res + x0 + i];
+                for ch in 0..3 {
+                    energy[ch] += f64::from(v[ch]);
+                    peak[ch] = peak[ch].max(v[ch]);
+                }
+            }
+        }
+    }
+    (energy.map(|e| e as f32), peak)
+}
+
 #[test]
 fn round_trip() {
     let dir = test_dir("round-trip");
@@ -394,12 +424,25 @@ fn round_trip() {
 
     let mut a = Archive::open(&path).unwrap();
     let info = a.info().clone();
-    assert_eq!((info.major, info.minor), (1, 0));
-    assert_eq!(info.pane_count, 5);
-    assert_eq!(info.tiles_per_pane, 16);
-    assert_eq!(a.tile_filter(), TileFilter::DeltaShuffle);
-    // pane 0 is all zero, and the left quarter (one tile column) of the others
-    assert_eq!(info.stored_tiles, 4 * 12);
+    assert_eq!((info.major, info.minor), (2, 0));
+    assert_eq!((info.pane_count, info.tiles), (5, 16));
+    // Pane 0 is all zero, and so is the left quarter (one tile column) of the others.
+    let ranks = a.pane_basis().ranks().to_vec();
+    for (t, &r) in ranks.iter().enumerate() {
+        assert_eq!(r == 0, t % 4 == 0, "tile {t}: rank {r} ({ranks:?})");
+        assert!(r <= 15, "at most 3P");
+    }
+    assert_eq!(info.max_rank, *ranks.iter().max().unwrap());
+    assert_eq!(info.rank_sum, ranks.iter().map(|&r| u64::from(r)).sum::<u64>());
+    assert_eq!(info.basis_bytes, 2 * 64 * info.rank_sum);
+    assert_eq!(info.coefficient_bytes, 12 * 5 * info.rank_sum);
+    assert_eq!(info.pane_texel_bytes, 5 * 32 * 32 * 4);
+    let panes_section = info.sections.iter().find(|x| x.name == "panes").unwrap();
+    assert_eq!(panes_section.raw_size, a.pane_basis().byte_size());
+    assert_eq!(
+        panes_section.raw_size,
+        16 + 4 * 16 + info.basis_bytes + info.coefficient_bytes
+    );
     let names: Vec<&str> = info.sections.iter().map(|s| s.name.as_str()).collect();
     for n in ["metadata", "atlas", "entries", "clusters", "panes"] {
         assert!(names.contains(&n), "{names:?}");
@@ -413,123 +456,65 @@ fn round_trip() {
     assert_eq!(a.entries(), &s.entries[..]);
     assert_eq!(a.clusters().len(), s.clusters.len());
 
-    for (p, pane) in s.panes.iter().enumerate() {
-        let got = a.read_pane(p).unwrap();
-        let raw = a.read_pane_rgb9e5(p).unwrap();
-        let mut energy = [0f64; 3];
-        let mut peak = [0f32; 3];
-        for (i, (g, want)) in got.iter().zip(pane).enumerate() {
-            assert_eq!(*g, decode_rgb9e5(encode_rgb9e5(*want)), "pane {p} texel {i}");
-            assert_eq!(raw[i], encode_rgb9e5(*want));
-            for c in 0..3 {
-                energy[c] += f64::from(g[c]);
-                peak[c] = peak[c].max(g[c]);
-                let m = want[0].max(want[1]).max(want[2]);
-                assert!((g[c] - want[c]).abs() <= (m / 511.5).max(RGB9E5_MIN_ABS_ERROR));
-            }
-        }
+    let decoded: Vec<Vec<[f32; 3]>> = (0..5).map(|p| a.read_pane(p).unwrap()).collect();
+    for (t, e) in tile_errors(&s.panes, &decoded, 32, 8).into_iter().enumerate() {
+        assert!(within_tolerance(e, PANE_TOLERANCE), "tile {t}: relative error {e}");
+    }
+    for (p, pane) in decoded.iter().enumerate() {
+        let rgb9e5 = a.read_pane_rgb9e5(p).unwrap();
+        assert_eq!(rgb9e5, pane.iter().map(|&t| encode_rgb9e5(t)).collect::<Vec<_>>());
         let cl = &a.clusters()[p];
-        assert_eq!(cl.peak, peak);
-        for c in 0..3 {
-            let rel = (f64::from(cl.energy[c]) - energy[c]).abs() / energy[c].max(1e-30);
-            assert!(rel < 1e-6, "energy {:?} vs {energy:?}", cl.energy);
-        }
+        let (energy, peak) = spec_energy_peak(pane, 32, 8);
+        assert_eq!(cl.energy.map(f32::to_bits), energy.map(f32::to_bits), "pane {p}");
+        assert_eq!(cl.peak.map(f32::to_bits), peak.map(f32::to_bits), "pane {p}");
         assert_eq!((cl.first, cl.count), (s.clusters[p].first, s.clusters[p].count));
         assert_eq!(cl.centroid, s.clusters[p].centroid);
+        assert!(pane.iter().flatten().all(|v| *v >= 0.0 && v.is_sign_positive()));
     }
     assert_eq!(a.clusters()[0].energy, [0.0; 3]);
-
-    // tile access and out-of-range requests
-    let t = a.read_tile_rgb9e5(1, 3, 3).unwrap();
-    assert_eq!(t.len(), 64);
-    assert!(a.tile_is_stored(1, 3, 3).unwrap());
-    assert!(!a.tile_is_stored(1, 0, 0).unwrap());
-    assert!(a.read_tile_rgb9e5(1, 0, 0).unwrap().iter().all(|&x| x == 0));
     assert!(matches!(a.read_pane(5), Err(Error::InvalidInput(_))));
-    assert!(a.read_tile_rgb9e5(0, 4, 0).is_err());
+    assert!(matches!(a.read_pane_rgb9e5(5), Err(Error::InvalidInput(_))));
 
     let report = a.verify().unwrap();
     assert_eq!(report.panes, 5);
     assert_eq!(report.sections, 5);
-    assert_eq!(report.stored_tiles + report.omitted_tiles, 80);
+    assert_eq!(report.bytes_hashed + 64 + 5 * 48, size);
 
     // from_bytes agrees with open
     let bytes = std::fs::read(&path).unwrap();
-    assert_eq!(read_all(&bytes).unwrap().panes[3], a.read_pane_rgb9e5(3).unwrap());
+    assert_eq!(read_all(&bytes).unwrap().panes[3], a.read_pane(3).unwrap());
 }
 
+/// Writing the same input twice gives the same bytes, whether the panes are compressed by
+/// `finish` or before it by `compress_panes`, which fills in the cluster table as written.
 #[test]
-fn tile_callback_and_full_pane_agree() {
-    let s = scene(16, 4, 2, 3);
-    let (_, a_path, b_path, mut w) = written_and_started("tile-callback", &s, "full.prm", "tiles.prm");
-    assert_eq!(w.panes_remaining(), 2);
+fn the_same_input_writes_the_same_bytes() {
+    let s = scene(32, 8, 6, 3);
+    let (_, a_path, b_path, mut w) = written_and_started("same-bytes", &s, "first.prm", "second.prm");
+    assert_eq!(w.panes_remaining(), 6);
+    assert!(w.compress_panes().is_err(), "panes are missing");
     for pane in &s.panes {
-        w.add_pane_with(|tx, ty, tile| {
-            for j in 0..4 {
-                for i in 0..4 {
-                    let (x, y) = (tx as usize * 4 + i, ty as usize * 4 + j);
-                    tile[j * 4 + i] = pane[y * 16 + x];
-                }
-            }
-        })
-        .unwrap();
+        w.add_pane(pane).unwrap();
     }
     assert!(w.add_pane(&s.panes[0]).is_err(), "one pane too many");
+    assert!(w.clusters().iter().all(|c| c.energy == [0.0; 3]), "not compressed yet");
+    let ranks = w.compress_panes().unwrap().ranks().to_vec();
+    let clusters = w.clusters().to_vec();
+    assert!(clusters[1..].iter().all(|c| c.energy[0] > 0.0 && c.peak[0] > 0.0));
+    assert_eq!(w.compress_panes().unwrap().ranks(), &ranks[..]);
     w.metadata_mut().timings.insert("compress".into(), 0.125);
     w.finish().unwrap();
-    let a = read_all(&std::fs::read(&a_path).unwrap()).unwrap();
-    let b = read_all(&std::fs::read(&b_path).unwrap()).unwrap();
-    assert_eq!(a.panes, b.panes);
-    assert_eq!(a.clusters, b.clusters);
-    assert_eq!(b.metadata.timings["compress"], 0.125);
-}
-
-/// Panes encoded on other threads and appended in order give the same bytes as `add_pane`; a
-/// pane encoded for another layout is refused and leaves the writer usable.
-#[test]
-fn panes_encoded_apart_write_the_same_bytes() {
-    let s = scene(16, 4, 3, 5);
-    let (dir, a_path, b_path, mut w) = written_and_started("encoded-apart", &s, "direct.prm", "apart.prm");
-    let encoder = std::sync::Mutex::new(w.pane_encoder().unwrap());
-    let encoded: Vec<_> = std::thread::scope(|scope| {
-        let jobs: Vec<_> = s
-            .panes
-            .iter()
-            .map(|p| scope.spawn(|| encoder.lock().unwrap().encode(p).unwrap()))
-            .collect();
-        jobs.into_iter().map(|j| j.join().unwrap()).collect()
-    });
-    let other = scene(32, 4, 1, 5);
-    let mut wrong = start_writer(&dir.join("other.prm"), &other)
-        .unwrap()
-        .pane_encoder()
-        .unwrap();
-    let err = w.add_encoded_pane(wrong.encode(&other.panes[0]).unwrap()).unwrap_err();
-    assert!(err.to_string().contains("32²"), "{err}");
-    assert!(
-        matches!(wrong.encode(&s.panes[0]), Err(Error::InvalidInput(_))),
-        "wrong size"
-    );
-    let unfiltered = WriterOptions {
-        tile_filter: TileFilter::None,
-        ..WriterOptions::default()
-    };
-    let mut other_filter = start_writer_with(&dir.join("unfiltered.prm"), &s, unfiltered)
-        .unwrap()
-        .pane_encoder()
-        .unwrap();
-    let err = w
-        .add_encoded_pane(other_filter.encode(&s.panes[0]).unwrap())
-        .unwrap_err();
-    assert!(err.to_string().contains("filter"), "{err}");
-    for e in encoded {
-        let energy = e.energy();
-        w.add_encoded_pane(e).unwrap();
-        let done = w.clusters().len() - w.panes_remaining();
-        assert_eq!(w.clusters()[done - 1].energy, energy);
-    }
-    w.finish().unwrap();
-    assert_eq!(std::fs::read(&a_path).unwrap(), std::fs::read(&b_path).unwrap());
+    let a = std::fs::read(&a_path).unwrap();
+    let b = std::fs::read(&b_path).unwrap();
+    let (ra, rb) = (read_all(&a).unwrap(), read_all(&b).unwrap());
+    assert_eq!(ra.panes, rb.panes);
+    assert_eq!(rb.clusters, clusters);
+    assert_eq!(ra.clusters, clusters);
+    assert_eq!(rb.metadata.timings["compress"], 0.125);
+    // Without the extra timing, byte for byte.
+    let third = a_path.with_file_name("third.prm");
+    write_scene(&third, &s, WriterOptions::default());
+    assert_eq!(std::fs::read(&third).unwrap(), a);
 }
 
 #[test]
@@ -538,7 +523,6 @@ fn uncompressed_sections_round_trip() {
     let c = read_all(&bytes).unwrap();
     assert_eq!(c.entries, s.entries);
     let a = Archive::from_bytes(&bytes).unwrap();
-    assert_eq!(a.tile_filter(), TileFilter::None);
     for sec in &a.info().sections {
         assert_eq!(sec.compression, compression::NONE, "{}", sec.name);
     }
@@ -644,46 +628,41 @@ fn unknown_sections_are_skipped() {
     );
 }
 
-/// An `accuracy` key means the bake's estimate only from 1.5 on (formats/prm.md §3.1): before,
-/// whatever it holds is ignored; from 1.5 a malformed one is corrupt metadata.
+/// The metadata's `accuracy` key is the bake's estimate (formats/prm.md §3.1): a malformed one
+/// is corrupt metadata.
 #[test]
-fn the_accuracy_key_is_read_only_from_1_5() {
+fn a_malformed_accuracy_key_is_refused() {
     let (bytes, _) = small_archive("accuracy-key", WriterOptions::default());
     let a = Archive::from_bytes(&bytes).unwrap();
-    assert!(a.info().minor < 5 && a.metadata().accuracy.is_none());
+    assert!(a.metadata().accuracy.is_none());
     let mut json = serde_json::to_value(a.metadata()).unwrap();
     json["accuracy"] = serde_json::json!("an extension of some other writer");
     let raw = serde_json::to_vec(&json).unwrap();
-    let older = replace_section(&bytes, kind::METADATA, &raw, compression::NONE, raw.len() as u64);
-    let a = Archive::from_bytes(&older).unwrap();
-    assert_eq!(a.metadata().accuracy, None);
-    let mut newer = older.clone();
-    put_u16(&mut newer, 10, 5);
-    resign(&mut newer);
-    let err = Archive::from_bytes(&newer).err().unwrap();
+    let bad = replace_section(&bytes, kind::METADATA, &raw, compression::NONE, raw.len() as u64);
+    let err = Archive::from_bytes(&bad).err().unwrap();
     assert!(matches!(err, Error::Inconsistent { .. }), "{err}");
     assert!(err.to_string().to_lowercase().contains("accuracy"), "{err}");
 }
 
 #[test]
-fn newer_major_is_refused_newer_minor_accepted() {
+fn other_majors_are_refused_later_minors_accepted() {
     let (bytes, _) = small_archive("versions", WriterOptions::default());
     let mut newer = bytes.clone();
-    put_u16(&mut newer, 8, 2);
+    put_u16(&mut newer, 8, 3);
     put_u16(&mut newer, 10, 3);
     resign(&mut newer);
     let err = Archive::from_bytes(&newer).err().unwrap();
-    assert!(matches!(err, Error::UnsupportedVersion { major: 2, minor: 3 }), "{err}");
-    assert!(err.to_string().contains("2.3"), "{err}");
+    assert!(matches!(err, Error::UnsupportedVersion { major: 3, minor: 3 }), "{err}");
+    assert!(err.to_string().contains("3.3"), "{err}");
 
-    // A later minor than this reader knows (1.1) may use reserved fields; it ignores them.
+    // A later minor than this reader knows (2.1) may use reserved fields; it ignores them.
     let mut minor = bytes.clone();
     put_u16(&mut minor, 10, VERSION_MINOR + 1);
     put_u64(&mut minor, 32, 0xdead_beef);
     resign(&mut minor);
     let a = Archive::from_bytes(&minor).unwrap();
-    assert_eq!((a.info().major, a.info().minor), (1, VERSION_MINOR + 1));
-    // ... but in a 1.0 file they must be zero.
+    assert_eq!((a.info().major, a.info().minor), (2, VERSION_MINOR + 1));
+    // ... but in a 2.0 file they must be zero.
     let mut strict = bytes.clone();
     put_u64(&mut strict, 32, 0xdead_beef);
     resign(&mut strict);
@@ -696,6 +675,39 @@ fn newer_major_is_refused_newer_minor_accepted() {
         Archive::from_bytes(b"PK\x03\x04 not an archive"),
         Err(Error::BadMagic)
     ));
+}
+
+/// A format 1 archive is refused, before anything else of it is read, with a message that says
+/// what it is and that the scene must be baked again.
+#[test]
+fn format_1_archives_are_refused_with_the_re_bake_message() {
+    let (bytes, _) = small_archive("format-1", WriterOptions::default());
+    for minor in [0u16, 9] {
+        let mut old = bytes.clone();
+        put_u16(&mut old, 8, 1);
+        put_u16(&mut old, 10, minor);
+        resign(&mut old);
+        let err = Archive::from_bytes(&old).err().unwrap();
+        assert!(
+            matches!(err, Error::Rebake { major: 1, minor: m } if m == minor),
+            "{err}"
+        );
+        let msg = err.to_string();
+        assert!(msg.contains(&format!("format 1.{minor}")), "{msg}");
+        assert!(msg.contains("re-bake") && msg.contains("prm-bake"), "{msg}");
+        // Even with a header checksum of another layout: the version comes first.
+        old[56] ^= 0xff;
+        assert!(matches!(Archive::from_bytes(&old), Err(Error::Rebake { .. })));
+    }
+    // Through a file, and in an anyhow chain, the same sentence.
+    let dir = test_dir("format-1-file");
+    let mut old = bytes.clone();
+    put_u16(&mut old, 8, 1);
+    resign(&mut old);
+    std::fs::write(dir.join("old.prm"), &old).unwrap();
+    let err = Archive::open(dir.join("old.prm")).err().unwrap();
+    let chain = format!("{:#}", anyhow::Error::from(err).context("cannot open old.prm"));
+    assert!(chain.contains("format 1.0") && chain.contains("re-bake"), "{chain}");
 }
 
 #[test]
@@ -730,10 +742,11 @@ fn atomic_write_leaves_old_archive_untouched() {
     assert!(w.finish().is_err());
     untouched();
 
-    // 4. the tile producer panics mid-pane
+    // 4. the pane producer panics after a pane
     let r = std::panic::catch_unwind(|| {
         let mut w = start_writer(&path, &other).unwrap();
-        w.add_pane_with(|tx, _, _| assert!(tx < 1, "producer failed")).unwrap();
+        w.add_pane(&other.panes[0]).unwrap();
+        panic!("producer failed");
     });
     assert!(r.is_err());
     untouched();
@@ -860,25 +873,35 @@ fn hostile_sizes_are_rejected_before_allocation() {
 #[test]
 fn python_reader_agrees_with_rust() {
     let dir = test_dir("python");
-    for (name, filter) in [("shuffled", TileFilter::DeltaShuffle), ("plain", TileFilter::None)] {
-        if !python_reader_check(&dir.join(format!("{name}.prm")), filter) {
+    for (name, options) in [("zstd", WriterOptions::default()), ("plain", UNCOMPRESSED)] {
+        if !python_reader_check(&dir.join(format!("{name}.prm")), options) {
             return;
         }
     }
-    // An archive with none of the optional sections (1.0) reads too.
-    let (bytes, _) = small_archive("python-plain", WriterOptions::default());
-    let path = dir.join("small-1.0.prm");
-    std::fs::write(&path, bytes).unwrap();
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../formats/read_prm.py");
+    // An archive with none of the optional sections reads too.
+    let (bytes, _) = small_archive("python-plain", WriterOptions::default());
+    let path = dir.join("small.prm");
+    std::fs::write(&path, &bytes).unwrap();
     let out = Command::new("python3").arg(&script).arg(&path).output().unwrap();
     assert!(
         out.status.success(),
-        "read_prm.py failed on a 1.0 archive: {}",
+        "read_prm.py failed on an archive without optional sections: {}",
         String::from_utf8_lossy(&out.stderr)
     );
     let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-    assert_eq!(j["version"], "1.0");
+    assert_eq!(j["version"], "2.0");
     assert!(j["near_field"].is_null() && j["probe_rays"].is_null());
+    // A format 1 archive is refused with the re-bake message.
+    let mut old = bytes.clone();
+    put_u16(&mut old, 8, 1);
+    put_u16(&mut old, 10, 9);
+    resign(&mut old);
+    std::fs::write(&path, &old).unwrap();
+    let out = Command::new("python3").arg(&script).arg(&path).output().unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("1.9") && err.contains("re-bake"), "{err}");
 }
 
 /// Writes an archive, reads it with `formats/read_prm.py` and compares;
@@ -888,14 +911,10 @@ fn json_list<T>(v: &serde_json::Value, item: impl FnMut(&serde_json::Value) -> T
     v.as_array().unwrap().iter().map(item).collect()
 }
 
-fn python_reader_check(path: &Path, filter: TileFilter) -> bool {
+fn python_reader_check(path: &Path, opts: WriterOptions) -> bool {
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../formats/read_prm.py");
     let dir = path.parent().unwrap();
     let s = scene(16, 8, 4, 21);
-    let opts = WriterOptions {
-        tile_filter: filter,
-        ..WriterOptions::default()
-    };
     let mut metadata = s.metadata.clone();
     let accuracy = prm_format::Accuracy {
         exit_points: 1024,
@@ -956,8 +975,8 @@ fn python_reader_check(path: &Path, filter: TileFilter) -> bool {
         String::from_utf8_lossy(&out.stderr)
     );
     let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-    let mut a = Archive::open(path).unwrap();
-    assert_eq!(j["version"], "1.9");
+    let a = Archive::open(path).unwrap();
+    assert_eq!(j["version"], "2.0");
     assert_eq!(j["checksums_verified"], true);
     let ja = &j["accuracy"];
     assert_eq!(ja["exit_points"], 1024);
@@ -976,7 +995,12 @@ fn python_reader_check(path: &Path, filter: TileFilter) -> bool {
         assert_eq!(l[k], v, "{k}");
     }
     assert_eq!(Archive::open(path).unwrap().metadata().accuracy, Some(accuracy));
-    assert_eq!(j["tile_filter"], filter.code());
+    let jb = &j["panes"];
+    let ranks: Vec<u32> = json_list(&jb["ranks"], |v| v.as_u64().unwrap() as u32);
+    assert_eq!(ranks, a.pane_basis().ranks());
+    assert_eq!(jb["max_rank"], a.info().max_rank);
+    assert_eq!(jb["basis_bytes"], a.info().basis_bytes);
+    assert_eq!(jb["coefficient_bytes"], a.info().coefficient_bytes);
     assert_eq!(j["resolution"], 16);
     assert_eq!(j["tile_size"], 8);
     assert_eq!(j["covered_texels"], a.atlas().covered_texels());
@@ -1061,7 +1085,6 @@ fn python_reader_check(path: &Path, filter: TileFilter) -> bool {
     };
     assert_eq!(a.near_field(), Some(&back));
     assert_eq!(a.near_field(), Some(&near));
-    assert_eq!(a.info().minor, 9);
     assert_eq!(json_list(&j["entry_energy"], f3), energy);
     assert_eq!(
         j["metadata"]["scene_fingerprint"],
@@ -1088,7 +1111,7 @@ fn python_reader_check(path: &Path, filter: TileFilter) -> bool {
     let texels = j["pane"]["texels"].as_array().unwrap();
     assert_eq!(texels.len(), pane.len());
     for (jt, t) in texels.iter().zip(&pane) {
-        assert_eq!(v3(jt), *t);
+        assert_eq!(v3(jt), *t, "the spec pins every decoded value's rounding");
     }
     // The spec pins the summation order, so Python's energy is bit-identical.
     assert_eq!(v3(&j["pane"]["energy"]), a.clusters()[2].energy);
@@ -1105,15 +1128,13 @@ fn python_reader_check(path: &Path, filter: TileFilter) -> bool {
     true
 }
 
-/// Size and accuracy on plausible data: 256 panes of 256×256 texels.
-/// Run with `cargo test -p prm-format --release -- --ignored --nocapture measure`.
+/// Compression time, size and accuracy at the bundled Cornell box's size: 512 panes of 256²
+/// texels in 64² tiles, synthetic smooth light. Run with
+/// `cargo test -p prm-format --release --test archive -- --ignored --nocapture cornell`.
 #[test]
 #[ignore]
-fn measure_256_panes_256x256() {
-    let res = 256u32;
-    let panes = 256usize;
-    let dir = test_dir("measure");
-    let path = dir.join("measure.prm");
+fn measure_cornell_size_panes() {
+    let (res, tile, panes) = (256u32, 64u32, 512usize);
     let mut rng = Rng(2026);
     let entries: Vec<Entry> = (0..panes)
         .map(|c| Entry {
@@ -1125,79 +1146,87 @@ fn measure_256_panes_256x256() {
     let clusters: Vec<Cluster> = (0..panes)
         .map(|c| Cluster::new(c as u32, 1, entries[c].position, [0.0, 0.0, 1.0]))
         .collect();
-    let mut atlas = AtlasSection::new(res, 64);
-    for y in 0..res {
-        for x in 0..res {
-            atlas.set_covered(x, y, !zero_region(x, y, res));
-        }
+    let atlas = AtlasSection::new(res, tile);
+    let mut rng = Rng(7);
+    let dense: Vec<Vec<[f32; 3]>> = (0..panes).map(|_| sharp_pane(&mut rng, res)).collect();
+    let path = test_dir("measure").join("cornell-size.prm");
+    let mut w = ArchiveWriter::create(&path, Metadata::new("measure", "0"), &atlas, &entries, &clusters).unwrap();
+    for p in &dense {
+        w.add_pane(p).unwrap();
     }
-    for (level, filter) in [
-        (3, TileFilter::None),
-        (3, TileFilter::DeltaShuffle),
-        (9, TileFilter::DeltaShuffle),
-        (19, TileFilter::DeltaShuffle),
-    ] {
-        let started = std::time::Instant::now();
-        let mut w = ArchiveWriter::create_with_options(
-            &path,
-            Metadata::new("measure", "0"),
-            &atlas,
-            &entries,
-            &clusters,
-            WriterOptions {
-                zstd_level: level,
-                compress_sections: true,
-                tile_filter: filter,
-            },
-        )
-        .unwrap();
-        let mut worst_rel_max = 0f64;
-        let mut worst_rel_any = 0f64;
-        let mut sum_rel = 0f64;
-        let mut n_rel = 0u64;
-        let mut rng = Rng(7);
-        for _ in 0..panes {
-            let pane = smooth_pane(&mut rng, res);
-            for t in &pane {
-                let d = decode_rgb9e5(encode_rgb9e5(*t));
-                let m = t[0].max(t[1]).max(t[2]);
-                if m >= RGB9E5_MIN_NORMAL {
-                    for c in 0..3 {
-                        let rel = f64::from((d[c] - t[c]).abs()) / f64::from(t[c]);
-                        if t[c] == m {
-                            worst_rel_max = worst_rel_max.max(rel);
-                        }
-                        worst_rel_any = worst_rel_any.max(rel);
-                        sum_rel += rel;
-                        n_rel += 1;
-                    }
+    let started = std::time::Instant::now();
+    w.compress_panes().unwrap();
+    let compress = started.elapsed();
+    let size = w.finish().unwrap();
+    let written = started.elapsed();
+    let mut a = Archive::open(&path).unwrap();
+    let info = a.info().clone();
+    let t0 = std::time::Instant::now();
+    a.verify().unwrap();
+    let verify = t0.elapsed();
+    let t0 = std::time::Instant::now();
+    a.pane_basis().energy_peak();
+    let energy_peak = t0.elapsed();
+    let t0 = std::time::Instant::now();
+    let decoded: Vec<Vec<[f32; 3]>> = (0..panes).map(|p| a.read_pane(p).unwrap()).collect();
+    let decode = t0.elapsed();
+    let errors = tile_errors(&dense, &decoded, res as usize, tile as usize);
+    let worst = errors.iter().copied().fold(0f64, f64::max);
+    // A lit combination: random positive weights, relative RMSE against the dense panes.
+    let weights: Vec<f32> = (0..panes).map(|_| rng.unit()).collect();
+    let lit = |set: &[Vec<[f32; 3]>]| -> Vec<f64> {
+        let mut out = vec![0f64; (res * res * 3) as usize];
+        for (p, w) in set.iter().zip(&weights) {
+            for (o, v) in out.chunks_exact_mut(3).zip(p) {
+                for ch in 0..3 {
+                    o[ch] += f64::from(*w) * f64::from(v[ch]);
                 }
             }
-            w.add_pane(&pane).unwrap();
         }
-        let size = w.finish().unwrap();
-        let elapsed = started.elapsed();
-        let mut a = Archive::open(&path).unwrap();
-        let info = a.info().clone();
-        let t0 = std::time::Instant::now();
-        a.verify().unwrap();
-        println!(
-            "{filter:?}, zstd level {level}: {size} bytes ({:.2} MiB) for {panes} panes of {res}x{res}; \
-             RGB9E5 raw {:.1} MiB (ratio {:.2}), f32 RGB {:.1} MiB; stored tiles {}/{}; \
-             write {:.2?}, verify {:.2?}; max rel error (largest channel) {worst_rel_max:.3e}, \
-             (any channel) {worst_rel_any:.3e}, mean {:.3e}",
-            size as f64 / 1048576.0,
-            info.pane_texel_bytes as f64 / 1048576.0,
-            info.pane_texel_bytes as f64 / size as f64,
-            (panes as u64 * u64::from(res * res) * 12) as f64 / 1048576.0,
-            info.stored_tiles,
-            info.tiles_per_pane * u64::from(info.pane_count),
-            elapsed,
-            t0.elapsed(),
-            sum_rel / n_rel as f64,
-        );
-        assert!(worst_rel_max <= RGB9E5_MAX_RELATIVE_ERROR);
+        out
+    };
+    let (want, got) = (lit(&dense), lit(&decoded));
+    let num: f64 = want.iter().zip(&got).map(|(a, b)| (a - b).powi(2)).sum();
+    let den: f64 = want.iter().map(|a| a * a).sum();
+    let panes_bytes = info.sections.iter().find(|x| x.name == "panes").unwrap();
+    println!(
+        "{panes} panes of {res}² in {tile}² tiles: compressed in {compress:.2?} (archive written in {written:.2?}, \
+         verified in {verify:.2?}, of which energy and peak {energy_peak:.2?}; every pane decoded in {decode:.2?}); ranks mean {:.1}, max {}; panes section {:.2} MiB raw, {:.2} MiB stored \
+         (dense RGB9E5 {:.1} MiB); archive {:.2} MiB; worst tile error {worst:.4}; lit combination {:.4}%",
+        info.rank_sum as f64 / info.tiles as f64,
+        info.max_rank,
+        panes_bytes.raw_size as f64 / 1048576.0,
+        panes_bytes.stored_size as f64 / 1048576.0,
+        info.pane_texel_bytes as f64 / 1048576.0,
+        size as f64 / 1048576.0,
+        100.0 * (num / den).sqrt(),
+    );
+    assert!(within_tolerance(worst, PANE_TOLERANCE), "{worst}");
+}
+
+/// A cluster's light as a bake of a room gives it, roughly: one falloff of 1 to 7 texels about the
+/// cluster's own place, a broad one about another place, and a soft tinted floor, with the band
+/// of [`zero_region`] empty. Sharper than [`smooth_pane`], so that the tiles near a cluster need
+/// a rank of a few tens, as in the bundled Cornell box.
+fn sharp_pane(rng: &mut Rng, res: u32) -> Vec<[f32; 3]> {
+    let near = [rng.unit() * res as f32, rng.unit() * res as f32];
+    let radius = (0.004 + 0.024 * rng.unit()) * res as f32;
+    let far = [rng.unit() * res as f32, rng.unit() * res as f32];
+    let tint = [0.2 + rng.unit(), 0.2 + rng.unit(), 0.2 + rng.unit()];
+    let floor = 0.02 * rng.unit();
+    let mut out = Vec::with_capacity((res * res) as usize);
+    for y in 0..res {
+        for x in 0..res {
+            if zero_region(x, y, res) {
+                out.push([0.0; 3]);
+                continue;
+            }
+            let d2 = |c: [f32; 2]| (x as f32 - c[0]).powi(2) + (y as f32 - c[1]).powi(2);
+            let f = 4.0 / (1.0 + d2(near) / (radius * radius)) + 0.5 / (1.0 + d2(far) / (0.09 * (res * res) as f32));
+            out.push(std::array::from_fn(|k| (f + floor) * tint[k]));
+        }
     }
+    out
 }
 
 /// 10% of the atlas (a band at the bottom) is empty.
@@ -1601,7 +1630,7 @@ fn os_error_text_appears_once_in_anyhow_chain() {
     let err = Archive::from_bytes(&bad).err().unwrap();
     assert!(matches!(err, Error::ChecksumMismatch { .. }), "{err}");
     let mut newer = bytes.clone();
-    put_u16(&mut newer, 8, 2);
+    put_u16(&mut newer, 8, 3);
     assert!(matches!(
         Archive::from_bytes(&newer),
         Err(Error::UnsupportedVersion { .. })
@@ -1611,9 +1640,9 @@ fn os_error_text_appears_once_in_anyhow_chain() {
 // ---------------------------------------------------------------- bounded fuzzing
 
 /// Offsets of the integer fields worth overwriting with hostile values: the
-/// header's counts and offsets, every section record's offset and sizes, the
-/// panes header, the first tile records, and (in uncompressed sections) the
-/// atlas header and the first cluster's range.
+/// header's counts and offsets, every section record's offset and sizes, and
+/// (in uncompressed sections) the panes header and first ranks, the atlas
+/// header and the first cluster's range.
 fn count_fields(b: &[u8]) -> Vec<(usize, usize)> {
     let mut f = vec![(12, 4), (16, 8), (24, 8)];
     let table = u64_at(b, 16).unwrap() as usize;
@@ -1621,13 +1650,7 @@ fn count_fields(b: &[u8]) -> Vec<(usize, usize)> {
         let r = table + i * 48;
         f.extend([(r, 4), (r + 4, 4), (r + 8, 8), (r + 16, 8), (r + 24, 8)]);
         match s.kind {
-            kind::PANES => {
-                f.extend([(s.offset + 8, 4), (s.offset + 12, 4), (s.offset + 20, 4)]);
-                for t in 0..4 {
-                    let rec = s.offset + 32 + t * 24;
-                    f.extend([(rec, 8), (rec + 8, 4)]);
-                }
-            }
+            kind::PANES => f.extend((0..8).map(|k| (s.offset + 4 * k, 4))),
             kind::ATLAS => f.extend([(s.offset, 4), (s.offset + 4, 4), (s.offset + 8, 4)]),
             kind::CLUSTERS => f.extend([(s.offset, 4), (s.offset + 4, 4), (s.offset + 60, 4)]),
             kind::ENTRIES => f.push((s.offset + 24, 4)),
@@ -1764,10 +1787,9 @@ fn sigkill_leftover_is_removed_by_the_next_writer() {
     assert_eq!(dir_listing(&dir), vec!["ready", "scene.prm"]);
 }
 
-// ---------------------------------------------------------------- entry energy (1.1)
+// ---------------------------------------------------------------- entry energy
 
-/// The entry energy section round-trips, makes the archive 1.1 (and only then), and a damaged
-/// one is refused: wrong record count, a negative or NaN energy, or the section twice.
+/// The entry energy section round-trips, and a damaged one is refused: wrong record count, a negative or NaN energy, or the section twice.
 #[test]
 fn entry_energy_round_trips_and_is_validated() {
     let dir = test_dir("entry-energy");
@@ -1789,12 +1811,12 @@ fn entry_energy_round_trips_and_is_validated() {
     };
     let with = write(&dir.join("with.prm"), Some(energy.clone()));
     let a = Archive::from_bytes(&with).unwrap();
-    assert_eq!(a.info().minor, 1);
     assert_eq!(a.entry_energy(), Some(&energy[..]));
     assert!(a.info().sections.iter().any(|x| x.name == "entry_energy"));
     let without = write(&dir.join("without.prm"), None);
     let b = Archive::from_bytes(&without).unwrap();
-    assert_eq!((b.info().minor, b.entry_energy()), (0, None));
+    assert_eq!(b.entry_energy(), None);
+    assert_eq!((a.info().minor, b.info().minor), (0, 0));
 
     // The writer refuses a count that is not the entries' and non-finite or negative values.
     let mut w = start_writer(&dir.join("bad.prm"), &s).unwrap();
@@ -1824,7 +1846,7 @@ fn entry_energy_round_trips_and_is_validated() {
     assert!(matches!(Archive::from_bytes(&damaged), Err(Error::Inconsistent { .. })));
 }
 
-// ---------------------------------------------------------------- emitters (1.2)
+// ---------------------------------------------------------------- emitters
 
 fn emitter_groups(s: &Scene, count: usize) -> Vec<EmitterGroup> {
     let texels = (s.atlas.resolution * s.atlas.resolution) as usize;
@@ -1840,8 +1862,7 @@ fn emitter_groups(s: &Scene, count: usize) -> Vec<EmitterGroup> {
         .collect()
 }
 
-/// The emitters section round-trips (its values are exact in RGB9E5 here), makes the archive
-/// 1.2, and the reader refuses a header for other counts and a group count over the limit
+/// The emitters section round-trips (its values are exact in RGB9E5 here), and the reader refuses a header for other counts and a group count over the limit
 /// before it decompresses the rest.
 #[test]
 fn emitters_round_trip_and_hostile_headers_are_refused() {
@@ -1856,7 +1877,6 @@ fn emitters_round_trip_and_hostile_headers_are_refused() {
         w.set_emitters(groups.clone()).unwrap();
     });
     let a = Archive::from_bytes(&bytes).unwrap();
-    assert_eq!(a.info().minor, 2);
     assert_eq!(a.emitters(), &groups[..]);
     assert!(a.info().sections.iter().any(|x| x.name == "emitters"));
     let (plain, _) = small_archive("emitters-none", WriterOptions::default());
@@ -1876,7 +1896,7 @@ fn emitters_round_trip_and_hostile_headers_are_refused() {
     assert_hostile_header_refused(&bytes, kind::EMITTERS, &header(2, n, 16), "2 groups");
 }
 
-// ---------------------------------------------------------------- sky (1.3)
+// ---------------------------------------------------------------- sky
 
 fn sky_transfer(s: &Scene) -> SkyTransfer {
     let texels = (s.atlas.resolution * s.atlas.resolution) as usize;
@@ -1890,8 +1910,8 @@ fn sky_transfer(s: &Scene) -> SkyTransfer {
     }
 }
 
-/// The sky section round-trips exactly (its values are exact in f16 here), makes the archive 1.3, and the reader refuses a header
-/// for another resolution or basis, and a declared size the resolution does not give, before it
+/// The sky section round-trips exactly (its values are exact in f16 here), and the reader refuses
+/// a header for another resolution or basis, and a declared size the resolution does not give, before it
 /// decompresses the rest.
 #[test]
 fn sky_round_trip_and_hostile_headers_are_refused() {
@@ -1900,7 +1920,7 @@ fn sky_round_trip_and_hostile_headers_are_refused() {
     let spoil = |wrong: &mut SkyTransfer| {
         wrong.direct.pop();
     };
-    let bytes = optional_section_round_trip("sky", &s, &sky, spoil, ArchiveWriter::set_sky, |a| a.sky(), 3);
+    let bytes = optional_section_round_trip("sky", &s, &sky, spoil, ArchiveWriter::set_sky, |a| a.sky());
 
     let header = |res: u32, coeffs: u32| le_words(&[res, coeffs, 0, 0]);
     for (head, what) in [(header(32, 9), "resolution"), (header(16, 16), "coefficients")] {
@@ -1909,7 +1929,7 @@ fn sky_round_trip_and_hostile_headers_are_refused() {
     assert_hostile_header_refused(&bytes, kind::SKY, &header(16, 9), "resolution 16");
 }
 
-// ---------------------------------------------------------------- probes (1.4)
+// ---------------------------------------------------------------- probes
 
 fn probe_set(s: &Scene) -> Probes {
     let grid = ProbeGrid {
@@ -1987,8 +2007,7 @@ fn near_set(s: &Scene) -> NearField {
     }
 }
 
-/// The probe rays section needs the probes, round-trips exactly and makes the archive 1.6; the
-/// reader refuses a section for another probe count, and one beside no probes section.
+/// The probe rays section needs the probes and round-trips exactly; the reader refuses a section for another probe count, and one beside no probes section.
 #[test]
 fn probe_rays_round_trip_and_need_the_probes() {
     let dir = test_dir("probe-rays");
@@ -2022,7 +2041,6 @@ fn probe_rays_round_trip_and_need_the_probes() {
     );
     add_panes_and_finish(w, &s);
     let mut a = Archive::open(&path).unwrap();
-    assert_eq!(a.info().minor, 6);
     assert_eq!(a.probe_rays(), Some(&rays));
     a.verify().unwrap();
 
@@ -2038,14 +2056,12 @@ fn probe_rays_round_trip_and_need_the_probes() {
         .position(|s| s.kind == kind::PRIVATE_FIRST + 10)
         .unwrap();
     bytes[table + 48 * i..table + 48 * i + 4].copy_from_slice(&kind::PROBE_RAYS.to_le_bytes());
-    put_u16(&mut bytes, 10, 6);
     resign(&mut bytes);
     let e = Archive::from_bytes(&bytes).err().unwrap().to_string();
     assert!(e.contains("without a probes section"), "{e}");
 }
 
-/// The probes section round-trips exactly (its values are exact in f16 here) and makes the
-/// archive 1.4; the reader refuses a header for another cluster count or basis, and a declared
+/// The probes section round-trips exactly (its values are exact in f16 here); the reader refuses a header for another cluster count or basis, and a declared
 /// size its counts do not give, before it decompresses the rest.
 #[test]
 fn probes_round_trip_and_hostile_headers_are_refused() {
@@ -2054,15 +2070,7 @@ fn probes_round_trip_and_hostile_headers_are_refused() {
     let spoil = |wrong: &mut Probes| {
         wrong.transfer.pop();
     };
-    let bytes = optional_section_round_trip(
-        "probes",
-        &s,
-        &probes,
-        spoil,
-        ArchiveWriter::set_probes,
-        |a| a.probes(),
-        4,
-    );
+    let bytes = optional_section_round_trip("probes", &s, &probes, spoil, ArchiveWriter::set_probes, |a| a.probes());
 
     let origin_spacing = [-1.0f32, 0.0, 0.0, 0.5].map(f32::to_bits);
     let header = |n: u32, clusters: u32, coeffs: u32| {
@@ -2079,9 +2087,8 @@ fn probes_round_trip_and_hostile_headers_are_refused() {
     }
 }
 
-/// The near field round-trips exactly and makes the archive 1.8 (1.7 without the deeper VPLs'
-/// disk); the writer refuses gather
-/// points of emitter groups the archive lacks; headers whose counts the atlas cannot hold are
+/// The near field round-trips exactly, with or without the complemented weights and the deeper
+/// VPLs' disk; the writer refuses gather points of emitter groups the archive lacks; headers whose counts the atlas cannot hold are
 /// refused before the rest is decompressed.
 #[test]
 fn near_field_round_trips_and_hostile_headers_are_refused() {
@@ -2103,11 +2110,8 @@ fn near_field_round_trips_and_hostile_headers_are_refused() {
         );
     });
     let mut a = Archive::from_bytes(&bytes).unwrap();
-    assert_eq!(a.info().minor, 9);
     assert_eq!(a.near_field(), Some(&near));
     a.verify().unwrap();
-    // The lowest minor that holds each: 1.8 without the complemented weights, 1.7 also
-    // without the deeper VPLs' disk.
     let uncut = NearField {
         complement: false,
         ..near.clone()
@@ -2116,13 +2120,13 @@ fn near_field_round_trips_and_hostile_headers_are_refused() {
         indirect_disk: 0.0,
         ..uncut.clone()
     };
-    for (minor, n) in [(8, &uncut), (7, &direct_only)] {
-        let bytes = written_with(&format!("near-field-1.{minor}"), &s, |w| {
+    for (name, n) in [("uncut", &uncut), ("direct-only", &direct_only)] {
+        let bytes = written_with(&format!("near-field-{name}"), &s, |w| {
             w.set_emitters(emitter_groups(&s, 2)).unwrap();
             w.set_near_field(n.clone()).unwrap();
         });
         let a = Archive::from_bytes(&bytes).unwrap();
-        assert_eq!(a.info().minor, minor);
+        assert_eq!((a.info().major, a.info().minor), (2, 0));
         assert_eq!(a.near_field(), Some(n));
     }
 
@@ -2139,5 +2143,238 @@ fn near_field_round_trips_and_hostile_headers_are_refused() {
         ),
     ] {
         assert_hostile_header_refused(&bytes, kind::NEAR_FIELD, &head, what);
+    }
+}
+
+// ---------------------------------------------------------------- panes
+
+/// The archive of `panes` (one cluster of one entry each) on an atlas of `res` texels in tiles of
+/// `tile`, written with `options` in a fresh directory `name`; its bytes.
+fn panes_archive(name: &str, panes: &[Vec<[f32; 3]>], res: u32, tile: u32, options: WriterOptions) -> Vec<u8> {
+    let entries: Vec<Entry> = (0..panes.len())
+        .map(|c| Entry {
+            position: [c as f32, 0.0, 0.0],
+            normal: [0.0, 1.0, 0.0],
+            cluster: c as u32,
+        })
+        .collect();
+    let clusters: Vec<Cluster> = (0..panes.len())
+        .map(|c| Cluster::new(c as u32, 1, [c as f32, 0.0, 0.0], [0.0, 1.0, 0.0]))
+        .collect();
+    let path = test_dir(name).join("panes.prm");
+    let atlas = AtlasSection::new(res, tile);
+    let metadata = Metadata::new("prm-format-tests", "0");
+    let mut w = ArchiveWriter::create_with_options(&path, metadata, &atlas, &entries, &clusters, options).unwrap();
+    for p in panes {
+        w.add_pane(p).unwrap();
+    }
+    w.finish().unwrap();
+    std::fs::read(&path).unwrap()
+}
+
+/// Relative RMSE of the lit combination `Σ_c w_c·pane_c` of `decoded` against that of `panes`,
+/// with positive random weights.
+fn lit_error(panes: &[Vec<[f32; 3]>], decoded: &[Vec<[f32; 3]>], rng: &mut Rng) -> f64 {
+    let weights: Vec<f64> = panes.iter().map(|_| f64::from(rng.unit()) + 0.01).collect();
+    let (mut num, mut den) = (0f64, 0f64);
+    for k in 0..panes[0].len() {
+        for ch in 0..3 {
+            let want: f64 = panes.iter().zip(&weights).map(|(p, w)| w * f64::from(p[k][ch])).sum();
+            let got: f64 = decoded.iter().zip(&weights).map(|(p, w)| w * f64::from(p[k][ch])).sum();
+            num += (want - got).powi(2);
+            den += want * want;
+        }
+    }
+    (num / den).sqrt()
+}
+
+/// Random smooth panes come back within the tolerance in every tile, and so do their lit
+/// combinations; a tighter tolerance keeps more of every tile and errs less.
+#[test]
+fn smooth_panes_round_trip_within_the_tolerance() {
+    let mut rng = Rng(41);
+    let (res, tile) = (32u32, 16u32);
+    let panes: Vec<Vec<[f32; 3]>> = (0..24).map(|_| smooth_pane(&mut rng, res)).collect();
+    let mut ranks = Vec::new();
+    for (name, eps) in [("default", PANE_TOLERANCE), ("tight", 0.002)] {
+        let options = WriterOptions {
+            pane_tolerance: eps,
+            ..WriterOptions::default()
+        };
+        let bytes = panes_archive(&format!("smooth-{name}"), &panes, res, tile, options);
+        let mut a = Archive::from_bytes(&bytes).unwrap();
+        let decoded: Vec<Vec<[f32; 3]>> = (0..panes.len()).map(|p| a.read_pane(p).unwrap()).collect();
+        let errors = tile_errors(&panes, &decoded, res as usize, tile as usize);
+        for (t, &e) in errors.iter().enumerate() {
+            assert!(within_tolerance(e, eps), "ε {eps}, tile {t}: {e}");
+        }
+        let lit = lit_error(&panes, &decoded, &mut rng);
+        assert!(lit <= f64::from(eps), "ε {eps}: lit combination off by {lit}");
+        println!(
+            "ε {eps}: ranks {:?}, tile errors {errors:?}, lit {lit}",
+            a.pane_basis().ranks()
+        );
+        ranks.push(a.pane_basis().ranks().to_vec());
+        a.verify().unwrap();
+    }
+    assert!(ranks[0].iter().zip(&ranks[1]).all(|(a, b)| a <= b), "{ranks:?}");
+    assert!(ranks[0].iter().sum::<u32>() < ranks[1].iter().sum::<u32>(), "{ranks:?}");
+    assert!(ranks[0].iter().all(|&r| r < 3 * 24), "compressed at all: {ranks:?}");
+}
+
+/// Panes that are combinations of two images are of rank 2 in every tile: each tile keeps two
+/// basis vectors, and the panes come back up to the `f16` rounding of the basis.
+#[test]
+fn panes_of_rank_two_reconstruct_almost_exactly() {
+    let res = 16u32;
+    let n = res as usize;
+    let e1: Vec<f32> = (0..n * n).map(|i| 1.0 + 0.8 * (0.9 * (i % n) as f32).sin()).collect();
+    let e2: Vec<f32> = (0..n * n).map(|i| 1.0 + 0.8 * (0.7 * (i / n) as f32).cos()).collect();
+    let mut rng = Rng(5);
+    let panes: Vec<Vec<[f32; 3]>> = (0..6)
+        .map(|_| {
+            let a: [f32; 3] = std::array::from_fn(|_| 0.1 + rng.unit());
+            let b: [f32; 3] = std::array::from_fn(|_| 0.1 + rng.unit());
+            (0..n * n)
+                .map(|i| std::array::from_fn(|ch| a[ch] * e1[i] + b[ch] * e2[i]))
+                .collect()
+        })
+        .collect();
+    let bytes = panes_archive("rank-two", &panes, res, 8, WriterOptions::default());
+    let a = Archive::from_bytes(&bytes).unwrap();
+    assert_eq!(a.pane_basis().ranks(), &[2, 2, 2, 2]);
+    let decoded: Vec<Vec<[f32; 3]>> = (0..panes.len()).map(|p| a.read_pane(p).unwrap()).collect();
+    for (t, e) in tile_errors(&panes, &decoded, n, 8).into_iter().enumerate() {
+        assert!(e < 1e-3, "tile {t}: {e}");
+    }
+    for (p, d) in panes.iter().zip(&decoded) {
+        for (want, got) in p.iter().zip(d) {
+            for ch in 0..3 {
+                assert!((want[ch] - got[ch]).abs() <= 2e-3 * want[ch], "{want:?} vs {got:?}");
+            }
+        }
+    }
+    // Each decoded value is the spec's sum, term by term.
+    let basis = a.pane_basis();
+    let (u, c) = (basis.basis(3), basis.coefficients(3));
+    let texel = 5 * 8 + 6; // texel (6, 5) of tile (1, 1): atlas texel (14, 13)
+    let mut v = 0f32;
+    for k in 0..2 {
+        v += u[texel * 2 + k] * c[(3 * 4 + 1) * 2 + k];
+    }
+    assert_eq!(decoded[4][13 * n + 14][1].to_bits(), v.max(0.0).to_bits());
+    assert!(u.iter().all(|x| half::f16::from_f32(*x).to_f32() == *x), "f16 values");
+}
+
+/// The panes section of `bytes` (stored uncompressed): its offset.
+fn panes_offset(bytes: &[u8]) -> usize {
+    sections(bytes).iter().find(|s| s.kind == kind::PANES).unwrap().offset
+}
+
+/// `m` re-signed must be refused on open as inconsistent, naming `what`, and by `verify`.
+fn assert_inconsistent(mut m: Vec<u8>, what: &str) {
+    resign(&mut m);
+    let err = Archive::from_bytes(&m).err().unwrap();
+    assert!(matches!(err, Error::Inconsistent { .. }), "{what}: {err}");
+    assert!(err.to_string().contains(what), "{what}: {err}");
+    assert!(verify_bytes(&m).is_err());
+}
+
+/// A panes section whose header, ranks, size or values break §7 is refused, without a panic and
+/// before the rest is decompressed.
+#[test]
+fn corrupted_panes_sections_are_refused() {
+    let (bytes, _) = small_archive("panes-corrupt", UNCOMPRESSED);
+    let p = panes_offset(&bytes);
+    let word = |m: &mut Vec<u8>, at: usize, v: u32| m[at..at + 4].copy_from_slice(&v.to_le_bytes());
+    let head: Vec<u32> = (0..8).map(|k| u32_at(&bytes, p + 4 * k).unwrap()).collect();
+    let (panes, tps, max_rank, ranks) = (head[0], head[1], head[2], &head[4..8]);
+    assert_eq!((panes, tps), (3, 2));
+    assert_eq!(max_rank, *ranks.iter().max().unwrap());
+    assert!(ranks[0] < max_rank, "{ranks:?}");
+    let mut m = bytes.clone();
+    word(&mut m, p + 4, 3);
+    assert_inconsistent(m, "tiles per side");
+    let mut m = bytes.clone();
+    word(&mut m, p + 12, 1);
+    assert_inconsistent(m, "reserved");
+    let mut m = bytes.clone();
+    word(&mut m, p + 8, max_rank + 1);
+    assert_inconsistent(m, "largest rank");
+    let mut m = bytes.clone();
+    word(&mut m, p + 16, 10); // min(T², 3P) = 9
+    word(&mut m, p + 8, 10);
+    assert_inconsistent(m, "rank 10");
+    let mut m = bytes.clone();
+    word(&mut m, p + 16, ranks[0] + 1); // one more vector in tile 0: the size no longer matches
+    assert_inconsistent(m, "raw bytes");
+    let mut m = bytes.clone();
+    word(&mut m, p, panes + 1);
+    assert_inconsistent(m, "raw bytes");
+    let mut m = bytes.clone();
+    word(&mut m, p, u32::MAX);
+    assert_inconsistent(m, "exceed the limit");
+
+    // A NaN coefficient (the first), an infinite basis value (the last).
+    let coefficients = p + 16 + 16;
+    let mut m = bytes.clone();
+    word(&mut m, coefficients, f32::NAN.to_bits());
+    assert_inconsistent(m, "finite");
+    let rank_total: usize = ranks.iter().map(|&r| r as usize).sum();
+    let basis_end = coefficients + rank_total * (12 * 3 + 2 * 64);
+    assert_eq!(
+        basis_end,
+        sections(&bytes)
+            .iter()
+            .find(|s| s.kind == kind::PANES)
+            .map(|s| p + s.size)
+            .unwrap()
+    );
+    let mut m = bytes.clone();
+    m[basis_end - 2..basis_end].copy_from_slice(&half::f16::INFINITY.to_le_bytes());
+    assert_inconsistent(m, "finite");
+    // A finite change is data, not damage: it opens, and `verify` finds the energy off.
+    let mut m = bytes.clone();
+    m[basis_end - 2..basis_end].copy_from_slice(&half::f16::from_f32(0.75).to_le_bytes());
+    resign(&mut m);
+    let mut a = Archive::from_bytes(&m).unwrap();
+    let err = a.verify().unwrap_err();
+    assert!(
+        err.to_string().contains("energy") || err.to_string().contains("peak"),
+        "{err}"
+    );
+
+    // A declared raw size that the ranks do not give, behind a compressed header: refused
+    // before the 64 MiB are produced.
+    let header = le_words(&[3, 2, 9, 0, 9, 9, 9, 9]);
+    assert_hostile_header_refused(&bytes, kind::PANES, &header, "panes section declares");
+    // Too short to hold its ranks.
+    let short = le_words(&[3, 2, 9, 0]);
+    let m = replace_section(&bytes, kind::PANES, &short, compression::NONE, short.len() as u64);
+    let err = Archive::from_bytes(&m).err().unwrap();
+    assert!(matches!(err, Error::Inconsistent { .. }), "{err}");
+}
+
+/// `verify` recomputes every cluster's energy and peak from the decoded panes, bit for bit.
+#[test]
+fn verify_finds_an_energy_or_peak_one_ulp_off() {
+    let (bytes, _) = small_archive("verify-energy", UNCOMPRESSED);
+    verify_bytes(&bytes).unwrap();
+    let c = sections(&bytes)
+        .iter()
+        .find(|s| s.kind == kind::CLUSTERS)
+        .unwrap()
+        .offset;
+    for (field, what) in [(32, "energy"), (44 + 8, "peak")] {
+        let at = c + 56 + field; // cluster 1
+        let mut m = bytes.clone();
+        let v = f32::from_le_bytes(m[at..at + 4].try_into().unwrap());
+        assert!(v > 0.0);
+        m[at..at + 4].copy_from_slice(&f32::from_bits(v.to_bits() + 1).to_le_bytes());
+        resign(&mut m);
+        let mut a = Archive::from_bytes(&m).unwrap();
+        let err = a.verify().unwrap_err();
+        assert!(matches!(err, Error::Inconsistent { .. }), "{err}");
+        assert!(err.to_string().contains(what), "{err}");
     }
 }
