@@ -102,7 +102,11 @@ fn tile_basis(panes: &[Vec<[f32; 3]>], texels: Vec<usize>, max_rank: usize, shar
     let mut uq = vec![0f32; rows * k];
     for i in 0..rows {
         for j in 0..k {
-            uq[i * k + j] = half::f16::from_f64(u[(i, j)]).to_f32();
+            uq[i * k + j] = if full_precision() {
+                u[(i, j)] as f32
+            } else {
+                half::f16::from_f64(u[(i, j)]).to_f32()
+            };
         }
     }
     let mut sv = vec![0f32; cols * k];
@@ -118,6 +122,11 @@ fn tile_basis(panes: &[Vec<[f32; 3]>], texels: Vec<usize>, max_rank: usize, shar
         sigma,
         shared,
     })
+}
+
+/// `F32=1` keeps the basis in `f32` instead of `f16`, to see what the rounding costs.
+fn full_precision() -> bool {
+    env_or("F32", 0) == 1
 }
 
 /// The lit lightmap `Σ_c w_c pane_c` through every tile's basis truncated to `ranks[t]`.
@@ -251,12 +260,14 @@ pub fn run(args: Vec<String>) {
     );
     for (name, bytes, v) in rows {
         let mean = |f: fn(&(f64, f64, f64)) -> f64| v.iter().map(f).sum::<f64>() / n;
+        let each: Vec<String> = v.iter().map(|x| format!("{:.2}", 100.0 * x.0)).collect();
         println!(
-            "{name:<28} {:9.2} {:8.2}% {:8.3} {:8.2}%",
+            "{name:<28} {:9.2} {:8.2}% {:8.3} {:8.2}%   per light {}",
             mib(bytes),
             100.0 * mean(|x| x.0),
             mean(|x| x.1),
-            100.0 * mean(|x| x.2)
+            100.0 * mean(|x| x.2),
+            each.join(" ")
         );
     }
 }
