@@ -59,7 +59,7 @@ enum Command {
     #[command(after_help = EXIT_STATUS)]
     Atlas(atlas::AtlasArgs),
     /// Estimate an archive's accuracy as a bake's last step does: its indirect light, played
-    /// as prm-play plays it, against the reference path tracer under three test lights.
+    /// as prm-play plays it, against the reference path tracer under four test lights, one of them close under the ceiling.
     ///
     /// For a merged sharded bake (whose shards skip the check) or at another size than the
     /// bake's. Needs the scene the archive was baked from; refuses another.

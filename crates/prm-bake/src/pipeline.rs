@@ -78,7 +78,8 @@ pub const PROBE_SKY_PATHS: u32 = 4096;
 pub const PROBE_RAYS: u32 = 1024;
 
 /// Exit points of the bake's accuracy check by default (`--accuracy-points`), each traced with
-/// [`ACCURACY_PATHS`] reference paths for each of three test lights ([`prm_trace::check`]).
+/// [`ACCURACY_PATHS`] reference paths for each test light: three clear of surfaces and one close
+/// under the ceiling ([`prm_trace::check`]).
 /// Measured (see `prm_trace::check`): 1.2–1.3% of a default bake on the boxes and under 1% on
 /// chairs and the fireplace room, within one or two standard errors of a 4096-point × 1024-path
 /// measurement of the same archive but where a light's error lies in a few points.

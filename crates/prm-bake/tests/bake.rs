@@ -228,12 +228,24 @@ fn bake_writes_a_valid_archive_and_report() {
     assert_eq!(json["entries"], 256);
     assert_eq!(json["clusters"], 16);
     eprintln!("report timings: {timings:?}");
-    // The accuracy check: three test lights free in the box, a plausible estimate, the same in
-    // the report and the archive (1.5; the near field makes it 1.8).
+    // The accuracy check: three test lights free in the box and one close under its ceiling, a
+    // plausible estimate, the same in the report and the archive (1.5; the near field makes it
+    // 1.8).
     let accuracy = meta.accuracy.as_ref().expect("the bake estimates its accuracy");
     assert_eq!(archive.info().minor, 9);
     assert!(archive.near_field().is_some());
-    assert_eq!(accuracy.lights.len(), 3, "{accuracy:?}");
+    assert_eq!(
+        accuracy.lights.len(),
+        prm_trace::check::CHECK_LIGHTS + 1,
+        "{accuracy:?}"
+    );
+    let (clear, hard) = (accuracy.lights[0].position, accuracy.lights[3].position);
+    assert_eq!(
+        (hard[0], hard[2]),
+        (clear[0], clear[2]),
+        "the hard light is above the first"
+    );
+    assert!(hard[1] > clear[1], "{accuracy:?}");
     assert_eq!(accuracy.exit_points, prm_bake::ACCURACY_POINTS);
     assert_eq!(accuracy.top_k, meta.params["top_k"].as_u64().unwrap() as u32);
     for l in &accuracy.lights {
@@ -812,7 +824,8 @@ fn check_repeats_the_bake_s_own_estimate() {
     let out = run(&[&["check", scene, &p, "--quiet"][..], &size].concat());
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(
-        text.starts_with("estimated accuracy: indirect light") && text.matches("light at (").count() == 3,
+        text.starts_with("estimated accuracy: indirect light")
+            && text.matches("light at (").count() == prm_trace::check::CHECK_LIGHTS + 1,
         "{}",
         describe(&out)
     );

@@ -10,9 +10,17 @@
 //! interleaved frame by frame so that load from other processes hits both alike; with 2 shared
 //! cores the wall-time ratio still swings by several per cent from run to run.
 //!
-//! Archives: `target/prm-bench/NAME.prm`, baked once with `prm-bake bake SCENE -o OUT --preset
-//! preview` (`cargo run --release -p prm-bake`, or the binary `$PRM_BAKE` names) and reused while
-//! they open and match their scene. Scenes without lights (the OBJ Cornell box: its lamp is an
+//! Then it attributes the gi frame's added wall time to its parts, from gi frames interleaved
+//! with those of two more players of the same archive: one without the near field
+//! (`--near-field off`), and one without it blending 8 panes and no residual groups (`--top-k 8
+//! --residual-groups 0`). The three differences (against the direct frame's median) are the
+//! weights, ranking and a minimal blend; the other panes and groups; the near field's gathers.
+//! On lavapipe this is the only account of the compute passes: their timestamps read near zero,
+//! since lavapipe does a dispatch's work outside the pass's timestamp pair.
+//!
+//! Archives: `target/prm-bench/NAME-PRESET.prm`, baked once with `prm-bake bake SCENE -o OUT
+//! --preset PRESET` (`PRM_BENCH_PRESET`, `preview` by default; `cargo run --release -p prm-bake`,
+//! or the binary `$PRM_BAKE` names) and reused while they open and match their scene. Scenes without lights (the OBJ Cornell box: its lamp is an
 //! emissive quad) get a point light just below the middle of the ceiling.
 
 use std::path::{Path, PathBuf};
@@ -87,7 +95,12 @@ fn workspace() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
 }
 
-/// Bakes `scene` into `archive` with the preview preset.
+/// The bake preset of the benchmarked archives: `$PRM_BENCH_PRESET`, or `preview`.
+fn preset() -> String {
+    std::env::var("PRM_BENCH_PRESET").unwrap_or_else(|_| "preview".into())
+}
+
+/// Bakes `scene` into `archive` with [`preset`].
 fn bake(scene: &Path, archive: &Path) -> Result<()> {
     let mut cmd = match std::env::var_os("PRM_BAKE") {
         Some(bin) => Command::new(bin),
@@ -102,7 +115,7 @@ fn bake(scene: &Path, archive: &Path) -> Result<()> {
         .arg(scene)
         .arg("-o")
         .arg(archive)
-        .args(["--preset", "preview", "--quiet"]);
+        .args(["--preset", &preset(), "--quiet"]);
     println!("baking {} -> {} ...", scene.display(), archive.display());
     let status = cmd.status()?;
     if !status.success() {
@@ -142,7 +155,9 @@ fn lights(scene: &Scene) -> Vec<Light> {
 
 /// Benchmarks one scene; returns (median ratio, GPU ratio).
 fn bench(name: &str, scene_path: &Path, frames: usize) -> Result<(f64, f64)> {
-    let archive_path = workspace().join("target/prm-bench").join(format!("{name}.prm"));
+    let archive_path = workspace()
+        .join("target/prm-bench")
+        .join(format!("{name}-{}.prm", preset()));
     let (mut archive, scene) = open(scene_path, &archive_path)?;
     let ctx = prm_play::open_vulkan()?;
     let opts = PlayOptions {
@@ -186,7 +201,7 @@ fn bench(name: &str, scene_path: &Path, frames: usize) -> Result<(f64, f64)> {
     dt.print_passes("direct");
     gt.print_passes("gi");
     // The last frame (gi) for a look: target/prm-bench/NAME-gi.png.
-    let png = archive_path.with_file_name(format!("{name}-gi.png"));
+    let png = archive_path.with_file_name(format!("{name}-{}-gi.png", preset()));
     prm_play::output::write_png(&png, &r.read_image()?, 1.0)?;
     let ratio = g.median_ms / d.median_ms;
     let gpu_ratio = gt.gpu_total() / dt.gpu_total();
@@ -194,7 +209,62 @@ fn bench(name: &str, scene_path: &Path, frames: usize) -> Result<(f64, f64)> {
         "  gi / direct: frame time (median) {ratio:.3}, GPU time {gpu_ratio:.3}   [{}]",
         png.display()
     );
+    r.set_timing(false);
+    attribute(&mut r, &mut archive, &scene, &opts, camera, &lights, frames, d.median_ms)?;
     Ok((ratio, gpu_ratio))
+}
+
+/// Prints where the gi frame's added wall time goes (see the module doc): gi frames of `base`
+/// interleaved with those of a player without the near field, and of one without the near field
+/// blending 8 panes, so that the differences telescope to the whole added time.
+#[allow(clippy::too_many_arguments)]
+fn attribute(
+    base: &mut Renderer,
+    archive: &mut prm_play::FileArchive,
+    scene: &Scene,
+    opts: &PlayOptions,
+    camera: prm_scene::Camera,
+    lights: &[Light],
+    frames: usize,
+    direct_ms: f64,
+) -> Result<()> {
+    let no_near = prm_play::RuntimeOptions {
+        near_light: prm_play::NearLight::Off,
+        ..opts.runtime.clone()
+    };
+    let few = prm_play::RuntimeOptions {
+        top_k: 8.min(opts.runtime.top_k),
+        residual_groups: 0,
+        ..no_near.clone()
+    };
+    let mut player = |runtime| {
+        let opts = PlayOptions {
+            runtime,
+            timestamps: false,
+            ..opts.clone()
+        };
+        Renderer::new(prm_play::open_vulkan()?, scene, archive, opts)
+    };
+    let (mut no_near, mut few) = (player(no_near)?, player(few)?);
+    let mut times = [Vec::new(), Vec::new(), Vec::new()];
+    for i in 0..frames + 3 {
+        for (r, out) in [&mut *base, &mut no_near, &mut few].into_iter().zip(times.iter_mut()) {
+            let t = r.render(&FrameInput { camera, lights, mode: Mode::Gi })?;
+            if i >= 3 {
+                out.push(t);
+            }
+        }
+    }
+    let [gi, no_near, few] = times.map(|t| Stats::of(&t).median_ms);
+    println!(
+        "  gi's added {:.1} ms: weights, ranking and 8 panes {:.1} ms, the other panes and groups {:.1} ms, \
+         near field {:.1} ms",
+        gi - direct_ms,
+        few - direct_ms,
+        no_near - few,
+        gi - no_near
+    );
+    Ok(())
 }
 
 fn main() {

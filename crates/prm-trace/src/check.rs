@@ -4,7 +4,10 @@
 //!
 //! **Lights** ([`check_lights`]): the first [`CHECK_LIGHTS`] of [`CANDIDATES`] (fractions of the
 //! scene's bounds, as a user would first try) neither inside geometry
-//! ([`crate::probes::is_inside`]) nor closer than [`CLEARANCE`] of the bounds' diagonal to a surface.
+//! ([`crate::probes::is_inside`]) nor closer than [`CLEARANCE`] of the bounds' diagonal to a
+//! surface; then one hard light ([`hard_light`]): a lamp [`HARD_DISTANCE`] under the ceiling
+//! above the first (or by a wall beside it), where the entry points' spacing decides the light
+//! next to it and the method is weakest.
 //!
 //! **The archive's side** ([`check_accuracy`]): entries' direct irradiance ray-cast with the run
 //! time's disk bound ([`entry_irradiance`]), clusters weighed by pane energy ([`energy_weight`]),
@@ -57,6 +60,11 @@ pub const CANDIDATES: [[f32; 3]; 9] = [
 /// not what a first estimate should report.
 pub const CLEARANCE: f32 = 0.03;
 
+/// Largest distance of the hard test light below the ceiling, in scene units (metres in glTF):
+/// a lamp within half a metre of a ceiling is common in game levels. Smaller scenes take
+/// [`CLEARANCE`] of their diagonal instead (2.8 cm in the bundled Cornell box).
+pub const HARD_DISTANCE: f32 = 0.4;
+
 /// Directions of the clearance test.
 const CLEARANCE_DIRECTIONS: u32 = 64;
 
@@ -90,17 +98,35 @@ impl Default for CheckParams {
     }
 }
 
-/// Positions of at most [`CHECK_LIGHTS`] test lights in `scene` (fewer when fewer candidates are
-/// free).
+/// Positions of at most [`CHECK_LIGHTS`] clear test lights in `scene` (fewer when fewer
+/// candidates are free), then the [`hard_light`] when there is one.
 pub fn check_lights(scene: &Scene, bvh: &Bvh) -> Vec<Vec3> {
     let b = scene.bounds();
     let clearance = CLEARANCE * b.diagonal();
-    CANDIDATES
+    let mut lights: Vec<Vec3> = CANDIDATES
         .iter()
         .map(|f| b.min + (b.max - b.min) * Vec3::from_array(*f))
         .filter(|&p| !crate::probes::is_inside(bvh, p) && nearest_surface(bvh, p, clearance) >= clearance)
         .take(CHECK_LIGHTS)
-        .collect()
+        .collect();
+    if let Some(hard) = lights.iter().find_map(|&p| hard_light(scene, bvh, p)) {
+        lights.push(hard);
+    }
+    lights
+}
+
+/// A test light close to the surface above `p` (the ceiling), or else beside it (a wall, along
+/// ±x then ±z): `min(HARD_DISTANCE, CLEARANCE · diagonal)` from it; `None` when no surface is
+/// far enough from `p` in those directions for a light between them.
+pub fn hard_light(scene: &Scene, bvh: &Bvh, p: Vec3) -> Option<Vec3> {
+    let distance = HARD_DISTANCE.min(CLEARANCE * scene.bounds().diagonal());
+    [Vec3::Y, Vec3::X, Vec3::NEG_X, Vec3::Z, Vec3::NEG_Z]
+        .into_iter()
+        .find_map(|d| {
+            let hit = bvh.closest_hit(p, d, f32::INFINITY, u32::MAX)?;
+            let light = p + d * (hit.t - distance);
+            (hit.t > 2.0 * distance && !crate::probes::is_inside(bvh, light)).then_some(light)
+        })
 }
 
 /// Distance from `p` to the nearest surface along [`CLEARANCE_DIRECTIONS`] rays, at most `tmax`.

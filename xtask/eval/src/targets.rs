@@ -11,8 +11,8 @@
 //! (largest 8×8 window over the whole; where that window is and its reference's brightness
 //! against the image's, see [`compare`]), the reference's own noise after the downsample (from a
 //! second reference with another seed, [`NOISE_SPP`]), the bake's seconds (its report), the
-//! bake's own estimate of its accuracy (`prm_trace::check`: its own three lights, at exit
-//! points, without the downsample; recorded in the archive) and the `gi`/`direct` frame-time ratio at 1024×768 (median of interleaved frames on one renderer, as
+//! bake's own estimate of its accuracy (`prm_trace::check`: its own four lights, one close to
+//! a surface, at exit points, without the downsample; recorded in the archive) and the `gi`/`direct` frame-time ratio at 1024×768 (median of interleaved frames on one renderer, as
 //! `cargo bench -p prm-play --bench frame` does). Each cell names its target and whether it is
 //! met. The fireplace room's default bake is made twice, with seeds 0 and 1: its error moves by
 //! half a point with the seed.
@@ -239,7 +239,7 @@ fn against(value: String, ok: Option<bool>, target: String) -> String {
 /// Runs the cases; returns the Markdown table.
 pub fn run(bake_bin: &Path, cache: &Path, root: &Path, out: &Path) -> Result<String> {
     let mut md = String::from(
-        "| case | light | indirect error (4×4) | full res. | energy | shape | local (worst 8×8 window's corner, its reference's RMS over the image's) | ref. noise | bake s | bake's own estimate (its 3 lights, exit points) | gi / direct frame |\n| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n",
+        "| case | light | indirect error (4×4) | full res. | energy | shape | local (worst 8×8 window's corner, its reference's RMS over the image's) | ref. noise | bake s | bake's own estimate (its 4 lights, exit points) | gi / direct frame |\n| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n",
     );
     for case in cases(root, cache)? {
         let name = format!("targets-{}", case.name);

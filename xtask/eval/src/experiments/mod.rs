@@ -6,13 +6,14 @@ mod cluster_weights;
 mod common;
 mod lattice;
 mod near_field;
+mod pane_rank;
 mod probe_split;
 mod residual_panes;
 
 use anyhow::{anyhow, bail, Result};
 
 /// The experiments by name, with the arguments each takes.
-const EXPERIMENTS: [(&str, &str); 6] = [
+const EXPERIMENTS: [(&str, &str); 7] = [
     (
         "bench_trace",
         "(no arguments) ray throughput of the BVH on the bundled scenes",
@@ -28,6 +29,10 @@ const EXPERIMENTS: [(&str, &str); 6] = [
     (
         "near_field",
         "SCENE ARCHIVE.prm FX FY FZ  the near field against the reference at one light",
+    ),
+    (
+        "pane_rank",
+        "SCENE ARCHIVE.prm [TILE]  the panes as a low-rank basis per tile",
     ),
     (
         "probe_split",
@@ -47,6 +52,7 @@ pub fn run(args: &[String]) -> Result<()> {
         "cluster_weights" => cluster_weights::run(rest),
         "lattice" => lattice::run(rest),
         "near_field" => near_field::run(rest),
+        "pane_rank" => pane_rank::run(rest),
         "probe_split" => probe_split::run(rest).map_err(|e| anyhow!("{e}"))?,
         "residual_panes" => residual_panes::run(rest),
         other => bail!("no experiment named {other:?}\n{}", listing()),
