@@ -26,7 +26,8 @@ fn group_energies<R: std::io::Read + std::io::Seek>(
         return Vec::new();
     }
     for (c, &g) in of.iter().enumerate() {
-        let pane = archive.read_pane(c).unwrap();
+        // The pane as the run time uploads it: RGB9E5.
+        let pane = prm_format::decode_rgb9e5_slice(&archive.read_pane_rgb9e5(c).unwrap());
         if sums.is_empty() {
             sums = vec![vec![[0.0; 3]; pane.len()]; groups];
         }

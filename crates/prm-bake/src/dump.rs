@@ -157,7 +157,11 @@ pub fn summary_json<R: Read + Seek>(archive: &Archive<R>, file: &Path, report: O
         .enumerate()
         .map(|(i, c)| json!({"index": i, "entries": c.count, "energy": c.energy, "peak": c.peak}))
         .collect();
-    let total_tiles = info.tiles_per_pane * u64::from(info.pane_count);
+    let panes_stored = info
+        .sections
+        .iter()
+        .find(|s| s.kind == prm_format::kind::PANES)
+        .map_or(0, |s| s.stored_size);
     let mut v = json!({
         "file": file.display().to_string(),
         "version": format!("{}.{}", info.major, info.minor),
@@ -230,12 +234,14 @@ pub fn summary_json<R: Read + Seek>(archive: &Archive<R>, file: &Path, report: O
             "lights": a.lights,
         })),
         "clusters": archive.clusters().len(),
-        "tiles": {
-            "filter": archive.tile_filter().name(),
-            "per_pane": info.tiles_per_pane,
-            "stored": info.stored_tiles,
-            "omitted": total_tiles - info.stored_tiles,
-            "stored_bytes": info.stored_tile_bytes,
+        "basis": {
+            "tiles": info.tiles,
+            "ranks": archive.pane_basis().ranks(),
+            "max_rank": info.max_rank,
+            "mean_rank": info.rank_sum as f64 / info.tiles.max(1) as f64,
+            "basis_bytes": info.basis_bytes,
+            "coefficient_bytes": info.coefficient_bytes,
+            "stored_bytes": panes_stored,
             "texel_bytes": info.pane_texel_bytes,
         },
         "panes": panes,
@@ -245,8 +251,6 @@ pub fn summary_json<R: Read + Seek>(archive: &Archive<R>, file: &Path, report: O
             "ok": true,
             "sections": r.sections,
             "panes": r.panes,
-            "stored_tiles": r.stored_tiles,
-            "omitted_tiles": r.omitted_tiles,
             "bytes_hashed": r.bytes_hashed,
         });
     }
@@ -309,8 +313,8 @@ pub fn write_summary<W: Write, R: Read + Seek>(
     )?;
     writeln!(
         out,
-        "atlas        {r}x{r} texels, tiles {t}x{t} ({} per pane), {} triangles, {covered} covered texels ({:.1}%)",
-        info.tiles_per_pane,
+        "atlas        {r}x{r} texels, tiles {t}x{t} ({} in all), {} triangles, {covered} covered texels ({:.1}%)",
+        info.tiles,
         atlas.triangle_uvs.len(),
         100.0 * covered as f64 / texels.max(1) as f64,
         r = atlas.resolution,
@@ -334,12 +338,10 @@ pub fn write_summary<W: Write, R: Read + Seek>(
     if let Some(r) = report {
         writeln!(
             out,
-            "\nverify       OK: {} sections ({}) hashed, {} panes decoded, {} tiles decompressed, {} omitted, cluster energy/peak match",
+            "\nverify       OK: {} sections ({}) hashed, {} panes decoded, cluster energy/peak match",
             r.sections,
             human_bytes(r.bytes_hashed),
             r.panes,
-            r.stored_tiles,
-            r.omitted_tiles
         )?;
     }
     Ok(())
@@ -454,17 +456,16 @@ fn write_sections<W: Write, R: Read + Seek>(out: &mut W, archive: &Archive<R>) -
             hex(s.checksum)
         )?;
     }
-    let total_tiles = info.tiles_per_pane * u64::from(info.pane_count);
     writeln!(
         out,
-        "  pane tiles: {} of {} stored ({:.1}%), {} compressed ({} filter + zstd) from {} of RGB9E5 texels (ratio {:.2})",
-        info.stored_tiles,
-        total_tiles,
-        100.0 * info.stored_tiles as f64 / total_tiles.max(1) as f64,
-        human_bytes(info.stored_tile_bytes),
-        archive.tile_filter().name(),
+        "  panes: a basis per tile, mean rank {:.1} (largest {}) over {} tiles: {} of f16 basis and {} of coefficients, for {} of RGB9E5 texels (ratio {:.2})",
+        info.rank_sum as f64 / info.tiles.max(1) as f64,
+        info.max_rank,
+        info.tiles,
+        human_bytes(info.basis_bytes),
+        human_bytes(info.coefficient_bytes),
         human_bytes(info.pane_texel_bytes),
-        ratio(info.pane_texel_bytes, info.stored_tile_bytes)
+        ratio(info.pane_texel_bytes, info.basis_bytes + info.coefficient_bytes)
     )?;
     Ok(())
 }
@@ -724,12 +725,14 @@ mod tests {
         ];
         let mut w = ArchiveWriter::create(path, meta, &atlas, &entries, &clusters).unwrap();
         for p in 0..3 {
-            w.add_pane_with(|tx, ty, tile| {
-                if (tx + ty) % 2 == 0 {
-                    tile.fill([p as f32, 0.5, 0.25]);
-                }
-            })
-            .unwrap();
+            // Lit in every other 4² tile of the 8² atlas.
+            let pane: Vec<[f32; 3]> = (0..64)
+                .map(|i| match ((i % 8) / 4 + (i / 8) / 4) % 2 {
+                    0 => [p as f32, 0.5, 0.25],
+                    _ => [0.0; 3],
+                })
+                .collect();
+            w.add_pane(&pane).unwrap();
         }
         w.finish().unwrap();
     }
@@ -751,7 +754,7 @@ mod tests {
         let mut a = Archive::open(&path).unwrap();
         let report = a.verify().unwrap();
         let v = summary_json(&a, &path, Some(&report));
-        assert_eq!(v["version"], "1.0");
+        assert_eq!(v["version"], "2.0");
         assert_eq!(v["entries"], 2);
         assert_eq!(v["clusters"], 3);
         assert_eq!(v["resolution"], 8);
@@ -759,8 +762,9 @@ mod tests {
         assert_eq!(v["params"]["bounces"], 2);
         assert_eq!(v["timings"]["trace"], 3.5);
         assert_eq!(v["scene_fingerprint"], "000000000000feed");
-        assert_eq!(v["tiles"]["filter"], "delta-shuffle");
-        assert_eq!(v["tiles"]["stored"], 6); // 2 of 4 tiles per pane
+        // Two of the four tiles lit, each pane one colour there: rank 1 where lit.
+        assert_eq!(v["basis"]["tiles"], 4);
+        assert_eq!(v["basis"]["ranks"], serde_json::json!([1, 0, 0, 1]));
         assert_eq!(v["panes"][1]["peak"][0], 1.0);
         assert_eq!(v["verify"]["panes"], 3);
 
@@ -768,7 +772,7 @@ mod tests {
         write_summary(&mut text, &a, &path, Some(&report)).unwrap();
         let text = String::from_utf8(text).unwrap();
         for needle in [
-            "format       .prm 1.0",
+            "format       .prm 2.0",
             "bounces = 2",
             "trace",
             "clusters     3",
@@ -804,7 +808,7 @@ mod tests {
         );
         let a = Archive::open(&path).unwrap();
         let v = summary_json(&a, &path, None);
-        assert_eq!(v["version"], "1.5");
+        assert_eq!(v["version"], "2.0");
         assert_eq!(v["accuracy"]["mean_error"], 0.125);
         assert_eq!(v["accuracy"]["lights"][0]["energy"], 0.96);
         let mut text = Vec::new();
@@ -834,10 +838,8 @@ mod tests {
             export_exr: None,
         };
         let err = format!("{:#}", run(&args).unwrap_err());
-        assert!(
-            err.contains("failed verification") && err.contains("checksum mismatch"),
-            "{err}"
-        );
+        // The panes are read whole when the archive opens: the damage is named there.
+        assert!(err.contains("checksum mismatch in panes"), "{err}");
         let missing = DumpArgs {
             file: dir.join("missing.prm"),
             ..args
@@ -849,17 +851,21 @@ mod tests {
     #[test]
     fn export_of_a_damaged_archive_leaves_nothing_behind() {
         let (dir, path) = scratch_archive("exr-damaged");
-        // The first panes read and export before the damaged last one fails.
         let bad = damage_last_tile(&path, &dir.join("bad.prm"));
         let out = dir.join("exr");
-        let mut a = Archive::open(&bad).unwrap();
-        let err = format!("{:#}", export_exr(&mut a, &out).unwrap_err());
-        assert!(err.contains("cannot read pane"), "{err}");
+        let args = DumpArgs {
+            file: bad,
+            json: false,
+            verify: false,
+            export_exr: Some(out.clone()),
+        };
+        let err = format!("{:#}", run(&args).unwrap_err());
+        assert!(err.contains("cannot open archive"), "{err}");
         assert!(!out.exists(), "a failed export left {}", out.display());
         // Into an existing directory: its other files stay, no pane file appears.
         std::fs::create_dir_all(&out).unwrap();
         std::fs::write(out.join("keep.txt"), "x").unwrap();
-        assert!(export_exr(&mut a, &out).is_err());
+        assert!(run(&args).is_err());
         let left: Vec<_> = std::fs::read_dir(&out)
             .unwrap()
             .map(|e| e.unwrap().file_name())

@@ -603,6 +603,9 @@ pub fn bake(job: &BakeJob<'_>, renderer: Renderer<'_>, progress: &mut dyn Progre
     let mut recorder = PaneRecorder {
         checked_exits: &checked_exits,
         near_play: near_play.as_ref(),
+        image: vec![[0f32; 3]; texel_count(&traced.atlas)],
+        words: Vec::new(),
+        shard: job.shard.map(|s| (s, Vec::new())),
         checked_panes: Vec::new(),
         pane_energy: Vec::new(),
         write_s: 0.0,
@@ -622,6 +625,7 @@ pub fn bake(job: &BakeJob<'_>, renderer: Renderer<'_>, progress: &mut dyn Progre
         steps: &mut steps,
     };
     let panes = render_panes(renderer, &backend_name, &traced, out)?;
+    recorder.compress(&traced.atlas, &mut writer, &mut steps)?;
     trace_probes(&traced, &mut writer, &mut steps)?;
     let write_s = recorder.write_s;
     let accuracy = check_accuracy(&traced, recorder, &residual_groups, panes.sampled_energy, &mut steps)?;
@@ -884,43 +888,86 @@ fn trace_near_field(traced: &Traced<'_>, steps: &mut Steps<'_>) -> Option<prm_fo
     Some(near)
 }
 
-/// Appends encoded panes to the archive, and keeps what the accuracy check reads of each.
+/// Appends panes to the archive, and keeps what the accuracy check reads of them once compressed.
 struct PaneRecorder<'a> {
     /// The accuracy check's exit points (none: no check).
     checked_exits: &'a [usize],
     /// The accuracy check's model of the player's near field.
     near_play: Option<&'a prm_trace::NearPlay<'a>>,
-    /// Every pane at the checked exit points ([`crate::estimate::checked_pane`]).
+    /// The atlas image a pane is placed in, and its RGB9E5 words.
+    image: Vec<[f32; 3]>,
+    words: Vec<u32>,
+    /// A shard's own panes ([`crate::shard::SHARD_PANES`]), its partial archive's panes being
+    /// zero.
+    shard: Option<(Shard, Vec<u32>)>,
+    /// Every stored pane at the checked exit points ([`crate::estimate::checked_pane`]).
     checked_panes: Vec<Vec<Vec3>>,
     /// Every pane's energy, from the cluster table.
     pane_energy: Vec<Vec3>,
-    /// Seconds spent placing, encoding and writing the panes.
+    /// Seconds spent placing, compressing and writing the panes.
     write_s: f64,
 }
 
 impl PaneRecorder<'_> {
-    /// Appends an encoded pane, and keeps what the accuracy check reads of it.
-    fn add(
-        &mut self,
-        pane: &[Vec3],
-        encoded: prm_format::EncodedPane,
-        writer: &mut ArchiveWriter,
-    ) -> Result<(), BakeError> {
-        writer
-            .add_encoded_pane(encoded)
-            .map_err(archive_error("writing a pane"))?;
-        if !self.checked_exits.is_empty() {
-            // What the player reads: the stored RGB9E5 texels, and the cluster table's energy.
-            let stored = |v: &Vec3| Vec3::from(prm_format::decode_rgb9e5(prm_format::encode_rgb9e5(v.to_array())));
-            let stored: Vec<Vec3> = pane.par_iter().map(stored).collect();
-            self.checked_panes.push(crate::estimate::checked_pane(
-                self.near_play,
-                self.checked_exits,
-                &stored,
-            ));
-            let done = writer.clusters().len() - writer.panes_remaining();
-            self.pane_energy.push(Vec3::from(writer.clusters()[done - 1].energy));
+    /// Appends a pane, one value per exit point: placed in its texels, dilated into the gutters
+    /// and rounded to RGB9E5 (what a shard keeps, so that merged shards compress the same panes).
+    fn add(&mut self, atlas: &Atlas, pane: &[Vec3], writer: &mut ArchiveWriter) -> Result<(), BakeError> {
+        let t = Instant::now();
+        let cluster = writer.clusters().len() - writer.panes_remaining();
+        fill_texels(atlas, pane, &mut self.image);
+        prm_format::encode_rgb9e5_slice(&self.image, &mut self.words);
+        match &mut self.shard {
+            Some((shard, own)) => {
+                if shard.owns(cluster) {
+                    own.extend_from_slice(&self.words);
+                }
+                self.image.fill([0.0; 3]);
+            }
+            None => {
+                for (texel, &w) in self.image.iter_mut().zip(&self.words) {
+                    *texel = prm_format::decode_rgb9e5(w);
+                }
+            }
         }
+        writer.add_pane(&self.image).map_err(archive_error("writing a pane"))?;
+        self.write_s += t.elapsed().as_secs_f64();
+        Ok(())
+    }
+
+    /// Compresses the panes into the archive's low-rank basis, and keeps what the player will
+    /// read of them for the accuracy check: every decoded pane at the checked exit points and
+    /// every cluster's energy.
+    fn compress(&mut self, atlas: &Atlas, writer: &mut ArchiveWriter, steps: &mut Steps<'_>) -> Result<(), BakeError> {
+        let t = Instant::now();
+        if let Some((_, own)) = self.shard.take() {
+            let bytes = own.iter().flat_map(|w| w.to_le_bytes()).collect();
+            writer
+                .add_custom_section(crate::shard::SHARD_PANES, bytes)
+                .map_err(archive_error("recording the shard's panes"))?;
+        }
+        let basis = writer
+            .compress_panes()
+            .map_err(archive_error("compressing the panes"))?;
+        steps.progress.info(&format!(
+            "  panes: a basis of mean rank {:.1} per {}² tile, {:.1} MiB",
+            basis.ranks().iter().map(|&r| f64::from(r)).sum::<f64>() / basis.tile_count().max(1) as f64,
+            basis.tile_size(),
+            basis.byte_size() as f64 / f64::from(1 << 20)
+        ));
+        if !self.checked_exits.is_empty() {
+            let (near, checked) = (self.near_play, self.checked_exits);
+            self.checked_panes = (0..basis.pane_count())
+                .into_par_iter()
+                .map(|c| {
+                    let pane = basis.decode_pane(c)?;
+                    let at_exits: Vec<Vec3> = atlas.exits.iter().map(|e| Vec3::from(pane[e.texel as usize])).collect();
+                    Ok(crate::estimate::checked_pane(near, checked, &at_exits))
+                })
+                .collect::<Result<_, prm_format::Error>>()
+                .map_err(archive_error("decoding a pane"))?;
+        }
+        self.pane_energy = writer.clusters().iter().map(|c| Vec3::from(c.energy)).collect();
+        self.write_s += t.elapsed().as_secs_f64();
         Ok(())
     }
 }
@@ -1029,8 +1076,6 @@ fn render_panes(
 fn render_panes_gpu(ctx: &GpuContext, traced: &Traced<'_>, out: &mut PaneSink) -> Result<RenderedPanes, BakeError> {
     let (atlas, clustering) = (&traced.atlas, &traced.clustering);
     let mut entry_energy = vec![[0f32; 3]; traced.entries.len()];
-    let mut encoder = out.writer.pane_encoder().map_err(archive_error("encoding a pane"))?;
-    let mut image = vec![[0f32; 3]; texel_count(atlas)];
     let rp = PaneRenderParams {
         bound: traced.params.bound(),
         face_resolution: traced.params.face_resolution,
@@ -1060,11 +1105,7 @@ fn render_panes_gpu(ctx: &GpuContext, traced: &Traced<'_>, out: &mut PaneSink) -
                     *slot = e.to_array();
                 }
                 at += member_energy.len();
-                let t = Instant::now();
-                fill_texels(atlas, irradiance, &mut image);
-                let encoded = encoder.encode(&image).map_err(archive_error("encoding a pane"))?;
-                out.recorder.add(irradiance, encoded, out.writer)?;
-                out.recorder.write_s += t.elapsed().as_secs_f64();
+                out.recorder.add(atlas, irradiance, out.writer)?;
             }
             PaneOutput::Progress(s) => progress.phase_advance(s.vpls),
         }
@@ -1143,45 +1184,14 @@ fn render_panes_cpu(lattice: &Lattice, traced: &Traced<'_>, out: &mut PaneSink) 
     })
 }
 
-/// Appends the CPU's panes, every one at hand: encodes a batch on every thread, then appends it
-/// in order.
+/// Appends the CPU's panes, in cluster order.
 fn write_cpu_panes(
     atlas: &Atlas,
     panes: &prm_trace::Panes,
     writer: &mut ArchiveWriter,
     recorder: &mut PaneRecorder<'_>,
 ) -> Result<(), BakeError> {
-    let t = Instant::now();
-    // One image per worker: no more workers than panes (a 4096² image is 192 MiB).
-    let threads = rayon::current_num_threads().min(panes.clusters).max(1);
-    let mut workers = (0..threads)
-        .map(|_| Ok((writer.pane_encoder()?, vec![[0f32; 3]; texel_count(atlas)])))
-        .collect::<Result<Vec<_>, prm_format::Error>>()
-        .map_err(archive_error("encoding a pane"))?;
-    let batch = 4 * threads;
-    for first in (0..panes.clusters).step_by(batch) {
-        let last = (first + batch).min(panes.clusters);
-        let per_worker = (last - first).div_ceil(threads);
-        let encoded = workers
-            .par_iter_mut()
-            .enumerate()
-            .map(|(w, (encoder, image))| {
-                let lo = (first + w * per_worker).min(last);
-                (lo..(lo + per_worker).min(last))
-                    .map(|c| {
-                        fill_texels(atlas, panes.pane(c), image);
-                        encoder.encode(image)
-                    })
-                    .collect::<Result<Vec<_>, _>>()
-            })
-            .collect::<Result<Vec<_>, _>>()
-            .map_err(archive_error("encoding a pane"))?;
-        for (c, e) in (first..last).zip(encoded.into_iter().flatten()) {
-            recorder.add(panes.pane(c), e, writer)?;
-        }
-    }
-    recorder.write_s += t.elapsed().as_secs_f64();
-    Ok(())
+    (0..panes.clusters).try_for_each(|c| recorder.add(atlas, panes.pane(c), writer))
 }
 
 /// Records the probes section ([`probe_section`]) of a bake with probes, and their rays where

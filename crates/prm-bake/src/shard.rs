@@ -31,6 +31,12 @@ pub struct Shard {
     pub count: u32,
 }
 
+/// Private section of a shard's partial archive: its own clusters' panes, exactly as the whole
+/// bake would compress them (RGB9E5 words, `R²` per pane, in cluster order), so that `merge`
+/// compresses the same panes and writes the single bake's bytes. The partial archive's panes
+/// section holds zero panes.
+pub(crate) const SHARD_PANES: u32 = 0x8000_5052;
+
 impl Shard {
     /// Whether cluster `cluster` is rendered by this shard.
     pub fn owns(&self, cluster: usize) -> bool {
@@ -226,13 +232,16 @@ fn merge_recording(
     }
     copy_shared_sections(&first.archive, &mut writer)?;
     merge_probes(&opened, owner, clusters.len(), &mut writer)?;
+    let texels = (atlas.resolution as usize).pow(2);
+    let mut shard_panes: Vec<Vec<u32>> = Vec::with_capacity(opened.len());
+    for part in &mut opened {
+        shard_panes.push(read_shard_panes(part, texels)?);
+    }
     for c in 0..clusters.len() {
-        let part = &mut opened[owner(c)];
-        let pane = part
-            .archive
-            .read_pane(c)
-            .map_err(archive_error(format!("reading pane {c} of {}", part.path.display())))?;
-        writer.add_pane(&pane).map_err(archive_error("writing a pane"))?;
+        let words = &shard_panes[owner(c)][(c / owners.len()) * texels..][..texels];
+        writer
+            .add_pane(&prm_format::decode_rgb9e5_slice(words))
+            .map_err(archive_error("writing a pane"))?;
     }
     let archive_bytes = writer
         .finish()
@@ -243,6 +252,29 @@ fn merge_recording(
         panes: clusters.len(),
         archive_bytes,
     })
+}
+
+/// The panes a part rendered ([`SHARD_PANES`]): `texels` words per pane it owns.
+fn read_shard_panes(part: &mut Part<'_>, texels: usize) -> Result<Vec<u32>, BakeError> {
+    let bytes = part
+        .archive
+        .read_custom_section(SHARD_PANES)
+        .map_err(archive_error(format!("reading the panes of {}", part.path.display())))?
+        .unwrap_or_default();
+    let clusters = part.archive.pane_count();
+    let owned = (0..clusters).filter(|&c| part.shard.owns(c)).count();
+    if bytes.len() != owned * texels * 4 {
+        return Err(invalid(format!(
+            "{} holds {} bytes of its shard's panes, not the {} of {owned} panes: not a part of this version of prm-bake",
+            part.path.display(),
+            bytes.len(),
+            owned * texels * 4
+        )));
+    }
+    Ok(bytes
+        .chunks_exact(4)
+        .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+        .collect())
 }
 
 /// A partial archive of a sharded bake.

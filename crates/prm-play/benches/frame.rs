@@ -210,7 +210,16 @@ fn bench(name: &str, scene_path: &Path, frames: usize) -> Result<(f64, f64)> {
         png.display()
     );
     r.set_timing(false);
-    attribute(&mut r, &mut archive, &scene, &opts, camera, &lights, frames, d.median_ms)?;
+    attribute(
+        &mut r,
+        &mut archive,
+        &scene,
+        &opts,
+        camera,
+        &lights,
+        frames,
+        d.median_ms,
+    )?;
     Ok((ratio, gpu_ratio))
 }
 
@@ -249,7 +258,11 @@ fn attribute(
     let mut times = [Vec::new(), Vec::new(), Vec::new()];
     for i in 0..frames + 3 {
         for (r, out) in [&mut *base, &mut no_near, &mut few].into_iter().zip(times.iter_mut()) {
-            let t = r.render(&FrameInput { camera, lights, mode: Mode::Gi })?;
+            let t = r.render(&FrameInput {
+                camera,
+                lights,
+                mode: Mode::Gi,
+            })?;
             if i >= 3 {
                 out.push(t);
             }

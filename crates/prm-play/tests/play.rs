@@ -107,7 +107,7 @@ fn lightmap_equals_cpu_blend_with_all_clusters() {
     .unwrap();
     let gpu = r.read_lightmap().unwrap();
     let weights = r.read_weights().unwrap();
-    let mut archive = Archive::open(cornell_archive()).unwrap();
+    let archive = Archive::open(cornell_archive()).unwrap();
     let n = archive.clusters().len();
     assert_eq!(weights.len(), n);
     let mut cpu = vec![[0f64; 3]; gpu.len()];
@@ -328,7 +328,7 @@ fn top_k_keeps_the_strongest_clusters() {
     }
     assert!((kept / all - 1.0).abs() < 1e-4, "kept energy {kept} vs all {all}");
     let gpu = r.read_lightmap().unwrap();
-    let mut archive = Archive::open(cornell_archive()).unwrap();
+    let archive = Archive::open(cornell_archive()).unwrap();
     let mut cpu = vec![[0f32; 3]; gpu.len()];
     for &c in &by_score[..k as usize] {
         let pane = archive.read_pane(c).unwrap();
@@ -370,14 +370,15 @@ fn residual_groups_carry_the_dropped_clusters() {
     let w = r.read_weights().unwrap();
     let gw = r.runtime().read_group_weights().unwrap();
     assert_eq!(gw.len(), groups as usize);
-    let mut archive = Archive::open(cornell_archive()).unwrap();
+    let archive = Archive::open(cornell_archive()).unwrap();
     let of = prm_format::residual_groups(archive.clusters(), groups);
     let res = archive.atlas().resolution as usize;
     let mut sums = vec![vec![[0f32; 3]; res * res]; groups as usize];
     let mut cpu = vec![[0f32; 3]; res * res];
     let (mut all, mut played) = (0f64, 0f64);
     for (c, cw) in w.iter().enumerate() {
-        let pane = archive.read_pane(c).unwrap();
+        // The pane as the run time uploads it: RGB9E5.
+        let pane = prm_format::decode_rgb9e5_slice(&archive.read_pane_rgb9e5(c).unwrap());
         all += f64::from(cw.score);
         for ch in 0..3 {
             assert!(
@@ -433,7 +434,7 @@ fn refuses_archive_of_other_geometry() {
 /// The synthetic archive again, with eight probes (a 2×2×2 grid over the box) whose transfer
 /// from every cluster is uniform: `E(n) = Σ_c w_c ⊙ (1, 0.5, 0.25)` for every normal.
 fn archive_with_uniform_probes() -> PathBuf {
-    let mut a = Archive::open(cornell_archive()).unwrap();
+    let a = Archive::open(cornell_archive()).unwrap();
     let path = out_dir("probes").join("cornell-probes.prm");
     let clusters: Vec<prm_format::Cluster> = a
         .clusters()

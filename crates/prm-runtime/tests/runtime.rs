@@ -263,7 +263,7 @@ fn panes_in_small_chunks_blend_the_same_lightmap() {
 #[test]
 fn a_shard_of_a_bake_is_refused() {
     let ctx = gpu();
-    let (scene, mut a) = archive("shard");
+    let (scene, a) = archive("shard");
     let mut metadata = a.metadata().clone();
     metadata
         .params

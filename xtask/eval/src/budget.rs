@@ -211,7 +211,7 @@ fn played(archive: &Path, scene_path: &Path, top_k: u32, light: Light, texels: &
 /// ray-cast direct irradiance (bounded by a disk of `entry_disk · A/(Nπ)`) and pane energy, as
 /// the run time's weights pass does with shadow maps.
 fn cpu_blend(archive: &Path, tracer: &Tracer, light: Light, texels: &[u32], entry_disk: f32) -> Result<Vec<Vec3>> {
-    let mut a = prm_format::Archive::open(archive).with_context(|| format!("opening {}", archive.display()))?;
+    let a = prm_format::Archive::open(archive).with_context(|| format!("opening {}", archive.display()))?;
     let entries = a.entries().to_vec();
     let clusters = a.clusters().to_vec();
     let energy: Vec<Vec3> = a

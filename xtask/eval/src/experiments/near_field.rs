@@ -29,7 +29,7 @@ fn env_or(name: &str, default: u32) -> u32 {
 pub fn run(args: Vec<String>) {
     let scene = prm_scene::load(Path::new(&args[0])).unwrap();
     let bvh = Bvh::build(&scene, &BvhParams::DEFAULT).unwrap();
-    let mut archive = prm_format::Archive::open(Path::new(&args[1])).unwrap();
+    let archive = prm_format::Archive::open(Path::new(&args[1])).unwrap();
     let frac = Vec3::new(
         args[2].parse().unwrap(),
         args[3].parse().unwrap(),

@@ -163,7 +163,7 @@ fn lit(bases: &[TileBasis], ranks: &[usize], w: &[Vec3], texels: usize) -> Vec<V
 
 pub fn run(args: Vec<String>) {
     let scene_path = Path::new(&args[0]);
-    let mut archive = prm_format::Archive::open(Path::new(&args[1])).unwrap();
+    let archive = prm_format::Archive::open(Path::new(&args[1])).unwrap();
     let tile: usize = args.get(2).map_or(64, |s| s.parse().unwrap());
     let scene = prm_scene::load(scene_path).unwrap();
     let bvh = Bvh::build(&scene, &BvhParams::DEFAULT).unwrap();

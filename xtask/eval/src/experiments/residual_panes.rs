@@ -35,7 +35,7 @@ pub fn run(args: Vec<String>) {
     let archive_path = Path::new(&args[1]);
     let scene = prm_scene::load(scene_path).unwrap();
     let bvh = Bvh::build(&scene, &BvhParams::DEFAULT).unwrap();
-    let mut archive = prm_format::Archive::open(archive_path).unwrap();
+    let archive = prm_format::Archive::open(archive_path).unwrap();
     let k: usize = args.get(2).map_or_else(
         || archive.metadata().params["top_k"].as_u64().unwrap() as usize,
         |s| s.parse().unwrap(),
