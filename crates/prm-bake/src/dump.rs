@@ -433,7 +433,7 @@ fn write_contents<W: Write, R: Read + Seek>(out: &mut W, archive: &Archive<R>) -
     Ok(())
 }
 
-/// The section table and the pane tiles' storage.
+/// The section table and the panes' basis.
 fn write_sections<W: Write, R: Read + Seek>(out: &mut W, archive: &Archive<R>) -> std::io::Result<()> {
     let info = archive.info();
     writeln!(out, "\nsections")?;
