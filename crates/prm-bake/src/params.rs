@@ -456,8 +456,10 @@ const CAPPED_WALKS: u32 = 32;
 /// Bytes a pane's texel takes resident at run time (RGB9E5).
 const PANE_TEXEL_BYTES: f64 = 4.0;
 
-/// Bytes a covered texel of a pane takes in the archive budget's estimate: the measured RGB9E5 +
-/// filter + zstd rate on smooth panes, doubled for safety.
+/// Bytes a covered texel of a pane takes in the archive budget's estimate. The panes' basis
+/// (2% tolerance) takes 0.44 bytes per covered texel and pane on the Cornell box's default bake
+/// and 0.68 on the modern hall's (`cargo xtask eval experiment pane_rank`); 1.5 leaves a margin
+/// for scenes whose panes are less alike.
 const ARCHIVE_BYTES_PER_TEXEL: f64 = 1.5;
 
 /// The smallest side, texels, the time budget shrinks an automatic atlas to (more where its

@@ -27,6 +27,11 @@
 //!
 //! (128² tiles are capped at rank 128, `MAX_RANK`.) One basis for the three channels takes 2.5
 //! times fewer bytes at the same error; 32² and 64² tiles lie on one front.
+//!
+//! On the modern hall's default bake (205 clusters, 512² atlas, dense panes 205 MiB, shared
+//! basis in 64² tiles, the check's four lights): ε 0.005 keeps 40.7 MiB at 1.56%, 0.02 20.5 MiB
+//! at 1.92%, 0.04 14.1 MiB at 2.64%, 0.08 9.2 MiB at 5.51%. A basis kept in `f32` (`F32=1`) gives
+//! the same figures, so the `f16` rounding costs nothing measurable.
 
 use glam::Vec3;
 
