@@ -719,8 +719,8 @@ fn catchable_signals_during_a_bake_leave_no_temporary_file() {
 }
 
 /// Destinations are checked before any work: a directory, a device or a FIFO is refused (as
-/// root, `-o /dev/full` used to replace the device node with a regular file), and a symlink is
-/// written through, so the link stays a link.
+/// root, writing `-o /dev/full` by rename would replace the device node with a regular file),
+/// and a symlink is written through, so the link stays a link.
 #[cfg(unix)]
 #[test]
 fn destinations_are_checked_before_work_and_symlinks_written_through() {

@@ -196,8 +196,8 @@ mod furnace {
     /// Is it principled? Only partly. The furnace identity E_ind = ρ/(1−ρ) holds at *every* point,
     /// edges and corners included, so nothing physical happens at the edges; what fails there is
     /// the estimator, for two reasons:
-    /// - an exit point lying *exactly* on a concave edge (the atlas used to put the exit points of
-    ///   partially covered border texels on the triangle's boundary) sees the adjacent wall
+    /// - an exit point lying *exactly* on a concave edge (an atlas that put the exit points of
+    ///   partially covered border texels on the triangle's boundary would make them) sees the adjacent wall
     ///   edge-on: every VPL there has cos θ_v = 0, so half of the hemisphere (a third in a corner)
     ///   contributes nothing and the sum is about 0.42 instead of 1 (measured: 96 such exits at
     ///   32², mean 0.42). That is a degenerate sample position, and excluding it is right;

@@ -1104,7 +1104,7 @@ fn cli_lights_a_scene_without_lights_and_says_so() {
     assert!(sum > 0.0, "the frame is black");
 }
 
-/// A damaged archive's error names the file (it used to say `(archive)`).
+/// A damaged archive's error names the file, not a generic `(archive)`.
 #[test]
 fn cli_names_a_damaged_archive() {
     let dir = out_dir("damaged");
