@@ -1214,19 +1214,19 @@ fn sharp_pane(rng: &mut Rng, res: u32) -> Vec<[f32; 3]> {
     let far = [rng.unit() * res as f32, rng.unit() * res as f32];
     let tint = [0.2 + rng.unit(), 0.2 + rng.unit(), 0.2 + rng.unit()];
     let floor = 0.02 * rng.unit();
-    let mut out = Vec::with_capacity((res * res) as usize);
-    for y in 0..res {
-        for x in 0..res {
-            if zero_region(x, y, res) {
-                out.push([0.0; 3]);
-                continue;
-            }
-            let d2 = |c: [f32; 2]| (x as f32 - c[0]).powi(2) + (y as f32 - c[1]).powi(2);
-            let f = 4.0 / (1.0 + d2(near) / (radius * radius)) + 0.5 / (1.0 + d2(far) / (0.09 * (res * res) as f32));
-            out.push(std::array::from_fn(|k| (f + floor) * tint[k]));
-        }
-    }
-    out
+    pane_image(res, |x, y| {
+        let d2 = |c: [f32; 2]| (x as f32 - c[0]).powi(2) + (y as f32 - c[1]).powi(2);
+        let f = 4.0 / (1.0 + d2(near) / (radius * radius)) + 0.5 / (1.0 + d2(far) / (0.09 * (res * res) as f32));
+        std::array::from_fn(|k| (f + floor) * tint[k])
+    })
+}
+
+/// A `res`² pane of `texel(x, y)`, but for the empty band of [`zero_region`].
+fn pane_image(res: u32, texel: impl Fn(u32, u32) -> [f32; 3]) -> Vec<[f32; 3]> {
+    (0..res)
+        .flat_map(|y| (0..res).map(move |x| (x, y)))
+        .map(|(x, y)| if zero_region(x, y, res) { [0.0; 3] } else { texel(x, y) })
+        .collect()
 }
 
 /// 10% of the atlas (a band at the bottom) is empty.
@@ -1245,25 +1245,17 @@ fn smooth_pane(rng: &mut Rng, res: u32) -> Vec<[f32; 3]> {
             )
         })
         .collect();
-    let mut out = Vec::with_capacity((res * res) as usize);
-    for y in 0..res {
-        for x in 0..res {
-            if zero_region(x, y, res) {
-                out.push([0.0; 3]);
-                continue;
+    pane_image(res, |x, y| {
+        let mut v = [0.0f32; 3];
+        for (c, r, tint) in &lights {
+            let d2 = (x as f32 - c[0]).powi(2) + (y as f32 - c[1]).powi(2);
+            let f = 2.0 / (1.0 + d2 / (r * r));
+            for k in 0..3 {
+                v[k] += f * tint[k];
             }
-            let mut v = [0.0f32; 3];
-            for (c, r, tint) in &lights {
-                let d2 = (x as f32 - c[0]).powi(2) + (y as f32 - c[1]).powi(2);
-                let f = 2.0 / (1.0 + d2 / (r * r));
-                for k in 0..3 {
-                    v[k] += f * tint[k];
-                }
-            }
-            out.push(v);
         }
-    }
-    out
+        v
+    })
 }
 
 /// The pure-Python XXH3 of `read_prm.py` against the Rust crate, for every
