@@ -18,8 +18,11 @@ fn quick_start_commands(readme: &str) -> Vec<String> {
     let start = readme
         .find("\n## Quick start")
         .expect("the README has a Quick start section");
-    let end = readme[start..]
-        .find("\n## Commands")
+    // The Bevy section's command is run by bevy_prm's own tests.
+    let end = ["\n## Use it in Bevy", "\n## Commands"]
+        .iter()
+        .filter_map(|h| readme[start..].find(h))
+        .min()
         .map_or(readme.len(), |e| start + e);
     let mut commands = Vec::new();
     let mut in_block = false;
