@@ -33,19 +33,14 @@ KINDS = {1: "metadata", 2: "atlas", 3: "entries", 4: "clusters", 5: "panes", 6: 
 OPTIONAL = {6, 7, 8, 9, 10, 11}
 RAY_SKY = 0xFFFFFFFF
 RAY_BLOCKED = 0xFFFFFFFE
-MAX_PROBE_RAYS = 1 << 16
-MAX_NEAR_RAYS = 1 << 16
-MAX_PROBES = 1 << 16
-MAX_PROBE_CELLS = 1 << 24
 SH_COEFFS = 9
+# The reader's limits (formats/prm.md), before any allocation.
+MAX_PROBE_RAYS = MAX_NEAR_RAYS = MAX_PROBES = MAX_SECTIONS = 1 << 16
+MAX_PROBE_CELLS = MAX_TRIANGLES = MAX_ENTRIES = MAX_METADATA = 1 << 24
+MAX_CLUSTERS = 1 << 20
 MAX_EMITTER_GROUPS = 256
 MAX_RESOLUTION = 8192
 MAX_TILE_SIZE = 1024
-MAX_TRIANGLES = 1 << 24
-MAX_ENTRIES = 1 << 24
-MAX_CLUSTERS = 1 << 20
-MAX_METADATA = 16 << 20
-MAX_SECTIONS = 65536
 
 
 class InvalidArchive(Exception):

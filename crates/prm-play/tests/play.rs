@@ -987,30 +987,39 @@ fn play_cli(dir: &Path, args: &[&str]) -> std::process::Output {
 #[test]
 fn cli_refuses_hostile_options_naming_them() {
     let dir = out_dir("hostile-options");
-    let cases: &[(&[&str], &str, &str)] = &[
-        (&["--size", "16384x16384"], "--size", "max_buffer_size"),
-        (&["--size", "12000x12000"], "--size", "max_buffer_size"),
-        (&["--size", "16384x8192"], "--size", "max_buffer_size"),
-        (&["--size", "0x10"], "size", "1..=16384"),
-        (&["--shadow-resolution", "16384"], "--shadow-resolution", "16..="),
-        (&["--shadow-resolution", "0"], "--shadow-resolution", "16..="),
-        (&["--shadow-resolution", "100000"], "--shadow-resolution", "16..="),
-        (&["--sun-tiles", "0"], "--sun-tiles", "1..=8"),
-        (&["--sun-tiles", "9"], "--sun-tiles", "1..=8"),
-        (&["--top-k", "0"], "--top-k", "0"),
-        (&["--exposure", "nan"], "--exposure", "finite"),
-        (&["--fade-band", "nan"], "--fade-band", "finite"),
-        (&["--fade-band", "-1"], "--fade-band", ">= 0"),
+    // (option, values refused, the name and the limit the message must give)
+    let cases: &[(&str, &[&str], &str, &str)] = &[
+        (
+            "--size",
+            &["16384x16384", "12000x12000", "16384x8192"],
+            "--size",
+            "max_buffer_size",
+        ),
+        ("--size", &["0x10"], "size", "1..=16384"),
+        (
+            "--shadow-resolution",
+            &["16384", "0", "100000"],
+            "--shadow-resolution",
+            "16..=",
+        ),
+        ("--sun-tiles", &["0", "9"], "--sun-tiles", "1..=8"),
+        ("--top-k", &["0"], "--top-k", "0"),
+        ("--exposure", &["nan"], "--exposure", "finite"),
+        ("--fade-band", &["nan"], "--fade-band", "finite"),
+        ("--fade-band", &["-1"], "--fade-band", ">= 0"),
     ];
-    for (args, option, limit) in cases {
-        let out = play_cli(&dir, args);
-        let stderr = String::from_utf8_lossy(&out.stderr);
-        assert_eq!(out.status.code(), Some(2), "{args:?}: not refused up front:\n{stderr}");
-        assert!(!stderr.contains("panicked"), "{args:?} panicked:\n{stderr}");
-        assert!(
-            stderr.contains(option) && stderr.contains(limit),
-            "{args:?}: the message should name {option} and {limit}:\n{stderr}"
-        );
+    for &(option, values, named, limit) in cases {
+        for &value in values {
+            let args = [option, value];
+            let out = play_cli(&dir, &args);
+            let stderr = String::from_utf8_lossy(&out.stderr);
+            assert_eq!(out.status.code(), Some(2), "{args:?}: not refused up front:\n{stderr}");
+            assert!(!stderr.contains("panicked"), "{args:?} panicked:\n{stderr}");
+            assert!(
+                stderr.contains(named) && stderr.contains(limit),
+                "{args:?}: the message should name {named} and {limit}:\n{stderr}"
+            );
+        }
     }
 }
 

@@ -86,22 +86,22 @@ mod tests {
     /// caller's labels are not counted.
     #[test]
     fn labels_fall_in_their_parts() {
-        for (label, part) in [
-            ("prm panes", Some("panes")),
-            ("prm lit quads", Some("panes")),
-            ("prm near hits", Some("near field")),
-            ("prm near field, last sum", Some("near field")),
-            ("prm probe coefficients", Some("probes")),
-            ("prm gather points", Some("probes")),
-            ("prm baked direct lightmap", Some("baked light")),
-            ("prm lightmap", Some("lightmap")),
-            ("prm shadow maps", Some("shadow maps")),
-            ("prm weights", Some("weights")),
-            ("prm positions", Some("geometry")),
-            ("prm something new", Some("other")),
-            ("my engine's gbuffer", None),
-        ] {
-            assert_eq!(part_of(label), part, "{label}");
+        let parts: [(Option<&str>, &[&str]); 10] = [
+            (Some("panes"), &["prm panes", "prm lit quads"]),
+            (Some("near field"), &["prm near hits", "prm near field, last sum"]),
+            (Some("probes"), &["prm probe coefficients", "prm gather points"]),
+            (Some("baked light"), &["prm baked direct lightmap"]),
+            (Some("lightmap"), &["prm lightmap"]),
+            (Some("shadow maps"), &["prm shadow maps"]),
+            (Some("weights"), &["prm weights"]),
+            (Some("geometry"), &["prm positions"]),
+            (Some("other"), &["prm something new"]),
+            (None, &["my engine's gbuffer"]),
+        ];
+        for (part, labels) in parts {
+            for label in labels {
+                assert_eq!(part_of(label), part, "{label}");
+            }
         }
     }
 }
