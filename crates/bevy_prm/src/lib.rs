@@ -28,7 +28,7 @@ mod radiance;
 
 use std::io::Cursor;
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 
 use bevy_app::{App, Plugin, PostUpdate};
 use bevy_asset::io::file::FileAssetReader;
@@ -121,17 +121,22 @@ pub struct PrmArchive {
     data: Arc<ArchiveData>,
 }
 
+/// The archive as read and checked once by the loader (the run time starts from it), and its
+/// scene.
 struct ArchiveData {
-    bytes: Vec<u8>,
+    archive: Mutex<prm_format::Archive<Cursor<Vec<u8>>>>,
     scene: Scene,
-    resolution: u32,
-    triangle_uvs: Vec<[[f32; 2]; 3]>,
 }
 
 impl PrmArchive {
     /// Side of the archive's lightmap atlas, in texels.
     pub fn resolution(&self) -> u32 {
-        self.data.resolution
+        self.data
+            .archive
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .atlas()
+            .resolution
     }
 
     /// The scene the archive was baked from.
@@ -144,25 +149,20 @@ impl PrmArchive {
     /// glTF), each with its material's linear albedo. Textures are not carried.
     pub fn meshes(&self) -> Vec<(Mesh, LinearRgba)> {
         let scene = &self.data.scene;
-        (0..scene.materials.len())
-            .filter_map(|m| {
-                let (positions, normals, uvs): (Vec<_>, Vec<_>, Vec<_>) = scene
-                    .triangles
-                    .iter()
-                    .zip(&self.data.triangle_uvs)
-                    .filter(|(t, _)| t.material as usize == m)
-                    .flat_map(|(t, uv)| {
-                        (0..3).map(move |i| (t.positions[i].to_array(), t.normals[i].to_array(), uv[i]))
-                    })
-                    .fold((Vec::new(), Vec::new(), Vec::new()), |mut acc, (p, n, uv)| {
-                        acc.0.push(p);
-                        acc.1.push(n);
-                        acc.2.push(uv);
-                        acc
-                    });
-                if positions.is_empty() {
-                    return None;
-                }
+        let archive = self.data.archive.lock().unwrap_or_else(|e| e.into_inner());
+        // Corners per material: positions, normals, lightmap UVs.
+        let mut corners = vec![(Vec::new(), Vec::new(), Vec::new()); scene.materials.len()];
+        for (t, uv) in scene.triangles.iter().zip(&archive.atlas().triangle_uvs) {
+            let (p, n, u) = &mut corners[t.material as usize];
+            p.extend(t.positions.map(|v| v.to_array()));
+            n.extend(t.normals.map(|v| v.to_array()));
+            u.extend(*uv);
+        }
+        corners
+            .into_iter()
+            .zip(&scene.materials)
+            .filter(|((p, _, _), _)| !p.is_empty())
+            .map(|((positions, normals, uvs), material)| {
                 let count = positions.len() as u32;
                 let mesh = Mesh::new(PrimitiveTopology::TriangleList, RenderAssetUsages::default())
                     .with_inserted_attribute(Mesh::ATTRIBUTE_POSITION, positions)
@@ -170,8 +170,8 @@ impl PrmArchive {
                     .with_inserted_attribute(Mesh::ATTRIBUTE_UV_0, uvs.clone())
                     .with_inserted_attribute(Mesh::ATTRIBUTE_UV_1, uvs)
                     .with_inserted_indices(Indices::U32((0..count).collect()));
-                let a = scene.materials[m].albedo;
-                Some((mesh, LinearRgba::rgb(a.x, a.y, a.z)))
+                let a = material.albedo;
+                (mesh, LinearRgba::rgb(a.x, a.y, a.z))
             })
             .collect()
     }
@@ -224,20 +224,15 @@ impl AssetLoader for PrmArchiveLoader {
     ) -> Result<PrmArchive, PrmLoadError> {
         let mut bytes = Vec::new();
         reader.read_to_end(&mut bytes).await?;
-        let archive = prm_format::Archive::from_reader(Cursor::new(&bytes[..]))?;
+        let archive = prm_format::Archive::from_reader(Cursor::new(bytes))?;
         let path = settings.scene.clone().unwrap_or_else(|| {
             let dir = load_context.path().path().parent().unwrap_or(Path::new(""));
             self.root.join(dir).join(&archive.metadata().source_scene)
         });
         let scene = prm_scene::load(&path).map_err(|source| PrmLoadError::Scene { path, source })?;
-        let atlas = archive.atlas();
-        let (resolution, triangle_uvs) = (atlas.resolution, atlas.triangle_uvs.clone());
-        drop(archive);
         let data = ArchiveData {
-            bytes,
+            archive: Mutex::new(archive),
             scene,
-            resolution,
-            triangle_uvs,
         };
         Ok(PrmArchive { data: Arc::new(data) })
     }
@@ -458,7 +453,7 @@ fn update_gi(
 }
 
 fn start_runtime(device: &wgpu::Device, queue: &wgpu::Queue, data: &ArchiveData) -> Result<Runtime, String> {
-    let mut archive = prm_format::Archive::from_reader(Cursor::new(&data.bytes[..])).map_err(|e| e.to_string())?;
+    let mut archive = data.archive.lock().unwrap_or_else(|e| e.into_inner());
     let options = RuntimeOptions::for_archive(&archive);
     Runtime::new(device, queue, &mut archive, &data.scene, options).map_err(|e| e.to_string())
 }
