@@ -15,37 +15,16 @@ use prm_trace::check::{select_top_k, select_with_residuals, FADE_BAND};
 /// Clusters kept, of the synthetic archive's 48.
 const TOP_K: u32 = 8;
 
-/// The energy of every residual group's summed pane as the run time stores it (RGB9E5).
-fn group_energies<R: std::io::Read + std::io::Seek>(
-    archive: &mut prm_format::Archive<R>,
-    of: &[u32],
-    groups: usize,
-) -> Vec<Vec3> {
-    let mut sums: Vec<Vec<[f32; 3]>> = Vec::new();
-    if groups == 0 {
-        return Vec::new();
-    }
-    for (c, &g) in of.iter().enumerate() {
-        // The pane as the run time uploads it: RGB9E5.
-        let pane = prm_format::decode_rgb9e5_slice(&archive.read_pane_rgb9e5(c).unwrap());
-        if sums.is_empty() {
-            sums = vec![vec![[0.0; 3]; pane.len()]; groups];
-        }
-        for (s, v) in sums[g as usize].iter_mut().zip(&pane) {
-            (0..3).for_each(|k| s[k] += v[k]);
+/// The energy of every residual group's pane as the run time takes it: its members' recorded
+/// energies summed.
+fn group_energies(energy: &[Vec3], of: &[u32], groups: usize) -> Vec<Vec3> {
+    let mut sums = vec![Vec3::ZERO; groups];
+    if groups > 0 {
+        for (e, &g) in energy.iter().zip(of) {
+            sums[g as usize] += *e;
         }
     }
-    sums.iter()
-        .map(|sum| {
-            sum.iter()
-                .map(|t| {
-                    let v = prm_format::decode_rgb9e5(prm_format::encode_rgb9e5(*t));
-                    [0, 1, 2].map(|k| f64::from(v[k]))
-                })
-                .fold([0f64; 3], |a, b| [a[0] + b[0], a[1] + b[1], a[2] + b[2]])
-        })
-        .map(|e| Vec3::new(e[0] as f32, e[1] as f32, e[2] as f32))
-        .collect()
+    sums
 }
 
 #[test]
@@ -74,7 +53,7 @@ fn the_check_selects_the_clusters_the_player_selects() {
         assert!(energy.len() > TOP_K as usize);
         let formed = prm_format::residual_group_count(energy.len(), residual_groups);
         let of = prm_format::residual_groups(archive.clusters(), formed);
-        let group_energy = group_energies(&mut archive, &of, formed as usize);
+        let group_energy = group_energies(&energy, &of, formed as usize);
         let options = RuntimeOptions {
             top_k: TOP_K,
             residual_groups,

@@ -1,4 +1,4 @@
-// prm-runtime near indirect pass (archives of format 1.8), after the blend: the deeper VPLs' share
+// prm-runtime near indirect pass, after the blend: the deeper VPLs' share
 // of what the panes' bound removes (formats/prm.md §5.6), π/M × Σ over an exit point's near hits
 // of R₁²/(r² + R₁²) × the radiance near_indirect_radiance.wgsl gave the gather point
 // (near_sum.wgsl), added to the blend's value at the exit point's texel (read from `source`, a

@@ -1,4 +1,4 @@
-// prm-runtime near indirect radiance pass (archives of format 1.8), after the blend: the radiance
+// prm-runtime near indirect radiance pass, after the blend: the radiance
 // every gather point of the near field sends from the lights' indirect light, albedo/π × the
 // blended lightmap at its texel (read from `source`, a copy of it) less the emitters' and the
 // sky's traced part, for the deeper VPLs' share (near_indirect.wgsl). One invocation per gather

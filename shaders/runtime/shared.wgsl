@@ -105,13 +105,27 @@ struct Selected {
     cluster: u32,
 };
 
-// One chunk of the blend's panes (blend.rs): quads (four row-major texels) first_quad ..
-// first_quad + quads, of which lit_quads are lit.
+// One atlas tile of the panes' basis (blend.rs): its basis rows (four f16 per vec2<u32>,
+// `stride` per texel, zero beyond the rank) from `basis` in its chunk's basis buffer, pane p's
+// channel ch of coefficient k at `coefficients + (3p + ch)·rank + k` in its chunk's coefficients.
+struct PaneTile {
+    basis: u32,
+    stride: u32,
+    rank: u32,
+    coefficients: u32,
+};
+
+// One chunk of the panes' tiles (blend.rs): tiles first_tile .. first_tile + tiles, lit_texels
+// of whose texels anything lights; mixed_stride mixed coefficients per tile.
 struct BlendChunk {
-    first_quad: u32,
-    quads: u32,
-    lit_quads: u32,
+    first_tile: u32,
+    tiles: u32,
+    lit_texels: u32,
+    mixed_stride: u32,
+    tile_size: u32,
+    tiles_per_side: u32,
     _pad0: u32,
+    _pad1: u32,
 };
 
 // The probe grid (`prm_format::ProbeGrid`): cell (i, j, k) is index i + nx·(j + ny·k), its centre

@@ -1,7 +1,7 @@
 // prm-runtime weights pass: irradiance of every entry point from the lights (shadow-mapped) and
 // the emitters (precomputed), and
 // each cluster's weight = its members' irradiance weighed by their pane energy,
-// Σ E_i e_i / Σ e_i per channel (the mean when every e_i is 1, archives before 1.1), so the
+// Σ E_i e_i / Σ e_i per channel (the mean when every e_i is 1, archives without entry energies), so the
 // cluster gives the indirect energy its members would give unclustered; score = Σ_rgb weight ×
 // pane energy.
 

@@ -106,13 +106,12 @@ pub struct BakeArgs {
     pub probes: Option<u32>,
     /// Rays per probe that find the surfaces the player gathers the probes' light from, each
     /// frame, through the lightmap (default 1024; 0: none, the probes are lit through the panes'
-    /// VPLs instead, as archives before format 1.6 are, and the VPL disks stay three entry-point
-    /// radii).
+    /// VPLs instead, and the VPL disks stay three entry-point radii).
     #[arg(long, value_name = "RAYS", requires = "probes")]
     pub probe_rays: Option<u32>,
     /// Cosine rays per exit point that find the surfaces close enough for the VPL bound to
     /// have removed their light (default 64; 0: none). The player gathers it back each frame
-    /// from their light, mostly at inner edges and contacts (format 1.7 to 1.9). With it the
+    /// from their light, mostly at inner edges and contacts. With it the
     /// VPL disks are eight times their entry point's radius where atlas texels × near rays fit
     /// 2^24 hits (a 512² atlas at 64 rays), else three (`vpl_disk_scale` in --config); without
     /// it once.
@@ -443,9 +442,10 @@ fn print_plan(params: &BakeParams, progress: &Progress) {
         let groups = prm_format::residual_group_count(params.clusters, prm_format::RESIDUAL_GROUPS);
         let mib = prm_bake::params::resident_pane_bytes(params.clusters, r) as f64 / (1024.0 * 1024.0);
         progress.say(&format!(
-            "  footprint: panes {mib:.1} MiB resident on the GPU ({} clusters + {groups} residual groups × {r}² \
-             texels × 4 B; memory budget {:.0} MiB)",
-            params.clusters, params.memory_budget_mib
+            "  footprint: panes at most {mib:.1} MiB resident on the GPU ({} clusters + {groups} residual groups, \
+             {r}² texels, every tile at rank {}; the archive's own: `prm-bake dump`)",
+            params.clusters,
+            prm_format::MAX_PANE_RANK
         ));
     }
 }

@@ -70,23 +70,31 @@ pub fn run(args: &DumpArgs) -> Result<()> {
     Ok(())
 }
 
-/// What an archive needs resident on the GPU as the player loads it by default: every pane
-/// and residual group at 4 bytes a texel, and the near field's records and hits.
+/// What an archive needs resident on the GPU as the run time loads it by default: the panes'
+/// basis rows (`f16`, the rank rounded up to four), their coefficients and the residual groups'
+/// (`f32`), and the near field's records and hits.
 fn resident_line<R: Read + Seek>(archive: &Archive<R>) -> String {
     let mib = |b: u64| b as f64 / (1024.0 * 1024.0);
+    let basis = archive.pane_basis();
     let clusters = archive.pane_count();
     let groups = prm_format::residual_group_count(clusters, prm_format::RESIDUAL_GROUPS) as usize;
-    let texels = (archive.atlas().resolution as u64).pow(2);
-    let panes = prm_bake::params::resident_pane_bytes(clusters, archive.atlas().resolution);
+    let ranks = basis.ranks().iter().map(|&r| u64::from(r));
+    let rows: u64 = ranks
+        .clone()
+        .map(|r| u64::from(basis.tile_size()).pow(2) * r.div_ceil(4) * 8)
+        .sum();
+    let coefficients = 12 * (clusters + groups) as u64 * ranks.sum::<u64>();
     let near = archive.near_field().map_or(0, |n| {
         (n.exits.len() * std::mem::size_of::<prm_format::NearExit>()
             + n.hits.len() * std::mem::size_of::<prm_format::NearHit>()) as u64
     });
     format!(
-        "{:.1} MiB on the GPU: panes {:.1} MiB ({clusters} clusters + {groups} residual groups × {texels} texels × 4 B), \
-         near field {:.1} MiB",
-        mib(panes + near),
-        mib(panes),
+        "{:.1} MiB on the GPU: panes {:.1} MiB (basis {:.1} MiB, coefficients of {clusters} clusters + {groups} \
+         residual groups {:.1} MiB), near field {:.1} MiB",
+        mib(rows + coefficients + near),
+        mib(rows + coefficients),
+        mib(rows),
+        mib(coefficients),
         mib(near)
     )
 }

@@ -453,7 +453,10 @@ const WALKS_IN_ALL: usize = 65536;
 /// 6% at all three seeds. Sponza does not gain (`cargo xtask eval --sky`, sky and sun).
 const CAPPED_WALKS: u32 = 32;
 
-/// Bytes a pane's texel takes resident at run time (RGB9E5).
+/// Bytes a pane's texel counts against the memory budget: its size as a dense RGB9E5 texel. The
+/// run time keeps far less, the archive's basis per tile (0.16 B a pane texel on the Cornell
+/// box's default bake, `prm-bake dump`; [`resident_pane_bytes`] bounds it), so the budget is a
+/// conservative cap on clusters × texels, which the large scenes' evaluated plans were made with.
 const PANE_TEXEL_BYTES: f64 = 4.0;
 
 /// Bytes a covered texel of a pane takes in the archive budget's estimate. The panes' basis
@@ -505,11 +508,16 @@ const GUESSED_UTILIZATION: f64 = 0.5;
 /// The pane passes' cube-face resolution without a preset or `--face-resolution`.
 const DEFAULT_FACE_RESOLUTION: u32 = 128;
 
-/// Bytes the player keeps resident for the panes of `clusters` clusters in a `resolution`²
-/// atlas: every pane and residual group's summed pane at 4 bytes (RGB9E5) a texel.
+/// The most bytes the run time keeps resident for the panes of `clusters` clusters in a
+/// `resolution`² atlas: every tile at the largest rank, its basis rows as `f16` (the rank
+/// rounded up to four) and its coefficients, with the residual groups', as `f32`. Bakes keep
+/// well under it (the tolerance sets the ranks): `prm-bake dump` prints an archive's own.
 pub fn resident_pane_bytes(clusters: usize, resolution: u32) -> u64 {
     let groups = prm_format::residual_group_count(clusters, prm_format::RESIDUAL_GROUPS) as u64;
-    (clusters as u64 + groups) * u64::from(resolution).pow(2) * PANE_TEXEL_BYTES as u64
+    let t = u64::from(crate::archive::tile_size(resolution));
+    let rank = u64::from(prm_format::MAX_PANE_RANK).min(t * t);
+    let tiles = (u64::from(resolution) / t).pow(2);
+    tiles * (t * t * rank.div_ceil(4) * 8 + 12 * (clusters as u64 + groups) * rank)
 }
 
 /// The smallest automatic atlas side that holds `charts` charts: every chart needs a texel and
@@ -1230,7 +1238,7 @@ impl BakeParams {
         let memory_mib = self.clusters as f64 * texels_per_pane * PANE_TEXEL_BYTES / (1024.0 * 1024.0);
         if memory_mib > self.memory_budget_mib {
             over_limit!(
-                "{} panes of {:.0} texels need {memory_mib:.0} MiB at run time, over the {:.0} MiB memory budget; \
+                "{} panes of {:.0} texels count {memory_mib:.0} MiB (4 B a texel), over the {:.0} MiB memory budget; \
                  use fewer --clusters, {}, or raise memory_budget_mib",
                 self.clusters,
                 texels_per_pane,
@@ -1245,7 +1253,7 @@ impl BakeParams {
     }
 
     /// The VPL bound these parameters ask for: the disk, or where the bake traces the near
-    /// field, the kernel that completes its cut weights (`VplBound::Near`, format 1.9).
+    /// field, the kernel that completes its cut weights (`VplBound::Near`).
     pub fn bound(&self) -> prm_trace::VplBound {
         if self.vpl_disk_scale > 0.0 && self.near_rays > 0 {
             prm_trace::VplBound::Near {

@@ -701,7 +701,7 @@ fn build_bvh(scene: &Scene, atlas: &mut Atlas, steps: &mut Steps<'_>) -> Result<
 }
 
 /// Whether the bake traces the near field, whose deeper share the player gathers back from the
-/// lightmap (format 1.8).
+/// lightmap.
 fn gathers_near(params: &BakeParams) -> bool {
     params.near_rays > 0 && params.vpl_disk_scale > 0.0
 }
@@ -1126,7 +1126,7 @@ fn render_panes_gpu(ctx: &GpuContext, traced: &Traced<'_>, out: &mut PaneSink) -
         steps.progress.info(&format!(
             "  no entry energies: their read-back would take {:.1} GiB, over the {:.1} GiB \
              budget, so the panes were rendered per cluster and the player weighs \
-             members equally (the archive stays format 1.0)",
+             members equally",
             prm_gpu::pane::member_readback_bytes(traced.entries.len(), atlas.exits.len()) as f64 / (1u64 << 30) as f64,
             rp.member_energy_bytes as f64 / (1u64 << 30) as f64
         ));

@@ -244,6 +244,45 @@ impl PaneBasis {
         Ok(out)
     }
 
+    /// The lit combination `Σ_c w_c ⊙ pane_c` of every pane under `weights` (RGB, one per pane),
+    /// as a player blends it from the basis: per tile, the mixed coefficients `a_k = Σ_c w_c ⊙
+    /// C[3c..3c + 3][k]` first, then `Σ_k U[i][k]·a_k` at every texel, clamped at +0 once. Row-major
+    /// over the atlas like [`decode_pane`](Self::decode_pane). It differs from the sum of the
+    /// decoded panes only where a pane's approximation dips below zero, which the decoder clamps
+    /// per pane. Panics unless there is one weight per pane.
+    pub fn blend(&self, weights: &[[f32; 3]]) -> Vec<[f32; 3]> {
+        assert_eq!(weights.len(), self.pane_count(), "one weight per pane");
+        let (t, res) = (self.tile_size as usize, self.resolution() as usize);
+        let s = self.tiles_per_side as usize;
+        let mut out = vec![[0f32; 3]; res * res];
+        let mut mixed = Vec::new();
+        for tile in 0..self.tile_count() {
+            let r = self.ranks[tile] as usize;
+            if r == 0 {
+                continue;
+            }
+            mixed.clear();
+            mixed.resize(r, [0f32; 3]);
+            for (w, c) in weights.iter().zip(self.coefficients[tile].chunks_exact(3 * r)) {
+                if *w == [0.0; 3] {
+                    continue;
+                }
+                for (k, a) in mixed.iter_mut().enumerate() {
+                    (0..3).for_each(|ch| a[ch] += w[ch] * c[ch * r + k]);
+                }
+            }
+            let (x0, y0) = ((tile % s) * t, (tile / s) * t);
+            for (i, u) in self.basis[tile].chunks_exact(r).enumerate() {
+                let mut v = [0f32; 3];
+                for (uk, a) in u.iter().zip(&mixed) {
+                    (0..3).for_each(|ch| v[ch] += uk * a[ch]);
+                }
+                out[(y0 + i / t) * res + x0 + i % t] = v.map(clamp);
+            }
+        }
+        out
+    }
+
     /// Every pane's `energy` and `peak` as the cluster table records them (formats/prm.md §6):
     /// per channel, the decoded values summed in binary64 over the tiles in tile order and the
     /// texels of a tile row-major, rounded to binary32; and their maximum.
@@ -816,6 +855,26 @@ mod tests {
         // The texel rule and the pane decoder agree bit for bit.
         let pane = basis.decode_pane(4).unwrap();
         assert_eq!(pane[9 * 16 + 3], basis.decode_texel(4, 2, 8 + 3));
+    }
+
+    /// The basis blend is the weighted sum of the decoded panes where no pane dips below zero,
+    /// and zero weights give zeros.
+    #[test]
+    fn blend_is_the_weighted_sum_of_the_panes() {
+        let panes = panes_of_rank(3, 6, 16, 11);
+        let basis = PaneBasis::compress(&panes, 16, 8, 0.0, MAX_PANE_RANK).unwrap();
+        let weights: Vec<[f32; 3]> = (0..6)
+            .map(|c| [c as f32 * 0.5, 1.0, if c == 2 { 0.0 } else { 2.0 }])
+            .collect();
+        let decoded: Vec<_> = (0..6).map(|c| basis.decode_pane(c).unwrap()).collect();
+        let blended = basis.blend(&weights);
+        for (i, b) in blended.iter().enumerate() {
+            for ch in 0..3 {
+                let sum: f32 = decoded.iter().zip(&weights).map(|(p, w)| w[ch] * p[i][ch]).sum();
+                assert!((b[ch] - sum).abs() <= 1e-5 * sum.max(1.0), "texel {i}: {b:?} vs {sum}");
+            }
+        }
+        assert!(basis.blend(&[[0.0; 3]; 6]).iter().all(|v| *v == [0.0; 3]));
     }
 
     #[test]

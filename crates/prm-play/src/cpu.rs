@@ -8,7 +8,8 @@
 //! - **Indirect light**: the run time's model on the CPU, the one the bake's accuracy check
 //!   plays: the entry points' irradiance (shadow rays, bounded by the entry disk), each
 //!   cluster's weight by its members' pane energy, the top K clusters with the faded rest
-//!   through the residual groups' summed panes, then the near field's direct share and the
+//!   through the residual groups, blended from the panes' basis as the run time blends them
+//!   ([`prm_format::PaneBasis::blend`]), then the near field's direct share and the
 //!   series of its deeper share ([`prm_trace::NearPlay`]). The lightmap is sampled bilinearly
 //!   at the triangles' lightmap UVs.
 //!
@@ -35,12 +36,11 @@ pub struct CpuArchive {
     clusters: Vec<prm_format::Cluster>,
     /// Every pane's energy.
     cluster_energy: Vec<Vec3>,
-    /// Every pane, RGB9E5 per lightmap texel.
-    panes: Vec<Vec<u32>>,
+    /// Every pane, as the archive's low-rank basis per tile.
+    panes: prm_format::PaneBasis,
     /// Every cluster's residual group; empty without groups.
     groups: Vec<u32>,
-    /// Every group's summed pane and its energy.
-    group_panes: Vec<Vec<Vec3>>,
+    /// Every group's energy: its members' summed.
     group_energy: Vec<Vec3>,
     /// The near field, if the archive has one and it is played.
     near: Option<prm_format::NearField>,
@@ -79,20 +79,16 @@ impl CpuArchive {
         };
         let clusters = archive.clusters().to_vec();
         let cluster_energy: Vec<Vec3> = archive.clusters().iter().map(|c| Vec3::from(c.energy)).collect();
-        let mut panes = Vec::with_capacity(archive.pane_count());
-        for c in 0..archive.pane_count() {
-            let pane = archive
-                .read_pane_rgb9e5(c)
-                .map_err(|e| PlayError::Cpu(format!("reading pane {c}: {e}")))?;
-            panes.push(pane);
-        }
         let groups = if options.residual_groups == 0 {
             Vec::new()
         } else {
             let count = prm_format::residual_group_count(archive.clusters().len(), options.residual_groups);
             prm_format::residual_groups(archive.clusters(), count)
         };
-        let (group_panes, group_energy) = group_sums(&panes, &cluster_energy, &groups);
+        let mut group_energy = vec![Vec3::ZERO; groups.iter().max().map_or(0, |g| *g as usize + 1)];
+        for (e, &g) in cluster_energy.iter().zip(&groups) {
+            group_energy[g as usize] += *e;
+        }
         let atlas = archive.atlas();
         Ok(CpuArchive {
             entry_disk: scene.entry_disk(entries.len()),
@@ -100,9 +96,8 @@ impl CpuArchive {
             entry_energy,
             clusters,
             cluster_energy,
-            panes,
+            panes: archive.pane_basis().clone(),
             groups,
-            group_panes,
             group_energy,
             near: archive.near_field().filter(|_| options.near_field).cloned(),
             resolution: atlas.resolution as usize,
@@ -114,21 +109,6 @@ impl CpuArchive {
     pub fn resolution(&self) -> usize {
         self.resolution
     }
-}
-
-/// Every residual group's summed pane and energy.
-fn group_sums(panes: &[Vec<u32>], energy: &[Vec3], groups: &[u32]) -> (Vec<Vec<Vec3>>, Vec<Vec3>) {
-    let count = groups.iter().max().map_or(0, |g| *g as usize + 1);
-    let texels = panes.first().map_or(0, Vec::len);
-    let mut sums = vec![vec![Vec3::ZERO; texels]; count];
-    let mut group_energy = vec![Vec3::ZERO; count];
-    for ((pane, e), &g) in panes.iter().zip(energy).zip(groups) {
-        group_energy[g as usize] += *e;
-        for (s, v) in sums[g as usize].iter_mut().zip(pane) {
-            *s += Vec3::from(prm_format::decode_rgb9e5(*v));
-        }
-    }
-    (sums, group_energy)
 }
 
 /// The CPU player: an archive's model, the scene's BVH and the near field's series.
@@ -172,10 +152,12 @@ impl<'a> CpuPlayer<'a> {
         );
         let top_k = self.options.top_k as usize;
         let fade = self.options.fade_band;
-        let mut lightmap = vec![Vec3::ZERO; a.resolution * a.resolution];
-        if a.groups.is_empty() {
-            let kept = prm_trace::check::select_top_k(&weights, &a.cluster_energy, top_k, fade);
-            add_panes(&mut lightmap, &kept, &a.panes);
+        // Blending is linear: a residual group's weight goes to each of its members.
+        let weights: Vec<[f32; 3]> = if a.groups.is_empty() {
+            prm_trace::check::select_top_k(&weights, &a.cluster_energy, top_k, fade)
+                .iter()
+                .map(|w| w.to_array())
+                .collect()
         } else {
             let (kept, residual) = prm_trace::check::select_with_residuals(
                 &weights,
@@ -185,13 +167,12 @@ impl<'a> CpuPlayer<'a> {
                 &a.groups,
                 &a.group_energy,
             );
-            add_panes(&mut lightmap, &kept, &a.panes);
-            for (w, sum) in residual.iter().zip(&a.group_panes) {
-                if *w != Vec3::ZERO {
-                    lightmap.par_iter_mut().zip(sum).for_each(|(o, v)| *o += *w * *v);
-                }
-            }
-        }
+            kept.iter()
+                .zip(&a.groups)
+                .map(|(w, &g)| (*w + residual[g as usize]).to_array())
+                .collect()
+        };
+        let lightmap: Vec<Vec3> = a.panes.blend(&weights).into_iter().map(Vec3::from).collect();
         match &self.near {
             Some(near) => {
                 let mut played = near.series(&lightmap);
@@ -265,18 +246,6 @@ impl<'a> CpuPlayer<'a> {
             e += bilinear(map, self.archive.resolution, uv);
         }
         self.scene.albedo(hit.triangle as usize, b1, b2) / std::f32::consts::PI * e
-    }
-}
-
-/// Adds `Σ w_c × pane_c` over the clusters of non-zero weight.
-fn add_panes(lightmap: &mut [Vec3], weights: &[Vec3], panes: &[Vec<u32>]) {
-    for (w, pane) in weights.iter().zip(panes) {
-        if *w != Vec3::ZERO {
-            lightmap
-                .par_iter_mut()
-                .zip(pane)
-                .for_each(|(o, v)| *o += *w * Vec3::from(prm_format::decode_rgb9e5(*v)));
-        }
     }
 }
 

@@ -71,9 +71,9 @@ struct Args {
     /// groups' summed panes (up to K + G panes a frame); 0 scales the kept clusters up instead.
     #[arg(long, value_name = "G", default_value_t = prm_format::RESIDUAL_GROUPS)]
     residual_groups: u32,
-    /// The near field of archives of format 1.7 and later (the light the panes' VPL bound removes
-    /// next to other surfaces, gathered each frame): `gather`, or `off` to play the panes alone
-    /// (darker than they should be at edges, from 1.8 everywhere a little).
+    /// The archive's near field (the light the panes' VPL bound removes next to other surfaces,
+    /// gathered each frame): `gather`, or `off` to play the panes alone (darker than they should
+    /// be, most at edges and contacts).
     #[arg(long, value_name = "gather|off", default_value = "gather", value_parser = ["gather", "off"])]
     near_field: String,
     /// How many times the near field's deeper share is gathered after the blend, each from the

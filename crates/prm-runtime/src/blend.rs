@@ -1,115 +1,242 @@
-//! The blend pass (`shaders/runtime/blend.wgsl`) and the panes it reads: Σ over the kept
-//! clusters and the residual groups of effective weight × pane, plus the emitters' and the near
-//! field's lightmaps, into the indirect-irradiance lightmap, one invocation per four lit texels.
+//! The blend pass (`shaders/runtime/blend.wgsl`) and the panes it reads: at every lit texel, the
+//! tile's basis row times the mixed coefficients of the mix pass ([`crate::mix`]), plus the
+//! emitters' and the near field's lightmaps, into the indirect-irradiance lightmap.
 //!
-//! The panes live in storage buffers of RGB9E5 words, decoded in the shader, in the atlas's
-//! row-major texel order grouped by four (a *quad*: texels `4q..4q + 3`, one `vec4<u32>`): a
-//! *chunk* holds, for a range of quads, every pane's words of those quads (pane `p`'s quad `q`
-//! at `p × quads + (q − first)`), as many quads as keep the chunk within the device's storage
-//! binding (128 MiB on lavapipe), and the pass dispatches once per chunk over the quads it
-//! lights. So the pane count is bounded by memory only, not by `max_texture_array_layers`
-//! (2048 on lavapipe, which would refuse an unclustered bake of 4096 entry points).
+//! The panes stay on the GPU as the archive holds them, a low-rank basis per atlas tile
+//! (`prm_format::PaneBasis`), not expanded to one texture per pane: the basis rows as `f16`
+//! (rounded up to four per texel, zero-padded) and the coefficients as `f32`, with every residual
+//! group's coefficients (its members' summed) after the clusters'. Since blending is linear, the
+//! frame's `Σ_c w_c·pane_c` is `U·(Σ_c w_c·C_c)` per tile: the mix pass forms the bracket, a few
+//! hundred values per tile, and this pass one dot product of rank length per texel. Tiles are
+//! grouped in *chunks* whose basis and coefficients each fit the device's storage binding (128
+//! MiB on lavapipe); each pass dispatches once per chunk.
 //!
-//! Measured on lavapipe (McGuire's CornellBox-Original, its default archive, 512 clusters, K =
-//! 128 + 64 groups; `prm-play --headless --size 1024x768 --frames 12 --timings --gi-update every-frame`, medians,
-//! the three builds interleaved): the `gi` frame took 86–102 ms (direct light alone 29 ms) with
-//! the panes in an `rgb9e5ufloat` texture array read one texel per invocation, 65–74 ms with the
-//! array read four texels per invocation, and **54–64 ms** as here: the blend itself about 17 ms
-//! against about 50 ms. Four texels share each kept cluster's weight load and come in one
-//! 16-byte load; eight per invocation were no faster (62–67 ms).
+//! On the bundled Cornell box's automatic bake (512 clusters + 64 residual groups, a 256² atlas,
+//! 16 tiles of mean rank 42.6) the panes take 10.2 MiB of GPU memory this way, against 144 MiB
+//! as one RGB9E5 buffer per pane, and a frame reads about 6 MB of them instead of 48 MB
+//! (`prm-play --timings` reports both). On lavapipe the frame bench (`cargo bench -p prm-play
+//! --bench frame`, `PRM_BENCH_PRESET=default`) puts the 120 panes and 64 groups beyond the
+//! first 8 at 0.1 ms of added frame time, against 13.7 ms for the RGB9E5 buffers.
 
+use prm_format::PaneBasis;
 use prm_gpu_kit::{linear_workgroups, pipeline, ComputePass, PassTimer};
 
-use crate::{Buffers, GpuBlendChunk, RuntimeError};
+use crate::{GpuBlendChunk, GpuPaneTile, RuntimeError};
 
-/// Texels per quad: one `vec4<u32>` of RGB9E5 words, one invocation of the blend.
-const QUAD: usize = 4;
+/// Basis values per `vec2<u32>`: four `f16`.
+const LANES: usize = 4;
 
-/// The panes as the blend reads them: chunks of quads, each a storage buffer.
+/// One chunk of tiles: their basis and coefficients, each a storage buffer.
+pub(crate) struct PaneChunk {
+    /// The chunk's constants (its tiles; lit texels are set by [`BlendPass::new`]).
+    pub constants: GpuBlendChunk,
+    pub basis: wgpu::Buffer,
+    pub coefficients: wgpu::Buffer,
+}
+
+/// The panes as the mix and blend passes read them.
 pub(crate) struct Panes {
-    /// One buffer per chunk.
-    chunks: Vec<wgpu::Buffer>,
-    /// Quads per chunk (the last may hold fewer).
-    quads_per_chunk: usize,
-    /// Quads in the atlas.
-    quads: usize,
-    /// Panes (clusters, then the residual groups' summed panes).
-    layers: usize,
+    pub chunks: Vec<PaneChunk>,
+    /// One [`GpuPaneTile`] per tile, offsets within its chunk's buffers.
+    pub tiles: wgpu::Buffer,
+    /// The mixed coefficients, `mixed_stride` `vec4<f32>` per tile.
+    pub mixed: wgpu::Buffer,
+    /// Each tile's chunk, rank and basis stride.
+    tile_chunk: Vec<usize>,
+    ranks: Vec<u32>,
+    tile_size: u32,
+    tiles_per_side: u32,
+    /// `Σ_t r_t`: coefficients a kept pane has per channel.
+    rank_sum: u64,
 }
 
 impl Panes {
-    /// Buffers for `layers` panes of `texels` texels each, in chunks the device can bind and
-    /// of at most `cap` bytes when given.
-    pub fn new(device: &wgpu::Device, layers: usize, texels: usize, cap: Option<u64>) -> Result<Panes, RuntimeError> {
+    /// Uploads `basis` with each of the `group_count` residual groups' coefficients (the sum of
+    /// those of the clusters `group_of` puts in it) after the clusters', in chunks the device
+    /// can bind and of at most `cap` bytes when given.
+    pub fn upload(
+        device: &wgpu::Device,
+        basis: &PaneBasis,
+        group_of: &[u32],
+        group_count: u32,
+        cap: Option<u64>,
+    ) -> Result<Panes, RuntimeError> {
         let limits = device.limits();
         let binding = limits
             .max_storage_buffer_binding_size
             .min(limits.max_buffer_size)
             .min(cap.unwrap_or(u64::MAX));
-        let quad_bytes = (layers * QUAD * 4) as u64;
-        let quads = texels.div_ceil(QUAD);
-        if quad_bytes > binding {
-            return Err(RuntimeError::TooManyPanes {
-                panes: layers,
-                max: (binding / (QUAD as u64 * 4)) as u32,
-            });
-        }
-        let quads_per_chunk = ((binding / quad_bytes) as usize).min(quads).max(1);
-        let chunks = (0..quads.div_ceil(quads_per_chunk))
-            .map(|c| {
-                let n = quads_per_chunk.min(quads - c * quads_per_chunk);
-                pipeline::storage(
-                    device,
-                    "prm panes",
-                    (layers * n * QUAD * 4) as u64,
-                    wgpu::BufferUsages::COPY_DST,
-                )
+        let panes = basis.pane_count() + group_count as usize;
+        let texels = u64::from(basis.tile_size()).pow(2);
+        let sizes: Vec<(u64, u64)> = basis
+            .ranks()
+            .iter()
+            .map(|&r| {
+                let stride = u64::from(r).div_ceil(LANES as u64);
+                (texels * stride * 8, 12 * panes as u64 * u64::from(r))
             })
             .collect();
+        if let Some(&(b, c)) = sizes.iter().find(|&&(b, c)| b.max(c) > binding) {
+            return Err(RuntimeError::TooManyPanes {
+                panes,
+                bytes: b.max(c),
+                binding,
+            });
+        }
+        // Tiles in order, a new chunk whenever the basis or the coefficients would not fit.
+        let mut bounds = vec![0usize];
+        let (mut b_sum, mut c_sum) = (0u64, 0u64);
+        for (t, &(b, c)) in sizes.iter().enumerate() {
+            if b_sum + b > binding || c_sum + c > binding {
+                bounds.push(t);
+                (b_sum, c_sum) = (0, 0);
+            }
+            b_sum += b;
+            c_sum += c;
+        }
+        bounds.push(sizes.len());
+        let mut gpu_tiles = Vec::with_capacity(sizes.len());
+        let mut tile_chunk = Vec::with_capacity(sizes.len());
+        let chunks = bounds
+            .windows(2)
+            .enumerate()
+            .map(|(c, w)| {
+                let chunk = upload_chunk(device, basis, group_of, group_count, w[0]..w[1], &mut gpu_tiles);
+                tile_chunk.extend(std::iter::repeat_n(c, w[1] - w[0]));
+                chunk
+            })
+            .collect();
+        let mixed_stride = basis.max_rank().div_ceil(LANES as u32) * LANES as u32;
         Ok(Panes {
             chunks,
-            quads_per_chunk,
-            quads,
-            layers,
+            tiles: pipeline::buffer_init(
+                device,
+                "prm panes tiles",
+                bytemuck::cast_slice(&gpu_tiles),
+                wgpu::BufferUsages::STORAGE,
+            ),
+            mixed: pipeline::storage(
+                device,
+                "prm panes mixed",
+                (basis.tile_count() as u64 * u64::from(mixed_stride.max(LANES as u32)) * 16).max(16),
+                wgpu::BufferUsages::empty(),
+            ),
+            tile_chunk,
+            ranks: basis.ranks().to_vec(),
+            tile_size: basis.tile_size(),
+            tiles_per_side: basis.tiles_per_side(),
+            rank_sum: basis.ranks().iter().map(|&r| u64::from(r)).sum(),
         })
     }
 
-    /// Quads in chunk `c`.
-    fn chunk_quads(&self, c: usize) -> usize {
-        self.quads_per_chunk.min(self.quads - c * self.quads_per_chunk)
+    /// Marks in `lit` (one flag per atlas texel, row-major) every texel whose basis row is not
+    /// zero: where some pane may light it.
+    pub fn mark_lit(basis: &PaneBasis, lit: &mut [bool]) {
+        let (t, s) = (basis.tile_size() as usize, basis.tiles_per_side() as usize);
+        let res = t * s;
+        for (tile, &r) in basis.ranks().iter().enumerate() {
+            if r == 0 {
+                continue;
+            }
+            let (x0, y0) = ((tile % s) * t, (tile / s) * t);
+            for (i, row) in basis.basis(tile).chunks_exact(r as usize).enumerate() {
+                if row.iter().any(|&u| u != 0.0) {
+                    lit[(y0 + i / t) * res + x0 + i % t] = true;
+                }
+            }
+        }
     }
 
-    /// Uploads pane `layer` (RGB9E5 words, row-major texels).
-    pub fn write(&self, queue: &wgpu::Queue, layer: u32, words: &[u32]) {
-        assert!((layer as usize) < self.layers && words.len() <= self.quads * QUAD);
-        let mut padded = Vec::new();
-        for (c, buffer) in self.chunks.iter().enumerate() {
-            let n = self.chunk_quads(c);
-            let start = c * self.quads_per_chunk * QUAD;
-            let end = (start + n * QUAD).min(words.len());
-            let slice = if end - start == n * QUAD {
-                &words[start..end]
-            } else {
-                padded.clear();
-                padded.extend_from_slice(&words[start..end]);
-                padded.resize(n * QUAD, 0);
-                &padded
-            };
-            let offset = (layer as usize * n * QUAD * 4) as u64;
-            queue.write_buffer(buffer, offset, bytemuck::cast_slice(slice));
-        }
+    /// The tile that holds atlas texel `texel`.
+    fn tile_of(&self, texel: u32) -> usize {
+        let res = self.tile_size * self.tiles_per_side;
+        let (x, y) = (texel % res, texel / res);
+        ((y / self.tile_size) * self.tiles_per_side + x / self.tile_size) as usize
+    }
+
+    /// Mixed coefficients per tile, as the passes index them.
+    fn mixed_stride(&self) -> u32 {
+        self.ranks.iter().copied().max().unwrap_or(0).div_ceil(LANES as u32) * LANES as u32
+    }
+
+    /// Bytes the mix pass reads a frame for each kept pane (`12·Σ_t r_t`).
+    pub fn coefficient_bytes_per_pane(&self) -> u64 {
+        12 * self.rank_sum
     }
 }
 
-/// The blend: one pipeline, one bind group and dispatch per chunk of panes.
+/// Chunk `tiles` of `basis` in two buffers, its tiles' entries appended to `gpu_tiles`.
+fn upload_chunk(
+    device: &wgpu::Device,
+    basis: &PaneBasis,
+    group_of: &[u32],
+    group_count: u32,
+    tiles: std::ops::Range<usize>,
+    gpu_tiles: &mut Vec<GpuPaneTile>,
+) -> PaneChunk {
+    let mut words: Vec<u32> = Vec::new();
+    let mut coefficients: Vec<f32> = Vec::new();
+    for tile in tiles.clone() {
+        let r = basis.ranks()[tile] as usize;
+        let stride = r.div_ceil(LANES);
+        gpu_tiles.push(GpuPaneTile {
+            basis: (words.len() / 2) as u32,
+            stride: stride as u32,
+            rank: r as u32,
+            coefficients: coefficients.len() as u32,
+        });
+        if r == 0 {
+            continue;
+        }
+        for row in basis.basis(tile).chunks_exact(r) {
+            let half = |k: usize| row.get(k).map_or(0, |&u| u32::from(half::f16::from_f32(u).to_bits()));
+            words.extend((0..2 * stride).map(|p| half(2 * p) | half(2 * p + 1) << 16));
+        }
+        let c = basis.coefficients(tile);
+        coefficients.extend_from_slice(c);
+        let first = coefficients.len();
+        coefficients.resize(first + 3 * r * group_count as usize, 0.0);
+        for (pane, rows) in c.chunks_exact(3 * r).enumerate() {
+            let g = group_of.get(pane).map_or(group_count, |&g| g);
+            if g < group_count {
+                let sum = &mut coefficients[first + 3 * r * g as usize..][..3 * r];
+                sum.iter_mut().zip(rows).for_each(|(s, v)| *s += v);
+            }
+        }
+    }
+    PaneChunk {
+        constants: GpuBlendChunk {
+            first_tile: tiles.start as u32,
+            tiles: tiles.len() as u32,
+            ..Default::default()
+        },
+        basis: pipeline::buffer_init(
+            device,
+            "prm panes basis",
+            bytemuck::cast_slice(&words),
+            wgpu::BufferUsages::STORAGE,
+        ),
+        coefficients: pipeline::buffer_init(
+            device,
+            "prm panes coefficients",
+            bytemuck::cast_slice(&coefficients),
+            wgpu::BufferUsages::STORAGE,
+        ),
+    }
+}
+
+/// The blend: one pipeline, one bind group and dispatch per chunk of tiles, after the mix.
 pub(crate) struct BlendPass {
+    mix: crate::mix::MixPass,
     pass: ComputePass,
-    /// Per chunk: its bind group and workgroups (chunks no texel of which is lit are left out).
+    /// Per chunk with a lit texel: its bind group and workgroups.
     chunks: Vec<(wgpu::BindGroup, [u32; 3])>,
-    /// The chunks' constants and lit quads, which the bind groups name (kept alive here).
+    /// The chunks' constants and lit texels, which the bind groups name (kept alive here).
     _buffers: Vec<wgpu::Buffer>,
-    /// Quads the blend reads of every selected pane: the lit ones.
-    pub lit_quads: u64,
+    /// Bytes of basis rows the blend reads a frame (those of the lit texels).
+    pub basis_bytes_read: u64,
+    /// Bytes the mix reads a frame per kept pane.
+    pub coefficient_bytes_per_pane: u64,
 }
 
 /// What the blend writes and adds besides the panes.
@@ -123,28 +250,31 @@ pub(crate) struct BlendTargets<'a> {
 }
 
 impl BlendPass {
-    /// The pass on `b`'s frame and selection, blending `panes` into `targets.lightmap` at the
-    /// quads holding a texel of `lit` (one flag per atlas texel, row-major).
-    pub fn new(device: &wgpu::Device, b: &Buffers, panes: &Panes, targets: &BlendTargets, lit: &[bool]) -> BlendPass {
-        // Per chunk: its constants and its lit quads (chunk-relative).
-        let mut counts = Vec::new();
+    /// The mix and the blend on `b`'s frame and selection, blending `panes` into
+    /// `targets.lightmap` at the texels of `lit` (one flag per atlas texel, row-major).
+    pub fn new(
+        device: &wgpu::Device,
+        b: &crate::Buffers,
+        panes: &Panes,
+        targets: &BlendTargets,
+        lit: &[bool],
+    ) -> BlendPass {
+        let mut texels: Vec<Vec<u32>> = vec![Vec::new(); panes.chunks.len()];
+        let mut basis_bytes_read = 0;
+        for t in (0..lit.len() as u32).filter(|&t| lit[t as usize]) {
+            let tile = panes.tile_of(t);
+            texels[panes.tile_chunk[tile]].push(t);
+            basis_bytes_read += u64::from(panes.ranks[tile].div_ceil(LANES as u32)) * 8;
+        }
         let mut buffers = Vec::new();
-        for c in 0..panes.chunks.len() {
-            let first = c * panes.quads_per_chunk;
-            let n = panes.chunk_quads(c);
-            let lit_quads: Vec<u32> = (0..n as u32)
-                .filter(|&q| {
-                    let t = ((first + q as usize) * QUAD).min(lit.len());
-                    lit[t..(t + QUAD).min(lit.len())].iter().any(|&l| l)
-                })
-                .collect();
+        for (chunk, texels) in panes.chunks.iter().zip(&texels) {
             let constants = GpuBlendChunk {
-                first_quad: first as u32,
-                quads: n as u32,
-                lit_quads: lit_quads.len() as u32,
-                _pad0: 0,
+                lit_texels: texels.len() as u32,
+                mixed_stride: panes.mixed_stride(),
+                tile_size: panes.tile_size,
+                tiles_per_side: panes.tiles_per_side,
+                ..chunk.constants
             };
-            counts.push(lit_quads.len() as u32);
             buffers.push(pipeline::buffer_init(
                 device,
                 "prm blend chunk",
@@ -153,18 +283,18 @@ impl BlendPass {
             ));
             buffers.push(pipeline::buffer_init(
                 device,
-                "prm lit quads",
-                bytemuck::cast_slice(&lit_quads),
+                "prm lit texels",
+                bytemuck::cast_slice(texels),
                 wgpu::BufferUsages::STORAGE,
             ));
         }
         let resources = |c: usize| {
             [
-                b.frame.as_entire_binding(),
-                b.selected.as_entire_binding(),
                 buffers[2 * c].as_entire_binding(),
-                panes.chunks[c].as_entire_binding(),
+                panes.tiles.as_entire_binding(),
+                panes.chunks[c].basis.as_entire_binding(),
                 buffers[2 * c + 1].as_entire_binding(),
+                panes.mixed.as_entire_binding(),
                 wgpu::BindingResource::TextureView(targets.lightmap),
                 wgpu::BindingResource::TextureView(targets.emitted),
                 wgpu::BindingResource::TextureView(targets.near),
@@ -178,19 +308,29 @@ impl BlendPass {
         );
         // Chunks with no lit texel are not dispatched.
         let chunks = (0..panes.chunks.len())
-            .filter(|&c| counts[c] > 0)
-            .map(|c| (pass.group(device, &resources(c)), linear_workgroups(counts[c])))
+            .filter(|&c| !texels[c].is_empty())
+            .map(|c| {
+                (
+                    pass.group(device, &resources(c)),
+                    linear_workgroups(texels[c].len() as u32),
+                )
+            })
             .collect();
+        let uniforms: Vec<&wgpu::Buffer> = buffers.iter().step_by(2).collect();
+        let mix = crate::mix::MixPass::new(device, b, panes, &uniforms, panes.mixed_stride());
         BlendPass {
+            mix,
             pass,
             chunks,
             _buffers: buffers,
-            lit_quads: counts.iter().map(|&n| n as u64).sum(),
+            basis_bytes_read,
+            coefficient_bytes_per_pane: panes.coefficient_bytes_per_pane(),
         }
     }
 
-    /// Records the blend: one compute pass, a dispatch per chunk.
+    /// Records the mix, then the blend: a compute pass each, a dispatch per chunk.
     pub fn encode(&self, encoder: &mut wgpu::CommandEncoder, timer: Option<&PassTimer>) {
+        self.mix.encode(encoder, timer);
         self.pass.encode_groups(encoder, &self.chunks, timer);
     }
 }

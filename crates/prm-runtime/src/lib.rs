@@ -3,9 +3,9 @@
 //!
 //! Per frame, all on the GPU: shadow maps of every light ([`shadow_views`]; or the caller's own,
 //! [`Shadows::External`]), the shadow-mapped irradiance of every entry point and each cluster's
-//! weight (`weights.wgsl`), when the archive holds the near field (format 1.7) the light the
+//! weight (`weights.wgsl`), when the archive holds the near field the light the
 //! panes' VPL bound removes next to other surfaces, gathered from the direct light of the
-//! texels there (`near_radiance.wgsl`, `near_field.wgsl`; from 1.8 also the deeper VPLs' share,
+//! texels there (`near_radiance.wgsl`, `near_field.wgsl`; also the deeper VPLs' share,
 //! gathered after the blend from its lightmap, `near_indirect_radiance.wgsl`,
 //! `near_indirect.wgsl`), the rank of every cluster by score (`rank.wgsl`), the top K with
 //! weights faded near the threshold and the residual groups that carry the dropped clusters'
@@ -19,7 +19,7 @@
 //! [`Runtime::emitter_lightmap`], their indirect light is in the lightmap. When the archive
 //! holds probes, every frame also gathers their irradiance coefficients along their rays from
 //! the surfaces' radiance of the frame (`probe_radiance.wgsl`, `probe_rays.wgsl`; archives
-//! before 1.6: summed under the same cluster weights, `probes.wgsl`), and [`Runtime::probes`]
+//! without rays: summed under the same cluster weights, `probes.wgsl`), and [`Runtime::probes`]
 //! gives shaders the volume to light moving objects from with [`PROBES_WGSL`].
 //!
 //! Every resource lives on the device given to [`Runtime::new`]; nothing is global.
@@ -55,6 +55,7 @@ mod irradiance;
 mod lights;
 mod lit;
 mod memory;
+mod mix;
 mod near_field;
 mod options;
 mod probe_rays;
@@ -82,7 +83,7 @@ pub use probes::ProbeVolume;
 pub use shadow::SHADOW_FORMAT;
 pub use shared::{
     GpuBlendChunk, GpuCluster, GpuEffective, GpuEntry, GpuFrame, GpuGatherPoint, GpuLight, GpuNearExit, GpuNearField,
-    GpuNearHit, GpuProbeGrid, GpuProbeRays, GpuSelected, GpuView, GpuWeight, LightKind, LIGHTS_WGSL,
+    GpuNearHit, GpuPaneTile, GpuProbeGrid, GpuProbeRays, GpuSelected, GpuView, GpuWeight, LightKind, LIGHTS_WGSL,
     LIGHT_BINDINGS_WGSL, PROBES_WGSL, SHARED_WGSL,
 };
 
@@ -93,13 +94,14 @@ use weights::WeightsPass;
 /// Most lights a frame may have.
 pub const MAX_LIGHTS: usize = 256;
 /// Names of the timed passes in frame order, for a [`PassTimer`] handed to [`Runtime::encode`].
-pub const PASS_NAMES: [&str; 11] = [
+pub const PASS_NAMES: [&str; 12] = [
     "shadow",
     "weights",
     "near radiance",
     "near field",
     "rank",
     "select",
+    "mix",
     "blend",
     "near indirect radiance",
     "near indirect",
@@ -125,7 +127,7 @@ pub enum Shadows<'a> {
 #[derive(Clone, Copy, Debug)]
 pub struct ClusterWeight {
     /// The members' entry irradiance weighed by their pane energy (their mean in archives
-    /// before 1.1).
+    /// without entry energies).
     pub weight: [f32; 3],
     /// Σ_rgb weight × pane energy.
     pub score: f32,
@@ -174,7 +176,7 @@ pub(crate) struct Buffers {
     threshold: wgpu::Buffer,
     selected: wgpu::Buffer,
     effective: wgpu::Buffer,
-    /// The energy of every residual group's summed pane (`vec4`, w unused).
+    /// The energy of every residual group's pane, its members' summed (`vec4`, w unused).
     group_energy: wgpu::Buffer,
 }
 
@@ -185,7 +187,7 @@ pub struct Runtime {
     options: RuntimeOptions,
     bounds: Aabb,
     cluster_count: u32,
-    /// Residual groups built at load (their summed panes follow the clusters').
+    /// Residual groups built at load (their coefficients follow the clusters').
     group_count: u32,
     /// The top K of the frame constants last uploaded (`update`), which the passes ran with.
     frame_top_k: u32,
@@ -396,7 +398,7 @@ impl Runtime {
     }
 
     /// Records the frame set by [`Runtime::update`]: with [`Shadows::Own`] the shadow pass, then
-    /// weights, the near field (archives of format 1.7), rank, select and blend into
+    /// weights, the near field, rank, select, mix and blend into
     /// [`Runtime::lightmap`], the near field's deeper share (1.8), then the probes. Timed passes
     /// are named as in [`PASS_NAMES`]. With [`GiUpdate::OnChange`] (the default) and the run
     /// time's own shadow maps, the passes after the shadow pass are recorded only when
@@ -449,7 +451,7 @@ impl Runtime {
 
     /// The probe volume, when the archive holds probes: bindings for [`PROBES_WGSL`], whose
     /// coefficients every [`Runtime::encode`] fills. When the archive holds the probes' rays
-    /// (format 1.6; [`Runtime::probes_gather_rays`]) they are gathered along them from the
+    /// ([`Runtime::probes_gather_rays`]) they are gathered along them from the
     /// radiance of the surfaces the rays reach: the lights' direct light through the shadow
     /// maps, the lightmap's indirect light and the emitters' and sky's baked direct light, plus
     /// emissive surfaces (times their group's scale) and the sky seen directly. Without rays
@@ -465,8 +467,8 @@ impl Runtime {
         })
     }
 
-    /// Whether the probes are gathered along their rays (archives of format 1.6 baked with
-    /// them) rather than summed through the panes.
+    /// Whether the probes are gathered along their rays (archives baked with them) rather than
+    /// summed through the panes.
     pub fn probes_gather_rays(&self) -> bool {
         self.probes.as_ref().is_some_and(|p| p.has_rays())
     }
@@ -640,12 +642,14 @@ impl Runtime {
     }
 
     /// Bytes the indirect light's passes read on every update, from the sizes of what they
-    /// bind: the weights read every entry and cluster; the blend reads the lit quads of the
-    /// top K clusters' and the residual groups' panes; the near field reads its exit records
+    /// bind: the weights read every entry and cluster; the mix reads the top K clusters' and
+    /// the residual groups' coefficients in every tile, the blend the basis rows of the lit
+    /// texels; the near field reads its exit records
     /// and hits once per gather (one, plus [`RuntimeOptions::near_bounces`] for the deeper
     /// share). Texture reads (shadow maps, lightmaps) and the probes are not counted.
     pub fn gi_bytes_read(&self) -> u64 {
-        let panes = (self.options.top_k.min(self.cluster_count) + self.group_count) as u64 * self.blend.lit_quads * 16;
+        let kept = u64::from(self.options.top_k.min(self.cluster_count) + self.group_count);
+        let panes = kept * self.blend.coefficient_bytes_per_pane + self.blend.basis_bytes_read;
         let near = self
             .near
             .as_ref()

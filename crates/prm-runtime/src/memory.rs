@@ -33,7 +33,7 @@ pub const MEMORY_PARTS: [&str; 9] = [
 pub(crate) fn part_of(label: &str) -> Option<&'static str> {
     let name = label.strip_prefix("prm ")?;
     let starts = |prefixes: &[&str]| prefixes.iter().any(|p| name.starts_with(p));
-    Some(if starts(&["panes", "blend chunk", "lit quads", "group energy"]) {
+    Some(if starts(&["panes", "blend chunk", "lit texels", "group energy"]) {
         "panes"
     } else if starts(&["near"]) {
         "near field"
@@ -87,7 +87,7 @@ mod tests {
     #[test]
     fn labels_fall_in_their_parts() {
         let parts: [(Option<&str>, &[&str]); 10] = [
-            (Some("panes"), &["prm panes", "prm lit quads"]),
+            (Some("panes"), &["prm panes basis", "prm lit texels"]),
             (Some("near field"), &["prm near hits", "prm near field, last sum"]),
             (Some("probes"), &["prm probe coefficients", "prm gather points"]),
             (Some("baked light"), &["prm baked direct lightmap"]),

@@ -1,11 +1,11 @@
 //! The near field passes (`shaders/runtime/near_radiance.wgsl`, `near_field.wgsl`; both sums
-//! through `near_sum.wgsl`), for archives that hold the near field (format 1.7): first the
+//! through `near_sum.wgsl`), for archives that hold the near field: first the
 //! radiance every gather point sends this frame from the lights' direct light (through the
 //! shadow maps, times albedo/π), then every exit point's share of what the panes' VPL disk bound
 //! removes, summed along its near rays into the near lightmap the blend adds. The panes' depth-0
 //! VPLs sample the entry points' direct light with a bounded falloff, which leaves inner edges
 //! and contacts too dark; this gathers that light back.
-//! Archives of format 1.8 bound the deeper VPLs by a disk as large, and two more passes after
+//! The deeper VPLs are bounded by a disk as large, and two more passes after
 //! the blend gather their share back from the blended lightmap itself
 //! (`near_indirect_radiance.wgsl`, `near_indirect.wgsl`), once per
 //! [`crate::RuntimeOptions::near_bounces`], each time from the lightmap the previous gather
@@ -31,7 +31,7 @@ pub(crate) struct NearFieldPass {
     pub bytes_per_gather: u64,
 }
 
-/// The deeper VPLs' share (format 1.8), after the blend: from a copy of its lightmap (`source`,
+/// The deeper VPLs' share, after the blend: from a copy of its lightmap (`source`,
 /// which holds the direct share already), the gather points' indirect radiance, then each exit
 /// point's sum of it added to `source` and written into the lightmap; then, for each further
 /// gather ([`crate::RuntimeOptions::near_bounces`]), the same from a copy of the lightmap the
@@ -372,7 +372,7 @@ impl NearFieldPass {
         }
     }
 
-    /// After the blend, for format 1.8: copies the blended `lightmap`, gives every gather point
+    /// After the blend: copies the blended `lightmap`, gives every gather point
     /// its radiance from the lights' indirect light in it, and adds the deeper VPLs' share at
     /// every exit point with near hits; then once per further bounce the same from the lightmap
     /// that share completed, added to the blended copy. Nothing for 1.7.

@@ -25,14 +25,6 @@ pub enum RuntimeError {
     /// A GPU error (validation, out of memory, device lost).
     #[error(transparent)]
     Gpu(#[from] GpuError),
-    /// A pane of the archive could not be read.
-    #[error("cannot read pane {pane} of the archive")]
-    Pane {
-        /// The pane (cluster) index.
-        pane: usize,
-        /// The reader's reason.
-        source: prm_format::Error,
-    },
     /// The archive and the scene disagree.
     #[error("archive does not fit the scene: {0}")]
     Mismatch(String),
@@ -40,16 +32,19 @@ pub enum RuntimeError {
     /// empty.
     #[error("the archive is shard {0} of a sharded bake, without the other shards' panes: join the parts with `prm-bake merge`")]
     PartialArchive(String),
-    /// More panes (clusters and residual groups) than one storage binding of the device holds
-    /// four texels of.
+    /// One atlas tile of the panes' basis or coefficients (with the residual groups') takes
+    /// more than one storage binding of the device.
     #[error(
-        "the archive has {panes} panes (with the residual groups) but this GPU binds at most {max} of them at once"
+        "the archive has {panes} panes (with the residual groups); one tile of them takes {bytes} bytes but this \
+         GPU binds at most {binding} at once"
     )]
     TooManyPanes {
         /// Panes with the residual groups.
         panes: usize,
-        /// Most panes one quad of which fits the device's storage binding.
-        max: u32,
+        /// Bytes of the largest tile's basis or coefficients.
+        bytes: u64,
+        /// Bytes one storage binding (or the chunk cap) holds.
+        binding: u64,
     },
     /// More lights than [`MAX_LIGHTS`].
     #[error("{count} lights, at most {MAX_LIGHTS} are supported")]
@@ -96,24 +91,24 @@ pub enum RuntimeError {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum ProbeLight {
     /// Along the probes' rays, from the surfaces' light of the frame, when the archive holds
-    /// them (format 1.6); through the panes otherwise.
+    /// them; through the panes otherwise.
     #[default]
     Rays,
     /// Through the panes: the clusters' transfer under the frame's weights (what archives
-    /// before 1.6 hold), for comparison.
+    /// without probe rays hold), for comparison.
     Panes,
 }
 
 /// Whether the run time gathers back what the panes' VPL bound removes, for an archive that
-/// holds the near field (format 1.7; 1.8 adds the deeper VPLs' share).
+/// holds the near field (its direct share and its deeper VPLs' share).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum NearLight {
-    /// Gathered each frame along the near rays: from the surfaces' direct light, and in 1.8 from
-    /// the blended lightmap's indirect light too.
+    /// Gathered each frame along the near rays: from the surfaces' direct light, and from the
+    /// blended lightmap's indirect light.
     #[default]
     Gather,
-    /// Left out: the panes' light only, as archives before 1.7 play, for comparison (a 1.8
-    /// archive, whose deeper VPLs' disks are large, then plays too dark).
+    /// Left out: the panes' light only, for comparison (an archive with a near field, whose
+    /// VPL disks are large, then plays too dark).
     Off,
 }
 
@@ -185,14 +180,14 @@ pub struct RuntimeOptions {
     pub probe_light: ProbeLight,
     /// Whether the near field is gathered ([`NearLight::Gather`] by default).
     pub near_light: NearLight,
-    /// How many times the deeper VPLs' share of the near field (archives of format 1.8 and
-    /// later) is gathered after the blend ([`RuntimeOptions::DEFAULT_NEAR_BOUNCES`] by
+    /// How many times the deeper VPLs' share of the near field is gathered after the blend ([`RuntimeOptions::DEFAULT_NEAR_BOUNCES`] by
     /// default); 0 leaves it out.
     pub near_bounces: u32,
     /// What follows the last of those gathers ([`NearTail::Extrapolated`] by default).
     pub near_tail: NearTail,
-    /// Most bytes one buffer of panes takes (the panes are cut into chunks of texels, each a
-    /// storage buffer: `blend.rs`); `None`: the device's storage binding limit. A smaller cap
+    /// Most bytes one buffer of panes takes (the panes' tiles are grouped in chunks, each one
+    /// buffer of basis rows and one of coefficients: `blend.rs`); `None`: the device's storage
+    /// binding limit. A smaller cap
     /// costs a dispatch per chunk and nothing measurable; for engines that bound their
     /// allocations, and for tests of the chunked path.
     pub pane_chunk_bytes: Option<u64>,

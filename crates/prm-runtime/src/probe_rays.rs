@@ -1,5 +1,5 @@
 //! The probe rays passes (`shaders/runtime/probe_radiance.wgsl`, `probe_rays.wgsl`), for archives
-//! whose probes carry their rays (format 1.6): first the radiance every gather point sends this
+//! whose probes carry their rays: first the radiance every gather point sends this
 //! frame (its direct light through the shadow maps, the lightmap's indirect light and the baked
 //! direct lightmap of emitters and sky, times albedo/π, plus on emissive surfaces their
 //! emission times their group's scale), then every probe's irradiance

@@ -1,7 +1,7 @@
 //! The probes pass (`shaders/runtime/probes.wgsl`): every probe's irradiance coefficients under
 //! this frame's cluster weights, Σ_c weight_c ⊙ transfer[c][probe] over all clusters (not the
 //! blend's top K, see the shader), one invocation per probe and coefficient, after the weights;
-//! or, when the archive holds the probes' rays (format 1.6), the probe rays passes
+//! or, when the archive holds the probes' rays, the probe rays passes
 //! ([`crate::probe_rays`]) after the blend, which gather them from the surfaces' light of the
 //! frame; plus the sky's part, summed on the CPU when the sky changes
 //! ([`ProbesPass::write_sky`]); and the probe volume it fills, which shaders sample with

@@ -175,79 +175,34 @@ impl Buffers {
     }
 }
 
-/// The panes the blend reads: the clusters' RGB9E5 words, then the residual groups' summed
-/// panes (their energies written to `b.group_energy`). Also returns the texels any pane lights.
+/// The panes the mix and blend read: the archive's basis, with the residual groups'
+/// coefficients after the clusters' and their energies (the sum of their members' recorded
+/// energies) written to `b.group_energy`. Also returns the texels any pane may light.
 pub(crate) fn upload_panes<R: Read + Seek>(
     device: &wgpu::Device,
     queue: &wgpu::Queue,
-    archive: &mut Archive<R>,
+    archive: &Archive<R>,
     b: &Buffers,
     group_of: &[u32],
     group_count: u32,
     options: &RuntimeOptions,
 ) -> Result<(blend::Panes, Vec<bool>), RuntimeError> {
-    let cluster_count = archive.clusters().len() as u32;
-    let res = archive.atlas().resolution;
-    let texels = (res * res) as usize;
-    let panes = blend::Panes::new(
-        device,
-        (cluster_count + group_count).max(1) as usize,
-        texels,
-        options.pane_chunk_bytes,
-    )?;
-    // Group by group (the groups partition the clusters), so one sum is held at a time.
-    let mut order: Vec<u32> = (0..cluster_count).collect();
-    order.sort_by_key(|&c| group_of[c as usize]);
-    let mut sum = vec![[0f32; 3]; if group_count > 0 { texels } else { 0 }];
-    let mut group_energy = Vec::with_capacity(group_count as usize);
-    let mut words = Vec::with_capacity(texels);
-    // The texels the blend writes: any pane, the traced indirect light or the near field
-    // lights them (the rest of the lightmap stays zero).
-    let mut lit = vec![false; texels];
-    for (i, &p) in order.iter().enumerate() {
-        let pane = archive
-            .read_pane_rgb9e5(p as usize)
-            .map_err(|source| RuntimeError::Pane {
-                pane: p as usize,
-                source,
-            })?;
-        for (l, &w) in lit.iter_mut().zip(&pane) {
-            *l |= w & prm_format::RGB9E5_MANTISSAS != 0;
+    let basis = archive.pane_basis();
+    let panes = blend::Panes::upload(device, basis, group_of, group_count, options.pane_chunk_bytes)?;
+    if group_count > 0 {
+        let mut group_energy = vec![[0f32; 4]; group_count as usize];
+        for (c, &g) in archive.clusters().iter().zip(group_of) {
+            let e = &mut group_energy[g as usize];
+            (0..3).for_each(|k| e[k] += c.energy[k]);
         }
-        panes.write(queue, p, &pane);
-        if group_count == 0 {
-            continue;
-        }
-        for (s, &w) in sum.iter_mut().zip(&pane) {
-            let v = prm_format::decode_rgb9e5(w);
-            (0..3).for_each(|k| s[k] += v[k]);
-        }
-        let g = group_of[p as usize];
-        if order.get(i + 1).is_some_and(|&next| group_of[next as usize] == g) {
-            continue;
-        }
-        // The group's last member: store its summed pane and the energy of the pane as
-        // stored (as the writer computes a cluster's).
-        words.clear();
-        prm_format::encode_rgb9e5_slice(&sum, &mut words);
-        group_energy.push(stored_energy(&words));
-        panes.write(queue, cluster_count + g, &words);
-        sum.fill([0.0; 3]);
-    }
-    if !group_energy.is_empty() {
         queue.write_buffer(&b.group_energy, 0, bytemuck::cast_slice(&group_energy));
     }
+    // The texels the blend writes: any pane, the traced indirect light or the near field
+    // lights them (the rest of the lightmap stays zero).
+    let res = archive.atlas().resolution as usize;
+    let mut lit = vec![false; res * res];
+    blend::Panes::mark_lit(basis, &mut lit);
     Ok((panes, lit))
-}
-
-/// The energy (RGB, then 0) of a pane as stored: the sum of its decoded RGB9E5 `words`.
-fn stored_energy(words: &[u32]) -> [f32; 4] {
-    let mut energy = [0f64; 3];
-    for &w in words {
-        let v = prm_format::decode_rgb9e5(w);
-        (0..3).for_each(|k| energy[k] += f64::from(v[k]));
-    }
-    [energy[0] as f32, energy[1] as f32, energy[2] as f32, 0.0]
 }
 
 /// The run time's lightmap, `res`² texels of [`LIGHTMAP_FORMAT`], and its view.

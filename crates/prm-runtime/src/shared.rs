@@ -57,7 +57,8 @@ pub struct GpuFrame {
     pub normal_offset: f32,
     /// Depth bias of shadow lookups, in shadow texels.
     pub depth_bias: f32,
-    /// Residual groups; their summed panes are panes `cluster_count + g` (see `select.wgsl`).
+    /// Residual groups; their panes (the members' summed) are panes `cluster_count + g` (see
+    /// `select.wgsl`).
     pub group_count: u32,
     /// Padding.
     pub _pad0: u32,
@@ -292,18 +293,42 @@ pub struct GpuSelected {
     pub cluster: u32,
 }
 
-/// One chunk of the blend's panes (`blend.rs`); `BlendChunk` in the shaders.
+/// One atlas tile of the panes' basis (`blend.rs`); `PaneTile` in the shaders.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct GpuPaneTile {
+    /// Where the tile's basis starts in its chunk's basis buffer, in `vec2<u32>` (four `f16`).
+    pub basis: u32,
+    /// `vec2<u32>` per texel row of the basis: the rank rounded up to four, over four.
+    pub stride: u32,
+    /// The tile's rank `r` (0: every pane is zero there).
+    pub rank: u32,
+    /// Where the tile's coefficients start in its chunk's coefficient buffer, in `f32`: pane
+    /// `p`'s channel `ch` at `coefficients + (3p + ch)·r + k`.
+    pub coefficients: u32,
+}
+
+/// One chunk of the panes' tiles, each chunk's basis and coefficients in buffers of their own
+/// (`blend.rs`); `BlendChunk` in the shaders.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
 pub struct GpuBlendChunk {
-    /// The chunk's first quad (four row-major texels `4q..4q + 3`) in the atlas.
-    pub first_quad: u32,
-    /// Quads in the chunk: the stride from one pane to the next in its buffer.
-    pub quads: u32,
-    /// The chunk's quads that anything lights: the dispatch's invocations.
-    pub lit_quads: u32,
+    /// The chunk's first tile.
+    pub first_tile: u32,
+    /// Tiles in the chunk.
+    pub tiles: u32,
+    /// The chunk's texels that anything lights: the blend's invocations.
+    pub lit_texels: u32,
+    /// Mixed coefficients per tile (the largest rank rounded up to four).
+    pub mixed_stride: u32,
+    /// Texels per side of a tile.
+    pub tile_size: u32,
+    /// Tiles per side of the atlas.
+    pub tiles_per_side: u32,
     /// Padding.
     pub _pad0: u32,
+    /// Padding.
+    pub _pad1: u32,
 }
 
 #[cfg(test)]
@@ -354,7 +379,23 @@ mod tests {
         wgsl_layout!(s, GpuWeight, "Weight", [weight, score]).unwrap();
         wgsl_layout!(s, GpuEffective, "Effective", [weight, rank]).unwrap();
         wgsl_layout!(s, GpuSelected, "Selected", [weight, cluster]).unwrap();
-        wgsl_layout!(s, GpuBlendChunk, "BlendChunk", [first_quad, quads, lit_quads, _pad0]).unwrap();
+        wgsl_layout!(s, GpuPaneTile, "PaneTile", [basis, stride, rank, coefficients]).unwrap();
+        wgsl_layout!(
+            s,
+            GpuBlendChunk,
+            "BlendChunk",
+            [
+                first_tile,
+                tiles,
+                lit_texels,
+                mixed_stride,
+                tile_size,
+                tiles_per_side,
+                _pad0,
+                _pad1
+            ]
+        )
+        .unwrap();
         wgsl_layout!(s, GpuProbeGrid, "ProbeGrid", [origin, spacing, dims, count]).unwrap();
         wgsl_layout!(
             s,

@@ -15,12 +15,16 @@ fn gpu() -> GpuContext {
 }
 
 fn archive(name: &str) -> (Scene, FileArchive) {
+    archive_with(name, SyntheticParams::default())
+}
+
+fn archive_with(name: &str, params: SyntheticParams) -> (Scene, FileArchive) {
     let scene_path = cornell_box_path();
     let scene = prm_scene::load(&scene_path).unwrap();
     let dir = std::env::temp_dir().join(format!("prm-runtime-{}-{name}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let out = dir.join("synthetic.prm");
-    write_archive(&scene, &scene_path, &out, SyntheticParams::default()).unwrap();
+    write_archive(&scene, &scene_path, &out, params).unwrap();
     let a = prm_format::Archive::open(&out).unwrap();
     (scene, a)
 }
@@ -223,39 +227,60 @@ fn bad_input_is_refused_naming_it() {
     ctx.wait().unwrap();
 }
 
-/// Panes cut into many small chunks (one buffer and dispatch each, `RuntimeOptions::
-/// pane_chunk_bytes`) blend the same lightmap bit for bit as panes in one chunk; a cap under one
-/// quad of every pane is refused, naming the pane count.
+/// Bytes of tile `t`'s basis rows (four `f16` per eight bytes, the rank rounded up to four) and
+/// of its coefficients with the residual groups', as the run time uploads them.
+fn tile_bytes(basis: &prm_format::PaneBasis, panes: u64, t: usize) -> (u64, u64) {
+    let r = u64::from(basis.ranks()[t]);
+    (u64::from(basis.tile_size()).pow(2) * r.div_ceil(4) * 8, 12 * panes * r)
+}
+
+/// Tiles of the panes grouped in many small chunks (a basis and a coefficient buffer each, and
+/// a dispatch, `RuntimeOptions::pane_chunk_bytes`) blend the same lightmap bit for bit as one
+/// chunk; a cap under one tile is refused, naming the pane count.
 #[test]
 fn panes_in_small_chunks_blend_the_same_lightmap() {
     let ctx = gpu();
-    let (scene, mut a) = archive("chunks");
+    // A 256² atlas: 16 tiles of 64².
+    let params = SyntheticParams {
+        resolution: 256,
+        ..SyntheticParams::default()
+    };
+    let (scene, mut a) = archive_with("chunks", params);
     let lights = [point(0.28, 0.45, 0.28), point(0.1, 0.3, 0.4)];
     let mut whole = Runtime::new(&ctx.device, &ctx.queue, &mut a, &scene, RuntimeOptions::default()).unwrap();
     let expected = frame(&ctx, &mut whole, &lights, Shadows::Own);
     assert!(expected.iter().flatten().any(|&v| v > 0.0));
-    // A quad is four RGB9E5 words of every pane (clusters and residual groups).
-    let quad_bytes = 16 * u64::from(whole.cluster_count() + whole.group_count());
-    let texels = u64::from(whole.lightmap_resolution()).pow(2);
-    // 37 quads a chunk: many chunks, the last one short.
+    let panes = u64::from(whole.cluster_count() + whole.group_count());
+    let basis = a.pane_basis();
+    let largest = (0..basis.tile_count())
+        .map(|t| {
+            let (b, c) = tile_bytes(basis, panes, t);
+            b.max(c)
+        })
+        .max()
+        .unwrap();
+    assert!(
+        basis.ranks().iter().filter(|&&r| r > 0).count() > 4,
+        "too few tiles: {:?}",
+        basis.ranks()
+    );
+    // One tile's largest buffer a chunk: a chunk per tile, or nearly.
     let options = RuntimeOptions {
-        pane_chunk_bytes: Some(37 * quad_bytes),
+        pane_chunk_bytes: Some(largest),
         ..RuntimeOptions::default()
     };
-    assert!(texels / 4 > 10 * 37, "too few quads for several chunks: {texels}");
     let mut chunked = Runtime::new(&ctx.device, &ctx.queue, &mut a, &scene, options).unwrap();
     assert_eq!(frame(&ctx, &mut chunked, &lights, Shadows::Own), expected);
 
     let options = RuntimeOptions {
-        pane_chunk_bytes: Some(quad_bytes - 1),
+        pane_chunk_bytes: Some(largest - 1),
         ..RuntimeOptions::default()
     };
     let e = Runtime::new(&ctx.device, &ctx.queue, &mut a, &scene, options)
         .err()
         .unwrap();
     assert!(matches!(e, RuntimeError::TooManyPanes { .. }), "{e}");
-    let panes = (whole.cluster_count() + whole.group_count()).to_string();
-    assert!(e.to_string().contains(&panes), "{e}");
+    assert!(e.to_string().contains(&panes.to_string()), "{e}");
 }
 
 /// One shard of a sharded bake (`params.shard`) holds the other shards' panes as zeros: the run
@@ -290,9 +315,10 @@ fn a_shard_of_a_bake_is_refused() {
     );
 }
 
-/// The run time's GPU memory by part: the panes' part holds every pane and residual group at
-/// 4 bytes a texel (and little more), the lightmap its RGBA32F texels, and the bytes an update
-/// reads cover the selected panes' lit quads.
+/// The run time's GPU memory by part: the panes' part holds the basis rows and the
+/// coefficients with the residual groups' (and little more), the lightmap its RGBA32F texels,
+/// and the bytes an update reads cover the selected panes' coefficients and the lit texels'
+/// basis rows.
 #[test]
 fn gpu_memory_is_reported_by_part() {
     let ctx = gpu();
@@ -304,18 +330,24 @@ fn gpu_memory_is_reported_by_part() {
     let parts = rt.gpu_memory().expect("Vulkan reports its allocations");
     assert_eq!(parts.len(), prm_runtime::MEMORY_PARTS.len());
     let part = |name: &str| parts.iter().find(|p| p.name == name).unwrap().bytes;
-    let panes = (rt.cluster_count() + rt.group_count()) as u64 * texels * 4;
+    let basis = a.pane_basis();
+    let all = u64::from(rt.cluster_count() + rt.group_count());
+    let (rows, coefficients) = (0..basis.tile_count())
+        .map(|t| tile_bytes(basis, all, t))
+        .fold((0, 0), |(b, c), (tb, tc)| (b + tb, c + tc));
+    let panes = rows + coefficients;
     assert!(
         part("panes") >= panes && part("panes") <= panes + panes / 10 + (1 << 20),
-        "panes {} for {panes} bytes of texels",
+        "panes {} for {panes} bytes of basis and coefficients",
         part("panes")
     );
     assert!(part("lightmap") >= texels * 16, "lightmap {}", part("lightmap"));
     assert!(part("shadow maps") > 0 && part("weights") > 0);
     let read = rt.gi_bytes_read();
-    let k = rt.options().top_k.min(rt.cluster_count()) as u64;
+    let k = u64::from(rt.options().top_k.min(rt.cluster_count()) + rt.group_count());
+    let per_pane = coefficients / all;
     assert!(
-        read > 0 && read <= (k + rt.group_count() as u64) * texels * 4 + (64 << 20),
+        read > k * per_pane && read <= k * per_pane + rows + (64 << 20),
         "{read}"
     );
 }

@@ -205,9 +205,8 @@ pub fn select_top_k(weights: &[Vec3], cluster_energy: &[Vec3], top_k: usize, fad
 /// scaled, and for every group `g` the weight of its summed pane, `Σ_{c∈g} w_c ⊙ e_c ⊙ (1 −
 /// fade_c) / E_g` per channel (0 where `E_g`, the group pane's energy, is 0). Returns the
 /// clusters' weights and the groups'; with `top_k ≥` the cluster count, the weights as they
-/// are and no group light. The run time takes `E_g` from its RGB9E5 summed pane; the bake's
-/// check ([`played_indirect`]) sums the members' energies and panes unrounded, which differ
-/// from it by the encoding's rounding (2^-9 of a texel at most).
+/// are and no group light. The run time and the bake's check ([`played_indirect`]) both take
+/// `E_g` as the members' summed energies.
 pub fn select_with_residuals(
     weights: &[Vec3],
     cluster_energy: &[Vec3],

@@ -1,4 +1,4 @@
-//! The near field (format 1.7 to 1.9: `prm_format::NearField`): short cosine rays from every exit
+//! The near field (`prm_format::NearField`): short cosine rays from every exit
 //! point, kept where they end close enough for the VPL disk bound ([`crate::VplBound`]) to
 //! have removed light, so that the run time gathers that light back from the surfaces' direct
 //! light of the frame.

@@ -404,7 +404,7 @@ pub(crate) fn gather_points(
     (index, points)
 }
 
-/// Where every probe's [`probe_ray_direction`] rays meet the scene (format 1.6's probe rays):
+/// Where every probe's [`probe_ray_direction`] rays meet the scene (the archive's probe rays):
 /// the covered texel of the front face they hit, [`RAY_SKY`] when they leave the scene, or
 /// [`RAY_BLOCKED`] at a back face. A hit takes its texel's exit when that exit is on the hit's
 /// chart, else the exit its gutter texel copies (same chart), else the nearest exit of the

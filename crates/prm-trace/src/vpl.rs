@@ -45,7 +45,7 @@ pub enum VplBound {
         /// Radius multiplier (1 = a disk of exactly the VPL's area).
         scale: f32,
     },
-    /// The complement of a near field's cut weights (format 1.9):
+    /// The complement of a near field's cut weights:
     /// `1/max(r², (1 − w₀)(r² + R²))`, `R²` as for [`VplBound::Disk`] and `w₀` =
     /// `prm_format::NEAR_MIN_WEIGHT`. It is the disk's kernel times `1/(1 − w₀)` out to where
     /// `R²/(r² + R²)` falls to `w₀`, and `1/r²` beyond, so that with the near field's weight

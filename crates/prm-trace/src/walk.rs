@@ -122,7 +122,7 @@ pub struct WalkParams {
 /// stands for, `A/(N·M)`, spikes more the more walks there are: on the fireplace room, 64 walks
 /// per entry point instead of 14 play at 16.9% against 14.5%, local error 19×. A disk as large as
 /// its entry point's costs the light next to other surfaces, which the near field gathers back
-/// from the lightmap's indirect light (format 1.8): the fireplace room's 120 s bake then plays at
+/// from the lightmap's indirect light: the fireplace room's 120 s bake then plays at
 /// 11.95% (local 3.6×), and 48 walks per entry point at 11.86%, so the walks' noise is not what
 /// limits it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

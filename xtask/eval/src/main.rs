@@ -414,6 +414,11 @@ fn evaluate_scene(mode: Mode, bin: &Path, cache: &Path, spec: &SceneSpec) -> Res
             }
         }
         let (mut renderer, _) = measure::renderer(&baked.archive, &spec.path, ks[0].0)?;
+        // What the run time allocated on the GPU, every part (0 where the backend reports none).
+        let memory_bytes = renderer
+            .runtime()
+            .gpu_memory()
+            .map_or(0, |parts| parts.iter().map(|p| p.bytes).sum());
         for (k, label, group) in ks {
             renderer.set_top_k(k);
             let frame_ms = measure::frame_time(
@@ -462,7 +467,7 @@ fn evaluate_scene(mode: Mode, bin: &Path, cache: &Path, spec: &SceneSpec) -> Res
                 vpl_disk_scale: p.vpl_disk_scale,
                 bake_s,
                 archive_bytes,
-                memory_bytes: p.clusters as u64 * (p.resolution as u64).pow(2) * 4,
+                memory_bytes,
                 frame_ms,
                 lightmap_rel_rmse: sum.lightmap / n,
                 lightmap_ref_noise: sum.lightmap_noise / n,
