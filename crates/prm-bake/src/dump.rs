@@ -71,19 +71,17 @@ pub fn run(args: &DumpArgs) -> Result<()> {
 }
 
 /// What an archive needs resident on the GPU as the run time loads it by default: the panes'
-/// basis rows (`f16`, the rank rounded up to four), their coefficients and the residual groups'
-/// (`f32`), and the near field's records and hits.
+/// basis rows (`f16`) and their coefficients with the residual groups' (`f32`), each tile's rank
+/// rounded up to four, and the near field's records and hits.
 fn resident_line<R: Read + Seek>(archive: &Archive<R>) -> String {
     let mib = |b: u64| b as f64 / (1024.0 * 1024.0);
     let basis = archive.pane_basis();
     let clusters = archive.pane_count();
     let groups = prm_format::residual_group_count(clusters, prm_format::RESIDUAL_GROUPS) as usize;
-    let ranks = basis.ranks().iter().map(|&r| u64::from(r));
-    let rows: u64 = ranks
-        .clone()
-        .map(|r| u64::from(basis.tile_size()).pow(2) * r.div_ceil(4) * 8)
-        .sum();
-    let coefficients = 12 * (clusters + groups) as u64 * ranks.sum::<u64>();
+    // Both padded to four ranks: basis rows as f16, coefficients as f32.
+    let quads: u64 = basis.ranks().iter().map(|&r| u64::from(r).div_ceil(4)).sum();
+    let rows = u64::from(basis.tile_size()).pow(2) * quads * 8;
+    let coefficients = 48 * (clusters + groups) as u64 * quads;
     let near = archive.near_field().map_or(0, |n| {
         (n.exits.len() * std::mem::size_of::<prm_format::NearExit>()
             + n.hits.len() * std::mem::size_of::<prm_format::NearHit>()) as u64

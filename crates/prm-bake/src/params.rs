@@ -209,9 +209,6 @@ struct PresetValues {
     paths: u32,
     top_k: usize,
     face: u32,
-    /// The run-time memory budget the preset's panes need, MiB, when the configuration gives
-    /// none (`None`: [`DEFAULT_MEMORY_BUDGET_MIB`]).
-    memory_budget_mib: Option<f64>,
 }
 
 fn preset_values(p: Preset) -> Option<PresetValues> {
@@ -223,7 +220,6 @@ fn preset_values(p: Preset) -> Option<PresetValues> {
             paths: 1,
             top_k: 16,
             face: 64,
-            memory_budget_mib: None,
         }),
         Preset::Paper => Some(PresetValues {
             entries: 4096,
@@ -232,7 +228,6 @@ fn preset_values(p: Preset) -> Option<PresetValues> {
             paths: 1,
             top_k: 32,
             face: 128,
-            memory_budget_mib: None,
         }),
         Preset::High => Some(PresetValues {
             entries: 16384,
@@ -241,8 +236,6 @@ fn preset_values(p: Preset) -> Option<PresetValues> {
             paths: 2,
             top_k: 64,
             face: 256,
-            // 1024 panes of 512² RGB9E5 texels.
-            memory_budget_mib: Some(1024.0),
         }),
         Preset::Default => None,
     }
@@ -371,25 +364,33 @@ pub const MAX_AUTO_SKY_PATHS: u32 = 1024;
 /// µs). Simpler scenes go faster (our courtyard about 0.2 µs), so the estimate errs long.
 pub const SKY_PATH_SECONDS: f64 = 1.14e-6;
 
-/// Panes the automatic atlas leaves room for in the run-time memory budget: the atlas shrinks
-/// (in steps of 64 texels a side) until this many fit. Measured on the fireplace room at the
-/// default time budget (`cargo xtask eval --targets`'s lamp, 4×4 error): with 128, a 704²
-/// atlas and 108 clusters, 18.4% (a 70 s bake); with 256, 512² and 205 clusters, 14.6% (115
-/// s). The reference's own lightmap at 512², shaded in place of the played one, is 6.1% off:
-/// the coarser atlas costs little beside the clusters it buys. Scenes whose automatic atlas is
-/// at most 512² (McGuire's boxes, chairs) do not change.
+/// Panes the automatic atlas leaves room for in the run-time memory budget at the largest rank
+/// ([`pane_memory_bound`]): the atlas shrinks (in steps of 64 texels a side) until this many
+/// fit, and until the near field's hits fit [`NEAR_HIT_BUDGET`], which keeps the larger VPL
+/// disks ([`NEAR_FIELD_DISK_SCALE`], 512² at the default 64 near rays). Measured on the fireplace
+/// room at the default time budget (`cargo xtask eval --targets`'s lamp, 4×4 error): a 704²
+/// atlas with 108 clusters, 18.4% (a 70 s bake); 512² with 205 clusters, 14.6% (115 s). The
+/// reference's own lightmap at 512², shaded in place of the played one, is 6.1% off: the
+/// coarser atlas costs little beside the clusters it buys.
 const AUTO_ATLAS_PANES: usize = 256;
 
-/// Texels the run time blends a frame, summed over the panes it blends, from which the
-/// automatic top K follows (less the residual groups, `prm_format::RESIDUAL_GROUPS`): 192 panes
-/// of 256² texels. Measured on McGuire's box baked with 4096 entry points and 16 walks each (512
-/// clusters; `cargo xtask eval --targets`'s lights, 4×4 error, ceiling light / red wall light):
-/// K = 32 with 16 groups 8.1% / 6.5%, K = 64 with 32 groups 6.2% / 5.0%, K = 96 with 32 groups
-/// 5.4% / 4.7%, K = 128 with 64 groups 4.3% / 4.6%, every cluster 3.4% / 4.7%. On lavapipe at
-/// 1024×768 the 192 panes add about 85 ms to a 35 ms frame of direct light (`prm-play
-/// --timings --gi-update every-frame`, median CPU frame); 48 panes add about 25 ms. A GPU blends them in well under a
-/// millisecond.
-const BLEND_TEXELS: f64 = 192.0 * 65536.0;
+/// Bytes of coefficients the run time's mix pass may read a frame, at the largest rank in every
+/// tile (12·128 bytes per pane and 64² tile; real bakes keep about a third of that rank), from
+/// which the automatic top K follows (less the residual groups, `prm_format::RESIDUAL_GROUPS`):
+/// every cluster of a 256² atlas (1365 panes), 341 panes at 512², 85 at 1024². The more
+/// clusters a frame blends the better: on McGuire's box baked with 4096 entry points and 16
+/// walks each (512 clusters; `cargo xtask eval --targets`'s lights, 4×4 error, ceiling light /
+/// red wall light), K = 32 with 16 groups 8.1% / 6.5%, K = 64 with 32 groups 6.2% / 5.0%, K =
+/// 128 with 64 groups 4.3% / 4.6%, every cluster 3.4% / 4.7%. The mix reads 12 bytes per rank
+/// and tile of a kept pane, and the blend's work per texel does not grow with K: on lavapipe
+/// at 1024×768 the frame bench (`cargo bench -p prm-play --bench frame`,
+/// `PRM_BENCH_PRESET=default`) puts the Cornell box's 504 clusters beyond the first 8 at 1.0 ms
+/// of a frame whose lights move.
+const MIX_BYTES: f64 = 32.0 * 1024.0 * 1024.0;
+
+/// Coefficient bytes per texel of a pane at the largest rank in 64² tiles (`12·128 / 64²`),
+/// the bound [`MIX_BYTES`] counts with.
+const MIX_BYTES_PER_TEXEL: f64 = 12.0 * prm_format::MAX_PANE_RANK as f64 / 4096.0;
 
 /// The automatic top K at least, however large the atlas.
 const MIN_AUTO_TOP_K: usize = 32;
@@ -446,18 +447,24 @@ const WALKS_IN_ALL: usize = 65536;
 
 /// Most walks per entry point where the cluster cap cuts the automatic entry points (below):
 /// those it keeps walk towards twice `WALKS_IN_ALL` in all, up to this many each, as far as the
-/// time budget allows (the fireplace room, Sponza and Sibenik keep 3072 of 15360–16384, and walk
-/// noise is then the largest share of their error). Measured by `cargo xtask eval --targets` on
-/// the fireplace room's default plan (4×4 error, seeds 0 / 1 / 2): 5.32% / 5.75% / 5.98% with a
-/// 208 s bake, against 5.58% / 6.32% / 6.29% and 110 s at 16; 32 is the first count tried under
-/// 6% at all three seeds. Sponza does not gain (`cargo xtask eval --sky`, sky and sun).
+/// time budget allows (where the budgets allow few clusters, walk noise is the largest share of
+/// the error). Measured by `cargo xtask eval --targets` on the fireplace room planned with 205
+/// clusters, which keep 3072 of its 15360 entry points (4×4 error, seeds 0 / 1 / 2): 5.32% /
+/// 5.75% / 5.98% with a 208 s bake, against 5.58% / 6.32% / 6.29% and 110 s at 16; 32 is the
+/// first count tried under 6% at all three seeds. Sponza does not gain (`cargo xtask eval --sky`, sky and sun).
 const CAPPED_WALKS: u32 = 32;
 
-/// Bytes a pane's texel counts against the memory budget: its size as a dense RGB9E5 texel. The
-/// run time keeps far less, the archive's basis per tile (0.16 B a pane texel on the Cornell
-/// box's default bake, `prm-bake dump`; [`resident_pane_bytes`] bounds it), so the budget is a
-/// conservative cap on clusters × texels, which the large scenes' evaluated plans were made with.
-const PANE_TEXEL_BYTES: f64 = 4.0;
+/// Bytes an atlas texel's basis row takes resident at most: the largest rank, 128, in `f16`.
+const BASIS_BYTES_PER_TEXEL: f64 = 2.0 * prm_format::MAX_PANE_RANK as f64;
+
+/// The most bytes the run time keeps resident for `panes` panes (clusters and residual groups)
+/// of `texels` texels: every 64² tile at the largest rank, its basis rows in `f16` and every
+/// pane's coefficients in `f32`. Real bakes keep about a third of that rank: 10.2 MiB of the
+/// 29.5 MiB bound on the Cornell box's default bake (`prm-bake dump`). The memory budget counts
+/// with it.
+fn pane_memory_bound(panes: f64, texels: f64) -> f64 {
+    texels * (BASIS_BYTES_PER_TEXEL + panes * MIX_BYTES_PER_TEXEL)
+}
 
 /// Bytes a covered texel of a pane takes in the archive budget's estimate. The panes' basis
 /// (2% tolerance) takes 0.44 bytes per covered texel and pane on the Cornell box's default bake
@@ -508,16 +515,13 @@ const GUESSED_UTILIZATION: f64 = 0.5;
 /// The pane passes' cube-face resolution without a preset or `--face-resolution`.
 const DEFAULT_FACE_RESOLUTION: u32 = 128;
 
-/// The most bytes the run time keeps resident for the panes of `clusters` clusters in a
-/// `resolution`² atlas: every tile at the largest rank, its basis rows as `f16` (the rank
-/// rounded up to four) and its coefficients, with the residual groups', as `f32`. Bakes keep
+/// The most bytes the run time keeps resident for the panes of `clusters` clusters and their
+/// residual groups in a `resolution`² atlas: every 64² tile at the largest rank, 256 bytes of
+/// `f16` basis per texel and 0.375 bytes of `f32` coefficients per texel and pane. Bakes keep
 /// well under it (the tolerance sets the ranks): `prm-bake dump` prints an archive's own.
 pub fn resident_pane_bytes(clusters: usize, resolution: u32) -> u64 {
-    let groups = prm_format::residual_group_count(clusters, prm_format::RESIDUAL_GROUPS) as u64;
-    let t = u64::from(crate::archive::tile_size(resolution));
-    let rank = u64::from(prm_format::MAX_PANE_RANK).min(t * t);
-    let tiles = (u64::from(resolution) / t).pow(2);
-    tiles * (t * t * rank.div_ceil(4) * 8 + 12 * (clusters as u64 + groups) * rank)
+    let groups = prm_format::residual_group_count(clusters, prm_format::RESIDUAL_GROUPS) as usize;
+    pane_memory_bound((clusters + groups) as f64, f64::from(resolution).powi(2)) as u64
 }
 
 /// The smallest automatic atlas side that holds `charts` charts: every chart needs a texel and
@@ -526,17 +530,22 @@ fn atlas_floor(charts: usize) -> u32 {
     ((3.0 * (charts as f64).sqrt() / ATLAS_STEP as f64).ceil() as u32 * ATLAS_STEP).max(ATLAS_STEP)
 }
 
-/// Why the automatic top K is `k`: the panes a frame blends less the residual groups, with the
-/// arithmetic only where it holds (when the groups take every pane, the floor decides).
-fn top_k_reason(k: usize, panes: usize, texels_per_pane: f64, groups: usize, clusters: usize) -> String {
-    let frame = format!("{panes} pane{} of {texels_per_pane:.0} texels a frame", plural(panes));
-    if k == clusters && k < panes.saturating_sub(groups).max(MIN_AUTO_TOP_K) {
+/// Why the automatic top K is `k`: every cluster, or the panes a frame mixes less the residual
+/// groups, with the arithmetic only where it holds (when the groups take every pane, the floor
+/// decides).
+fn top_k_reason(k: usize, panes: usize, groups: usize, clusters: usize) -> String {
+    let mib = MIX_BYTES / (1024.0 * 1024.0);
+    let frame = format!(
+        "the coefficients of {panes} pane{} fit {mib:.0} MiB a frame",
+        plural(panes)
+    );
+    if k == clusters && (k <= panes || k < MIN_AUTO_TOP_K) {
         format!("top K {k}: every cluster ({frame})")
     } else if panes >= groups + MIN_AUTO_TOP_K {
-        format!("top K {k}: {frame} less {groups} residual groups")
+        format!("top K {k}: {frame}, less {groups} residual groups")
     } else {
         format!(
-            "top K {k}: at least {MIN_AUTO_TOP_K} ({frame} leave {} beside {groups} residual groups)",
+            "top K {k}: at least {MIN_AUTO_TOP_K} ({frame}: {} beside {groups} residual groups)",
             panes.saturating_sub(groups)
         )
     }
@@ -584,13 +593,10 @@ struct Budgets {
 }
 
 impl Budgets {
-    /// The config's budgets, else the preset's memory budget, else the defaults; all positive.
-    fn resolve(config: &BakeConfig, fixed: Option<&PresetValues>) -> Result<Budgets, BakeError> {
+    /// The config's budgets, else the defaults; all positive.
+    fn resolve(config: &BakeConfig) -> Result<Budgets, BakeError> {
         let archive_budget_mib = config.archive_budget_mib.unwrap_or(DEFAULT_ARCHIVE_BUDGET_MIB);
-        let memory_budget_mib = config
-            .memory_budget_mib
-            .or(fixed.and_then(|v| v.memory_budget_mib))
-            .unwrap_or(DEFAULT_MEMORY_BUDGET_MIB);
+        let memory_budget_mib = config.memory_budget_mib.unwrap_or(DEFAULT_MEMORY_BUDGET_MIB);
         let time_budget_s = config.time_budget_s.unwrap_or(DEFAULT_TIME_BUDGET_S);
         if !(archive_budget_mib > 0.0 && memory_budget_mib > 0.0 && time_budget_s > 0.0) {
             invalid!(
@@ -605,10 +611,13 @@ impl Budgets {
         })
     }
 
-    /// The most panes of `texels_per_pane` the memory budget holds beside the residual groups'
-    /// summed ones (up to one group per `CLUSTERS_PER_GROUP` clusters, at most `RESIDUAL_GROUPS`).
+    /// The most panes of `texels_per_pane` the memory budget holds ([`pane_memory_bound`])
+    /// beside the residual groups' (up to one group per `CLUSTERS_PER_GROUP` clusters, at most
+    /// `RESIDUAL_GROUPS`).
     fn by_memory(&self, texels_per_pane: f64) -> usize {
-        let panes = (self.memory_mib * 1024.0 * 1024.0 / (PANE_TEXEL_BYTES * texels_per_pane)) as usize;
+        let budget = self.memory_mib * 1024.0 * 1024.0;
+        let basis = pane_memory_bound(0.0, texels_per_pane);
+        let panes = ((budget - basis).max(0.0) / (pane_memory_bound(1.0, texels_per_pane) - basis)) as usize;
         let per = prm_format::CLUSTERS_PER_GROUP as usize;
         let groups = (panes / (per + 1)).min(prm_format::RESIDUAL_GROUPS as usize);
         panes - groups
@@ -710,20 +719,27 @@ impl Planner<'_> {
             (None, None, None) => probe()?,
         };
         let mut r = auto.resolution;
-        let memory_texels = self.budgets.memory_mib * 1024.0 * 1024.0 / PANE_TEXEL_BYTES;
+        let budget = self.budgets.memory_mib * 1024.0 * 1024.0;
+        let over_memory = |r: u32| pane_memory_bound(AUTO_ATLAS_PANES as f64, f64::from(r).powi(2)) > budget;
+        // The near field's hits within the budget that keeps the larger VPL disks.
+        let near_rays = u64::from(self.near_rays_rule());
+        let keeps_disks = self.config.vpl_disk_scale.is_none() && near_rays > 0;
+        let over_near = |r: u32| keeps_disks && u64::from(r).pow(2) * near_rays > NEAR_HIT_BUDGET;
         // Never below what the charts need: the bake would refuse that atlas.
         let floor = atlas_floor(auto.stats.charts as usize).min(auto.resolution);
-        while r > floor.max(ATLAS_MEMORY_STEP) && (AUTO_ATLAS_PANES as f64 * (r as f64).powi(2)) > memory_texels {
+        while r > floor.max(ATLAS_MEMORY_STEP) && (over_memory(r) || over_near(r)) {
             r = (r - ATLAS_MEMORY_STEP).max(floor);
         }
+        let why = if r == auto.resolution {
+            String::new()
+        } else if over_near(auto.resolution) && !over_memory(r + ATLAS_MEMORY_STEP) {
+            format!(", shrunk so its {near_rays} near rays a texel keep within {NEAR_HIT_BUDGET} hits")
+        } else {
+            ", shrunk so 256 panes fit the memory budget".to_string()
+        };
         reasons.push(format!(
-            "atlas {r}² texels: {} triangles want about 12 texels each{}",
+            "atlas {r}² texels: {} triangles want about 12 texels each{why}",
             self.scene.triangles.len(),
-            if r < auto.resolution {
-                ", shrunk so 256 panes fit the memory budget"
-            } else {
-                ""
-            }
         ));
         Ok(AtlasChoice {
             size: AtlasSize::Resolution(r),
@@ -949,16 +965,21 @@ impl Planner<'_> {
         }
     }
 
-    /// The top K: given, else the panes of [`BLEND_TEXELS`] a frame less the residual groups, at
-    /// least [`MIN_AUTO_TOP_K`]; never more than the clusters.
+    /// The top K: given, else the panes whose coefficients fit [`MIX_BYTES`] a frame less the
+    /// residual groups (every cluster when they all fit), at least [`MIN_AUTO_TOP_K`]; never
+    /// more than the clusters.
     fn top_k_rule(&self, clusters: usize, texels_per_pane: f64, reasons: &mut Vec<String>) -> usize {
         match self.config.top_k.or(self.fixed.as_ref().map(|v| v.top_k)) {
             Some(k) => k,
             None => {
                 let groups = prm_format::residual_group_count(clusters, prm_format::RESIDUAL_GROUPS) as usize;
-                let panes = (BLEND_TEXELS / texels_per_pane) as usize;
-                let k = panes.saturating_sub(groups).max(MIN_AUTO_TOP_K);
-                reasons.push(top_k_reason(k.min(clusters), panes, texels_per_pane, groups, clusters));
+                let panes = (MIX_BYTES / (MIX_BYTES_PER_TEXEL * texels_per_pane)) as usize;
+                let k = if panes >= clusters {
+                    clusters
+                } else {
+                    panes.saturating_sub(groups).max(MIN_AUTO_TOP_K)
+                };
+                reasons.push(top_k_reason(k.min(clusters), panes, groups, clusters));
                 k
             }
         }
@@ -1093,7 +1114,7 @@ impl BakeParams {
     ) -> Result<BakeParams, BakeError> {
         let preset = config.preset.unwrap_or(Preset::Default);
         let fixed = preset_values(preset);
-        let budgets = Budgets::resolve(config, fixed.as_ref())?;
+        let budgets = Budgets::resolve(config)?;
         let planner = Planner {
             config,
             fixed,
@@ -1235,10 +1256,11 @@ impl BakeParams {
                 self.vpl_disk_scale
             );
         }
-        let memory_mib = self.clusters as f64 * texels_per_pane * PANE_TEXEL_BYTES / (1024.0 * 1024.0);
+        let memory_mib = pane_memory_bound(self.clusters as f64, texels_per_pane) / (1024.0 * 1024.0);
         if memory_mib > self.memory_budget_mib {
             over_limit!(
-                "{} panes of {:.0} texels count {memory_mib:.0} MiB (4 B a texel), over the {:.0} MiB memory budget; \
+                "{} panes of {:.0} texels may need {memory_mib:.0} MiB at run time (rank 128 in every tile), over \
+                 the {:.0} MiB memory budget; \
                  use fewer --clusters, {}, or raise memory_budget_mib",
                 self.clusters,
                 texels_per_pane,

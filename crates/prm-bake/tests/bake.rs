@@ -63,12 +63,13 @@ fn assert_refused(r: &Output, what: &str, expected: &str) {
     );
 }
 
-/// Writes the config file with the settings the command line has no flag for.
+/// Writes the config file with the settings the command line has no flag for, one per bake
+/// `name` in `dir`, so that bakes run at once never read a file another is writing.
 /// VPL disks of three entry-point radii: at 256 entry points the plan's eight (its rule for a
 /// 64² atlas) would be 40 cm discs in a 55 cm box, and the panes would hold little of the light
 /// (the accuracy check then measured 28% with every cluster and with one alike).
-fn config_file(dir: &Path) -> PathBuf {
-    let path = dir.join("small.toml");
+fn config_file(dir: &Path, name: &str) -> PathBuf {
+    let path = dir.join(format!("{name}-small.toml"));
     std::fs::write(&path, "face_resolution = 64\nvpl_disk_scale = 3.0\n").unwrap();
     path
 }
@@ -88,7 +89,7 @@ fn bake_with(
     env: impl FnOnce(&mut Command),
 ) -> (PathBuf, Output, f64) {
     let out = dir.join(format!("{name}.prm"));
-    let config = config_file(dir);
+    let config = config_file(dir, name);
     let seed = seed.to_string();
     let scene = scene_path();
     let mut cmd = Command::new(BIN);
@@ -261,7 +262,7 @@ fn bake_writes_a_valid_archive_and_report() {
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
         .collect();
     names.sort();
-    assert_eq!(names, ["a.prm", "report.json", "small.toml"]);
+    assert_eq!(names, ["a-small.toml", "a.prm", "report.json"]);
 }
 
 #[test]

@@ -107,9 +107,9 @@ struct Args {
     #[arg(long, value_name = "FILE.png")]
     screenshot: Option<PathBuf>,
     /// Write per-pass GPU times, frame times, the resident memory after each frame, the run
-    /// time's GPU memory by part and the bytes its passes read an update as JSON (headless
-    /// only; with a still light, add
-    /// `--gi-update every-frame` to time the indirect light's passes on every frame).
+    /// time's GPU memory by part and the bytes its passes read an update, in all and by part,
+    /// as JSON (headless only; with a still light, add `--gi-update every-frame` to time the
+    /// indirect light's passes on every frame).
     #[arg(long, value_name = "FILE.json")]
     timings: Option<PathBuf>,
     /// Shadow-map resolution per view (16 to 8192, and at most the device's largest texture).
@@ -631,6 +631,9 @@ fn write_timings(
             parts.iter().map(|p| (p.name.to_string(), serde_json::json!(p.bytes))).collect::<serde_json::Map<_, _>>()
         }),
         "gi_bytes_read_per_update": renderer.runtime().gi_bytes_read(),
+        "gi_bytes_read_by_part": renderer.runtime().gi_bytes_read_by_part().iter()
+            .map(|p| (p.name.to_string(), serde_json::json!(p.bytes)))
+            .collect::<serde_json::Map<_, _>>(),
         "frames": frames.iter().map(|(f, rss)| serde_json::json!({
             "cpu_ms": f.cpu_ms,
             "gpu_ms": f.gpu_ms.iter().map(|(k, v)| ((*k).to_string(), serde_json::json!(v))).collect::<serde_json::Map<_, _>>(),

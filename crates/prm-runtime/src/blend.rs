@@ -4,19 +4,21 @@
 //!
 //! The panes stay on the GPU as the archive holds them, a low-rank basis per atlas tile
 //! (`prm_format::PaneBasis`), not expanded to one texture per pane: the basis rows as `f16`
-//! (rounded up to four per texel, zero-padded) and the coefficients as `f32`, with every residual
-//! group's coefficients (its members' summed) after the clusters'. Since blending is linear, the
+//! (rounded up to four per texel, zero-padded) and the coefficients as `f32`, each pane's channel
+//! as vec4s of four ranks (likewise), with every residual group's coefficients (its members'
+//! summed) after the clusters'. Since blending is linear, the
 //! frame's `Σ_c w_c·pane_c` is `U·(Σ_c w_c·C_c)` per tile: the mix pass forms the bracket, a few
 //! hundred values per tile, and this pass one dot product of rank length per texel. Tiles are
 //! grouped in *chunks* whose basis and coefficients each fit the device's storage binding (128
 //! MiB on lavapipe); each pass dispatches once per chunk.
 //!
 //! On the bundled Cornell box's automatic bake (512 clusters + 64 residual groups, a 256² atlas,
-//! 16 tiles of mean rank 42.6) the panes take 10.2 MiB of GPU memory this way, against 144 MiB
-//! as one RGB9E5 buffer per pane, and a frame reads about 6 MB of them instead of 48 MB
-//! (`prm-play --timings` reports both). On lavapipe the frame bench (`cargo bench -p prm-play
-//! --bench frame`, `PRM_BENCH_PRESET=default`) puts the 120 panes and 64 groups beyond the
-//! first 8 at 0.1 ms of added frame time, against 13.7 ms for the RGB9E5 buffers.
+//! 16 tiles of mean rank 42.6) the panes take 10.4 MiB of GPU memory this way, against 144 MiB
+//! as one RGB9E5 buffer per pane, and a frame that blends every cluster reads 9.2 MB of them
+//! (`prm-play --timings`, `gi_bytes_read_by_part`; RGB9E5 buffers read 48 MB for 192 panes).
+//! On lavapipe the frame bench (`cargo bench -p prm-play --bench frame`,
+//! `PRM_BENCH_PRESET=default`) puts the 504 clusters beyond the first 8 at 1.0 ms of a frame
+//! whose lights move (RGB9E5 buffers: 13.7 ms for 120 panes and 64 groups).
 
 use prm_format::PaneBasis;
 use prm_gpu_kit::{linear_workgroups, pipeline, ComputePass, PassTimer};
@@ -46,8 +48,6 @@ pub(crate) struct Panes {
     ranks: Vec<u32>,
     tile_size: u32,
     tiles_per_side: u32,
-    /// `Σ_t r_t`: coefficients a kept pane has per channel.
-    rank_sum: u64,
 }
 
 impl Panes {
@@ -73,7 +73,7 @@ impl Panes {
             .iter()
             .map(|&r| {
                 let stride = u64::from(r).div_ceil(LANES as u64);
-                (texels * stride * 8, 12 * panes as u64 * u64::from(r))
+                (texels * stride * 8, 48 * panes as u64 * stride)
             })
             .collect();
         if let Some(&(b, c)) = sizes.iter().find(|&&(b, c)| b.max(c) > binding) {
@@ -125,7 +125,6 @@ impl Panes {
             ranks: basis.ranks().to_vec(),
             tile_size: basis.tile_size(),
             tiles_per_side: basis.tiles_per_side(),
-            rank_sum: basis.ranks().iter().map(|&r| u64::from(r)).sum(),
         })
     }
 
@@ -159,9 +158,14 @@ impl Panes {
         self.ranks.iter().copied().max().unwrap_or(0).div_ceil(LANES as u32) * LANES as u32
     }
 
-    /// Bytes the mix pass reads a frame for each kept pane (`12·Σ_t r_t`).
+    /// Bytes the mix pass reads a frame for each kept pane: three vec4s per four ranks of
+    /// every tile.
     pub fn coefficient_bytes_per_pane(&self) -> u64 {
-        12 * self.rank_sum
+        48 * self
+            .ranks
+            .iter()
+            .map(|&r| u64::from(r).div_ceil(LANES as u64))
+            .sum::<u64>()
     }
 }
 
@@ -183,7 +187,7 @@ fn upload_chunk(
             basis: (words.len() / 2) as u32,
             stride: stride as u32,
             rank: r as u32,
-            coefficients: coefficients.len() as u32,
+            coefficients: (coefficients.len() / 4) as u32,
         });
         if r == 0 {
             continue;
@@ -192,15 +196,21 @@ fn upload_chunk(
             let half = |k: usize| row.get(k).map_or(0, |&u| u32::from(half::f16::from_f32(u).to_bits()));
             words.extend((0..2 * stride).map(|p| half(2 * p) | half(2 * p + 1) << 16));
         }
-        let c = basis.coefficients(tile);
-        coefficients.extend_from_slice(c);
+        // Each pane's channel as `stride` vec4s of four ranks, zero-padded, the residual
+        // groups' (their members' summed) after the clusters'.
         let first = coefficients.len();
-        coefficients.resize(first + 3 * r * group_count as usize, 0.0);
-        for (pane, rows) in c.chunks_exact(3 * r).enumerate() {
+        let row = 4 * stride;
+        let panes = basis.pane_count() + group_count as usize;
+        coefficients.resize(first + 3 * panes * row, 0.0);
+        for (pane, rows) in basis.coefficients(tile).chunks_exact(3 * r).enumerate() {
             let g = group_of.get(pane).map_or(group_count, |&g| g);
-            if g < group_count {
-                let sum = &mut coefficients[first + 3 * r * g as usize..][..3 * r];
-                sum.iter_mut().zip(rows).for_each(|(s, v)| *s += v);
+            for (ch, v) in rows.chunks_exact(r).enumerate() {
+                let own = first + (3 * pane + ch) * row;
+                coefficients[own..own + r].copy_from_slice(v);
+                if g < group_count {
+                    let sum = first + (3 * (basis.pane_count() + g as usize) + ch) * row;
+                    coefficients[sum..sum + r].iter_mut().zip(v).for_each(|(s, v)| *s += v);
+                }
             }
         }
     }

@@ -642,19 +642,44 @@ impl Runtime {
     }
 
     /// Bytes the indirect light's passes read on every update, from the sizes of what they
-    /// bind: the weights read every entry and cluster; the mix reads the top K clusters' and
-    /// the residual groups' coefficients in every tile, the blend the basis rows of the lit
-    /// texels; the near field reads its exit records
-    /// and hits once per gather (one, plus [`RuntimeOptions::near_bounces`] for the deeper
-    /// share). Texture reads (shadow maps, lightmaps) and the probes are not counted.
+    /// bind ([`Runtime::gi_bytes_read_by_part`], summed).
     pub fn gi_bytes_read(&self) -> u64 {
-        let kept = u64::from(self.options.top_k.min(self.cluster_count) + self.group_count);
+        self.gi_bytes_read_by_part().iter().map(|p| p.bytes).sum()
+    }
+
+    /// Bytes the indirect light's passes read on every update, by part, from the sizes of what
+    /// they bind: `weights`, every entry and cluster; `panes`, the mix's coefficients of the
+    /// kept clusters (and of the residual groups when K drops clusters) in every tile and the
+    /// blend's basis rows of the lit texels; `near field`, its exit records and hits once per
+    /// gather (one, plus [`RuntimeOptions::near_bounces`] for the deeper share). Texture reads
+    /// (shadow maps, lightmaps) and the probes are not counted.
+    pub fn gi_bytes_read_by_part(&self) -> [MemoryPart; 3] {
+        let k = self.options.top_k.min(self.cluster_count);
+        let groups = if self.cluster_count > self.options.top_k {
+            self.group_count
+        } else {
+            0
+        };
+        let kept = u64::from(k + groups);
         let panes = kept * self.blend.coefficient_bytes_per_pane + self.blend.basis_bytes_read;
         let near = self
             .near
             .as_ref()
             .map_or(0, |n| (1 + self.options.near_bounces as u64) * n.bytes_per_gather);
-        self.buffers.entries.size() + self.buffers.clusters.size() + panes + near
+        [
+            MemoryPart {
+                name: "weights",
+                bytes: self.buffers.entries.size() + self.buffers.clusters.size(),
+            },
+            MemoryPart {
+                name: "panes",
+                bytes: panes,
+            },
+            MemoryPart {
+                name: "near field",
+                bytes: near,
+            },
+        ]
     }
 
     /// Changes the number of clusters kept, from the next [`Runtime::update`] on.

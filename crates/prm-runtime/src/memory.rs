@@ -5,7 +5,8 @@
 //! included, not what the code meant to allocate. Only the run time's labels count: a caller's
 //! allocations on the same device are left out, those of another run time on it are not.
 
-/// One part of the run time's GPU memory.
+/// One part of the run time and its bytes: of GPU memory ([`crate::Runtime::gpu_memory`]) or
+/// read on every update ([`crate::Runtime::gi_bytes_read_by_part`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct MemoryPart {
     /// The part: `panes`, `near field`, `weights`, `probes`, `baked light` (emitters and sky),

@@ -1,7 +1,7 @@
 //! The mix pass (`shaders/runtime/mix.wgsl`): per atlas tile, the kept clusters' and residual
 //! groups' coefficients summed under their effective weights, the vector the blend pass
 //! ([`crate::blend`]) multiplies every basis row of the tile by. One invocation per tile and
-//! coefficient, a dispatch per chunk of tiles.
+//! four coefficients (one vec4 load per channel and kept pane), a dispatch per chunk of tiles.
 
 use prm_gpu_kit::{linear_workgroups, ComputePass, PassTimer};
 
@@ -46,7 +46,7 @@ impl MixPass {
             .enumerate()
             .filter(|(_, chunk)| chunk.constants.tiles > 0 && mixed_stride > 0)
             .map(|(c, chunk)| {
-                let invocations = chunk.constants.tiles * mixed_stride;
+                let invocations = chunk.constants.tiles * mixed_stride / 4;
                 (pass.group(device, &resources(c)), linear_workgroups(invocations))
             })
             .collect();

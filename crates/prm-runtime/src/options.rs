@@ -180,8 +180,8 @@ pub struct RuntimeOptions {
     pub probe_light: ProbeLight,
     /// Whether the near field is gathered ([`NearLight::Gather`] by default).
     pub near_light: NearLight,
-    /// How many times the deeper VPLs' share of the near field is gathered after the blend ([`RuntimeOptions::DEFAULT_NEAR_BOUNCES`] by
-    /// default); 0 leaves it out.
+    /// How many times the deeper VPLs' share of the near field is gathered after the blend
+    /// ([`RuntimeOptions::DEFAULT_NEAR_BOUNCES`] by default); 0 leaves it out.
     pub near_bounces: u32,
     /// What follows the last of those gathers ([`NearTail::Extrapolated`] by default).
     pub near_tail: NearTail,

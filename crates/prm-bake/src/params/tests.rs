@@ -65,10 +65,10 @@ fn automatic_sizes_follow_the_scene_and_budgets() {
     let scene = cornell();
     let p = resolve(&BakeConfig::default(), &scene, probe(&scene)).unwrap();
     // A 16-chart box needs the minimum, 1024, doubled twice where nothing cut it: 8 per
-    // cluster, 16 walks each (65536 in all), and K = 128 of its 512 clusters beside 64 groups.
+    // cluster, 16 walks each (65536 in all), and every one of its 512 clusters blended.
     assert_eq!(
         (p.entries, p.clusters, p.paths_per_entry, p.top_k),
-        (4096, 512, 16, 128)
+        (4096, 512, 16, 512)
     );
     assert_eq!(
         p.reasons.iter().filter(|r| r.contains("twice as many")).count(),
@@ -77,9 +77,10 @@ fn automatic_sizes_follow_the_scene_and_budgets() {
         p.reasons
     );
     assert!(!p.reasons.is_empty());
-    // A tight memory budget shrinks the atlas or the cluster count until the panes fit it.
+    // A tight memory budget shrinks the atlas or the cluster count until the panes fit it at
+    // the largest rank.
     let bytes = |p: &BakeParams| match p.atlas {
-        AtlasSize::Resolution(r) => p.clusters as f64 * (r as f64).powi(2) * 4.0,
+        AtlasSize::Resolution(r) => pane_memory_bound(p.clusters as f64, f64::from(r).powi(2)),
         AtlasSize::TexelSize(_) => unreachable!(),
     };
     let tight = BakeConfig {
@@ -159,25 +160,26 @@ fn impossible_parameters_are_refused() {
 }
 
 /// Automatic entry points stop at 16 per cluster the bake can have: chairs' 913 charts want
-/// 3840 (7680, in 960 clusters, where nothing cuts them), 100 clusters take 1536 (16 × 100, a
-/// multiple of 256, not doubled), and a memory budget that allows fewer clusters lowers them too,
-/// never below 1024; a time budget that cuts anything leaves them undoubled.
+/// 3840 (15360, in 1024 clusters, where nothing cuts them; doubled once in nine tenths of that
+/// plan's time), 100 clusters take 1536 (16 × 100, a multiple of 256, not doubled), and a
+/// memory budget that allows fewer clusters lowers them too, never below 1024.
 #[test]
 fn automatic_entries_follow_the_clusters() {
     let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/chairs/chairs.obj");
     let scene = prm_scene::load(&p).unwrap();
     let free = resolve(&BakeConfig::default(), &scene, probe(&scene)).unwrap();
-    // 7680 / 8 = 960 clusters: the memory budget's 1024 panes of 256² less 64 residual groups
-    // (so not doubled twice: 15360 would crowd them), 9 walks each (about 65536 in all).
-    assert_eq!((free.entries, free.clusters, free.paths_per_entry), (7680, 960, 9));
+    // Doubled twice where nothing cuts them: 15360 in 1024 clusters (the most automatic
+    // clusters, 15 entry points each), 5 walks each (about 65536 in all).
+    assert_eq!((free.entries, free.clusters, free.paths_per_entry), (15360, 1024, 5));
     let hurried = BakeConfig {
         time_budget_s: Some(free.estimated_seconds * 0.9),
         ..Default::default()
     };
     let h = resolve(&hurried, &scene, probe(&scene)).unwrap();
+    // Nine tenths of its time: doubled once.
     assert_eq!(
         (h.entries, h.clusters, h.paths_per_entry),
-        (3840, 480, 16),
+        (7680, 960, 9),
         "{:?}",
         h.reasons
     );
@@ -193,9 +195,10 @@ fn automatic_entries_follow_the_clusters() {
         .iter()
         .any(|r| r.contains("at most 16 for each of the 100 clusters given")));
     // A memory budget that caps the clusters (the atlas stops shrinking at 96², what the 913
-    // charts need) caps the entries: 16 per cluster, never below 1024.
+    // charts need, whose basis may take 2.25 MiB) caps the entries: 16 per cluster, never below
+    // 1024.
     let tight = BakeConfig {
-        memory_budget_mib: Some(2.0),
+        memory_budget_mib: Some(2.5),
         ..Default::default()
     };
     let q = resolve(&tight, &scene, probe(&scene)).unwrap();
@@ -226,8 +229,8 @@ fn probes_lit_through_the_panes_keep_the_smaller_disks() {
     assert_eq!(scale(Some(64), Some(0), Some(0)), 1.0);
 }
 
-/// Every named preset plans on the bundled Cornell box with the default budgets: `high`
-/// brings the memory budget its 1024 panes of 512² texels need.
+/// Every named preset plans on the bundled Cornell box with the default budgets: `high`'s
+/// 1024 panes of 512² texels fit the default memory budget at the largest rank.
 #[test]
 fn every_preset_works_as_shipped() {
     let scene = cornell();
@@ -238,7 +241,7 @@ fn every_preset_works_as_shipped() {
         };
         let p = resolve(&cfg, &scene, probe(&scene)).unwrap_or_else(|e| panic!("{preset:?}: {e}"));
         if preset == Preset::High {
-            assert_eq!(p.memory_budget_mib, 1024.0);
+            assert_eq!(p.memory_budget_mib, DEFAULT_MEMORY_BUDGET_MIB);
         }
     }
 }
@@ -260,12 +263,14 @@ fn a_tiny_texel_size_names_texel_size() {
 /// outnumber the panes a frame blends.
 #[test]
 fn the_top_k_reason_adds_up() {
-    let r = top_k_reason(32, 48, 262144.0, 51, 1024);
+    let r = top_k_reason(32, 48, 51, 1024);
     assert!(!r.contains("less 51"), "{r}");
     assert!(r.contains("at least 32"), "{r}");
-    let r = top_k_reason(128, 192, 65536.0, 64, 512);
-    assert!(r.contains("192 panes") && r.contains("less 64"), "{r}");
-    let r = top_k_reason(20, 192, 65536.0, 5, 20);
+    let r = top_k_reason(277, 341, 64, 1024);
+    assert!(r.contains("341 panes") && r.contains("less 64"), "{r}");
+    let r = top_k_reason(512, 1365, 64, 512);
+    assert!(r.contains("every cluster"), "{r}");
+    let r = top_k_reason(20, 1365, 5, 20);
     assert!(r.contains("every cluster"), "{r}");
 }
 
@@ -287,7 +292,7 @@ fn the_planned_atlas_holds_every_chart() {
     std::fs::write(&path, obj).unwrap();
     let scene = prm_scene::load(&path).unwrap();
     let cfg = BakeConfig {
-        memory_budget_mib: Some(64.0),
+        memory_budget_mib: Some(128.0),
         ..Default::default()
     };
     let p = resolve(&cfg, &scene, probe(&scene)).unwrap();
