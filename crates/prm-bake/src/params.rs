@@ -375,7 +375,7 @@ pub const SKY_PATH_SECONDS: f64 = 1.14e-6;
 const AUTO_ATLAS_PANES: usize = 256;
 
 /// Bytes of coefficients the run time's mix pass may read a frame, at the largest rank in every
-/// tile (12·128 bytes per pane and 64² tile; real bakes keep about a third of that rank), from
+/// tile (12·128 bytes per pane and 64² tile; real bakes keep a third to nearly all of it), from
 /// which the automatic top K follows (less the residual groups, `prm_format::RESIDUAL_GROUPS`):
 /// every cluster of a 256² atlas (1365 panes), 341 panes at 512², 85 at 1024². The more
 /// clusters a frame blends the better: on McGuire's box baked with 4096 entry points and 16
@@ -459,9 +459,9 @@ const BASIS_BYTES_PER_TEXEL: f64 = 2.0 * prm_format::MAX_PANE_RANK as f64;
 
 /// The most bytes the run time keeps resident for `panes` panes (clusters and residual groups)
 /// of `texels` texels: every 64² tile at the largest rank, its basis rows in `f16` and every
-/// pane's coefficients in `f32`. Real bakes keep about a third of that rank: 10.2 MiB of the
-/// 29.5 MiB bound on the Cornell box's default bake (`prm-bake dump`). The memory budget counts
-/// with it.
+/// pane's coefficients in `f32`. Real bakes keep from a third of that rank to nearly all of it
+/// (`prm-bake dump`): 10.2 MiB of the 29.5 MiB bound on the Cornell box's default bake, 159.6
+/// of 166.0 MiB on Sibenik's. The memory budget counts with it.
 fn pane_memory_bound(panes: f64, texels: f64) -> f64 {
     texels * (BASIS_BYTES_PER_TEXEL + panes * MIX_BYTES_PER_TEXEL)
 }
