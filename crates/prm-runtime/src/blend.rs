@@ -43,9 +43,12 @@ pub(crate) struct Panes {
     pub tiles: wgpu::Buffer,
     /// The mixed coefficients, `mixed_stride` `vec4<f32>` per tile.
     pub mixed: wgpu::Buffer,
-    /// Each tile's chunk, rank and basis stride.
+    /// Each tile's chunk.
     tile_chunk: Vec<usize>,
+    /// Each tile's rank.
     ranks: Vec<u32>,
+    /// Mixed coefficients per tile: the largest rank rounded up to four.
+    mixed_stride: u32,
     tile_size: u32,
     tiles_per_side: u32,
 }
@@ -123,6 +126,7 @@ impl Panes {
             ),
             tile_chunk,
             ranks: basis.ranks().to_vec(),
+            mixed_stride,
             tile_size: basis.tile_size(),
             tiles_per_side: basis.tiles_per_side(),
         })
@@ -153,9 +157,10 @@ impl Panes {
         ((y / self.tile_size) * self.tiles_per_side + x / self.tile_size) as usize
     }
 
-    /// Mixed coefficients per tile, as the passes index them.
-    fn mixed_stride(&self) -> u32 {
-        self.ranks.iter().copied().max().unwrap_or(0).div_ceil(LANES as u32) * LANES as u32
+    /// Mixed coefficients per tile, as the passes index them: the largest rank rounded up to
+    /// four.
+    pub fn mixed_stride(&self) -> u32 {
+        self.mixed_stride
     }
 
     /// Bytes the mix pass reads a frame for each kept pane: three vec4s per four ranks of
@@ -327,7 +332,7 @@ impl BlendPass {
             })
             .collect();
         let uniforms: Vec<&wgpu::Buffer> = buffers.iter().step_by(2).collect();
-        let mix = crate::mix::MixPass::new(device, b, panes, &uniforms, panes.mixed_stride());
+        let mix = crate::mix::MixPass::new(device, b, panes, &uniforms);
         BlendPass {
             mix,
             pass,

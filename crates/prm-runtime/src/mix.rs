@@ -16,14 +16,9 @@ pub(crate) struct MixPass {
 
 impl MixPass {
     /// The pass on `b`'s frame and selection, writing `panes.mixed`; `constants` holds each
-    /// chunk's [`GpuBlendChunk`](crate::GpuBlendChunk) uniform, `mixed_stride` its stride.
-    pub fn new(
-        device: &wgpu::Device,
-        b: &Buffers,
-        panes: &Panes,
-        constants: &[&wgpu::Buffer],
-        mixed_stride: u32,
-    ) -> MixPass {
+    /// chunk's [`GpuBlendChunk`](crate::GpuBlendChunk) uniform.
+    pub fn new(device: &wgpu::Device, b: &Buffers, panes: &Panes, constants: &[&wgpu::Buffer]) -> MixPass {
+        let mixed_stride = panes.mixed_stride();
         let resources = |c: usize| {
             [
                 b.frame.as_entire_binding(),
