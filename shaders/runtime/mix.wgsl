@@ -1,17 +1,25 @@
 // prm-runtime mix pass: per atlas tile, the mixed coefficients a_k = Σ_j weight_j ⊙
 // C[3·pane_j .. 3·pane_j + 3][k] over the kept clusters and the residual groups (select.wgsl;
 // a group's coefficients are its members' summed, built at load), so that the blend's texel i
-// of the tile is Σ_k U[i][k]·a_k (blend.wgsl). A tile's coefficients are vec4s of four ranks,
-// pane p's channel ch at `coefficients + (3p + ch)·stride + k/4` (zero-padded beyond the rank).
-// One invocation per tile of the chunk and group of four ranks, up to mixed_stride/4; beyond
-// the tile's rank it writes zeros, which the blend's padded basis rows multiply.
+// of the tile is Σ_k U[i][k]·a_k (blend.wgsl). Pane p's coefficients in a tile are a block of
+// vec2<u32> at `coefficients + p·(1 + 3·stride)`: its scale (f32 bits in x), then each channel's
+// coefficients over the scale as f16, four ranks a word (zero-padded beyond the rank; blend.rs's
+// PaneBlock). One invocation per tile of the chunk and group of four ranks, up to
+// mixed_stride/4; beyond the tile's rank it writes zeros, which the blend's padded basis rows
+// multiply.
 
 @group(0) @binding(0) var<uniform> frame: Frame;
 @group(0) @binding(1) var<storage, read> selected: array<Selected>;
 @group(0) @binding(2) var<uniform> chunk: BlendChunk;
 @group(0) @binding(3) var<storage, read> tiles: array<PaneTile>;
-@group(0) @binding(4) var<storage, read> coefficients: array<vec4<f32>>;
+@group(0) @binding(4) var<storage, read> coefficients: array<vec2<u32>>;
 @group(0) @binding(5) var<storage, read_write> mixed: array<vec4<f32>>;
+
+// Four f16 coefficients of word `c`.
+fn quad(c: u32) -> vec4<f32> {
+    let q = coefficients[c];
+    return vec4<f32>(unpack2x16float(q.x), unpack2x16float(q.y));
+}
 
 @compute @workgroup_size(64)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
@@ -31,10 +39,12 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
             select(0u, frame.group_count, frame.cluster_count > frame.top_k);
         for (var j = 0u; j < kept; j++) {
             let s = selected[j];
-            let c = tile.coefficients + 3u * s.cluster * tile.stride + k4;
-            r += s.weight.r * coefficients[c];
-            g += s.weight.g * coefficients[c + tile.stride];
-            b += s.weight.b * coefficients[c + 2u * tile.stride];
+            let block = tile.coefficients + s.cluster * (1u + 3u * tile.stride);
+            let w = s.weight * bitcast<f32>(coefficients[block].x);
+            let c = block + 1u + k4;
+            r += w.r * quad(c);
+            g += w.g * quad(c + tile.stride);
+            b += w.b * quad(c + 2u * tile.stride);
         }
     }
     let m = t * chunk.mixed_stride + 4u * k4;

@@ -9,6 +9,6 @@
 
 // Exit record `i`'s sum, into its texel of the near lightmap.
 fn sum_exit(i: u32) {
-    let s = near_sum(i, false, textureDimensions(near_map).x);
+    let s = near_sum(i, textureDimensions(near_map).x);
     textureStore(near_map, s.xy, vec4<f32>(s.irradiance, 0.0));
 }

@@ -13,16 +13,18 @@
 @group(0) @binding(4) var source: texture_2d<f32>;
 @group(0) @binding(5) var lightmap: texture_storage_2d<rgba32float, write>;
 @group(0) @binding(6) var previous: texture_2d<f32>;
-@group(0) @binding(7) var<storage, read> tail: array<vec4<f32>>;
+// Every exit record's tail factor, RGB as half floats.
+@group(0) @binding(7) var<storage, read> tail: array<vec2<u32>>;
 
 // Exit record `i`'s sum, added to the blend's value into the lightmap.
 fn sum_exit(i: u32) {
-    let s = near_sum(i, true, textureDimensions(source).x);
+    let s = near_sum(i, textureDimensions(source).x);
     let base = textureLoad(source, s.xy, 0).rgb;
     var e = base + s.irradiance;
     if near.tail != 0u {
         let term = s.irradiance - (textureLoad(previous, s.xy, 0).rgb - base);
-        e += tail[i].rgb * max(term, vec3<f32>(0.0));
+        let f = tail[i];
+        e += vec3<f32>(unpack2x16float(f.x), unpack2x16float(f.y).x) * max(term, vec3<f32>(0.0));
     }
     textureStore(lightmap, s.xy, vec4<f32>(e, 1.0));
 }

@@ -10,5 +10,5 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
         return;
     }
     let g = points[i];
-    radiance[i] = vec4<f32>(g.albedo * INV_PI * point_irradiance(g), 0.0);
+    radiance[i] = vec4<f32>(near_albedo(g) * INV_PI * point_irradiance(g), 0.0);
 }

@@ -5,11 +5,11 @@
 // gather point (near_points.wgsl's entry point); comes after shared.wgsl, light_bindings.wgsl
 // (bindings 0 to 3), lights.wgsl and near_points.wgsl.
 
-@group(0) @binding(4) var<storage, read> points: array<GatherPoint>;
+@group(0) @binding(4) var<storage, read> points: array<NearPoint>;
 @group(0) @binding(5) var<storage, read_write> radiance: array<vec4<f32>>;
 @group(0) @binding(6) var<uniform> near: NearField;
 
 // The lights' direct irradiance of gather point `g`.
-fn point_irradiance(g: GatherPoint) -> vec3<f32> {
-    return direct_irradiance(g.position, g.normal);
+fn point_irradiance(g: NearPoint) -> vec3<f32> {
+    return direct_irradiance(near_position(g), near_normal(g));
 }

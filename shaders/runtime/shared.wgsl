@@ -105,14 +105,15 @@ struct Selected {
     cluster: u32,
 };
 
-// One atlas tile of the panes' basis (blend.rs): its basis rows (four f16 per vec2<u32>,
-// `stride` per texel, zero beyond the rank) from `basis` in its chunk's basis buffer, pane p's
-// channel ch of coefficient k at `coefficients + (3p + ch)·rank + k` in its chunk's coefficients.
+// One atlas tile of the panes' basis (blend.rs): its basis rows' length (four f16 per
+// vec2<u32>, zero beyond the rank; each lit texel names its row, blend.wgsl), its rank, and
+// where pane p's block of coefficients starts in its chunk's coefficients,
+// `coefficients + p·(1 + 3·stride)` (mix.wgsl).
 struct PaneTile {
-    basis: u32,
     stride: u32,
     rank: u32,
     coefficients: u32,
+    _pad0: u32,
 };
 
 // One chunk of the panes' tiles (blend.rs): tiles first_tile .. first_tile + tiles, lit_texels
@@ -153,6 +154,39 @@ struct GatherPoint {
 
 const NO_EMITTER: u32 = 0xFFFFFFFFu;
 
+// A gather point of the near field: GatherPoint without the emission, its texel flagged with
+// NEAR_EXIT where the texel has an exit record, its normal octahedral in two snorm16 and its
+// albedo in RGB9E5.
+struct NearPoint {
+    position: array<f32, 3>,
+    texel: u32,
+    normal: u32,
+    albedo: u32,
+};
+
+const NEAR_EXIT: u32 = 0x80000000u;
+
+fn near_position(g: NearPoint) -> vec3<f32> {
+    return vec3<f32>(g.position[0], g.position[1], g.position[2]);
+}
+
+// The unit normal of an octahedral snorm16 pair.
+fn near_normal(g: NearPoint) -> vec3<f32> {
+    let e = unpack2x16snorm(g.normal);
+    var n = vec3<f32>(e, 1.0 - abs(e.x) - abs(e.y));
+    let t = max(-n.z, 0.0);
+    n.x += select(t, -t, n.x >= 0.0);
+    n.y += select(t, -t, n.y >= 0.0);
+    return normalize(n);
+}
+
+// An RGB9E5 value (WebGPU's rgb9e5ufloat layout): mantissas × 2^(exponent − 24).
+fn near_albedo(g: NearPoint) -> vec3<f32> {
+    let v = g.albedo;
+    let scale = exp2(f32(i32(v >> 27u) - 24));
+    return vec3<f32>(f32(v & 511u), f32((v >> 9u) & 511u), f32((v >> 18u) & 511u)) * scale;
+}
+
 // The item of a one-dimensional dispatch of 64-wide workgroups laid out in rows
 // (prm_gpu_kit::linear_workgroups): any count fits, past one dimension's 65 535 groups.
 fn linear_index(gid: vec3<u32>, groups: vec3<u32>) -> u32 {
@@ -181,17 +215,20 @@ struct NearExit {
     end: u32,
 };
 
-// A near ray's end: a gather point and its squared distance from the exit point.
+// An exit point's near rays on one gather point: the point's index above the low
+// `NearField.weight_bits` bits, which hold the top bits of their summed weight's half float.
 struct NearHit {
-    point: u32,
-    // unpack2x16float: x the direct share's weight, y the deeper VPLs' share's.
-    weights: u32,
+    packed: u32,
 };
 
-// The near field's constants: counts and π/M.
+// The near field's constants: counts, π/M, whether to add the series' tail and how a hit packs.
 struct NearField {
     exits: u32,
     points: u32,
     scale: f32,
     tail: u32,
+    weight_bits: u32,
+    _pad0: u32,
+    _pad1: u32,
+    _pad2: u32,
 };

@@ -71,20 +71,39 @@ pub fn run(args: &DumpArgs) -> Result<()> {
 }
 
 /// What an archive needs resident on the GPU as the run time loads it by default: the panes'
-/// basis rows (`f16`) and their coefficients with the residual groups' (`f32`), each tile's rank
-/// rounded up to four, and the near field's records and hits.
+/// basis rows that are not zero (`f16`, each tile's rank rounded up to four) and their coefficients with the
+/// residual groups' (per pane and tile a scale and four `f16` ranks a word, 8 bytes each), and
+/// the near field's exit records (8 bytes) and merged hits (4 bytes; twice where the deeper
+/// share's disk differs from the direct share's).
 fn resident_line<R: Read + Seek>(archive: &Archive<R>) -> String {
+    use prm_scene::MergeNearHits;
     let mib = |b: u64| b as f64 / (1024.0 * 1024.0);
     let basis = archive.pane_basis();
     let clusters = archive.pane_count();
     let groups = prm_format::residual_group_count(clusters, prm_format::RESIDUAL_GROUPS) as usize;
-    // Both padded to four ranks: basis rows as f16, coefficients as f32.
-    let quads: u64 = basis.ranks().iter().map(|&r| u64::from(r).div_ceil(4)).sum();
-    let rows = u64::from(basis.tile_size()).pow(2) * quads * 8;
-    let coefficients = 48 * (clusters + groups) as u64 * quads;
+    let quads = |r: u32| u64::from(r).div_ceil(4);
+    let rows: u64 = (0..basis.tile_count())
+        .map(|t| match basis.ranks()[t] {
+            0 => 0,
+            r => {
+                let stored = basis
+                    .basis(t)
+                    .chunks_exact(r as usize)
+                    .filter(|row| row.iter().any(|&u| u != 0.0));
+                stored.count() as u64 * quads(r) * 8
+            }
+        })
+        .sum();
+    let block = |r: u32| if r == 0 { 0 } else { 8 * (1 + 3 * quads(r)) };
+    let coefficients = (clusters + groups) as u64 * basis.ranks().iter().map(|&r| block(r)).sum::<u64>();
     let near = archive.near_field().map_or(0, |n| {
-        (n.exits.len() * std::mem::size_of::<prm_format::NearExit>()
-            + n.hits.len() * std::mem::size_of::<prm_format::NearHit>()) as u64
+        let (_, merged) = n.merged_hits();
+        let sets = if n.indirect_disk > 0.0 && n.indirect_disk != n.disk {
+            2
+        } else {
+            1
+        };
+        (8 * n.exits.len() + 4 * sets * merged.len()) as u64
     });
     format!(
         "{:.1} MiB on the GPU: panes {:.1} MiB (basis {:.1} MiB, coefficients of {clusters} clusters + {groups} \

@@ -3,9 +3,10 @@
 //! emitters' and the near field's lightmaps, into the indirect-irradiance lightmap.
 //!
 //! The panes stay on the GPU as the archive holds them, a low-rank basis per atlas tile
-//! (`prm_format::PaneBasis`), not expanded to one texture per pane: the basis rows as `f16`
-//! (rounded up to four per texel, zero-padded) and the coefficients as `f32`, each pane's channel
-//! as vec4s of four ranks (likewise), with every residual group's coefficients (its members'
+//! (`prm_format::PaneBasis`), not expanded to one texture per pane: the basis rows that are not
+//! zero as `f16` (rounded up to four per texel, zero-padded; a texel outside every chart has a
+//! zero row, a third of the Cornell box's atlas) and the coefficients as `f16` under a scale per
+//! pane and tile ([`PaneBlock`]), with every residual group's coefficients (its members'
 //! summed) after the clusters'. Since blending is linear, the
 //! frame's `Σ_c w_c·pane_c` is `U·(Σ_c w_c·C_c)` per tile: the mix pass forms the bracket, a few
 //! hundred values per tile, and this pass one dot product of rank length per texel. Tiles are
@@ -13,9 +14,10 @@
 //! MiB on lavapipe); each pass dispatches once per chunk.
 //!
 //! On the bundled Cornell box's automatic bake (512 clusters + 64 residual groups, a 256² atlas,
-//! 16 tiles of mean rank 42.6) the panes take 10.4 MiB of GPU memory this way, against 144 MiB
-//! as one RGB9E5 buffer per pane, and a frame that blends every cluster reads 9.2 MB of them
-//! (`prm-play --timings`, `gi_bytes_read_by_part`; RGB9E5 buffers read 48 MB for 192 panes).
+//! 16 tiles of mean rank 42.6) the panes take 7.4 MiB of GPU memory this way, against 144 MiB
+//! as one RGB9E5 buffer per pane, and an update that blends every cluster reads 7.1 MB of them
+//! (`prm-play --timings`, `gpu_memory` and `gi_bytes_read_by_part`; RGB9E5 buffers read 48 MB
+//! for 192 panes).
 //! On lavapipe the frame bench (`cargo bench -p prm-play --bench frame`,
 //! `PRM_BENCH_PRESET=default`) puts the 504 clusters beyond the first 8 at 1.0 ms of a frame
 //! whose lights move (RGB9E5 buffers: 13.7 ms for 120 panes and 64 groups).
@@ -47,6 +49,9 @@ pub(crate) struct Panes {
     tile_chunk: Vec<usize>,
     /// Each tile's rank.
     ranks: Vec<u32>,
+    /// Every atlas texel's basis row in its chunk's basis buffer (in `vec2<u32>`), [`NO_ROW`]
+    /// where the row is zero; taken by [`BlendPass::new`].
+    rows: Vec<u32>,
     /// Mixed coefficients per tile: the largest rank rounded up to four.
     mixed_stride: u32,
     tile_size: u32,
@@ -70,13 +75,11 @@ impl Panes {
             .min(limits.max_buffer_size)
             .min(cap.unwrap_or(u64::MAX));
         let panes = basis.pane_count() + group_count as usize;
-        let texels = u64::from(basis.tile_size()).pow(2);
-        let sizes: Vec<(u64, u64)> = basis
-            .ranks()
-            .iter()
-            .map(|&r| {
+        let sizes: Vec<(u64, u64)> = (0..basis.tile_count())
+            .map(|t| {
+                let r = basis.ranks()[t];
                 let stride = u64::from(r).div_ceil(LANES as u64);
-                (texels * stride * 8, 48 * panes as u64 * stride)
+                (basis_rows(basis, t) * stride * 8, panes as u64 * PaneBlock::bytes(r))
             })
             .collect();
         if let Some(&(b, c)) = sizes.iter().find(|&&(b, c)| b.max(c) > binding) {
@@ -100,11 +103,14 @@ impl Panes {
         bounds.push(sizes.len());
         let mut gpu_tiles = Vec::with_capacity(sizes.len());
         let mut tile_chunk = Vec::with_capacity(sizes.len());
+        let res = (basis.tile_size() * basis.tiles_per_side()) as usize;
+        let mut rows = vec![NO_ROW; res * res];
         let chunks = bounds
             .windows(2)
             .enumerate()
             .map(|(c, w)| {
-                let chunk = upload_chunk(device, basis, group_of, group_count, w[0]..w[1], &mut gpu_tiles);
+                let tiles = w[0]..w[1];
+                let chunk = upload_chunk(device, basis, (group_of, group_count), tiles, &mut gpu_tiles, &mut rows);
                 tile_chunk.extend(std::iter::repeat_n(c, w[1] - w[0]));
                 chunk
             })
@@ -126,6 +132,7 @@ impl Panes {
             ),
             tile_chunk,
             ranks: basis.ranks().to_vec(),
+            rows,
             mixed_stride,
             tile_size: basis.tile_size(),
             tiles_per_side: basis.tiles_per_side(),
@@ -134,19 +141,9 @@ impl Panes {
 
     /// Marks in `lit` (one flag per atlas texel, row-major) every texel whose basis row is not
     /// zero: where some pane may light it.
-    pub fn mark_lit(basis: &PaneBasis, lit: &mut [bool]) {
-        let (t, s) = (basis.tile_size() as usize, basis.tiles_per_side() as usize);
-        let res = t * s;
-        for (tile, &r) in basis.ranks().iter().enumerate() {
-            if r == 0 {
-                continue;
-            }
-            let (x0, y0) = ((tile % s) * t, (tile / s) * t);
-            for (i, row) in basis.basis(tile).chunks_exact(r as usize).enumerate() {
-                if row.iter().any(|&u| u != 0.0) {
-                    lit[(y0 + i / t) * res + x0 + i % t] = true;
-                }
-            }
+    pub fn mark_lit(&self, lit: &mut [bool]) {
+        for (l, &row) in lit.iter_mut().zip(&self.rows) {
+            *l |= row != NO_ROW;
         }
     }
 
@@ -163,60 +160,116 @@ impl Panes {
         self.mixed_stride
     }
 
-    /// Bytes the mix pass reads a frame for each kept pane: three vec4s per four ranks of
-    /// every tile.
+    /// Bytes the mix pass reads a frame for each kept pane: its [`PaneBlock`] in every tile.
     pub fn coefficient_bytes_per_pane(&self) -> u64 {
-        48 * self
-            .ranks
-            .iter()
-            .map(|&r| u64::from(r).div_ceil(LANES as u64))
-            .sum::<u64>()
+        self.ranks.iter().map(|&r| PaneBlock::bytes(r)).sum()
     }
 }
 
-/// Chunk `tiles` of `basis` in two buffers, its tiles' entries appended to `gpu_tiles`.
+/// A pane's coefficients in one tile of rank `r` as the mix reads them, in `vec2<u32>` words:
+/// first its scale `s`, the largest magnitude of its coefficients there (f32 bits in `x`), then
+/// each channel's coefficients over `s` as `f16`, four ranks a word, zero-padded. Under its
+/// own scale a pane keeps 11 significant bits wherever it is bright, however dim beside the
+/// tile's brightest pane. On the bundled Cornell box's automatic bake the coefficients take
+/// 2.4 MiB instead of 4.7 as `f32`.
+pub(crate) struct PaneBlock;
+
+impl PaneBlock {
+    /// Words of a pane's block in a tile of rank `r`: the scale and three channels.
+    pub fn words(r: u32) -> u64 {
+        if r == 0 {
+            0
+        } else {
+            1 + 3 * u64::from(r).div_ceil(LANES as u64)
+        }
+    }
+
+    /// Bytes of a pane's block in a tile of rank `r`.
+    pub fn bytes(r: u32) -> u64 {
+        8 * Self::words(r)
+    }
+
+    /// Appends the block of one pane's coefficients `v` (three channels of `r` each) to `out`.
+    fn push(v: &[f32], r: usize, out: &mut Vec<[u32; 2]>) {
+        let scale = v.iter().fold(0.0f32, |m, x| m.max(x.abs()));
+        let inv = if scale > 0.0 { 1.0 / scale } else { 0.0 };
+        out.push([scale.to_bits(), 0]);
+        for channel in v.chunks_exact(r) {
+            let half = |k: usize| {
+                channel
+                    .get(k)
+                    .map_or(0, |&c| u32::from(half::f16::from_f32(c * inv).to_bits()))
+            };
+            out.extend((0..r.div_ceil(LANES)).map(|q| {
+                let k = LANES * q;
+                [half(k) | half(k + 1) << 16, half(k + 2) | half(k + 3) << 16]
+            }));
+        }
+    }
+}
+
+/// A texel without a basis row (zero there), in [`Panes`]'s rows and the blend's texels.
+const NO_ROW: u32 = u32::MAX;
+
+/// The basis rows of tile `t` that are not zero, which the GPU keeps.
+pub(crate) fn basis_rows(basis: &PaneBasis, t: usize) -> u64 {
+    match basis.ranks()[t] as usize {
+        0 => 0,
+        r => basis
+            .basis(t)
+            .chunks_exact(r)
+            .filter(|row| row.iter().any(|&u| u != 0.0))
+            .count() as u64,
+    }
+}
+
+/// Chunk `tiles` of `basis` in two buffers, with each residual group's coefficients (its
+/// members' by `group_of`, of `group_count` groups); its tiles' entries appended to
+/// `gpu_tiles`, its texels' rows written to `rows`.
 fn upload_chunk(
     device: &wgpu::Device,
     basis: &PaneBasis,
-    group_of: &[u32],
-    group_count: u32,
+    (group_of, group_count): (&[u32], u32),
     tiles: std::ops::Range<usize>,
     gpu_tiles: &mut Vec<GpuPaneTile>,
+    rows: &mut [u32],
 ) -> PaneChunk {
+    let (t, s) = (basis.tile_size() as usize, basis.tiles_per_side() as usize);
     let mut words: Vec<u32> = Vec::new();
-    let mut coefficients: Vec<f32> = Vec::new();
+    let mut coefficients: Vec<[u32; 2]> = Vec::new();
     for tile in tiles.clone() {
         let r = basis.ranks()[tile] as usize;
         let stride = r.div_ceil(LANES);
         gpu_tiles.push(GpuPaneTile {
-            basis: (words.len() / 2) as u32,
             stride: stride as u32,
             rank: r as u32,
-            coefficients: (coefficients.len() / 4) as u32,
+            coefficients: coefficients.len() as u32,
+            _pad0: 0,
         });
         if r == 0 {
             continue;
         }
-        for row in basis.basis(tile).chunks_exact(r) {
+        let (x0, y0) = ((tile % s) * t, (tile / s) * t);
+        for (i, row) in basis.basis(tile).chunks_exact(r).enumerate() {
+            if row.iter().all(|&u| u == 0.0) {
+                continue;
+            }
+            rows[(y0 + i / t) * t * s + x0 + i % t] = (words.len() / 2) as u32;
             let half = |k: usize| row.get(k).map_or(0, |&u| u32::from(half::f16::from_f32(u).to_bits()));
             words.extend((0..2 * stride).map(|p| half(2 * p) | half(2 * p + 1) << 16));
         }
-        // Each pane's channel as `stride` vec4s of four ranks, zero-padded, the residual
-        // groups' (their members' summed) after the clusters'.
-        let first = coefficients.len();
-        let row = 4 * stride;
-        let panes = basis.pane_count() + group_count as usize;
-        coefficients.resize(first + 3 * panes * row, 0.0);
-        for (pane, rows) in basis.coefficients(tile).chunks_exact(3 * r).enumerate() {
-            let g = group_of.get(pane).map_or(group_count, |&g| g);
-            for (ch, v) in rows.chunks_exact(r).enumerate() {
-                let own = first + (3 * pane + ch) * row;
-                coefficients[own..own + r].copy_from_slice(v);
-                if g < group_count {
-                    let sum = first + (3 * (basis.pane_count() + g as usize) + ch) * row;
-                    coefficients[sum..sum + r].iter_mut().zip(v).for_each(|(s, v)| *s += v);
-                }
+        // Each pane's block, the residual groups' (their members' summed) after the clusters'.
+        let own = basis.coefficients(tile);
+        let mut groups = vec![0.0f32; 3 * r * group_count as usize];
+        for (pane, v) in own.chunks_exact(3 * r).enumerate() {
+            let g = group_of.get(pane).map_or(group_count, |&g| g) as usize;
+            if g < group_count as usize {
+                let sum = &mut groups[3 * r * g..3 * r * (g + 1)];
+                sum.iter_mut().zip(v).for_each(|(s, v)| *s += v);
             }
+        }
+        for v in own.chunks_exact(3 * r).chain(groups.chunks_exact(3 * r)) {
+            PaneBlock::push(v, r, &mut coefficients);
         }
     }
     PaneChunk {
@@ -228,7 +281,7 @@ fn upload_chunk(
         basis: pipeline::buffer_init(
             device,
             "prm panes basis",
-            bytemuck::cast_slice(&words),
+            bytemuck::cast_slice(&crate::gather::at_least_one(words)),
             wgpu::BufferUsages::STORAGE,
         ),
         coefficients: pipeline::buffer_init(
@@ -270,16 +323,21 @@ impl BlendPass {
     pub fn new(
         device: &wgpu::Device,
         b: &crate::Buffers,
-        panes: &Panes,
+        panes: &mut Panes,
         targets: &BlendTargets,
         lit: &[bool],
     ) -> BlendPass {
-        let mut texels: Vec<Vec<u32>> = vec![Vec::new(); panes.chunks.len()];
+        let rows = std::mem::take(&mut panes.rows);
+        // Per chunk, its lit texels and their basis rows.
+        let mut texels: Vec<Vec<[u32; 2]>> = vec![Vec::new(); panes.chunks.len()];
         let mut basis_bytes_read = 0;
         for t in (0..lit.len() as u32).filter(|&t| lit[t as usize]) {
             let tile = panes.tile_of(t);
-            texels[panes.tile_chunk[tile]].push(t);
-            basis_bytes_read += u64::from(panes.ranks[tile].div_ceil(LANES as u32)) * 8;
+            let row = rows[t as usize];
+            texels[panes.tile_chunk[tile]].push([t, row]);
+            if row != NO_ROW {
+                basis_bytes_read += u64::from(panes.ranks[tile].div_ceil(LANES as u32)) * 8;
+            }
         }
         let mut buffers = Vec::new();
         for (chunk, texels) in panes.chunks.iter().zip(&texels) {

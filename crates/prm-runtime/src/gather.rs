@@ -6,7 +6,7 @@ use prm_format::GatherPoint;
 use prm_gpu_kit::{linear_workgroups, pipeline, ComputePass};
 
 use crate::lit::{LitBindings, LitFrame, LitPass};
-use crate::{Buffers, GpuGatherPoint};
+use crate::{Buffers, GpuGatherPoint, GpuNearPoint};
 
 /// `v`, or one default element when it is empty: a binding of zero bytes is invalid.
 pub(crate) fn at_least_one<T: Default>(mut v: Vec<T>) -> Vec<T> {
@@ -26,20 +26,38 @@ impl GatherPoints {
     /// Uploads `points` as `"{label} points"` and makes room for their radiance,
     /// `"{label} radiance"` (readable back, for tests).
     pub fn upload(device: &wgpu::Device, label: &str, points: &[GatherPoint]) -> GatherPoints {
-        let gpu: Vec<GpuGatherPoint> = at_least_one(
-            points
-                .iter()
-                .map(|g| GpuGatherPoint {
-                    position: g.position,
-                    texel: g.texel,
-                    normal: g.normal,
-                    albedo: g.albedo,
-                    emitter: g.emitter,
-                    emission: g.emission,
-                    ..Default::default()
-                })
-                .collect(),
-        );
+        let gpu = points
+            .iter()
+            .map(|g| GpuGatherPoint {
+                position: g.position,
+                texel: g.texel,
+                normal: g.normal,
+                albedo: g.albedo,
+                emitter: g.emitter,
+                emission: g.emission,
+                ..Default::default()
+            })
+            .collect();
+        Self::upload_as(device, label, gpu)
+    }
+
+    /// Uploads the near field's `points` as [`GpuNearPoint`]s, which leave out what only the
+    /// probes read (the emission) and pack the normal and albedo, flagging those at the texel
+    /// of one of the `exits` (texels strictly increasing).
+    pub fn upload_near(
+        device: &wgpu::Device,
+        label: &str,
+        points: &[GatherPoint],
+        exits: &[prm_format::NearExit],
+    ) -> GatherPoints {
+        let is_exit = |t: u32| exits.binary_search_by_key(&t, |x| x.texel).is_ok();
+        let gpu = points.iter().map(|g| GpuNearPoint::new(g, is_exit(g.texel))).collect();
+        Self::upload_as(device, label, gpu)
+    }
+
+    /// Uploads `gpu` (at least one) and makes room for its radiance.
+    fn upload_as<T: bytemuck::Pod + Default>(device: &wgpu::Device, label: &str, gpu: Vec<T>) -> GatherPoints {
+        let gpu = at_least_one(gpu);
         let points = pipeline::buffer_init(
             device,
             &format!("{label} points"),

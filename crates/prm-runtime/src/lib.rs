@@ -83,8 +83,8 @@ pub use probes::ProbeVolume;
 pub use shadow::SHADOW_FORMAT;
 pub use shared::{
     GpuBlendChunk, GpuCluster, GpuEffective, GpuEntry, GpuFrame, GpuGatherPoint, GpuLight, GpuNearExit, GpuNearField,
-    GpuNearHit, GpuPaneTile, GpuProbeGrid, GpuProbeRays, GpuSelected, GpuView, GpuWeight, LightKind, LIGHTS_WGSL,
-    LIGHT_BINDINGS_WGSL, PROBES_WGSL, SHARED_WGSL,
+    GpuNearHit, GpuNearPoint, GpuPaneTile, GpuProbeGrid, GpuProbeRays, GpuSelected, GpuView, GpuWeight, LightKind,
+    LIGHTS_WGSL, LIGHT_BINDINGS_WGSL, PROBES_WGSL, SHARED_WGSL,
 };
 
 use shadow::{ShadowMaps, ShadowPass};
@@ -253,7 +253,8 @@ impl Runtime {
         let mut emitters = baked::BakedLights::new(device, archive.emitters(), archive.sky(), atlas.resolution);
         emitters.apply(queue, &mut entries);
         let buffers = Buffers::new(device, &clusters, &entries, group_count);
-        let (panes, mut lit) = setup::upload_panes(device, queue, archive, &buffers, &group_of, group_count, &options)?;
+        let (mut panes, mut lit) =
+            setup::upload_panes(device, queue, archive, &buffers, &group_of, group_count, &options)?;
         let res = atlas.resolution;
         let (lightmap, lightmap_view) = setup::create_lightmap(device, res);
 
@@ -274,7 +275,7 @@ impl Runtime {
         let blend = blend::BlendPass::new(
             device,
             &buffers,
-            &panes,
+            &mut panes,
             &blend::BlendTargets {
                 lightmap: &lightmap_view,
                 emitted: &emitters.indirect_view,

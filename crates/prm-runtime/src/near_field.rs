@@ -20,6 +20,15 @@ use crate::gather::{at_least_one, GatherPasses, GatherPoints};
 use crate::lit::{LitBindings, LitPass};
 use crate::{Buffers, GpuNearExit, GpuNearField, GpuNearHit, NearTail};
 
+/// [`Merged`] as the passes read it.
+struct GpuMerged {
+    exits: Vec<GpuNearExit>,
+    /// The direct share's hits, and the deeper share's where their disks are one.
+    hits: Vec<GpuNearHit>,
+    /// The deeper share's hits where its disk differs.
+    deeper_hits: Option<Vec<GpuNearHit>>,
+}
+
 /// The passes and the buffers they own.
 pub(crate) struct NearFieldPass {
     /// Before the blend: the radiance pass (one invocation per gather point), then the sum (one
@@ -34,8 +43,12 @@ pub(crate) struct NearFieldPass {
 /// The deeper VPLs' share, after the blend: from a copy of its lightmap (`source`,
 /// which holds the direct share already), the gather points' indirect radiance, then each exit
 /// point's sum of it added to `source` and written into the lightmap; then, for each further
-/// gather ([`crate::RuntimeOptions::near_bounces`]), the same from a copy of the lightmap the
-/// previous sum completed (`again`), added to `source` again. The last sum adds the rest of the
+/// gather ([`crate::RuntimeOptions::near_bounces`]), the same from the lightmap the previous sum
+/// completed (`again`), added to `source` again. The sums before the last write the exit texels
+/// of the near lightmap, free once the blend has added it, which then holds that completed
+/// lightmap at the exit texels (and `source` at the others, which no sum changes): each gather
+/// point reads one or the other by its [`GpuNearPoint::EXIT`] flag. The near lightmap's other
+/// texels stay zero for the next blend, and the lightmap needs no third copy. The last sum adds the rest of the
 /// series ([`NearTail::Extrapolated`]). Summing both shares after the blend in one walk along the
 /// hits, without the direct share in the indirect light, played the fireplace room's 120 s bake
 /// at 13.14% instead of 11.95% (McGuire's box 3.70% / 4.44% instead of 3.60% / 4.24%).
@@ -49,10 +62,9 @@ struct IndirectShare {
     gathers: u32,
 }
 
-/// The gathers after the first: the copy of the lightmap the previous sum completed, the
-/// radiance pass reading it, and the sums before the last (without the tail).
+/// The gathers after the first: the radiance pass reading the lightmap the previous sum
+/// completed, and the sum before the last (without the tail), into the near lightmap.
 struct Again {
-    completed: wgpu::Texture,
     radiance_pass: ComputePass,
     sum: ComputePass,
 }
@@ -81,7 +93,8 @@ pub(crate) fn series_tail(near: &NearField, merged: &Merged, gathers: u32) -> Ve
 /// The textures the near field reads and writes besides its own buffers.
 pub(crate) struct NearTargets<'a> {
     /// The near lightmap the direct share's sum writes and the blend adds (the atlas's size,
-    /// `rgba32float`).
+    /// `rgba32float`; zero but at the exit texels), which the deeper share's gathers before the
+    /// last then reuse ([`IndirectShare`]).
     pub near_map: &'a wgpu::TextureView,
     /// The runtime's lightmap, which the deeper VPLs' share completes after the blend.
     pub lightmap: &'a wgpu::TextureView,
@@ -115,6 +128,9 @@ struct NearBuffers {
     constants: GpuNearField,
     exits: wgpu::Buffer,
     hits: wgpu::Buffer,
+    /// The hits with the deeper VPLs' weights, where they differ from the direct share's (a
+    /// deeper disk other than the direct share's); `None`: `hits` serve both.
+    deeper_hits: Option<wgpu::Buffer>,
     /// Gather points as uploaded (at least one).
     point_slots: u64,
 }
@@ -123,23 +139,28 @@ impl NearBuffers {
     /// Uploads `near`'s gather points, its constants and its `merged` exit records and hits.
     fn upload(device: &wgpu::Device, near: &NearField, merged: &Merged) -> NearBuffers {
         let st = wgpu::BufferUsages::STORAGE;
-        let gather = GatherPoints::upload(device, "prm near", &near.points);
+        let gather = GatherPoints::upload_near(device, "prm near", &near.points, &near.exits);
+        let points = near.points.len() as u32;
         let constants = GpuNearField {
             exits: merged.ends.len() as u32,
-            points: near.points.len() as u32,
+            points,
             scale: std::f32::consts::PI / near.rays_per_exit.max(1) as f32,
-            tail: 0,
+            weight_bits: GpuNearHit::weight_bits(points),
+            ..Default::default()
         };
         let info = constants_buffer(device, "prm near field", &constants);
-        let (exits, hits) = merged.gpu(near);
-        let (exits, hits) = (at_least_one(exits), at_least_one(hits));
+        let gpu = merged.gpu(near, constants.weight_bits);
+        let upload = |label, hits: Vec<GpuNearHit>| {
+            pipeline::buffer_init(device, label, bytemuck::cast_slice(&at_least_one(hits)), st)
+        };
+        let exits = at_least_one(gpu.exits);
         let exits = pipeline::buffer_init(device, "prm near exits", bytemuck::cast_slice(&exits), st);
-        let hits = pipeline::buffer_init(device, "prm near hits", bytemuck::cast_slice(&hits), st);
         NearBuffers {
             inputs: RadianceBindings { gather, info },
             constants,
             exits,
-            hits,
+            hits: upload("prm near hits", gpu.hits),
+            deeper_hits: gpu.deeper_hits.map(|h| upload("prm near deeper hits", h)),
             point_slots: near.points.len().max(1) as u64,
         }
     }
@@ -155,7 +176,7 @@ impl NearBuffers {
                 include_str!("../../../shaders/runtime/near_field.wgsl"),
             ],
             &[
-                self.sum_bindings(&self.inputs.info, &self.inputs.gather.radiance)
+                self.sum_bindings(&self.inputs.info, &self.hits, &self.inputs.gather.radiance)
                     .as_slice(),
                 &[wgpu::BindingResource::TextureView(near_map)],
             ]
@@ -164,18 +185,24 @@ impl NearBuffers {
     }
 
     /// Bindings 0 to 3 of both sums, which `near_sum.wgsl` declares: the constants
-    /// `constants`, the exit records, their hits and the gather points' `radiance`.
+    /// `constants`, the exit records, their `hits` and the gather points' `radiance`.
     fn sum_bindings<'a>(
         &'a self,
         constants: &'a wgpu::Buffer,
+        hits: &'a wgpu::Buffer,
         radiance: &'a wgpu::Buffer,
     ) -> [wgpu::BindingResource<'a>; 4] {
         [
             constants.as_entire_binding(),
             self.exits.as_entire_binding(),
-            self.hits.as_entire_binding(),
+            hits.as_entire_binding(),
             radiance.as_entire_binding(),
         ]
+    }
+
+    /// The hits the deeper share's sums walk.
+    fn deeper(&self) -> &wgpu::Buffer {
+        self.deeper_hits.as_ref().unwrap_or(&self.hits)
     }
 }
 
@@ -222,7 +249,8 @@ impl IndirectShare {
             wgpu::BufferUsages::empty(),
         );
         let info = &bufs.inputs.info;
-        let radiance_from = |from: &wgpu::Texture| {
+        // From `source`, and at exit texels from `completed`.
+        let radiance_from = |source: &wgpu::TextureView, completed: &wgpu::TextureView| {
             ComputePass::new(
                 device,
                 "near indirect radiance",
@@ -234,22 +262,30 @@ impl IndirectShare {
                 &[
                     info.as_entire_binding(),
                     bufs.inputs.gather.points.as_entire_binding(),
-                    wgpu::BindingResource::TextureView(&view(from)),
+                    wgpu::BindingResource::TextureView(source),
                     wgpu::BindingResource::TextureView(targets.emitted),
                     indirect.as_entire_binding(),
+                    wgpu::BindingResource::TextureView(completed),
                 ],
             )
         };
         let source = lightmap_copy(device, "prm near source", targets.resolution);
-        let completed = (gathers > 1).then(|| lightmap_copy(device, "prm near completed", targets.resolution));
+        let source_view = view(&source);
+        // Half floats, RGB then 0: the factors need no more than the gathers they scale.
+        let half = |v: f32| u32::from(half::f16::from_f32(v.min(65504.0)).to_bits());
+        let packed: Vec<[u32; 2]> = tail
+            .iter()
+            .map(|t| [half(t[0]) | half(t[1]) << 16, half(t[2])])
+            .collect();
         let tail_buf = pipeline::buffer_init(
             device,
             "prm near tail",
-            bytemuck::cast_slice(&at_least_one(tail)),
+            bytemuck::cast_slice(&at_least_one(packed)),
             wgpu::BufferUsages::STORAGE,
         );
-        // The sum after `previous`'s gather, with or without the series' tail.
-        let sum_after = |previous: &wgpu::Texture, constants: &wgpu::Buffer| {
+        // A sum into `target`, after the gather that completed `previous` at the exit texels,
+        // with or without the series' tail.
+        let sum_into = |target: &wgpu::TextureView, previous: &wgpu::TextureView, constants: &wgpu::Buffer| {
             ComputePass::new(
                 device,
                 "near indirect",
@@ -259,11 +295,11 @@ impl IndirectShare {
                     include_str!("../../../shaders/runtime/near_indirect.wgsl"),
                 ],
                 &[
-                    bufs.sum_bindings(constants, &indirect).as_slice(),
+                    bufs.sum_bindings(constants, bufs.deeper(), &indirect).as_slice(),
                     &[
-                        wgpu::BindingResource::TextureView(&view(&source)),
-                        wgpu::BindingResource::TextureView(targets.lightmap),
-                        wgpu::BindingResource::TextureView(&view(previous)),
+                        wgpu::BindingResource::TextureView(&source_view),
+                        wgpu::BindingResource::TextureView(target),
+                        wgpu::BindingResource::TextureView(previous),
                         tail_buf.as_entire_binding(),
                     ],
                 ]
@@ -278,14 +314,14 @@ impl IndirectShare {
                 ..bufs.constants
             },
         );
-        let previous = completed.as_ref().unwrap_or(&source);
+        let near_map = targets.near_map;
+        let previous = if gathers > 1 { near_map } else { &source_view };
         IndirectShare {
-            radiance_pass: radiance_from(&source),
-            last: sum_after(previous, &last_info),
-            again: completed.map(|c| Again {
-                radiance_pass: radiance_from(&c),
-                sum: sum_after(&c, info),
-                completed: c,
+            radiance_pass: radiance_from(&source_view, &source_view),
+            last: sum_into(targets.lightmap, previous, &last_info),
+            again: (gathers > 1).then(|| Again {
+                radiance_pass: radiance_from(&source_view, near_map),
+                sum: sum_into(near_map, &source_view, info),
             }),
             source,
             gathers,
@@ -294,12 +330,10 @@ impl IndirectShare {
 }
 
 /// The near field's hits with each exit record's hits on one gather point merged into one
-/// ([`MergeNearHits::merged_hits`]): each walk along them cost lavapipe about 50 ms a frame on the
-/// fireplace room before. The passes read the sums as half floats ([`GpuNearHit`], 8 bytes
-/// instead of 16 with f32 weights and padding): the fireplace room's default archive played its
-/// `gi` frame at 1024×768 in 197–205 ms instead of 221–233 (`prm-play --timings --gi-update
-/// every-frame`, medians, interleaved), the images 2·10⁻⁵ apart, and twice the hits fit one
-/// storage binding.
+/// ([`MergeNearHits::merged_hits`]): without merging, each walk along them cost lavapipe about
+/// 50 ms more a frame on the fireplace room. The passes read each merged hit as one `u32`
+/// ([`GpuNearHit`]: the point's index and the summed weight's half float), and one set of them
+/// serves both shares where their disks are one.
 pub(crate) struct Merged {
     /// Every exit record's end in `hits`.
     pub ends: Vec<u32>,
@@ -313,20 +347,26 @@ impl Merged {
         Merged { ends, hits }
     }
 
-    /// The exit records and their hits as the passes read them.
-    fn gpu(&self, near: &NearField) -> (Vec<GpuNearExit>, Vec<GpuNearHit>) {
+    /// The exit records and their hits as the passes read them, the weights in `weight_bits`.
+    fn gpu(&self, near: &NearField, weight_bits: u32) -> GpuMerged {
         let exits = near
             .exits
             .iter()
             .zip(&self.ends)
             .map(|(x, &end)| GpuNearExit { texel: x.texel, end })
             .collect();
-        let hits = self
-            .hits
-            .iter()
-            .map(|h| GpuNearHit::new(h.point, h.weight, h.indirect_weight))
-            .collect();
-        (exits, hits)
+        let pack = |weight: fn(&prm_scene::MergedHit) -> f32| {
+            self.hits
+                .iter()
+                .map(|h| GpuNearHit::new(h.point, weight(h), weight_bits))
+                .collect()
+        };
+        let one_disk = self.hits.iter().all(|h| h.weight == h.indirect_weight);
+        GpuMerged {
+            exits,
+            hits: pack(|h| h.weight),
+            deeper_hits: (!one_disk && near.indirect_disk > 0.0).then(|| pack(|h| h.indirect_weight)),
+        }
     }
 }
 
@@ -392,12 +432,7 @@ impl NearFieldPass {
         for k in 1..=share.gathers {
             let again = share.again.as_ref();
             if k > 1 {
-                let again = again.expect("a copy for every gather after the first");
-                encoder.copy_texture_to_texture(
-                    lightmap.as_image_copy(),
-                    again.completed.as_image_copy(),
-                    lightmap.size(),
-                );
+                let again = again.expect("passes for every gather after the first");
                 again
                     .radiance_pass
                     .encode(encoder, linear_workgroups(self.gathered.point_count()), timer);
@@ -429,37 +464,54 @@ mod tests {
             // Exit 0: point 2 twice (r² 0 and 1), point 5 once; exit 1: point 2 again.
             hits: vec![hit(2, 0.0), hit(5, 3.0), hit(2, 1.0), hit(2, 0.0)],
         };
-        let (exits, hits) = Merged::new(&near).gpu(&near);
+        let bits = GpuNearHit::weight_bits(6);
+        let gpu = Merged::new(&near).gpu(&near, bits);
         assert_eq!(
-            exits.iter().map(|x| (x.texel, x.end)).collect::<Vec<_>>(),
+            gpu.exits.iter().map(|x| (x.texel, x.end)).collect::<Vec<_>>(),
             [(3, 2), (7, 3)]
         );
-        let got: Vec<(u32, f32, f32)> = hits
-            .iter()
-            .map(|h| {
-                let (w0, w1) = h.weights();
-                (h.point, w0, w1)
-            })
-            .collect();
+        let unpack = |hits: &[GpuNearHit]| hits.iter().map(|h| h.unpack(bits)).collect::<Vec<_>>();
+        let (direct, deeper) = (unpack(&gpu.hits), unpack(gpu.deeper_hits.as_ref().unwrap()));
         // R² = 1: weights 1, ½, ¼ at r² 0, 1, 3; R₁² = ½: 1, ⅓, ⅐.
         let want = [(2, 1.0 + 0.5, 1.0 + 1.0 / 3.0), (5, 0.25, 1.0 / 7.0), (2, 1.0, 1.0)];
-        for (g, w) in got.iter().zip(want) {
-            assert_eq!(g.0, w.0);
+        for ((d, i), w) in direct.iter().zip(&deeper).zip(want) {
+            assert_eq!((d.0, i.0), (w.0, w.0));
             // Half floats: 11 significant bits.
             assert!(
-                (g.1 - w.1).abs() < 1e-3 * w.1 && (g.2 - w.2).abs() < 1e-3 * w.2,
-                "{got:?}"
+                (d.1 - w.1).abs() < 1e-3 * w.1 && (i.1 - w.2).abs() < 1e-3 * w.2,
+                "{direct:?} {deeper:?}"
             );
         }
-        let direct_only = NearField {
-            indirect_disk: 0.0,
-            ..near
-        };
-        assert!(Merged::new(&direct_only)
-            .gpu(&direct_only)
-            .1
-            .iter()
-            .all(|h| h.weights().1 == 0.0));
+        for indirect_disk in [0.0, 1.0] {
+            let one = NearField {
+                indirect_disk,
+                ..near.clone()
+            };
+            assert!(
+                Merged::new(&one).gpu(&one, bits).deeper_hits.is_none(),
+                "{indirect_disk}"
+            );
+        }
+    }
+
+    #[test]
+    fn a_hit_packs_its_point_and_weight_into_one_word() {
+        assert_eq!(GpuNearHit::weight_bits(1), 15);
+        assert_eq!(GpuNearHit::weight_bits(1 << 17), 15);
+        assert_eq!(GpuNearHit::weight_bits((1 << 17) + 1), 14);
+        assert_eq!(GpuNearHit::weight_bits(8192 * 8192), 6);
+        for bits in [15, 14, 10, 6] {
+            let last = (1u32 << (32 - bits)) - 1;
+            for point in [0, 1, last] {
+                for w in [0.0, 1.0 / 16.0, 0.3, 1.0, 7.25, 60000.0] {
+                    let (p, got) = GpuNearHit::new(point, w, bits).unpack(bits);
+                    assert_eq!(p, point);
+                    // A half float's 11 significant bits less the dropped ones, rounded.
+                    let tolerance = w * 2f32.powi(-11 - bits as i32 + 15);
+                    assert!((got - w).abs() <= tolerance, "{bits} bits: {w} became {got}");
+                }
+            }
+        }
     }
 
     #[test]

@@ -201,7 +201,7 @@ pub(crate) fn upload_panes<R: Read + Seek>(
     // lights them (the rest of the lightmap stays zero).
     let res = archive.atlas().resolution as usize;
     let mut lit = vec![false; res * res];
-    blend::Panes::mark_lit(basis, &mut lit);
+    panes.mark_lit(&mut lit);
     Ok((panes, lit))
 }
 

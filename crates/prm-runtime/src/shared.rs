@@ -119,6 +119,62 @@ pub struct GpuProbeRays {
     pub _pad0: u32,
 }
 
+/// A gather point of the near field ([`prm_format::GatherPoint`] without what only the probes
+/// read); `NearPoint` in the shaders. 24 bytes instead of [`GpuGatherPoint`]'s 64: the normal
+/// octahedral in two `snorm16` (WGSL's `unpack2x16snorm`), the albedo in RGB9E5 (9 bits under
+/// the largest channel's exponent).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct GpuNearPoint {
+    /// World position.
+    pub position: [f32; 3],
+    /// Texel index `y·R + x`, with [`GpuNearPoint::EXIT`] where the texel has an exit record.
+    pub texel: u32,
+    /// Unit normal, octahedral, two `snorm16` ([`GpuNearPoint::normal`]).
+    pub normal: u32,
+    /// Albedo, RGB9E5 (`prm_format::encode_rgb9e5`).
+    pub albedo: u32,
+}
+
+impl GpuNearPoint {
+    /// The texel's flag for a texel with an exit record, whose near sums change it (above every
+    /// texel index of an atlas of at most 8192²); `NEAR_EXIT` in the shaders.
+    pub const EXIT: u32 = 1 << 31;
+
+    /// Gather point `g`, packed; `exit`: its texel has an exit record.
+    pub fn new(g: &prm_format::GatherPoint, exit: bool) -> GpuNearPoint {
+        GpuNearPoint {
+            position: g.position,
+            texel: g.texel | if exit { Self::EXIT } else { 0 },
+            normal: octahedral(g.normal),
+            albedo: prm_format::encode_rgb9e5(g.albedo),
+        }
+    }
+
+    /// The unit normal as the shader unpacks it (`oct_normal` in shared.wgsl).
+    pub fn normal(&self) -> [f32; 3] {
+        let s = |b: u32| f32::from(b as u16 as i16).max(-32767.0) / 32767.0;
+        let (x, y) = (s(self.normal), s(self.normal >> 16));
+        let z = 1.0 - x.abs() - y.abs();
+        let t = (-z).max(0.0);
+        let (x, y) = (x + if x >= 0.0 { -t } else { t }, y + if y >= 0.0 { -t } else { t });
+        let l = (x * x + y * y + z * z).sqrt();
+        [x / l, y / l, z / l]
+    }
+}
+
+/// `n` (unit length) on the octahedron unfolded to [−1, 1]², as two `snorm16` (x low).
+fn octahedral(n: [f32; 3]) -> u32 {
+    let l1 = n[0].abs() + n[1].abs() + n[2].abs();
+    let (mut x, mut y) = if l1 > 0.0 { (n[0] / l1, n[1] / l1) } else { (0.0, 0.0) };
+    if n[2] < 0.0 {
+        let sign = |v: f32| if v >= 0.0 { 1.0 } else { -1.0 };
+        (x, y) = ((1.0 - y.abs()) * sign(x), (1.0 - x.abs()) * sign(y));
+    }
+    let snorm = |v: f32| u32::from((v.clamp(-1.0, 1.0) * 32767.0).round() as i16 as u16);
+    snorm(x) | snorm(y) << 16
+}
+
 /// An exit point with near hits (`prm_format::NearExit`); `NearExit` in the shaders.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
@@ -130,32 +186,43 @@ pub struct GpuNearExit {
 }
 
 /// An exit point's near rays that end on one gather point (`prm_format::NearHit`s merged);
-/// `NearHit` in the shaders. Eight bytes: the two weights as half floats (WGSL's
-/// `unpack2x16float`), which walking the hits twice a frame reads more than anything else.
+/// `NearHit` in the shaders. Four bytes, as walking the hits three times a frame reads more
+/// than anything else: the gather point's index in the high bits and the weight summed over the
+/// rays in the low [`GpuNearField::weight_bits`] (at most 15), the top bits of its IEEE half
+/// float (which has no sign bit to keep, weights being positive). Up to 2¹⁷ gather points the
+/// weight is the whole half float; each doubling beyond drops one bit of its 10-bit mantissa.
 #[repr(C)]
-#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Pod, Zeroable)]
 pub struct GpuNearHit {
-    /// Gather point index.
-    pub point: u32,
-    /// Low 16 bits: Σ `R²/(r² + R²)` over the rays, the direct share's weight; high 16 bits:
-    /// Σ `R₁²/(r² + R₁²)`, the deeper VPLs' share's (0 without it); both IEEE half floats.
-    pub weights: u32,
+    /// The gather point index `<< weight_bits`, or the weight's bits.
+    pub packed: u32,
 }
 
 impl GpuNearHit {
-    /// The hit on gather point `point` with the two weights rounded to half floats.
-    pub fn new(point: u32, weight: f32, indirect_weight: f32) -> GpuNearHit {
-        let bits = |w: f32| u32::from(half::f16::from_f32(w).to_bits());
+    /// The low bits that hold the weight when the gather points number `points`: the bits the
+    /// largest index leaves, at most the 15 of a positive half float.
+    pub fn weight_bits(points: u32) -> u32 {
+        let index_bits = (32 - points.saturating_sub(1).leading_zeros()).max(1);
+        (32 - index_bits).min(15)
+    }
+
+    /// The hit on gather point `point` of weight `weight` (≥ 0), rounded to `weight_bits` bits.
+    pub fn new(point: u32, weight: f32, weight_bits: u32) -> GpuNearHit {
+        let dropped = 15 - weight_bits;
+        let half = u32::from(half::f16::from_f32(weight.max(0.0)).to_bits()) & 0x7fff;
+        let round = if dropped > 0 { 1 << (dropped - 1) } else { 0 };
+        // Rounding may carry into the exponent, which is what the next larger value is; the
+        // largest finite value, below the infinities' exponent, caps it.
+        let bits = ((half + round) >> dropped).min(0x7bff >> dropped);
         GpuNearHit {
-            point,
-            weights: bits(weight) | bits(indirect_weight) << 16,
+            packed: point << weight_bits | bits,
         }
     }
 
-    /// The two weights (direct share, deeper VPLs' share) as the shader unpacks them.
-    pub fn weights(&self) -> (f32, f32) {
-        let half = |bits: u32| half::f16::from_bits(bits as u16).to_f32();
-        (half(self.weights & 0xffff), half(self.weights >> 16))
+    /// The gather point index and the weight, as the shader unpacks them.
+    pub fn unpack(&self, weight_bits: u32) -> (u32, f32) {
+        let bits = (self.packed & ((1 << weight_bits) - 1)) << (15 - weight_bits);
+        (self.packed >> weight_bits, half::f16::from_bits(bits as u16).to_f32())
     }
 }
 
@@ -172,6 +239,14 @@ pub struct GpuNearField {
     /// 1 when the deeper share's sum adds the rest of its series (the last gather with
     /// [`crate::NearTail::Extrapolated`]), else 0.
     pub tail: u32,
+    /// The bits of a [`GpuNearHit`] that hold its weight ([`GpuNearHit::weight_bits`]).
+    pub weight_bits: u32,
+    /// Padding.
+    pub _pad0: u32,
+    /// Padding.
+    pub _pad1: u32,
+    /// Padding.
+    pub _pad2: u32,
 }
 
 /// A light; `Light` in the shaders.
@@ -297,15 +372,16 @@ pub struct GpuSelected {
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
 pub struct GpuPaneTile {
-    /// Where the tile's basis starts in its chunk's basis buffer, in `vec2<u32>` (four `f16`).
-    pub basis: u32,
-    /// `vec2<u32>` per texel row of the basis: the rank rounded up to four, over four.
+    /// `vec2<u32>` per texel row of the basis: the rank rounded up to four, over four. (Each
+    /// lit texel names its own row, `blend.wgsl`.)
     pub stride: u32,
     /// The tile's rank `r` (0: every pane is zero there).
     pub rank: u32,
-    /// Where the tile's coefficients start in its chunk's coefficient buffer, in `f32`: pane
-    /// `p`'s channel `ch` at `coefficients + (3p + ch)·r + k`.
+    /// Where the tile's coefficients start in its chunk's coefficient buffer, in `vec2<u32>`:
+    /// pane `p`'s block (`blend.rs`, `PaneBlock`) at `coefficients + p·(1 + 3·stride)`.
     pub coefficients: u32,
+    /// Padding.
+    pub _pad0: u32,
 }
 
 /// One chunk of the panes' tiles, each chunk's basis and coefficients in buffers of their own
@@ -379,7 +455,7 @@ mod tests {
         wgsl_layout!(s, GpuWeight, "Weight", [weight, score]).unwrap();
         wgsl_layout!(s, GpuEffective, "Effective", [weight, rank]).unwrap();
         wgsl_layout!(s, GpuSelected, "Selected", [weight, cluster]).unwrap();
-        wgsl_layout!(s, GpuPaneTile, "PaneTile", [basis, stride, rank, coefficients]).unwrap();
+        wgsl_layout!(s, GpuPaneTile, "PaneTile", [stride, rank, coefficients, _pad0]).unwrap();
         wgsl_layout!(
             s,
             GpuBlendChunk,
@@ -406,8 +482,51 @@ mod tests {
         .unwrap();
         wgsl_layout!(s, GpuProbeRays, "ProbeRays", [probes, rays_per_probe, points, _pad0]).unwrap();
         wgsl_layout!(s, GpuNearExit, "NearExit", [texel, end]).unwrap();
-        wgsl_layout!(s, GpuNearHit, "NearHit", [point, weights]).unwrap();
-        wgsl_layout!(s, GpuNearField, "NearField", [exits, points, scale, tail]).unwrap();
+        wgsl_layout!(s, GpuNearPoint, "NearPoint", [position, texel, normal, albedo]).unwrap();
+        wgsl_layout!(s, GpuNearHit, "NearHit", [packed]).unwrap();
+        wgsl_layout!(
+            s,
+            GpuNearField,
+            "NearField",
+            [exits, points, scale, tail, weight_bits, _pad0, _pad1, _pad2]
+        )
+        .unwrap();
+    }
+
+    #[test]
+    fn near_points_keep_their_normal_and_albedo() {
+        let mut rng = 0x2545_f491_4f6c_dd1du64;
+        let mut next = || {
+            rng ^= rng << 13;
+            rng ^= rng >> 7;
+            rng ^= rng << 17;
+            (rng >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
+        };
+        let axes = [[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, -1.0]];
+        let random = (0..1000).map(|_| {
+            let v = [next(), next(), next()];
+            let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt().max(1e-3);
+            [v[0] / l, v[1] / l, v[2] / l]
+        });
+        for n in axes.into_iter().chain(random) {
+            let g = prm_format::GatherPoint {
+                texel: 7,
+                position: [1.0, -2.0, 3.5],
+                normal: n,
+                albedo: [0.8, 0.05, 0.4],
+                emission: [0.0; 3],
+                emitter: prm_format::NO_EMITTER,
+            };
+            let p = GpuNearPoint::new(&g, true);
+            assert_eq!(p.texel, 7 | GpuNearPoint::EXIT);
+            let m = p.normal();
+            let dot = n[0] * m[0] + n[1] * m[1] + n[2] * m[2];
+            assert!(dot > 0.999_99, "{n:?} became {m:?}");
+            let a = prm_format::decode_rgb9e5(p.albedo);
+            for (x, y) in a.iter().zip(g.albedo) {
+                assert!((x - y).abs() <= 0.8 / 511.0, "{a:?}");
+            }
+        }
     }
 
     #[test]

@@ -227,12 +227,22 @@ fn bad_input_is_refused_naming_it() {
     ctx.wait().unwrap();
 }
 
-/// Bytes of tile `t`'s basis rows (four `f16` per eight bytes, the rank rounded up to four) and
-/// of its coefficients with the residual groups' (`f32`, likewise rounded), as the run time
-/// uploads them.
+/// Bytes of tile `t`'s basis rows that are not zero (four `f16` per eight bytes, the rank
+/// rounded up to four) and of its coefficients with the residual groups' (per pane a scale word
+/// and three channels of four `f16` a word, likewise rounded), as the run time uploads them.
 fn tile_bytes(basis: &prm_format::PaneBasis, panes: u64, t: usize) -> (u64, u64) {
-    let quads = u64::from(basis.ranks()[t]).div_ceil(4);
-    (u64::from(basis.tile_size()).pow(2) * quads * 8, 48 * panes * quads)
+    let r = basis.ranks()[t] as usize;
+    let quads = r.div_ceil(4) as u64;
+    let block = if quads == 0 { 0 } else { 8 * (1 + 3 * quads) };
+    let rows = match r {
+        0 => 0,
+        r => basis
+            .basis(t)
+            .chunks_exact(r)
+            .filter(|row| row.iter().any(|&u| u != 0.0))
+            .count() as u64,
+    };
+    (rows * quads * 8, panes * block)
 }
 
 /// Tiles of the panes grouped in many small chunks (a basis and a coefficient buffer each, and
