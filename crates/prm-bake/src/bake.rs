@@ -110,10 +110,10 @@ pub struct BakeArgs {
     #[arg(long, value_name = "RAYS", requires = "probes")]
     pub probe_rays: Option<u32>,
     /// Cosine rays per exit point that find the surfaces close enough for the VPL bound to
-    /// have removed their light (default 64; 0: none). The player gathers it back each frame
+    /// have removed their light (default 32; 0: none). The player gathers it back each frame
     /// from their light, mostly at inner edges and contacts. With it the
     /// VPL disks are eight times their entry point's radius where atlas texels × near rays fit
-    /// 2^24 hits (a 512² atlas at 64 rays), else three (`vpl_disk_scale` in --config); without
+    /// 2^24 hits (a 724² atlas at 32 rays), else three (`vpl_disk_scale` in --config); without
     /// it once.
     #[arg(long, value_name = "RAYS")]
     pub near_rays: Option<u32>,

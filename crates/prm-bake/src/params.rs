@@ -366,8 +366,8 @@ pub const SKY_PATH_SECONDS: f64 = 1.14e-6;
 
 /// Panes the automatic atlas leaves room for in the run-time memory budget at the largest rank
 /// ([`pane_memory_bound`]): the atlas shrinks (in steps of 64 texels a side) until this many
-/// fit, and until the near field's hits fit [`NEAR_HIT_BUDGET`], which keeps the larger VPL
-/// disks ([`NEAR_FIELD_DISK_SCALE`], 512² at the default 64 near rays). Measured on the fireplace
+/// fit, and until the near field's hits fit [`AUTO_ATLAS_NEAR_HITS`], which keeps the larger VPL
+/// disks ([`NEAR_FIELD_DISK_SCALE`]). Measured on the fireplace
 /// room at the default time budget (`cargo xtask eval --targets`'s lamp, 4×4 error): a 704²
 /// atlas with 108 clusters, 18.4% (a 70 s bake); 512² with 205 clusters, 14.6% (115 s). The
 /// reference's own lightmap at 512², shaded in place of the played one, is 6.1% off: the
@@ -388,9 +388,10 @@ const AUTO_ATLAS_PANES: usize = 256;
 /// of a frame whose lights move.
 const MIX_BYTES: f64 = 32.0 * 1024.0 * 1024.0;
 
-/// Coefficient bytes per texel of a pane at the largest rank in 64² tiles (`12·128 / 64²`),
-/// the bound [`MIX_BYTES`] counts with.
-const MIX_BYTES_PER_TEXEL: f64 = 12.0 * prm_format::MAX_PANE_RANK as f64 / 4096.0;
+/// Coefficient bytes per texel of a pane at the largest rank in 64² tiles, the bound
+/// [`MIX_BYTES`] counts with: a scale and three channels of 128 `f16` per pane and tile, in
+/// 8-byte words (`8·(1 + 3·128/4) / 64²`, about 0.19).
+const MIX_BYTES_PER_TEXEL: f64 = 8.0 * (1.0 + 3.0 * prm_format::MAX_PANE_RANK as f64 / 4.0) / 4096.0;
 
 /// The automatic top K at least, however large the atlas.
 const MIN_AUTO_TOP_K: usize = 32;
@@ -421,10 +422,16 @@ pub const NEAR_FIELD_DISK_SCALE: f32 = 8.0;
 /// default Cornell box: 23.2%, energy 0.881, at 3; 45.9%, 0.681, at 8).
 pub const NEAR_FIELD_DISK_SCALE_LARGE: f32 = 3.0;
 
+/// Most near hits (texels times near rays) of the automatic atlas: 512² at the default 32 near
+/// rays ([`prm_trace::NEAR_RAYS`]), the atlas the large scenes' memory, bake time and accuracy
+/// were measured at (the fireplace room, Sibenik, the modern hall). Half of [`NEAR_HIT_BUDGET`],
+/// so the automatic atlas always keeps [`NEAR_FIELD_DISK_SCALE`].
+pub const AUTO_ATLAS_NEAR_HITS: u64 = NEAR_HIT_BUDGET / 2;
+
 /// Most near hits (the atlas's texels times the near rays each, before merging) for which the
 /// bake takes [`NEAR_FIELD_DISK_SCALE`]: 2²⁴ hits of 8 bytes fill one 128 MiB storage binding,
-/// lavapipe's limit and wgpu's default, so the player can hold them even unmerged (512² texels
-/// at the default 64 rays). The bake holds the traced near field's merged hits to it as well,
+/// lavapipe's limit and wgpu's default, so the player can hold them even unmerged (724² texels
+/// at the default 32 rays). The bake holds the traced near field's merged hits to it as well,
 /// halving the rays per exit point until they fit (pipeline.rs, `fit_near_field`): an atlas set
 /// by hand passes it even at [`NEAR_FIELD_DISK_SCALE_LARGE`].
 pub const NEAR_HIT_BUDGET: u64 = 1 << 24;
@@ -458,8 +465,8 @@ const CAPPED_WALKS: u32 = 32;
 const BASIS_BYTES_PER_TEXEL: f64 = 2.0 * prm_format::MAX_PANE_RANK as f64;
 
 /// The most bytes the run time keeps resident for `panes` panes (clusters and residual groups)
-/// of `texels` texels: every 64² tile at the largest rank, its basis rows in `f16` and every
-/// pane's coefficients in `f32`. Real bakes keep from a third of that rank to nearly all of it
+/// of `texels` texels: every 64² tile at the largest rank, its basis rows and every pane's
+/// coefficients in `f16`. Real bakes keep from a third of that rank to nearly all of it
 /// (`prm-bake dump`): 10.2 MiB of the 29.5 MiB bound on the Cornell box's default bake, 159.6
 /// of 166.0 MiB on Sibenik's. The memory budget counts with it.
 fn pane_memory_bound(panes: f64, texels: f64) -> f64 {
@@ -517,7 +524,7 @@ const DEFAULT_FACE_RESOLUTION: u32 = 128;
 
 /// The most bytes the run time keeps resident for the panes of `clusters` clusters and their
 /// residual groups in a `resolution`² atlas: every 64² tile at the largest rank, 256 bytes of
-/// `f16` basis per texel and 0.375 bytes of `f32` coefficients per texel and pane. Bakes keep
+/// `f16` basis per texel and about 0.19 bytes of `f16` coefficients per texel and pane. Bakes keep
 /// well under it (the tolerance sets the ranks): `prm-bake dump` prints an archive's own.
 pub fn resident_pane_bytes(clusters: usize, resolution: u32) -> u64 {
     let groups = prm_format::residual_group_count(clusters, prm_format::RESIDUAL_GROUPS) as usize;
@@ -724,7 +731,7 @@ impl Planner<'_> {
         // The near field's hits within the budget that keeps the larger VPL disks.
         let near_rays = u64::from(self.near_rays_rule());
         let keeps_disks = self.config.vpl_disk_scale.is_none() && near_rays > 0;
-        let over_near = |r: u32| keeps_disks && u64::from(r).pow(2) * near_rays > NEAR_HIT_BUDGET;
+        let over_near = |r: u32| keeps_disks && u64::from(r).pow(2) * near_rays > AUTO_ATLAS_NEAR_HITS;
         // Never below what the charts need: the bake would refuse that atlas.
         let floor = atlas_floor(auto.stats.charts as usize).min(auto.resolution);
         while r > floor.max(ATLAS_MEMORY_STEP) && (over_memory(r) || over_near(r)) {
@@ -733,7 +740,7 @@ impl Planner<'_> {
         let why = if r == auto.resolution {
             String::new()
         } else if over_near(auto.resolution) && !over_memory(r + ATLAS_MEMORY_STEP) {
-            format!(", shrunk so its {near_rays} near rays a texel keep within {NEAR_HIT_BUDGET} hits")
+            format!(", shrunk so its {near_rays} near rays a texel keep within {AUTO_ATLAS_NEAR_HITS} hits")
         } else {
             ", shrunk so 256 panes fit the memory budget".to_string()
         };

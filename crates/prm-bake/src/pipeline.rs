@@ -453,8 +453,8 @@ fn truncate_name(name: &str) -> String {
 
 /// The near field `trace(rays)` makes, with `rays` halved until its merged hits
 /// ([`prm_scene::MergeNearHits::merged_hits`]) are at most `budget`, and the rays it took. The player
-/// holds the merged hits in one storage binding (8 bytes each; 2²⁴ fill lavapipe's and wgpu's
-/// default 128 MiB): the planner's rule (texels × rays before merging, `NEAR_HIT_BUDGET`) keeps
+/// holds the merged hits in one storage binding (4 bytes each, so 2²⁴ take half of lavapipe's
+/// and wgpu's default 128 MiB, leaving room for the deeper share's where its disk differs): the planner's rule (texels × rays before merging, `NEAR_HIT_BUDGET`) keeps
 /// the default plans within it, but an atlas set by hand can pass it even at the smaller disks
 /// (the Dabrovic Sponza at 1024² and 64 rays: 26.5 M merged hits, 202 MiB, which the player
 /// refused).

@@ -38,7 +38,7 @@ fn paper_preset_is_the_papers_settings() {
         (4096, 256, AtlasSize::Resolution(256), 32)
     );
     // The preset fixes every size; only the VPL disks, which the paper does not have, are
-    // chosen (from the atlas: 256² texels × 64 near rays fit the hit budget, so the larger disks).
+    // chosen (from the atlas: 256² texels × 32 near rays fit the hit budget, so the larger disks).
     assert_eq!(p.vpl_disk_scale, NEAR_FIELD_DISK_SCALE);
     assert_eq!(p.reasons.len(), 1, "{:?}", p.reasons);
     assert!(p.reasons[0].starts_with("VPL disks"), "{:?}", p.reasons);
@@ -220,7 +220,7 @@ fn probes_lit_through_the_panes_keep_the_smaller_disks() {
         };
         resolve(&cfg, &scene, probe(&scene)).unwrap().vpl_disk_scale
     };
-    // 64² texels × 64 near rays fit the hit budget: the larger disks, with probes or without.
+    // 64² texels × 32 near rays fit the hit budget: the larger disks, with probes or without.
     assert_eq!(scale(None, None, None), NEAR_FIELD_DISK_SCALE);
     assert_eq!(scale(Some(64), None, None), NEAR_FIELD_DISK_SCALE);
     // Probes without rays read the panes, which have no near field.

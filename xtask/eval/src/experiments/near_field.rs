@@ -12,7 +12,7 @@
 //! direct part alone, both parts, both twice) and a whole final gather with the reference.
 //! `RAYS` (default 256) sets the rays per exit point, `MINW` (default 1024) the cut-off weight
 //! `1/MINW`, `POINTS` and `REFSPP` the sample and the reference's paths. The measurements are in
-//! `prm_trace::near`; the bake ships the direct part at 64 rays and `1/16`.
+//! `prm_trace::near`; the bake ships both parts at 32 rays and `1/16`.
 
 use glam::Vec3;
 
