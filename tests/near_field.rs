@@ -1,4 +1,4 @@
-//! The near field end to end: our Cornell box baked through the library (format 1.8) and played
+//! The near field end to end: our Cornell box baked through the library and played
 //! with a point light, with the near field gathered and without it. Checked: texels without near
 //! rays are untouched; the gather points' radiance against the CPU's ray-cast direct light (the
 //! GPU's is shadow-mapped); what the near exits gain against the CPU's sum along the archive's
@@ -30,7 +30,7 @@ fn the_near_field_brings_the_edges_to_the_reference() {
         near.indirect_disk, near.disk,
         "the deeper VPLs take the entry points' disk"
     );
-    assert!(near.complement, "the panes' kernel completes the cut weights (1.9)");
+    assert!(near.complement, "the panes' kernel completes the cut weights");
     let bvh = Bvh::build(&scene, &BvhParams::DEFAULT).unwrap();
     let atlas = prm_trace::bake_atlas(&scene, &bvh, &AtlasParams::with_sizing(Sizing::Resolution(64))).unwrap();
     let share = near.exits.len() as f64 / atlas.exits.len() as f64;

@@ -375,17 +375,17 @@ pub const SKY_PATH_SECONDS: f64 = 1.14e-6;
 const AUTO_ATLAS_PANES: usize = 256;
 
 /// Bytes of coefficients the run time's mix pass may read a frame, at the largest rank in every
-/// tile (12·128 bytes per pane and 64² tile; real bakes keep a third to nearly all of it), from
+/// tile ([`MIX_BYTES_PER_TEXEL`]; real bakes keep a third to nearly all of that rank), from
 /// which the automatic top K follows (less the residual groups, `prm_format::RESIDUAL_GROUPS`):
-/// every cluster of a 256² atlas (1365 panes), 341 panes at 512², 85 at 1024². The more
+/// every cluster of a 256² atlas (2702 panes), 675 panes at 512², 168 at 1024². The more
 /// clusters a frame blends the better: on McGuire's box baked with 4096 entry points and 16
 /// walks each (512 clusters; `cargo xtask eval --targets`'s lights, 4×4 error, ceiling light /
 /// red wall light), K = 32 with 16 groups 8.1% / 6.5%, K = 64 with 32 groups 6.2% / 5.0%, K =
-/// 128 with 64 groups 4.3% / 4.6%, every cluster 3.4% / 4.7%. The mix reads 12 bytes per rank
+/// 128 with 64 groups 4.3% / 4.6%, every cluster 3.4% / 4.7%. The mix reads 6 bytes per rank
 /// and tile of a kept pane, and the blend's work per texel does not grow with K: on lavapipe
 /// at 1024×768 the frame bench (`cargo bench -p prm-play --bench frame`,
-/// `PRM_BENCH_PRESET=default`) puts the Cornell box's 504 clusters beyond the first 8 at 1.0 ms
-/// of a frame whose lights move.
+/// `PRM_BENCH_PRESET=default`) puts the Cornell box's 504 clusters beyond the first 8 at 0.6–2.6
+/// ms of a frame whose lights move (two runs).
 const MIX_BYTES: f64 = 32.0 * 1024.0 * 1024.0;
 
 /// Coefficient bytes per texel of a pane at the largest rank in 64² tiles, the bound

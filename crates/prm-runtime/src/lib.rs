@@ -400,7 +400,7 @@ impl Runtime {
 
     /// Records the frame set by [`Runtime::update`]: with [`Shadows::Own`] the shadow pass, then
     /// weights, the near field, rank, select, mix and blend into
-    /// [`Runtime::lightmap`], the near field's deeper share (1.8), then the probes. Timed passes
+    /// [`Runtime::lightmap`], the near field's deeper share, then the probes. Timed passes
     /// are named as in [`PASS_NAMES`]. With [`GiUpdate::OnChange`] (the default) and the run
     /// time's own shadow maps, the passes after the shadow pass are recorded only when
     /// [`Runtime::gi_pending`] says so: the lightmap and the probes keep the last update's

@@ -415,7 +415,7 @@ impl NearFieldPass {
     /// After the blend: copies the blended `lightmap`, gives every gather point
     /// its radiance from the lights' indirect light in it, and adds the deeper VPLs' share at
     /// every exit point with near hits; then once per further bounce the same from the lightmap
-    /// that share completed, added to the blended copy. Nothing for 1.7.
+    /// that share completed, added to the blended copy. Nothing without a deeper disk.
     pub fn encode_after_blend(
         &self,
         encoder: &mut wgpu::CommandEncoder,

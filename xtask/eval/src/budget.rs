@@ -12,7 +12,7 @@
 //! | --- | --- | --- |
 //! | as played | nothing | the player's lightmap (`prm_play::Renderer::read_lightmap`) |
 //! | K = all | no top-K truncation | the same archive played with K = every cluster |
-//! | no near field | not an ideal: the panes alone, without the near field the player gathers back (format 1.7) | `prm_play::NearLight::Off` |
+//! | no near field | not an ideal: the panes alone, without the near field the player gathers back | `prm_play::NearLight::Off` |
 //! | ray-cast entry irradiance | exact visibility at the entry points instead of shadow maps | the archive's panes blended on the CPU, weights from `prm_trace::bounded_irradiance` (K = all), plus the near field with ray-cast direct light |
 //! | no entry-point bound | the entry disk bound `ENTRY_DISK` off | as above with disk 0 |
 //! | exact-visibility panes | a shadow ray per exit point and VPL instead of shared ones | `--backend cpu-exact` |
@@ -216,7 +216,7 @@ fn cpu_blend(archive: &Path, tracer: &Tracer, light: Light, texels: &[u32], entr
     let clusters = a.clusters().to_vec();
     let energy: Vec<Vec3> = a
         .entry_energy()
-        .context("the archive has no entry energies (format 1.0): re-bake it")?
+        .context("the archive has no entry energies: re-bake it")?
         .iter()
         .map(|e| Vec3::from_array(*e))
         .collect();

@@ -55,7 +55,7 @@ enum Lit {
 type Case = (&'static str, &'static str, &'static [&'static str], Lit);
 
 /// Rays per probe the cases bake with: the bake's default (`prm_bake::PROBE_RAYS`, which this
-/// package does not link), given explicitly so that bakes cached before format 1.6 are not taken.
+/// package does not link), given explicitly so that the bakes' cache keys name it.
 const PROBE_RAYS: &str = "1024";
 
 /// Runs the probe cases; returns the Markdown table.
@@ -152,7 +152,7 @@ pub fn run(bake_bin: &Path, cache: &Path, root: &Path) -> Result<String> {
         };
         r.render(&input)?;
         let played = read(&r)?;
-        // The probes lit through the panes, as before format 1.6: the bake a user makes for
+        // The probes lit through the panes, without probe rays: the bake a user makes for
         // that, `--probe-rays 0` (whose plan keeps the smaller VPL disks), at the same probes.
         let panes_args: Vec<String> = ["--probes", "--probe-rays", "0"]
             .into_iter()

@@ -38,10 +38,8 @@ pub fn denoised_error(test: &[Vec3], mean: &[Vec3], variance: &[Vec3], only: imp
     (((e2 - v).max(0.0) / (n2 - v)).sqrt(), st / sr)
 }
 
-/// Every entry point's pane energy in `archive`; panics on an archive without them (format 1.0).
+/// Every entry point's pane energy in `archive`; panics on an archive without them.
 pub fn entry_energy<R: std::io::Read + std::io::Seek>(archive: &prm_format::Archive<R>) -> Vec<Vec3> {
-    let energy = archive
-        .entry_energy()
-        .expect("the archive has no entry energies (format 1.0)");
+    let energy = archive.entry_energy().expect("the archive has no entry energies");
     energy.iter().map(|e| Vec3::from_array(*e)).collect()
 }

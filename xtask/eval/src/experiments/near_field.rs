@@ -6,8 +6,8 @@
 //! in expectation over the VPLs, `∫ L(y) · R²/(r² + R²) cos θ dω` with `R² = a/π`, the near
 //! field's radiance seen from the exit point. `L(y)` is what the run time knows at every texel:
 //! `ρ/π` times the direct irradiance (carried by depth-0 VPLs of area `A/N`) and the played
-//! indirect irradiance (carried by deeper VPLs of area `A/(N·M)`, or `A/N` in archives of format
-//! 1.8). This estimates it with
+//! indirect irradiance (carried by deeper VPLs of the archive's `indirect_disk`, or of area
+//! `A/(N·M)` without one). This estimates it with
 //! cosine rays from a sample of exit points and compares played, played + near field (the
 //! direct part alone, both parts, both twice) and a whole final gather with the reference.
 //! `RAYS` (default 256) sets the rays per exit point, `MINW` (default 1024) the cut-off weight
@@ -50,7 +50,7 @@ pub fn run(args: Vec<String>) {
     let n = entries.len() as f32;
     let disk = prm_scene::ENTRY_DISK * area / (n * std::f32::consts::PI);
     let r0 = area / (n * std::f32::consts::PI);
-    // Format 1.8 bounds the deeper VPLs by the archive's `indirect_disk`, 1.7 by `A/(N·M)`.
+    // The deeper VPLs' disk: the archive's `indirect_disk`, else the area one walk stands for.
     let r1 = match archive.near_field() {
         Some(n) if n.indirect_disk > 0.0 => r0 * n.indirect_disk / n.disk,
         _ => r0 / walks,
