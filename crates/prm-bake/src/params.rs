@@ -467,8 +467,8 @@ const BASIS_BYTES_PER_TEXEL: f64 = 2.0 * prm_format::MAX_PANE_RANK as f64;
 /// The most bytes the run time keeps resident for `panes` panes (clusters and residual groups)
 /// of `texels` texels: every 64² tile at the largest rank, its basis rows and every pane's
 /// coefficients in `f16`. Real bakes keep from a third of that rank to nearly all of it
-/// (`prm-bake dump`): 10.2 MiB of the 29.5 MiB bound on the Cornell box's default bake, 159.6
-/// of 166.0 MiB on Sibenik's. The memory budget counts with it.
+/// (`prm-bake dump`): 7.1 MiB of the 22.8 MiB bound on the Cornell box's default bake, 97.5
+/// of 115.5 MiB on Sibenik's. The memory budget counts with it.
 fn pane_memory_bound(panes: f64, texels: f64) -> f64 {
     texels * (BASIS_BYTES_PER_TEXEL + panes * MIX_BYTES_PER_TEXEL)
 }

@@ -1008,9 +1008,10 @@ fn command_line_conventions() {
     let stderr = String::from_utf8_lossy(&r.stderr);
     assert!(stderr.contains("shard 99/100 holds no clusters"), "{}", describe(&r));
     // The plan bounds the panes' footprint: 64 clusters + 16 residual groups, 128² texels in
-    // four 64² tiles of rank 128 at most: 4 × (4096 × 32 × 8 B of basis + 80 × 12 × 128 B).
+    // four 64² tiles of rank 128 at most: 4 × (4096 × 32 × 8 B of basis + 80 × 97 × 8 B of
+    // coefficients, a scale word and three channels of 32 words of four f16 per pane).
     assert!(
-        stderr.contains("footprint: panes at most 4.5 MiB resident on the GPU (64 clusters + 16 residual groups"),
+        stderr.contains("footprint: panes at most 4.2 MiB resident on the GPU (64 clusters + 16 residual groups"),
         "{}",
         describe(&r)
     );

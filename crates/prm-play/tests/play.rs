@@ -351,13 +351,16 @@ fn top_k_keeps_the_strongest_clusters() {
     assert_matches_cpu_sum(&gpu, &cpu);
 }
 
-/// Every texel of the GPU's lightmap `gpu` within 1% of the CPU's sum `cpu` (or of 10⁻⁴ of the
-/// sum's peak, where that is larger).
+/// Every texel of the GPU's lightmap `gpu` within 1% of the CPU's sum `cpu`, or within 10⁻⁴ of
+/// the sum's peak where that is larger: the GPU mixes the coefficients in `f16` (11 significant
+/// bits of each pane's largest in a tile), which leaves texels that its brighter ones cancel
+/// to almost nothing a few 10⁻⁵ of the peak off, and the CPU in `f32`.
 fn assert_matches_cpu_sum(gpu: &[[f32; 3]], cpu: &[[f32; 3]]) {
     let peak = cpu.iter().flatten().fold(0f32, |a, b| a.max(*b));
     for (g, c) in gpu.iter().zip(cpu) {
         for ch in 0..3 {
-            assert!((g[ch] - c[ch]).abs() <= 0.01 * c[ch].abs().max(peak * 1e-4));
+            let tolerance = (0.01 * c[ch].abs()).max(1e-4 * peak);
+            assert!((g[ch] - c[ch]).abs() <= tolerance, "{g:?} against {c:?}, peak {peak}");
         }
     }
 }
