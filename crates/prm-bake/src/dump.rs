@@ -71,8 +71,9 @@ pub fn run(args: &DumpArgs) -> Result<()> {
 }
 
 /// What an archive needs resident on the GPU as the run time loads it by default: the panes'
-/// basis rows that are not zero (`f16`, each tile's rank rounded up to four) and their coefficients with the
-/// residual groups' (per pane and tile a scale and four `f16` ranks a word, 8 bytes each), and
+/// basis rows that are not zero (`f16`, each tile's rank rounded up to four) and their
+/// coefficients with the residual groups' (per pane and tile a scale and four `f16` ranks a
+/// word, 8 bytes each), and
 /// the near field's exit records (8 bytes) and merged hits (4 bytes; twice where the deeper
 /// share's disk differs from the direct share's).
 fn resident_line<R: Read + Seek>(archive: &Archive<R>) -> String {
@@ -83,16 +84,7 @@ fn resident_line<R: Read + Seek>(archive: &Archive<R>) -> String {
     let groups = prm_format::residual_group_count(clusters, prm_format::RESIDUAL_GROUPS) as usize;
     let quads = |r: u32| u64::from(r).div_ceil(4);
     let rows: u64 = (0..basis.tile_count())
-        .map(|t| match basis.ranks()[t] {
-            0 => 0,
-            r => {
-                let stored = basis
-                    .basis(t)
-                    .chunks_exact(r as usize)
-                    .filter(|row| row.iter().any(|&u| u != 0.0));
-                stored.count() as u64 * quads(r) * 8
-            }
-        })
+        .map(|t| basis.nonzero_rows(t).count() as u64 * quads(basis.ranks()[t]) * 8)
         .sum();
     let block = |r: u32| if r == 0 { 0 } else { 8 * (1 + 3 * quads(r)) };
     let coefficients = (clusters + groups) as u64 * basis.ranks().iter().map(|&r| block(r)).sum::<u64>();

@@ -201,6 +201,18 @@ impl PaneBasis {
         &self.basis[tile]
     }
 
+    /// The texels of tile `tile` (row-major within the tile, ascending) whose basis row is not
+    /// all zero: the only ones a pane can light there. None for a tile of rank 0. Panics if
+    /// `tile` is not below [`tile_count`](Self::tile_count).
+    pub fn nonzero_rows(&self, tile: usize) -> impl Iterator<Item = usize> + '_ {
+        let r = (self.ranks[tile] as usize).max(1);
+        self.basis[tile]
+            .chunks_exact(r)
+            .enumerate()
+            .filter(|(_, row)| row.iter().any(|&u| u != 0.0))
+            .map(|(i, _)| i)
+    }
+
     /// Decodes texel `texel` (row-major within the tile) of tile `tile` of pane `pane`, by the
     /// normative rule (module docs). Panics if an index is out of range.
     pub fn decode_texel(&self, pane: usize, tile: usize, texel: usize) -> [f32; 3] {

@@ -19,8 +19,8 @@
 //! (`prm-play --timings`, `gpu_memory` and `gi_bytes_read_by_part`; RGB9E5 buffers read 48 MB
 //! for 192 panes).
 //! On lavapipe the frame bench (`cargo bench -p prm-play --bench frame`,
-//! `PRM_BENCH_PRESET=default`) puts the 504 clusters beyond the first 8 at 1.0 ms of a frame
-//! whose lights move (RGB9E5 buffers: 13.7 ms for 120 panes and 64 groups).
+//! `PRM_BENCH_PRESET=default`) puts the 504 clusters beyond the first 8 at 0.6–2.6 ms of a
+//! frame whose lights move (two runs; RGB9E5 buffers: 13.7 ms for 120 panes and 64 groups).
 
 use prm_format::PaneBasis;
 use prm_gpu_kit::{linear_workgroups, pipeline, ComputePass, PassTimer};
@@ -79,7 +79,8 @@ impl Panes {
             .map(|t| {
                 let r = basis.ranks()[t];
                 let stride = u64::from(r).div_ceil(LANES as u64);
-                (basis_rows(basis, t) * stride * 8, panes as u64 * PaneBlock::bytes(r))
+                let rows = basis.nonzero_rows(t).count() as u64;
+                (rows * stride * 8, panes as u64 * PaneBlock::bytes(r))
             })
             .collect();
         if let Some(&(b, c)) = sizes.iter().find(|&&(b, c)| b.max(c) > binding) {
@@ -211,18 +212,6 @@ impl PaneBlock {
 /// A texel without a basis row (zero there), in [`Panes`]'s rows and the blend's texels.
 const NO_ROW: u32 = u32::MAX;
 
-/// The basis rows of tile `t` that are not zero, which the GPU keeps.
-pub(crate) fn basis_rows(basis: &PaneBasis, t: usize) -> u64 {
-    match basis.ranks()[t] as usize {
-        0 => 0,
-        r => basis
-            .basis(t)
-            .chunks_exact(r)
-            .filter(|row| row.iter().any(|&u| u != 0.0))
-            .count() as u64,
-    }
-}
-
 /// Chunk `tiles` of `basis` in two buffers, with each residual group's coefficients (its
 /// members' by `group_of`, of `group_count` groups); its tiles' entries appended to
 /// `gpu_tiles`, its texels' rows written to `rows`.
@@ -250,10 +239,8 @@ fn upload_chunk(
             continue;
         }
         let (x0, y0) = ((tile % s) * t, (tile / s) * t);
-        for (i, row) in basis.basis(tile).chunks_exact(r).enumerate() {
-            if row.iter().all(|&u| u == 0.0) {
-                continue;
-            }
+        for i in basis.nonzero_rows(tile) {
+            let row = &basis.basis(tile)[i * r..(i + 1) * r];
             rows[(y0 + i / t) * t * s + x0 + i % t] = (words.len() / 2) as u32;
             let half = |k: usize| row.get(k).map_or(0, |&u| u32::from(half::f16::from_f32(u).to_bits()));
             words.extend((0..2 * stride).map(|p| half(2 * p) | half(2 * p + 1) << 16));

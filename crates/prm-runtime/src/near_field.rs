@@ -47,9 +47,9 @@ pub(crate) struct NearFieldPass {
 /// completed (`again`), added to `source` again. The sums before the last write the exit texels
 /// of the near lightmap, free once the blend has added it, which then holds that completed
 /// lightmap at the exit texels (and `source` at the others, which no sum changes): each gather
-/// point reads one or the other by its [`GpuNearPoint::EXIT`] flag. The near lightmap's other
-/// texels stay zero for the next blend, and the lightmap needs no third copy. The last sum adds the rest of the
-/// series ([`NearTail::Extrapolated`]). Summing both shares after the blend in one walk along the
+/// point reads one or the other by its [`crate::GpuNearPoint::EXIT`] flag. The near lightmap's other
+/// texels stay zero for the next blend, and the lightmap needs no third copy. The last sum adds
+/// the rest of the series ([`NearTail::Extrapolated`]). Summing both shares after the blend in one walk along the
 /// hits, without the direct share in the indirect light, played the fireplace room's 120 s bake
 /// at 13.14% instead of 11.95% (McGuire's box 3.70% / 4.44% instead of 3.60% / 4.24%).
 struct IndirectShare {

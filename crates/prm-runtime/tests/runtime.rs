@@ -234,14 +234,7 @@ fn tile_bytes(basis: &prm_format::PaneBasis, panes: u64, t: usize) -> (u64, u64)
     let r = basis.ranks()[t] as usize;
     let quads = r.div_ceil(4) as u64;
     let block = if quads == 0 { 0 } else { 8 * (1 + 3 * quads) };
-    let rows = match r {
-        0 => 0,
-        r => basis
-            .basis(t)
-            .chunks_exact(r)
-            .filter(|row| row.iter().any(|&u| u != 0.0))
-            .count() as u64,
-    };
+    let rows = basis.nonzero_rows(t).count() as u64;
     (rows * quads * 8, panes * block)
 }
 
