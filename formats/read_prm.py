@@ -223,6 +223,18 @@ def zstd_decompress(data, raw_size, what):
 
 # ------------------------------------------------------------------ RGB9E5
 
+def unplane(b, w, raw=False):
+    """Values of w bytes stored in w byte planes (section 1): as little-endian integers, or with
+    raw=True as their bytes in order."""
+    n = len(b) // w
+    out = bytearray(n * w)
+    for plane in range(w):
+        out[plane::w] = b[plane * n:(plane + 1) * n]
+    if raw:
+        return out
+    return struct.unpack(f"<{n}I", out) if w == 4 else out
+
+
 def decode_rgb9e5(t):
     scale = 2.0 ** ((t >> 27) - 24)
     return [(t & 0x1FF) * scale, ((t >> 9) & 0x1FF) * scale, ((t >> 18) & 0x1FF) * scale]
@@ -392,10 +404,12 @@ class Reader:
         # 32-byte header (exits E, rays per exit M, gather points G, flags (bit 0: the weights
         # complement the panes' kernel), atlas resolution, hits H, disk R^2 f32, the deeper VPLs'
         # disk R1^2 f32, 0 <= R1^2 <= R^2), G gather point records as in probe_rays,
-        # E exit records (texel u32, end of its hits u32), then H hits (gather point u32, r^2 f32).
+        # E exit records (texel u32, end of its hits u32), then the H hits' gather point indices as
+        # differences from the previous hit's (u32, mod 2^32, in 4 byte planes), then their H
+        # distance codes (u8): r^2 = R^2 (1/w - 1), w = 1/16 + 15/16 q/255, all in binary32.
         texels = self.resolution * self.resolution
         groups = len(self.emitters or [])
-        raw = self.load(s, 32 + (56 + 8) * texels + 8 * texels * MAX_NEAR_RAYS)
+        raw = self.load(s, 32 + (56 + 8) * texels + 5 * texels * MAX_NEAR_RAYS)
         if len(raw) < 32:
             raise InvalidArchive("near_field: shorter than its header")
         e, m, g, flags, res, h = struct.unpack_from("<6I", raw, 0)
@@ -408,7 +422,7 @@ class Reader:
             raise InvalidArchive("near_field: disk not finite and positive")
         if not 0 <= indirect_disk <= disk:
             raise InvalidArchive("near_field: indirect disk not between 0 and the disk")
-        if len(raw) != 32 + 56 * g + 8 * e + 8 * h:
+        if len(raw) != 32 + 56 * g + 8 * e + 5 * h:
             raise InvalidArchive("near_field: raw size differs from what the header gives")
         points = gather_points("near_field", raw, 32, g, texels, groups)
         at = 32 + 56 * g
@@ -422,10 +436,14 @@ class Reader:
         if end != h:
             raise InvalidArchive("near_field: the exits do not cover the hits")
         at += 8 * e
-        hits = []
+        hits, point = [], 0
+        deltas = unplane(raw[at:at + 4 * h], 4)
+        codes = raw[at + 4 * h:at + 5 * h]
         for i in range(h):
-            point, r2 = struct.unpack_from("<If", raw, at + 8 * i)
-            if point >= g or r2 != r2 or r2 < 0 or r2 == float("inf"):
+            point = (point + deltas[i]) & 0xFFFFFFFF
+            w = to_f32(1 / 16 + to_f32(15 / 16 * to_f32(codes[i] / 255)))
+            r2 = to_f32(disk * to_f32(to_f32(1 / w) - 1))
+            if point >= g or r2 == float("inf"):
                 raise InvalidArchive("near_field: a hit at a gather point that does not exist or not finite")
             hits.append(dict(point=point, distance2=r2))
         self.near_field = dict(rays_per_exit=m, disk=disk, indirect_disk=indirect_disk, complement=bool(flags & 1),
@@ -632,14 +650,17 @@ class Reader:
 
     def parse_panes(self, s):
         # Section 7: 16-byte header (pane count P, tiles per side S, largest rank, reserved), S^2
-        # ranks r_t (u32), then per tile 3P*r_t f32 coefficients (index (3c + ch)*r_t + k), then
-        # per tile T^2*r_t f16 basis values (index texel*r_t + k).
+        # ranks r_t (u32), P*S^2 f32 scales (tile by tile, pane by pane), then every tile's
+        # 3P*r_t f16 coefficients (index (3c + ch)*r_t + k, each times its pane's scale), then
+        # every tile's T^2*r_t f16 basis values column by column (index k*T^2 + texel); both f16
+        # arrays in 2 byte planes.
         p_count, t = len(self.clusters), self.tile_size
         tps = self.resolution // t
         tiles = tps * tps
         bound = min(t * t, 3 * p_count)
-        per_rank = 12 * p_count + 2 * t * t
-        raw = self.load(s, 16 + 4 * tiles + tiles * bound * per_rank)
+        per_rank = 6 * p_count + 2 * t * t
+        fixed = 16 + 4 * tiles + 4 * p_count * tiles
+        raw = self.load(s, fixed + tiles * bound * per_rank)
         if len(raw) < 16 + 4 * tiles:
             raise InvalidArchive("panes: shorter than its header and ranks")
         count, stps, max_rank, reserved = struct.unpack_from("<4I", raw, 0)
@@ -650,16 +671,29 @@ class Reader:
         ranks = list(struct.unpack_from(f"<{tiles}I", raw, 16))
         if any(r > bound for r in ranks) or max(ranks, default=0) != max_rank:
             raise InvalidArchive("panes: a rank over min(T^2, 3P), or the largest rank differs from the header's")
-        if len(raw) != 16 + 4 * tiles + sum(ranks) * per_rank:
+        if len(raw) != fixed + sum(ranks) * per_rank:
             raise InvalidArchive("panes: raw size differs from what the ranks give")
         at = 16 + 4 * tiles
-        coefficients, bases = [], []
-        for r in ranks:
-            coefficients.append(struct.unpack_from(f"<{3 * p_count * r}f", raw, at))
-            at += 12 * p_count * r
-        for r in ranks:
-            bases.append(struct.unpack_from(f"<{t * t * r}e", raw, at))
-            at += 2 * t * t * r
+        scales = struct.unpack_from(f"<{p_count * tiles}f", raw, at)
+        if any(not 0 <= v < float("inf") for v in scales):
+            raise InvalidArchive("panes: scales must be finite and at least 0")
+        at += 4 * p_count * tiles
+        n = 3 * p_count * sum(ranks)
+        halves = struct.unpack(f"<{n}e", bytes(unplane(raw[at:at + 2 * n], 2, raw=True)))
+        at += 2 * n
+        m = t * t * sum(ranks)
+        columns = struct.unpack(f"<{m}e", bytes(unplane(raw[at:at + 2 * m], 2, raw=True)))
+        coefficients, bases, k, j = [], [], 0, 0
+        for tile, r in enumerate(ranks):
+            c = []
+            for p in range(p_count):
+                scale = scales[tile * p_count + p]
+                c.extend(to_f32(v * scale) for v in halves[k:k + 3 * r])
+                k += 3 * r
+            coefficients.append(c)
+            cols = columns[j:j + t * t * r]
+            j += t * t * r
+            bases.append([cols[kk * t * t + i] for i in range(t * t) for kk in range(r)])
         if any(v != v or abs(v) == float("inf") for part in coefficients + bases for v in part):
             raise InvalidArchive("panes: coefficients and basis values must be finite")
         self.ranks, self.coefficients, self.bases = ranks, coefficients, bases
@@ -741,7 +775,7 @@ class Reader:
             clusters=self.clusters,
             panes=dict(tiles=self.tps * self.tps, ranks=self.ranks, max_rank=max(self.ranks, default=0),
                        basis_bytes=2 * self.tile_size ** 2 * sum(self.ranks),
-                       coefficient_bytes=12 * len(self.clusters) * sum(self.ranks)),
+                       coefficient_bytes=6 * len(self.clusters) * sum(self.ranks) + 4 * len(self.clusters) * len(self.ranks)),
         )
         if pane is not None:
             if not 0 <= pane < len(self.clusters):

@@ -5,7 +5,8 @@
 //! channel `ch` of pane `c`). Clusters light the same surfaces with alike, smooth falloffs, so
 //! `M` is close to a matrix of low rank `r`: `M ≈ U·Cᵀ`, `U` of `T² × r` with orthonormal
 //! columns (the tile's *basis*, stored as `f16`: its entries lie in `[−1, 1]`) and `C` of
-//! `3P × r` (the *coefficients*, `f32`). The rank of each tile is the smallest that keeps the
+//! `3P × r` (the *coefficients*, stored as `f16` times a scale per pane, the largest magnitude
+//! of its `3r`: they keep 11 significant bits of it). The rank of each tile is the smallest that keeps the
 //! discarded singular values' energy within `ε²‖M‖²_F` ([`PANE_TOLERANCE`]).
 //!
 //! **Decoding** (normative, formats/prm.md §7.2): channel `ch` of pane `c` at texel `i` of a tile
@@ -39,7 +40,7 @@ use faer::prelude::default;
 use faer::{Accum, Conj, Mat, MatRef, Par};
 
 use crate::error::{Error, Result};
-use crate::layout::{check_reserved, limits, Cursor, PutLe};
+use crate::layout::{check_reserved, from_planes, limits, to_planes, Cursor, PutLe};
 
 /// Default relative tolerance ε of the panes' low-rank approximation ([`crate::WriterOptions`]):
 /// each tile keeps the fewest basis vectors whose discarded singular values hold at most ε of the
@@ -47,9 +48,9 @@ use crate::layout::{check_reserved, limits, Cursor, PutLe};
 ///
 /// Chosen by measurement on the bundled Cornell box (512 clusters, a 256² atlas in 64² tiles),
 /// with `cargo xtask eval experiment pane_rank SCENE ARCHIVE`: at ε = 2% the tiles keep a mean
-/// rank of about 43, the panes take 9.3 MiB (as individually zstd-compressed RGB9E5 tiles they
-/// take 43 MiB, and 128 MiB as RGB9E5 textures), and lit combinations `Σ_c w_c·pane_c` deviate
-/// by 0.34% (relative RMSE) from the dense panes, well below the bake's own noise.
+/// rank of about 43, the panes take 5.1 MiB in the archive (128 MiB as RGB9E5 textures), and lit
+/// combinations `Σ_c w_c·pane_c` deviate by 0.34% (relative RMSE) from the dense panes, well
+/// below the bake's own noise.
 pub const PANE_TOLERANCE: f32 = 0.02;
 
 /// Default largest rank of a tile ([`crate::WriterOptions::max_pane_rank`]).
@@ -383,13 +384,14 @@ impl PaneBasis {
         2 * u64::from(self.tile_size).pow(2) * self.rank_sum()
     }
 
-    /// Bytes of the coefficients of every tile (`12·P·Σ r_t`).
+    /// Bytes of the coefficients of every tile with their scales (`6·P·Σ r_t + 4·P·S²`).
     pub fn coefficient_bytes(&self) -> u64 {
-        12 * u64::from(self.pane_count) * self.rank_sum()
+        let p = u64::from(self.pane_count);
+        6 * p * self.rank_sum() + 4 * p * self.tile_count() as u64
     }
 
     /// Bytes of the panes section before any zstd compression:
-    /// `16 + 4·S² + Σ_t r_t·(12·P + 2·T²)`.
+    /// `16 + 4·S² + 4·P·S² + Σ_t r_t·(6·P + 2·T²)`.
     pub fn byte_size(&self) -> u64 {
         (PANES_HEADER_SIZE + 4 * self.tile_count()) as u64 + self.coefficient_bytes() + self.basis_bytes()
     }
@@ -408,16 +410,34 @@ impl PaneBasis {
         for &r in &self.ranks {
             b.put_u32(r);
         }
-        for c in &self.coefficients {
-            for &v in c {
-                b.put_f32(v);
+        let p = self.pane_count as usize;
+        let mut halves = Vec::new();
+        for (c, &r) in self.coefficients.iter().zip(&self.ranks) {
+            let r = r as usize;
+            if r == 0 {
+                (0..p).for_each(|_| b.put_f32(0.0));
+                continue;
+            }
+            for pane in c.chunks_exact(3 * r) {
+                let scale = pane_scale(pane);
+                b.put_f32(scale);
+                halves.extend(pane.iter().map(|&v| to_half(v, scale)));
             }
         }
-        for u in &self.basis {
-            for &v in u {
-                b.extend_from_slice(&half::f16::from_f32(v).to_le_bytes());
+        b.extend(to_planes(halves.iter().map(|h| h.to_le_bytes())));
+        let mut basis = Vec::with_capacity(self.basis.iter().map(Vec::len).sum());
+        for (u, &r) in self.basis.iter().zip(&self.ranks) {
+            let r = r as usize;
+            for k in 0..r {
+                basis.extend(
+                    u.iter()
+                        .skip(k)
+                        .step_by(r)
+                        .map(|&v| half::f16::from_f32(v).to_le_bytes()),
+                );
             }
         }
+        b.extend(to_planes(basis.into_iter()));
         b
     }
 
@@ -437,6 +457,36 @@ impl PaneBasis {
             coefficients,
             basis,
         }
+    }
+}
+
+/// A pane's scale in a tile (formats/prm.md §7.1): the largest magnitude of its `3r`
+/// coefficients, so that each stored `f16` lies in `[−1, 1]`.
+fn pane_scale(pane: &[f32]) -> f32 {
+    pane.iter().fold(0.0f32, |m, v| m.max(v.abs()))
+}
+
+/// The `f16` that stores coefficient `v` of a pane of scale `scale` (0 for a zero pane).
+fn to_half(v: f32, scale: f32) -> half::f16 {
+    if scale > 0.0 {
+        half::f16::from_f32(v / scale)
+    } else {
+        half::f16::ZERO
+    }
+}
+
+/// The coefficient a reader decodes from `h` under `scale`: `f32(h) ⊗ scale`.
+fn from_half(h: half::f16, scale: f32) -> f32 {
+    h.to_f32() * scale
+}
+
+/// Rounds a pane's coefficients in a tile to what the archive stores, so that what a writer
+/// holds decodes the same as what it writes: the largest becomes its scale exactly, so the
+/// scale is the same when taken again.
+fn quantize_pane(pane: &mut [f32]) {
+    let scale = pane_scale(pane);
+    for v in pane.iter_mut() {
+        *v = from_half(to_half(*v, scale), scale);
     }
 }
 
@@ -635,6 +685,11 @@ fn compress_tile(m: MatRef<'_, f32>, tolerance: f64, max_rank: usize, seed: u64)
     for (j, &zero) in zero_col.iter().enumerate() {
         coefficients.extend((0..rank).map(|k| if zero { 0.0 } else { sigma[k] * vb[(j, k)] }));
     }
+    if rank > 0 {
+        for pane in coefficients.chunks_exact_mut(3 * rank) {
+            quantize_pane(pane);
+        }
+    }
     if !basis.iter().chain(&coefficients).all(|v| v.is_finite()) {
         return Err("the basis or its coefficients are not finite".into());
     }
@@ -763,11 +818,71 @@ pub(crate) fn check_ranks(header: &Header, tile_size: u32, ranks: &[u32]) -> Res
 }
 
 /// Raw size of the section for these counts, `None` on overflow:
-/// `16 + 4·S² + Σ_t r_t·(12·P + 2·T²)`.
+/// `16 + 4·S² + 4·P·S² + Σ_t r_t·(6·P + 2·T²)`.
 pub(crate) fn raw_size_for(pane_count: u32, tile_size: u32, ranks: &[u32]) -> Option<u64> {
-    let per_rank = 12 * u64::from(pane_count) + 2 * u64::from(tile_size) * u64::from(tile_size);
+    let per_rank = 6 * u64::from(pane_count) + 2 * u64::from(tile_size) * u64::from(tile_size);
     let ranks_total: u64 = ranks.iter().map(|&r| u64::from(r)).sum();
-    (PANES_HEADER_SIZE as u64 + 4 * ranks.len() as u64).checked_add(ranks_total.checked_mul(per_rank)?)
+    let tiles = ranks.len() as u64;
+    (PANES_HEADER_SIZE as u64 + 4 * tiles + 4 * tiles * u64::from(pane_count))
+        .checked_add(ranks_total.checked_mul(per_rank)?)
+}
+
+/// Decodes whole `f32` scales; a negative, NaN or infinite one is refused.
+pub(crate) fn decode_scales(raw: &[u8]) -> Result<Vec<f32>, String> {
+    let values: Vec<f32> = raw
+        .chunks_exact(4)
+        .map(|w| f32::from_le_bytes([w[0], w[1], w[2], w[3]]))
+        .collect();
+    if values.iter().any(|v| !(v.is_finite() && *v >= 0.0)) {
+        return Err("panes scales are not all finite and at least 0".into());
+    }
+    Ok(values)
+}
+
+/// Every tile's coefficients from their scales (`P` per tile, tile by tile) and their `f16`
+/// values in byte planes; a NaN or infinity is refused.
+pub(crate) fn decode_coefficients(
+    pane_count: usize,
+    ranks: &[u32],
+    scales: &[f32],
+    planes: &[u8],
+) -> Result<Vec<Vec<f32>>, String> {
+    let mut halves = from_planes::<2>(planes).map(half::f16::from_le_bytes);
+    let mut out = Vec::with_capacity(ranks.len());
+    for (t, &r) in ranks.iter().enumerate() {
+        let r = r as usize;
+        let mut c = Vec::with_capacity(3 * pane_count * r);
+        for p in 0..pane_count {
+            let scale = scales[t * pane_count + p];
+            c.extend(halves.by_ref().take(3 * r).map(|h| from_half(h, scale)));
+        }
+        if c.iter().any(|v| !v.is_finite()) {
+            return Err(format!("panes tile {t}'s coefficients are not all finite"));
+        }
+        out.push(c);
+    }
+    Ok(out)
+}
+
+/// Every tile's basis (row-major, `T²·r_t` values) from its `f16` values, column after column,
+/// in byte planes; a NaN or infinity is refused.
+pub(crate) fn decode_basis(texels: usize, ranks: &[u32], planes: &[u8]) -> Result<Vec<Vec<f32>>, String> {
+    let mut halves = from_planes::<2>(planes).map(|h| half::f16::from_le_bytes(h).to_f32());
+    let mut out = Vec::with_capacity(ranks.len());
+    for (t, &r) in ranks.iter().enumerate() {
+        let r = r as usize;
+        let mut u = vec![0.0f32; texels * r];
+        for k in 0..r {
+            for (i, v) in halves.by_ref().take(texels).enumerate() {
+                u[i * r + k] = v;
+            }
+        }
+        if u.iter().any(|v| !v.is_finite()) {
+            return Err(format!("panes tile {t}'s basis values are not all finite"));
+        }
+        out.push(u);
+    }
+    Ok(out)
 }
 
 /// Decodes whole `u32` ranks.
@@ -776,30 +891,6 @@ pub(crate) fn decode_ranks(raw: &[u8]) -> Result<Vec<u32>, String> {
         .chunks_exact(4)
         .map(|w| u32::from_le_bytes([w[0], w[1], w[2], w[3]]))
         .collect())
-}
-
-/// Decodes whole `f32` coefficients; a NaN or infinity is refused.
-pub(crate) fn decode_coefficients(raw: &[u8]) -> Result<Vec<f32>, String> {
-    let values: Vec<f32> = raw
-        .chunks_exact(4)
-        .map(|w| f32::from_le_bytes([w[0], w[1], w[2], w[3]]))
-        .collect();
-    if values.iter().any(|v| !v.is_finite()) {
-        return Err("panes coefficients are not all finite".into());
-    }
-    Ok(values)
-}
-
-/// Decodes whole `f16` basis values to `f32`; a NaN or infinity is refused.
-pub(crate) fn decode_basis(raw: &[u8]) -> Result<Vec<f32>, String> {
-    let values: Vec<f32> = raw
-        .chunks_exact(2)
-        .map(|h| half::f16::from_le_bytes([h[0], h[1]]).to_f32())
-        .collect();
-    if values.iter().any(|v| !v.is_finite()) {
-        return Err("panes basis values are not all finite".into());
-    }
-    Ok(values)
 }
 
 #[cfg(test)]

@@ -214,11 +214,6 @@ pub(crate) fn u32_at(record: &[u8], offset: usize) -> u32 {
     u32::from_le_bytes(record[offset..offset + 4].try_into().expect("4 bytes"))
 }
 
-/// The little-endian `f32` at byte `offset` of a record.
-pub(crate) fn f32_at(record: &[u8], offset: usize) -> f32 {
-    f32::from_bits(u32_at(record, offset))
-}
-
 /// Little-endian appenders for building records.
 pub(crate) trait PutLe {
     fn put_u16(&mut self, v: u16);
@@ -402,6 +397,27 @@ record_codec!(SectionRecord {
     reserved
 });
 
+/// Byte planes (formats/prm.md §1): `values` little-endian values of `W` bytes each, stored as
+/// `W` planes, plane `b` holding byte `b` of every value in order. Neighbouring values share their
+/// high bytes, which zstd then finds in long runs.
+pub(crate) fn to_planes<const W: usize>(values: impl ExactSizeIterator<Item = [u8; W]>) -> Vec<u8> {
+    let n = values.len();
+    let mut out = vec![0u8; n * W];
+    for (i, v) in values.enumerate() {
+        for (b, &byte) in v.iter().enumerate() {
+            out[b * n + i] = byte;
+        }
+    }
+    out
+}
+
+/// The values of `W` bytes that [`to_planes`] stored in `planes` (whose length is a multiple of
+/// `W`).
+pub(crate) fn from_planes<const W: usize>(planes: &[u8]) -> impl ExactSizeIterator<Item = [u8; W]> + '_ {
+    let n = planes.len() / W;
+    (0..n).map(move |i| std::array::from_fn(|b| planes[b * n + i]))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -464,5 +480,13 @@ mod tests {
         }
         .encode_into(&mut b);
         assert_eq!(b.len(), SECTION_RECORD_SIZE);
+    }
+
+    #[test]
+    fn byte_planes_round_trip() {
+        let values: Vec<[u8; 4]> = [1u32, 0x0102_0304, u32::MAX].iter().map(|v| v.to_le_bytes()).collect();
+        let planes = to_planes(values.iter().copied());
+        assert_eq!(planes, [1, 4, 0xff, 0, 3, 0xff, 0, 2, 0xff, 0, 1, 0xff]);
+        assert_eq!(from_planes::<4>(&planes).collect::<Vec<_>>(), values);
     }
 }

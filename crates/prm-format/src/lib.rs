@@ -3,9 +3,9 @@
 //! An archive holds the lightmap atlas of a scene, its entry points and
 //! their clusters, and one *pane* per cluster: the indirect irradiance at
 //! every atlas texel. The panes are stored as a low-rank basis per atlas tile
-//! ([`PaneBasis`]): per tile, `f16` basis images shared by every pane and `f32`
-//! coefficients per pane and channel, which decode exactly the same on every
-//! reader. The byte layout is specified in `formats/prm.md`.
+//! ([`PaneBasis`]): per tile, `f16` basis images shared by every pane and `f16`
+//! coefficients per pane and channel under a scale per pane, which decode exactly the
+//! same on every reader. The byte layout is specified in `formats/prm.md`.
 //!
 //! * [`ArchiveWriter`] collects the panes, compresses them (a randomized SVD per
 //!   tile, within [`WriterOptions::pane_tolerance`]) and writes the archive into a

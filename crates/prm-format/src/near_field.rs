@@ -33,15 +33,15 @@
 //! bytes (as the probe rays', §5.5), `E` exit records of 8 bytes (texel `u32`, the end of its hits `u32`: exit `i`'s hits are
 //! `[end[i−1], end[i])`), then `H` hits of 8 bytes (gather point `u32`, `r²` `f32`).
 
-use crate::layout::{check_flags, check_ray_count, f32_at, u32_at, Cursor, PutLe};
+use crate::layout::{check_flags, check_ray_count, from_planes, to_planes, u32_at, Cursor, PutLe};
 use crate::probe_rays::{self, GatherPoint, GATHER_POINT_SIZE};
 
 /// Size of the section's fixed header.
 pub const NEAR_FIELD_HEADER_SIZE: usize = 32;
 /// Bytes of one exit record.
 pub(crate) const NEAR_EXIT_SIZE: usize = 8;
-/// Bytes of one hit record.
-pub(crate) const NEAR_HIT_SIZE: usize = 8;
+/// Bytes of one hit: its gather point's index difference (`u32`) and its distance code (`u8`).
+pub(crate) const NEAR_HIT_SIZE: usize = 5;
 /// Most rays per exit point.
 pub const MAX_NEAR_RAYS: u32 = 1 << 16;
 /// The smallest depth-0 weight `R₀²/(r² + R₀²)` a stored hit has: farther hits are left out.
@@ -106,6 +106,25 @@ impl NearField {
         }
     }
 
+    /// Puts the hits in the form the archive stores, so that what a writer holds reads back the
+    /// same: each squared distance rounded to its distance code's (formats/prm.md §5.6; a hit
+    /// beyond the cut [`MIN_WEIGHT`] comes back at it) and each exit's hits ordered by gather
+    /// point (which the sum does not see, and which leaves the stored index differences small).
+    pub fn round_to_stored(&mut self) {
+        let disk = self.disk;
+        for h in &mut self.hits {
+            h.distance2 = stored_distance2(h.distance2, disk);
+        }
+        let mut start = 0;
+        for x in &self.exits {
+            let end = (x.end as usize).min(self.hits.len());
+            if let Some(hits) = self.hits.get_mut(start..end) {
+                hits.sort_by(|a, b| a.point.cmp(&b.point).then(a.distance2.total_cmp(&b.distance2)));
+            }
+            start = end;
+        }
+    }
+
     fn weight_for(&self, disk: f32, r2: f32) -> f32 {
         let w = disk / (r2 + disk);
         if self.complement {
@@ -147,6 +166,30 @@ impl NearField {
             })
             .collect()
     }
+}
+
+/// Steps of a hit's distance code between the cut and the exit point.
+const DISTANCE_CODES: f32 = 255.0;
+
+/// The distance code of a hit at squared distance `r2` from the disk `disk` (`R²`): its depth-0
+/// weight `w = R²/(r² + R²)` as `q = (w − w₀)/(1 − w₀)·255` rounded, clamped to `0 ..= 255`
+/// (formats/prm.md §5.6).
+fn distance_code(r2: f32, disk: f32) -> u8 {
+    let w = disk / (r2 + disk);
+    ((w - MIN_WEIGHT) / (1.0 - MIN_WEIGHT) * DISTANCE_CODES)
+        .round()
+        .clamp(0.0, DISTANCE_CODES) as u8
+}
+
+/// The squared distance code `q` stands for: `R²·(1/w − 1)`, `w = w₀ + (1 − w₀)·q/255`.
+fn code_distance2(q: u8, disk: f32) -> f32 {
+    let w = MIN_WEIGHT + (1.0 - MIN_WEIGHT) * (f32::from(q) / DISTANCE_CODES);
+    disk * (1.0 / w - 1.0)
+}
+
+/// The squared distance `r2` as an archive with the disk `disk` stores it.
+pub(crate) fn stored_distance2(r2: f32, disk: f32) -> f32 {
+    code_distance2(distance_code(r2, disk), disk)
 }
 
 /// Raw size of a section of `e` exits, `g` gather points and `h` hits; `None` on overflow.
@@ -236,10 +279,13 @@ pub(crate) fn encode(near: &NearField, resolution: u32) -> Vec<u8> {
         b.put_u32(x.texel);
         b.put_u32(x.end);
     }
-    for h in &near.hits {
-        b.put_u32(h.point);
-        b.put_f32(h.distance2);
-    }
+    let mut last = 0u32;
+    b.extend(to_planes(near.hits.iter().map(|h| {
+        let d = h.point.wrapping_sub(last);
+        last = h.point;
+        d.to_le_bytes()
+    })));
+    b.extend(near.hits.iter().map(|h| distance_code(h.distance2, near.disk)));
     b
 }
 
@@ -287,15 +333,22 @@ pub(crate) fn decode_exits(raw: &[u8]) -> Result<Vec<NearExit>, String> {
         .collect())
 }
 
-/// Decodes whole hit records.
-pub(crate) fn decode_hits(raw: &[u8]) -> Result<Vec<NearHit>, String> {
-    Ok(raw
-        .chunks_exact(NEAR_HIT_SIZE)
-        .map(|r| NearHit {
-            point: u32_at(r, 0),
-            distance2: f32_at(r, 4),
+/// Decodes the hits from their index differences (in byte planes) and distance codes
+/// (`5·H` bytes in all) for the disk `disk`.
+pub(crate) fn decode_hits(raw: &[u8], disk: f32) -> Vec<NearHit> {
+    let h = raw.len() / NEAR_HIT_SIZE;
+    let (points, codes) = raw.split_at(4 * h);
+    let mut last = 0u32;
+    from_planes::<4>(points)
+        .zip(codes)
+        .map(|(d, &q)| {
+            last = last.wrapping_add(u32::from_le_bytes(d));
+            NearHit {
+                point: last,
+                distance2: code_distance2(q, disk),
+            }
         })
-        .collect())
+        .collect()
 }
 
 #[cfg(test)]
@@ -330,7 +383,8 @@ mod tests {
 
     #[test]
     fn round_trip_through_the_encoding() {
-        let n = near();
+        let mut n = near();
+        n.round_to_stored();
         validate(&n, 4, 0).unwrap();
         let raw = encode(&n, 4);
         assert_eq!(raw.len() as u64, raw_size_for(2, 2, 3).unwrap());
@@ -365,9 +419,38 @@ mod tests {
             complement: h.complement,
             points: probe_rays::decode_points(&raw[NEAR_FIELD_HEADER_SIZE..a]).unwrap(),
             exits: decode_exits(&raw[a..b]).unwrap(),
-            hits: decode_hits(&raw[b..]).unwrap(),
+            hits: decode_hits(&raw[b..], h.disk),
         };
         assert_eq!(back, n);
+    }
+
+    #[test]
+    fn distance_codes_keep_the_weight_within_half_a_step() {
+        let disk = 0.0095;
+        for i in 0..=4000 {
+            let r2 = disk * 15.0 * i as f32 / 4000.0;
+            let q = distance_code(r2, disk);
+            let stored = code_distance2(q, disk);
+            assert_eq!(distance_code(stored, disk), q, "r² {r2}");
+            let (w, ws) = (disk / (r2 + disk), disk / (stored + disk));
+            assert!(
+                (w - ws).abs() <= 0.5 * (1.0 - MIN_WEIGHT) / DISTANCE_CODES + 1e-6,
+                "r² {r2}: {w} {ws}"
+            );
+        }
+        assert_eq!(code_distance2(255, disk), 0.0);
+        assert_eq!(distance_code(disk * 100.0, disk), 0, "beyond the cut: at the cut");
+    }
+
+    #[test]
+    fn stored_hits_are_ordered_by_gather_point_within_each_exit() {
+        let mut n = near();
+        n.round_to_stored();
+        let points: Vec<u32> = n.hits.iter().map(|h| h.point).collect();
+        assert_eq!(points, [0, 1, 0]);
+        n.hits.swap(0, 1);
+        n.round_to_stored();
+        assert_eq!(n.hits.iter().map(|h| h.point).collect::<Vec<_>>(), [0, 1, 0]);
     }
 
     #[test]

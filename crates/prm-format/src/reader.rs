@@ -70,7 +70,7 @@ pub struct ArchiveInfo {
     pub rank_sum: u64,
     /// Bytes of the tiles' bases (`f16`) in the panes section.
     pub basis_bytes: u64,
-    /// Bytes of the tiles' coefficients (`f32`) in the panes section.
+    /// Bytes of the tiles' coefficients (`f16`) and their scales (`f32`) in the panes section.
     pub coefficient_bytes: u64,
     /// Bytes of all panes as dense RGB9E5 texels (`pane_count × resolution² × 4`), what a run
     /// time that uploads them whole holds.
@@ -328,15 +328,14 @@ fn read_panes<R: Read + Seek>(
                 h.pane_count
             )
         })?;
-        let mut coefficients = Vec::with_capacity(tiles);
-        for &r in &ranks {
-            let n = 3 * h.pane_count as usize * r as usize;
-            coefficients.push(raw.records(n, 4, basis::decode_coefficients)?);
-        }
-        let mut bases = Vec::with_capacity(tiles);
-        for &r in &ranks {
-            bases.push(raw.records(t as usize * t as usize * r as usize, 2, basis::decode_basis)?);
-        }
+        let p = h.pane_count as usize;
+        let rank_sum: usize = ranks.iter().map(|&r| r as usize).sum();
+        let scales = raw.records(tiles * p, 4, basis::decode_scales)?;
+        let planes = raw.bytes(6 * p * rank_sum)?;
+        let coefficients = basis::decode_coefficients(p, &ranks, &scales, &planes).map_err(Error::inconsistent)?;
+        let texels = t as usize * t as usize;
+        let planes = raw.bytes(2 * texels * rank_sum)?;
+        let bases = basis::decode_basis(texels, &ranks, &planes).map_err(Error::inconsistent)?;
         Ok(PaneBasis::from_parts(&h, t, ranks, coefficients, bases))
     })
 }
@@ -1093,7 +1092,7 @@ fn read_near_field<R: Read + Seek>(
             complement: h.complement,
             points: raw.records(h.points as usize, GATHER_POINT_SIZE, probe_rays::decode_points)?,
             exits: raw.records(h.exits as usize, NEAR_EXIT_SIZE, near_field::decode_exits)?,
-            hits: raw.records(h.hits as usize, NEAR_HIT_SIZE, near_field::decode_hits)?,
+            hits: near_field::decode_hits(&raw.bytes(h.hits as usize * NEAR_HIT_SIZE)?, h.disk),
         })
     })?;
     near_field::validate(&out, resolution, groups).map_err(Error::inconsistent)?;

@@ -435,7 +435,7 @@ fn round_trip() {
     assert_eq!(info.max_rank, *ranks.iter().max().unwrap());
     assert_eq!(info.rank_sum, ranks.iter().map(|&r| u64::from(r)).sum::<u64>());
     assert_eq!(info.basis_bytes, 2 * 64 * info.rank_sum);
-    assert_eq!(info.coefficient_bytes, 12 * 5 * info.rank_sum);
+    assert_eq!(info.coefficient_bytes, 6 * 5 * info.rank_sum + 4 * 5 * 16);
     assert_eq!(info.pane_texel_bytes, 5 * 32 * 32 * 4);
     let panes_section = info.sections.iter().find(|x| x.name == "panes").unwrap();
     assert_eq!(panes_section.raw_size, a.pane_basis().byte_size());
@@ -1975,7 +1975,7 @@ fn probe_ray_set(s: &Scene) -> ProbeRays {
 
 fn near_set(s: &Scene) -> NearField {
     let points = probe_ray_set(s).points;
-    NearField {
+    let mut near = NearField {
         rays_per_exit: 8,
         disk: 0.03125,
         indirect_disk: 0.015625,
@@ -1996,7 +1996,9 @@ fn near_set(s: &Scene) -> NearField {
                 distance2: 0.5,
             },
         ],
-    }
+    };
+    near.round_to_stored();
+    near
 }
 
 /// The probe rays section needs the probes and round-trips exactly; the reader refuses a section for another probe count, and one beside no probes section.
@@ -2307,13 +2309,16 @@ fn corrupted_panes_sections_are_refused() {
     word(&mut m, p, u32::MAX);
     assert_inconsistent(m, "exceed the limit");
 
-    // A NaN coefficient (the first), an infinite basis value (the last).
-    let coefficients = p + 16 + 16;
+    // A NaN scale (the first), a NaN basis value (the last, whose high byte ends the section).
+    let scales = p + 16 + 16;
     let mut m = bytes.clone();
-    word(&mut m, coefficients, f32::NAN.to_bits());
+    word(&mut m, scales, f32::NAN.to_bits());
     assert_inconsistent(m, "finite");
+    let mut m = bytes.clone();
+    word(&mut m, scales, (-1.0f32).to_bits());
+    assert_inconsistent(m, "at least 0");
     let rank_total: usize = ranks.iter().map(|&r| r as usize).sum();
-    let basis_end = coefficients + rank_total * (12 * 3 + 2 * 64);
+    let basis_end = scales + 4 * 3 * 4 + rank_total * (6 * 3 + 2 * 64);
     assert_eq!(
         basis_end,
         sections(&bytes)
@@ -2323,11 +2328,11 @@ fn corrupted_panes_sections_are_refused() {
             .unwrap()
     );
     let mut m = bytes.clone();
-    m[basis_end - 2..basis_end].copy_from_slice(&half::f16::INFINITY.to_le_bytes());
+    m[basis_end - 1] = 0x7e;
     assert_inconsistent(m, "finite");
     // A finite change is data, not damage: it opens, and `verify` finds the energy off.
     let mut m = bytes.clone();
-    m[basis_end - 2..basis_end].copy_from_slice(&half::f16::from_f32(0.75).to_le_bytes());
+    m[basis_end - 1] = 0x3a;
     resign(&mut m);
     let mut a = Archive::from_bytes(&m).unwrap();
     let err = a.verify().unwrap_err();

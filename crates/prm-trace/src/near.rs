@@ -106,7 +106,7 @@ pub fn near_field(scene: &Scene, bvh: &Bvh, atlas: &Atlas, rays: u32, disk: f32,
             end: hits.len() as u32,
         });
     }
-    NearField {
+    let mut near = NearField {
         rays_per_exit: rays,
         disk,
         indirect_disk: 0.0,
@@ -114,7 +114,9 @@ pub fn near_field(scene: &Scene, bvh: &Bvh, atlas: &Atlas, rays: u32, disk: f32,
         points,
         exits,
         hits,
-    }
+    };
+    near.round_to_stored();
+    near
 }
 
 #[cfg(test)]
