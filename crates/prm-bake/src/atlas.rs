@@ -14,7 +14,7 @@ pub struct AtlasArgs {
     #[arg(long, conflicts_with = "resolution")]
     pub texel_size: Option<f32>,
     /// Atlas resolution (texels on a side); the texel size follows from it.
-    /// Without this or --texel-size the resolution is chosen from the triangle count.
+    /// Without this or --texel-size the resolution is chosen from the triangle and chart counts.
     #[arg(long)]
     pub resolution: Option<u32>,
     /// Empty texels around every chart (two charts are at least twice this apart).

@@ -208,7 +208,7 @@ impl Atlas {
             Sizing::Resolution(_) | Sizing::Auto => {
                 let r = match params.sizing {
                     Sizing::Resolution(r) => r,
-                    _ => auto_resolution(scene.triangles.len()),
+                    _ => auto_resolution(scene.triangles.len(), charts.len()),
                 };
                 let (s0, cells0) = fit_scale(&charts, plain, r)?;
                 let mut chosen = (s0, cells0, plain);
@@ -260,15 +260,15 @@ impl Atlas {
             .map(|c| 0.5 * ((c[1] - c[0]).perp_dot(c[2] - c[0])).abs() as f64)
             .sum::<f64>()
             .max(1e-12);
-        let resolution = match params.sizing {
-            Sizing::Resolution(r) => r,
-            Sizing::TexelSize(s) => ((scene.area() / uv_area).sqrt() / s as f64).ceil().clamp(4.0, 16384.0) as u32,
-            Sizing::Auto => auto_resolution(scene.triangles.len()),
-        };
-        let texel_size = ((scene.area() / uv_area).sqrt() / resolution as f64) as f32;
         // Charts: triangles joined by edges whose two endpoints share position and lightmap UV.
         let chart_of_triangle = connected_components(scene, |t, c| (scene.triangles[t].positions[c], file_uvs[t][c]));
         let charts = chart_of_triangle.iter().max().map_or(0, |m| m + 1);
+        let resolution = match params.sizing {
+            Sizing::Resolution(r) => r,
+            Sizing::TexelSize(s) => ((scene.area() / uv_area).sqrt() / s as f64).ceil().clamp(4.0, 16384.0) as u32,
+            Sizing::Auto => auto_resolution(scene.triangles.len(), charts as usize),
+        };
+        let texel_size = ((scene.area() / uv_area).sqrt() / resolution as f64) as f32;
         Ok(rasterize(
             scene,
             resolution,
@@ -286,12 +286,27 @@ impl Atlas {
     }
 }
 
-/// Default resolution: 256 for small scenes, growing so that there are about 12 texels per
-/// triangle, rounded up to a multiple of 64 and capped at 4096.
-fn auto_resolution(triangles: usize) -> u32 {
-    let r = ((12.0 * triangles as f64).sqrt() / 64.0).ceil() as u32 * 64;
-    r.clamp(256, 4096)
+/// Default resolution: about [`TEXELS_PER_TRIANGLE`] texels a triangle and
+/// [`TEXELS_PER_CHART`] a chart, whichever asks more, rounded up to a multiple of 64 and clamped
+/// to 128..=4096.
+fn auto_resolution(triangles: usize, charts: usize) -> u32 {
+    let texels = (TEXELS_PER_TRIANGLE * triangles as f64).max(TEXELS_PER_CHART * charts as f64);
+    let r = (texels.sqrt() / 64.0).ceil() as u32 * 64;
+    r.clamp(128, 4096)
 }
+
+/// Automatic atlas texels per triangle: enough that a scene's triangles each own exit points.
+const TEXELS_PER_TRIANGLE: f64 = 12.0;
+
+/// Automatic atlas texels per chart. A chart's gutters take texels from its interior, so many
+/// small charts need more texels than their triangles do. Chosen by the error-against-bytes front
+/// (`cargo xtask eval --full`, image error against the reference): the bundled chairs (913 charts,
+/// 2910 triangles) lose from 0.058 at 256² to 0.098 at 128², while the Cornell boxes (15 and 38
+/// charts) keep 0.046 and 0.040 at 128² for half the archive and a quarter of the pane rendering.
+/// At 64 texels a chart, the chairs keep 256² and the boxes drop to 128², where McGuire's box
+/// reads 2.7% and 2.5% under its two lights (`cargo xtask eval --targets`) against 2.2% and 1.9%
+/// at 256².
+const TEXELS_PER_CHART: f64 = 64.0;
 
 /// Position key for adjacency: coordinates quantised to a grid fine enough to tell vertices apart.
 fn quantise(p: Vec3, cell: f32) -> [i64; 3] {
@@ -993,9 +1008,12 @@ mod tests {
     }
 
     #[test]
-    fn auto_resolution_grows_with_triangles() {
-        assert_eq!(auto_resolution(36), 256);
-        assert_eq!(auto_resolution(100_000), 1152);
-        assert_eq!(auto_resolution(10_000_000), 4096);
+    fn auto_resolution_grows_with_triangles_and_charts() {
+        assert_eq!(auto_resolution(36, 16), 128);
+        assert_eq!(auto_resolution(2910, 913), 256);
+        assert_eq!(auto_resolution(2188, 38), 192);
+        assert_eq!(auto_resolution(100_000, 3000), 1152);
+        assert_eq!(auto_resolution(10_000, 20_000), 1152);
+        assert_eq!(auto_resolution(10_000_000, 1), 4096);
     }
 }
