@@ -21,6 +21,11 @@ pub struct CheckArgs {
     /// estimate, more paths only narrow its spread.
     #[arg(long, value_name = "PATHS", default_value_t = EstimateSize::DEFAULT.paths)]
     pub accuracy_paths: u32,
+    /// A test light instead of the check's own, repeatable: `point:X,Y,Z:R,G,B` (as `prm-play
+    /// --light`; the check measures each light alone, so its colour does not matter). Only
+    /// point lights: the check's lights shine every way.
+    #[arg(long = "light", value_name = "SPEC", value_parser = prm_scene::parse_light, allow_hyphen_values = true)]
+    pub lights: Vec<prm_scene::Light>,
     /// Print the estimate as one JSON object (the archive metadata's `accuracy`).
     #[arg(long)]
     pub json: bool,
@@ -34,6 +39,13 @@ pub fn run(args: &CheckArgs) -> Result<()> {
     if args.accuracy_points == 0 || args.accuracy_paths == 0 {
         crate::refuse!("--accuracy-points and --accuracy-paths must be at least 1");
     }
+    let mut positions = Vec::with_capacity(args.lights.len());
+    for light in &args.lights {
+        match light {
+            prm_scene::Light::Point { position, .. } => positions.push(*position),
+            _ => crate::refuse!("--light: the check places point lights only (point:X,Y,Z:R,G,B)"),
+        }
+    }
     let scene = prm_scene::load(&args.scene).with_context(|| format!("cannot load scene {}", args.scene.display()))?;
     let mut progress = Progress::new(args.quiet);
     for w in &scene.report.warnings {
@@ -43,7 +55,8 @@ pub fn run(args: &CheckArgs) -> Result<()> {
         exit_points: args.accuracy_points,
         paths: args.accuracy_paths,
     };
-    let accuracy = prm_bake::estimate_accuracy(&scene, &args.archive, size, &mut progress)
+    let lights = (!positions.is_empty()).then_some(positions.as_slice());
+    let accuracy = prm_bake::estimate_accuracy(&scene, &args.archive, size, lights, &mut progress)
         .with_context(|| format!("checking {} against {}", args.archive.display(), args.scene.display()))?;
     accuracy.validate().map_err(|e| anyhow::anyhow!("no estimate: {e}"))?;
     if args.json {

@@ -51,12 +51,14 @@ pub(crate) fn checked_pane(near: Option<&NearPlay>, checked: &[usize], pane: &[V
 }
 
 /// Runs the check on `panes` (every pane at the `checked` exit points, [`checked_pane`]) as the
-/// phase [`Phase::AccuracyCheck`] of `progress`.
+/// phase [`Phase::AccuracyCheck`] of `progress`, under point lights at `lights` (`None`: the
+/// check's own, [`prm_trace::check_lights`]).
 pub(crate) fn check(
     inputs: &CheckInputs,
     checked: &[usize],
     panes: &[Vec<Vec3>],
     params: &CheckParams,
+    lights: Option<&[Vec3]>,
     progress: &mut dyn ProgressSink,
 ) -> Result<Accuracy, BakeError> {
     let archive = prm_trace::CheckedArchive {
@@ -71,7 +73,10 @@ pub(crate) fn check(
         near: inputs.near,
     };
     let exits: Vec<_> = checked.iter().map(|&i| inputs.atlas.exits[i]).collect();
-    let lights = prm_trace::check_lights(inputs.scene, inputs.bvh);
+    let lights = match lights {
+        Some(given) => given.to_vec(),
+        None => prm_trace::check_lights(inputs.scene, inputs.bvh),
+    };
     let passes = ReferenceParams::with_spp(params.paths).passes;
     progress.phase_start(Phase::AccuracyCheck, lights.len() as u64 * u64::from(passes));
     prm_trace::check_accuracy(
@@ -108,12 +113,14 @@ impl EstimateSize {
 
 /// Estimates the accuracy of the archive at `archive_path`, baked from `scene`, at `size`, as
 /// the bake's last step does: the estimate of an archive that has none (a merged sharded
-/// bake), or of any archive at another size. Refuses a partial archive of a sharded bake,
+/// bake), or of any archive at another size. Under white point lights at `lights`, one at a
+/// time, or the check's own (`None`, as the bake). Refuses a partial archive of a sharded bake,
 /// another scene's, and one whose tables its recorded parameters do not reproduce.
 pub fn estimate_accuracy(
     scene: &Scene,
     archive_path: &Path,
     size: EstimateSize,
+    lights: Option<&[Vec3]>,
     progress: &mut dyn ProgressSink,
 ) -> Result<Accuracy, BakeError> {
     let mut archive =
@@ -161,7 +168,7 @@ pub fn estimate_accuracy(
         top_k: recorded.top_k,
         near: near.as_ref(),
     };
-    check(&inputs, &checked, &panes, &params, progress)
+    check(&inputs, &checked, &panes, &params, lights, progress)
 }
 
 /// The refusal of the archive at `archive_path`, saying `why`.

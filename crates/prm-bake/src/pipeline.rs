@@ -1266,6 +1266,7 @@ fn check_accuracy(
         recorder.checked_exits,
         &recorder.checked_panes,
         &check,
+        None,
         steps.progress,
     )?;
     // A NaN in a pane or the reference must not cost the whole bake: no estimate then.

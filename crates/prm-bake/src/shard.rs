@@ -172,7 +172,7 @@ pub fn merge_checked(
     // failed check leaves the output as it was.
     let scratch = Scratch(prm_format::scratch_path(output));
     merge_recording(parts, &scratch.0, None)?;
-    let accuracy = crate::estimate_accuracy(scene, &scratch.0, crate::EstimateSize::DEFAULT, progress)?;
+    let accuracy = crate::estimate_accuracy(scene, &scratch.0, crate::EstimateSize::DEFAULT, None, progress)?;
     accuracy
         .validate()
         .map_err(|e| BakeError::InvalidParams(format!("no estimate of {}: {e}", output.display())))?;

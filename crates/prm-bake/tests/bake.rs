@@ -830,12 +830,22 @@ fn check_repeats_the_bake_s_own_estimate() {
         describe(&out)
     );
 
+    // Under a light of the user's: that light alone, where it was given.
+    let light = "point:0.2,0.4,0.3:1,1,1";
+    let out = run(&[&["check", scene, &p, "--json", "--quiet", "--light", light][..], &size].concat());
+    assert!(out.status.success(), "{}", describe(&out));
+    let theirs: prm_format::Accuracy = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(theirs.lights.len(), 1);
+    assert_eq!(theirs.lights[0].position, [0.2, 0.4, 0.3]);
+    assert!(theirs.lights[0].error.is_finite() && theirs.lights[0].energy > 0.0);
+
     let (part, _, _) = bake(&dir, "part", 5, "cpu", &["--quiet", "--shard", "0/2"]);
     let chairs = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/chairs/chairs.obj");
     for (args, expected) in [
         (vec![scene, part.to_str().unwrap()], "merge the shards first"),
         (vec![chairs.to_str().unwrap(), &p], "other geometry"),
         (vec![scene, &p, "--accuracy-paths", "0"], "at least 1"),
+        (vec![scene, &p, "--light", "dir:0,-1,0:1,1,1"], "point lights only"),
     ] {
         let r = run(&[&["check"][..], &args, &["--quiet"]].concat());
         assert_refused(&r, &format!("{args:?}"), expected);
