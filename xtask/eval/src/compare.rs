@@ -11,6 +11,10 @@
 //!   is relative noise, one on a line of single pixels is geometry (McGuire's right
 //!   wall meets the floor on the image diagonal, through pixel centres, which the rasterizer
 //!   gives to the wall and the tracer to the floor).
+//!
+//! `--diff OUT.png` also writes where the error is: the reference, the test and their
+//! difference side by side, all three scaled by the reference's mean luminance, the difference
+//! red where the test is brighter and blue where it is darker.
 
 use anyhow::{bail, Context, Result};
 use std::path::Path;
@@ -141,12 +145,38 @@ pub fn compare_files(test: &Path, reference: &Path) -> Result<Metrics> {
     Ok(metrics(&t, &r))
 }
 
-/// Runs `compare TEST REF`.
+/// Writes `reference`, `test` and their difference side by side to the PNG `out` (see the
+/// module doc).
+fn write_diff(test: &Rgb, reference: &Rgb, out: &Path) -> Result<()> {
+    let luminance = |p: &[f64; 3]| 0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2];
+    let mean = reference.px.iter().map(luminance).sum::<f64>() / reference.px.len().max(1) as f64;
+    // Mean luminance at a quarter of full scale; the difference at twice the gain.
+    let gain = 0.25 / mean.max(1e-300);
+    let byte = |v: f64| (255.0 * v.clamp(0.0, 1.0).powf(1.0 / 2.2)).round() as u8;
+    let (w, h) = (reference.width as u32, reference.height as u32);
+    let mut img = image::RgbImage::new(3 * w, h);
+    for (i, (t, r)) in test.px.iter().zip(&reference.px).enumerate() {
+        let (x, y) = ((i % reference.width) as u32, (i / reference.width) as u32);
+        img.put_pixel(x, y, image::Rgb(r.map(|v| byte(gain * v))));
+        img.put_pixel(w + x, y, image::Rgb(t.map(|v| byte(gain * v))));
+        let d = 2.0 * gain * (luminance(t) - luminance(r));
+        img.put_pixel(2 * w + x, y, image::Rgb([byte(d), 0, byte(-d)]));
+    }
+    img.save(out).with_context(|| format!("writing {}", out.display()))
+}
+
+/// Runs `compare TEST REF [--diff OUT.png]`.
 pub fn run(args: &[String]) -> Result<()> {
-    let [test, reference] = args else {
-        bail!("usage: cargo xtask eval compare TEST.exr REFERENCE.exr");
+    let (test, reference, diff) = match args {
+        [test, reference] => (test, reference, None),
+        [test, reference, flag, out] if flag == "--diff" => (test, reference, Some(Path::new(out))),
+        _ => bail!("usage: cargo xtask eval compare TEST.exr REFERENCE.exr [--diff OUT.png]"),
     };
     let m = compare_files(Path::new(test), Path::new(reference))?;
+    if let Some(out) = diff {
+        let (t, r) = (load(Path::new(test))?, load(Path::new(reference))?);
+        write_diff(&t, &r, out)?;
+    }
     println!(
         "error {:.2}% (4x4 downsample), {:.2}% full resolution; energy {:.3}; shape error {:.2}%; local error {:.2}x (8x8 window at {}, {}; its reference at {:.0}% of the image's RMS)",
         100.0 * m.error,
@@ -196,5 +226,21 @@ mod tests {
         assert!(m.local > 3.0, "{m:?}");
         assert_eq!(m.local_at, (0, 0), "{m:?}");
         assert!((m.local_brightness - 1.0).abs() < 1e-12, "{m:?}");
+    }
+
+    #[test]
+    fn the_diff_shows_reference_test_and_their_difference() {
+        let r = image(16, 8, |_, _| 1.0);
+        let t = image(16, 8, |x, _| if x < 8 { 2.0 } else { 0.5 });
+        let out = std::env::temp_dir().join(format!("prm-compare-diff-{}.png", std::process::id()));
+        write_diff(&t, &r, &out).unwrap();
+        let png = image::open(&out).unwrap().to_rgb8();
+        std::fs::remove_file(&out).ok();
+        assert_eq!(png.dimensions(), (48, 8));
+        // Brighter on the left: red; darker on the right: blue; the panels as bright as they are.
+        let (left, right) = (png.get_pixel(32 + 2, 4), png.get_pixel(32 + 12, 4));
+        assert!(left[0] > 0 && left[2] == 0, "{left:?}");
+        assert!(right[2] > 0 && right[0] == 0, "{right:?}");
+        assert!(png.get_pixel(16 + 2, 4)[1] > png.get_pixel(2, 4)[1]);
     }
 }

@@ -122,7 +122,7 @@ const STUDIES: [&str; 5] = ["budget", "targets", "emitters", "sky", "probes"];
 
 fn usage() -> ! {
     eprintln!(
-        "usage: cargo xtask eval [--quick|--full|--budget|--targets|--emitters|--sky|--probes] [--out DIR]\n       cargo xtask eval compare TEST.exr REFERENCE.exr   (error, energy, shape and local error as ../shared/notes/metrics.md defines them)\n       cargo xtask eval experiment NAME [ARGS]   (the experiments the crates' docs cite; without NAME, the list)\n\n  --quick   Cornell box, a handful of settings, small references (CI; dev-profile binaries); default\n  --full    all scenes and sweeps (release binaries; the README's charts)\n  --budget  the error budget of the default bake, one idealised stage at a time (release; the README's budget table)\n  --targets the accuracy targets as ../shared/notes/metrics.md measures them: default bakes of McGuire's boxes, chairs and the fireplace room against the reference in image space, bake time and the gi/direct frame ratio (release)\n  --emitters emissive surfaces (McGuire's CornellBox-Original by its own lamp, two lamps in our Cornell box) against the reference, and the frame cost of a scale change (release)\n  --sky     the sky and a sun (our courtyard; Sponza) against the reference, and the frame cost of turning the sky (release)\n  --probes  irradiance probes (our Cornell box, two rooms) against the reference at the probe positions, and their cost (release)\n  --out DIR output directory (default target/eval-quick, eval-full, eval-budget, eval-targets, eval-emitters, eval-sky or eval-probes)\n\nBakes and references are cached under target/eval/ (delete it to start over)."
+        "usage: cargo xtask eval [--quick|--full|--budget|--targets|--emitters|--sky|--probes] [--out DIR] [--only CASE]\n       cargo xtask eval compare TEST.exr REFERENCE.exr [--diff OUT.png]   (error, energy, shape and local error as ../shared/notes/metrics.md defines them)\n       cargo xtask eval experiment NAME [ARGS]   (the experiments the crates' docs cite; without NAME, the list)\n\n  --quick   Cornell box, a handful of settings, small references (CI; dev-profile binaries); default\n  --full    all scenes and sweeps (release binaries; the README's charts)\n  --budget  the error budget of the default bake, one idealised stage at a time (release; the README's budget table)\n  --targets the accuracy targets as ../shared/notes/metrics.md measures them: default bakes of McGuire's boxes, chairs and the fireplace room against the reference in image space, bake time and the gi/direct frame ratio (release)\n  --emitters emissive surfaces (McGuire's CornellBox-Original by its own lamp, two lamps in our Cornell box) against the reference, and the frame cost of a scale change (release)\n  --sky     the sky and a sun (our courtyard; Sponza) against the reference, and the frame cost of turning the sky (release)\n  --probes  irradiance probes (our Cornell box, two rooms) against the reference at the probe positions, and their cost (release)\n  --only CASE  with --targets: only the cases whose name contains CASE (\"modern hall\", \"fireplace\")\n  --out DIR output directory (default target/eval-quick, eval-full, eval-budget, eval-targets, eval-emitters, eval-sky or eval-probes)\n\nBakes and references are cached under target/eval/ (delete it to start over)."
     );
     std::process::exit(2);
 }
@@ -158,12 +158,14 @@ fn run(args: &[String]) -> Result<()> {
     // A study (`--budget`, `--targets`, …) writes one Markdown table instead of the sweep.
     let mut study: Option<&'static str> = None;
     let mut out = None;
+    let mut only: Option<String> = None;
     let mut it = args.iter();
     while let Some(a) = it.next() {
         match a.as_str() {
             "--quick" => mode = Mode::Quick,
             "--full" => mode = Mode::Full,
             "--out" => out = Some(PathBuf::from(it.next().unwrap_or_else(|| usage()))),
+            "--only" => only = Some(it.next().unwrap_or_else(|| usage()).clone()),
             flag => {
                 let name = flag.strip_prefix("--").unwrap_or_else(|| usage());
                 study = Some(STUDIES.into_iter().find(|s| *s == name).unwrap_or_else(|| usage()));
@@ -227,7 +229,7 @@ fn run(args: &[String]) -> Result<()> {
             "emitters" => emitters::run(&bin, &cache, &root, &out)?,
             "sky" => sky::run(&bin, &cache, &root, &out)?,
             "probes" => probes::run(&bin, &cache, &root)?,
-            "targets" => targets::run(&bin, &cache, &root, &out)?,
+            "targets" => targets::run(&bin, &cache, &root, &out, only.as_deref())?,
             _ => budget::run(&bin, &cache, &root)?,
         };
         return table(study, markdown);

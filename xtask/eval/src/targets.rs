@@ -12,10 +12,14 @@
 //! against the image's, see [`compare`]), the reference's own noise after the downsample (from a
 //! second reference with another seed, [`NOISE_SPP`]), the bake's seconds (its report), the
 //! bake's own estimate of its accuracy (`prm_trace::check`: its own four lights, one close to
-//! a surface, at exit points, without the downsample; recorded in the archive) and the `gi`/`direct` frame-time ratio at 1024×768 (median of interleaved frames on one renderer, as
-//! `cargo bench -p prm-play --bench frame` does). Each cell names its target and whether it is
+//! a surface, at exit points, without the downsample; recorded in the archive), the same check
+//! under the case's own light (`prm-bake check --light`) over the error measured in the image,
+//! and the `gi`/`direct` frame-time ratio at 1024×768 (median of interleaved frames on one
+//! renderer, as `cargo bench -p prm-play --bench frame` does). Each cell names its target and whether it is
 //! met. The fireplace room's default bake is made twice, with seeds 0 and 1: its error moves by
-//! half a point with the seed.
+//! half a point with the seed. The large scenes (the modern hall, Sponza, Sibenik) are lit by lamps 0.4 m
+//! from a surface, one under a ceiling and one by a wall ([`near_surface_lamps`]), where the
+//! entry points' spacing decides the indirect light. `--only CASE` runs the cases whose name contains CASE.
 
 use anyhow::{Context, Result};
 use std::fmt::Write as _;
@@ -52,9 +56,10 @@ struct Target {
     bake_s: Option<f64>,
 }
 
-/// The targets every case shares: no blotches and a cheap frame.
+/// The targets every case shares: no blotches and a cheap frame (the ratio on lavapipe, the
+/// CPU's Vulkan; a hardware GPU's target is 1.1).
 const LOCAL: f64 = 3.0;
-const FRAME_RATIO: f64 = 1.10;
+const FRAME_RATIO: f64 = 1.30;
 
 struct Case {
     name: String,
@@ -120,10 +125,10 @@ fn cases(root: &Path, cache: &Path) -> Result<Vec<Case>> {
                 ("(−0.75, 0.4, 0), low near the red wall".into(), point(-0.75, 0.4, 0.0)),
             ],
             target: Target {
-                error: 0.05,
+                error: 0.03,
                 full: Some(0.08),
                 energy: Some(0.02),
-                bake_s: Some(55.0),
+                bake_s: Some(17.0),
             },
         });
         out.push(Case {
@@ -165,8 +170,8 @@ fn cases(root: &Path, cache: &Path) -> Result<Vec<Case>> {
         // The default budget once more with another seed: how much of the error the seed moves.
         let runs: [(&str, &[&str], f64); 3] = [
             ("fireplace room, --time-budget 120", &["--time-budget", "120"], 0.10),
-            ("fireplace room, default budget", &[], 0.06),
-            ("fireplace room, default budget, --seed 1", &["--seed", "1"], 0.06),
+            ("fireplace room, default budget", &[], 0.055),
+            ("fireplace room, default budget, --seed 1", &["--seed", "1"], 0.055),
         ];
         for (name, args, error) in runs {
             out.push(Case {
@@ -186,7 +191,99 @@ fn cases(root: &Path, cache: &Path) -> Result<Vec<Case>> {
     } else {
         println!("targets: {} is absent: the fireplace room skipped", fireplace.display());
     }
+    // The large scenes, each lit by a lamp under a ceiling and one by a wall.
+    let large = [
+        (
+            "modern hall",
+            "modern-hall/modern_hall.obj",
+            HALL_CAMERA,
+            HALL_LAMP_BASES,
+        ),
+        ("sponza", "sponza-dabrovic/sponza.obj", SPONZA_CAMERA, SPONZA_LAMP_BASES),
+        ("sibenik", "sibenik/sibenik.obj", SIBENIK_CAMERA, SIBENIK_LAMP_BASES),
+    ];
+    for (name, file, camera, bases) in large {
+        let scene = shared.join(file);
+        if !scene.is_file() {
+            println!("targets: {} is absent: {name} skipped", scene.display());
+            continue;
+        }
+        out.push(Case {
+            name: name.into(),
+            lights: near_surface_lamps(&scene, bases)?,
+            scene,
+            camera: Some(camera.into()),
+            size: "256x192",
+            spp: SPP,
+            bake_args: vec![],
+            target: LARGE,
+        });
+    }
     Ok(out)
+}
+
+/// The large scenes' targets: 8% with lamps near a surface, energy within 3%, a bake within
+/// the default budget.
+const LARGE: Target = Target {
+    error: 0.08,
+    full: None,
+    energy: Some(0.03),
+    bake_s: Some(600.0),
+};
+
+/// The modern hall's camera, the `.scene`'s own (its FOV of 1.3 rad, vertical), and the point
+/// 5 m in front of it whose ceiling and nearest wall get the lamps.
+const HALL_CAMERA: &str = "5.488,2.255,1.170:4.491,2.240,1.094:74.5";
+const HALL_LAMP_BASES: [[f32; 3]; 2] = [[0.509, 2.177, 0.790]; 2];
+
+/// Sponza's camera, in the atrium at head height looking down its length, a point under the
+/// ground floor's arcade (the atrium itself is open to the sky) for the ceiling lamp and one in
+/// the atrium for the wall lamp.
+const SPONZA_CAMERA: &str = "13,3,0:0,3,0:70";
+const SPONZA_LAMP_BASES: [[f32; 3]; 2] = [[2.0, 2.0, 5.8], [2.0, 3.0, 0.0]];
+
+/// Sibenik's camera, at the west end of the nave about 3 m above its floor looking east, a point
+/// in a side aisle for the ceiling lamp and one in the nave for the wall lamp.
+const SIBENIK_CAMERA: &str = "-16,-10,0:0,-10,0:70";
+const SIBENIK_LAMP_BASES: [[f32; 3]; 2] = [[-6.0, -10.0, 5.5], [-6.0, -10.0, 0.0]];
+
+/// How far the near-surface lamps hang from their surface, in metres: game levels put lamps
+/// within half a metre of a ceiling or a wall.
+const LAMP_GAP: f32 = 0.4;
+
+/// Two point lights [`LAMP_GAP`] from a surface in `scene`: under the ceiling above `bases[0]`,
+/// and before the nearest wall along ±x or ±z from `bases[1]`. Their intensity is the eval's
+/// warm white scaled by the bounds' diagonal squared ([`plan::point_light`]).
+fn near_surface_lamps(scene: &Path, bases: [[f32; 3]; 2]) -> Result<Vec<(String, String)>> {
+    use glam::Vec3;
+    let loaded = prm_scene::load(scene).with_context(|| format!("loading {}", scene.display()))?;
+    let bvh = prm_trace::Bvh::build(&loaded, &prm_trace::BvhParams::DEFAULT)?;
+    let [up, side] = bases.map(Vec3::from_array);
+    let hit = |p: Vec3, d: Vec3| bvh.closest_hit(p, d, f32::INFINITY, u32::MAX).map(|h| (p, d, h.t));
+    let ceiling = hit(up, Vec3::Y).with_context(|| format!("no ceiling above {up} in {}", scene.display()))?;
+    let wall = [Vec3::X, Vec3::NEG_X, Vec3::Z, Vec3::NEG_Z]
+        .into_iter()
+        .filter_map(|d| hit(side, d))
+        .min_by(|a, b| a.2.total_cmp(&b.2))
+        .with_context(|| format!("no wall about {side} in {}", scene.display()))?;
+    let d = loaded.bounds().diagonal();
+    let i = Vec3::new(1.0, 0.9, 0.75) * 0.3 * d * d;
+    let lamp = |(p, dir, t): (Vec3, Vec3, f32), what: &str| {
+        anyhow::ensure!(
+            t > 2.0 * LAMP_GAP,
+            "{what} {t} m from {p}: no room for a lamp {LAMP_GAP} m from it"
+        );
+        let at = p + dir * (t - LAMP_GAP);
+        Ok((
+            format!("({:.2}, {:.2}, {:.2}), {LAMP_GAP} m from the {what}", at.x, at.y, at.z),
+            format!("point:{},{},{}:{},{},{}", at.x, at.y, at.z, i.x, i.y, i.z),
+        ))
+    };
+    let lamps = vec![lamp(ceiling, "ceiling")?, lamp(wall, "wall")?];
+    for (label, spec) in &lamps {
+        println!("targets: {}: a lamp at {label} (--light {spec})", scene.display());
+    }
+    Ok(lamps)
 }
 
 /// The fireplace room's camera: the `.scene`'s camera turned by the objects' common yaw (0.3 rad,
@@ -228,6 +325,34 @@ fn frame_ratio(archive: &Path, scene_path: &Path, camera: Option<&str>, light: &
     Ok(median(&mut gi) / median(&mut direct))
 }
 
+/// How far the check's error may lie from the measured one, as a share of it.
+const ESTIMATE: f64 = 0.30;
+
+/// Reference paths per exit point of the check under a case's light: at the bake's 512, the
+/// reference's own noise (2.6–2.8% on McGuire's box) hides errors of 2–3%.
+const CHECK_PATHS: u32 = 4096;
+
+/// The bake's check of `archive` under the point light `light` alone (`prm-bake check --light`,
+/// [`CHECK_PATHS`] paths): its error and standard error at the exit points.
+fn check_under(bake_bin: &Path, scene: &Path, archive: &Path, light: &str) -> Result<(f64, f64)> {
+    let output = std::process::Command::new(bake_bin)
+        .arg("check")
+        .arg(scene)
+        .arg(archive)
+        .args(["--light", light, "--json", "--quiet", "--accuracy-paths"])
+        .arg(CHECK_PATHS.to_string())
+        .output()
+        .with_context(|| format!("starting {}", bake_bin.display()))?;
+    anyhow::ensure!(
+        output.status.success(),
+        "prm-bake check {}: {}",
+        archive.display(),
+        String::from_utf8_lossy(&output.stderr).trim()
+    );
+    let accuracy: prm_format::Accuracy = serde_json::from_slice(&output.stdout).context("reading the check's JSON")?;
+    Ok((accuracy.mean_error(), accuracy.mean_standard_error()))
+}
+
 /// `value` formatted, with "(target: met)" or "(target: **not met**)" when `ok` says.
 fn against(value: String, ok: Option<bool>, target: String) -> String {
     match ok {
@@ -236,12 +361,14 @@ fn against(value: String, ok: Option<bool>, target: String) -> String {
     }
 }
 
-/// Runs the cases; returns the Markdown table.
-pub fn run(bake_bin: &Path, cache: &Path, root: &Path, out: &Path) -> Result<String> {
+/// Runs the cases (those whose name contains `only`, when given); returns the Markdown table.
+pub fn run(bake_bin: &Path, cache: &Path, root: &Path, out: &Path, only: Option<&str>) -> Result<String> {
     let mut md = String::from(
-        "| case | light | indirect error (4×4) | full res. | energy | shape | local (worst 8×8 window's corner, its reference's RMS over the image's) | ref. noise | bake s | bake's own estimate (its 4 lights, exit points) | gi / direct frame |\n| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n",
+        "| case | light | indirect error (4×4) | full res. | energy | shape | local (worst 8×8 window's corner, its reference's RMS over the image's) | ref. noise | bake s | bake's own estimate (its 4 lights, exit points) | the check under this light (exit points), over the measured error | gi / direct frame |\n| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n",
     );
-    for case in cases(root, cache)? {
+    let cases = cases(root, cache)?;
+    let chosen = cases.into_iter().filter(|c| only.is_none_or(|o| c.name.contains(o)));
+    for case in chosen {
         let name = format!("targets-{}", case.name);
         let (baked, bake_s) = plan::bake_case(bake_bin, cache, &name, &case.scene, &case.bake_args)?;
         println!("targets: {}: baked ({bake_s:.1} s)", case.name);
@@ -275,11 +402,13 @@ pub fn run(bake_bin: &Path, cache: &Path, root: &Path, out: &Path) -> Result<Str
             let share = f64::from(NOISE_SPP) / f64::from(NOISE_SPP + case.spp);
             let noise = compare::compare_files(&rb, &ra)?.error * share.sqrt();
             let ratio = frame_ratio(&baked.archive, &case.scene, case.camera.as_deref(), light)?;
+            let checked = check_under(bake_bin, &case.scene, &baked.archive, light)?;
+            let over = checked.0 / m.error;
             let tg = case.target;
             let pct = |v: f64| format!("{:.1}%", 100.0 * v);
             let _ = writeln!(
                 md,
-                "| {} | {label} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+                "| {} | {label} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
                 case.name,
                 against(pct(m.error), Some(m.error <= tg.error), format!("≤ {}", pct(tg.error))),
                 against(
@@ -316,12 +445,22 @@ pub fn run(bake_bin: &Path, cache: &Path, root: &Path, out: &Path) -> Result<Str
                 },
                 if row == 0 { estimate.clone() } else { String::new() },
                 against(
+                    format!("{} ± {:.1}: {over:.2}", pct(checked.0), 100.0 * checked.1),
+                    Some((over - 1.0).abs() <= ESTIMATE),
+                    format!("±{:.0}%", 100.0 * ESTIMATE)
+                ),
+                against(
                     format!("{ratio:.2}"),
                     Some(ratio <= FRAME_RATIO),
                     format!("≤ {FRAME_RATIO}")
                 ),
             );
-            println!("targets: {} {label}: {:.2}% (4x4)", case.name, 100.0 * m.error);
+            println!(
+                "targets: {} {label}: {:.2}% (4x4), energy {:.3} (--light {light})",
+                case.name,
+                100.0 * m.error,
+                m.energy
+            );
         }
     }
     Ok(md)
