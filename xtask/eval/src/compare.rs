@@ -130,6 +130,12 @@ fn metrics(t: &Rgb, r: &Rgb) -> Metrics {
 
 /// The metrics of the EXR `test` against the EXR `reference` (same size).
 pub fn compare_files(test: &Path, reference: &Path) -> Result<Metrics> {
+    let (t, r) = load_pair(test, reference)?;
+    Ok(metrics(&t, &r))
+}
+
+/// The EXRs `test` and `reference`, refused unless of one size.
+fn load_pair(test: &Path, reference: &Path) -> Result<(Rgb, Rgb)> {
     let (t, r) = (load(test)?, load(reference)?);
     if (t.width, t.height) != (r.width, r.height) {
         bail!(
@@ -142,7 +148,7 @@ pub fn compare_files(test: &Path, reference: &Path) -> Result<Metrics> {
             r.height
         );
     }
-    Ok(metrics(&t, &r))
+    Ok((t, r))
 }
 
 /// Writes `reference`, `test` and their difference side by side to the PNG `out` (see the
@@ -172,9 +178,9 @@ pub fn run(args: &[String]) -> Result<()> {
         [test, reference, flag, out] if flag == "--diff" => (test, reference, Some(Path::new(out))),
         _ => bail!("usage: cargo xtask eval compare TEST.exr REFERENCE.exr [--diff OUT.png]"),
     };
-    let m = compare_files(Path::new(test), Path::new(reference))?;
+    let (t, r) = load_pair(Path::new(test), Path::new(reference))?;
+    let m = metrics(&t, &r);
     if let Some(out) = diff {
-        let (t, r) = (load(Path::new(test))?, load(Path::new(reference))?);
         write_diff(&t, &r, out)?;
     }
     println!(

@@ -151,11 +151,17 @@ pub fn scenes(mode: Mode, root: &Path) -> Vec<SceneSpec> {
 pub fn point_light(scene: &prm_scene::Scene, fraction: [f32; 3]) -> Result<(String, prm_scene::Light)> {
     let b = scene.bounds();
     let p = b.min + (b.max - b.min) * glam::Vec3::from_array(fraction);
-    let d = b.diagonal();
-    let i = glam::Vec3::new(1.0, 0.9, 0.75) * 0.3 * d * d;
+    let i = light_intensity(scene);
     let s = format!("point:{},{},{}:{},{},{}", p.x, p.y, p.z, i.x, i.y, i.z);
     let l = prm_trace::parse_light(&s).map_err(|e| anyhow::anyhow!("light {s}: {e}"))?;
     Ok((s, l))
+}
+
+/// The eval's warm white point-light intensity for `scene`, scaled by its bounds' diagonal
+/// squared.
+pub fn light_intensity(scene: &prm_scene::Scene) -> glam::Vec3 {
+    let d = scene.bounds().diagonal();
+    glam::Vec3::new(1.0, 0.9, 0.75) * 0.3 * d * d
 }
 
 #[derive(Clone, Copy, Debug)]

@@ -107,7 +107,7 @@ fn point(x: f32, y: f32, z: f32) -> String {
     format!("point:{x},{y},{z}:1,1,1")
 }
 
-fn cases(root: &Path, cache: &Path) -> Result<Vec<Case>> {
+fn cases(root: &Path, cache: &Path, only: Option<&str>) -> Result<Vec<Case>> {
     let shared = root.join("../shared/scenes");
     let mut out = Vec::new();
     let boxes = cache.join("targets-scenes");
@@ -202,7 +202,8 @@ fn cases(root: &Path, cache: &Path) -> Result<Vec<Case>> {
         ("sponza", "sponza-dabrovic/sponza.obj", SPONZA_CAMERA, SPONZA_LAMP_BASES),
         ("sibenik", "sibenik/sibenik.obj", SIBENIK_CAMERA, SIBENIK_LAMP_BASES),
     ];
-    for (name, file, camera, bases) in large {
+    // Their lamps are found by loading the scene: only for the cases that run.
+    for (name, file, camera, bases) in large.into_iter().filter(|l| only.is_none_or(|o| l.0.contains(o))) {
         let scene = shared.join(file);
         if !scene.is_file() {
             println!("targets: {} is absent: {name} skipped", scene.display());
@@ -253,7 +254,7 @@ const LAMP_GAP: f32 = 0.4;
 
 /// Two point lights [`LAMP_GAP`] from a surface in `scene`: under the ceiling above `bases[0]`,
 /// and before the nearest wall along ±x or ±z from `bases[1]`. Their intensity is the eval's
-/// warm white scaled by the bounds' diagonal squared ([`plan::point_light`]).
+/// warm white scaled by the bounds' diagonal squared ([`plan::light_intensity`]).
 fn near_surface_lamps(scene: &Path, bases: [[f32; 3]; 2]) -> Result<Vec<(String, String)>> {
     use glam::Vec3;
     let loaded = prm_scene::load(scene).with_context(|| format!("loading {}", scene.display()))?;
@@ -266,8 +267,7 @@ fn near_surface_lamps(scene: &Path, bases: [[f32; 3]; 2]) -> Result<Vec<(String,
         .filter_map(|d| hit(side, d))
         .min_by(|a, b| a.2.total_cmp(&b.2))
         .with_context(|| format!("no wall about {side} in {}", scene.display()))?;
-    let d = loaded.bounds().diagonal();
-    let i = Vec3::new(1.0, 0.9, 0.75) * 0.3 * d * d;
+    let i = plan::light_intensity(&loaded);
     let lamp = |(p, dir, t): (Vec3, Vec3, f32), what: &str| {
         anyhow::ensure!(
             t > 2.0 * LAMP_GAP,
@@ -366,7 +366,7 @@ pub fn run(bake_bin: &Path, cache: &Path, root: &Path, out: &Path, only: Option<
     let mut md = String::from(
         "| case | light | indirect error (4×4) | full res. | energy | shape | local (worst 8×8 window's corner, its reference's RMS over the image's) | ref. noise | bake s | bake's own estimate (its 4 lights, exit points) | the check under this light (exit points), over the measured error | gi / direct frame |\n| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n",
     );
-    let cases = cases(root, cache)?;
+    let cases = cases(root, cache, only)?;
     let chosen = cases.into_iter().filter(|c| only.is_none_or(|o| c.name.contains(o)));
     for case in chosen {
         let name = format!("targets-{}", case.name);
