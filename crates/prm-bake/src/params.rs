@@ -349,8 +349,21 @@ impl CostModel {
     }
 }
 
-/// Most entry points the automatic rules choose.
+/// Most entry points the doublings reach, but for the lamps' ([`MAX_DOUBLED_ENTRIES`]).
 const MAX_AUTO_ENTRIES: usize = 16384;
+
+/// Most entry points the chart rule ([`ENTRIES_PER_CHART`]) asks for: [`ENTRIES_PER_CLUSTER`]
+/// for each of the [`MAX_AUTO_CLUSTERS`], so that scenes of many charts keep the clusters'
+/// spacing the automatic cluster count was chosen at (only the doublings, where the time budget
+/// allows, go beyond it). A cluster's pane spreads its members' light over the area they
+/// cover, which a lamp close to a surface shows most. Measured under six lamp positions 0.4 m
+/// from a ceiling and six 0.4 m from a wall in each scene (the `cargo xtask eval --targets`
+/// lamps and views, moved by 0.2–0.4 m; 4×4 image error against 256-path references, mean
+/// over positions, 1024 clusters, 512² atlas, 65536 walks): Sponza 20.7% / 18.9% at 8192
+/// entry points against 24.5% / 18.5% at 16384 (28.8% / 18.7% at 32768, 28.1% / 26.8% at
+/// 4096), Sibenik 21.8% / 21.6% against 31.4% / 21.6%, the ceiling lamps' energy 0.92 / 0.91
+/// against 0.86 / 0.75.
+const MAX_CHART_ENTRIES: usize = ENTRIES_PER_CLUSTER * MAX_AUTO_CLUSTERS;
 
 /// Most paths per texel the time budget gives the sky's transfer (from [`crate::SKY_PATHS`],
 /// doubled). Measured on Dabrovic Sponza (`cargo xtask eval --sky`, its default plan of about
@@ -771,7 +784,7 @@ impl Planner<'_> {
     }
 
     /// The entry points: given, else [`ENTRIES_PER_CHART`] per chart, [`MIN_AUTO_ENTRIES`] to
-    /// [`MAX_AUTO_ENTRIES`], a multiple of [`ENTRY_STEP`].
+    /// [`MAX_CHART_ENTRIES`], a multiple of [`ENTRY_STEP`].
     fn entries_rule(
         &self,
         probe: &dyn Fn() -> Result<Atlas, BakeError>,
@@ -785,10 +798,12 @@ impl Planner<'_> {
                 let charts = probe()?.stats.charts as usize;
                 let n = (ENTRIES_PER_CHART * charts)
                     .div_ceil(ENTRY_STEP)
-                    .clamp(MIN_AUTO_ENTRIES / ENTRY_STEP, MAX_AUTO_ENTRIES / ENTRY_STEP)
+                    .clamp(MIN_AUTO_ENTRIES / ENTRY_STEP, MAX_CHART_ENTRIES / ENTRY_STEP)
                     * ENTRY_STEP;
                 reasons.push(format!(
-                    "{n} entry points: 4 per chart of the scene's {charts} charts, 1024..16384"
+                    "{n} entry points: 4 per chart of the scene's {charts} charts, \
+                     {MIN_AUTO_ENTRIES}..{MAX_CHART_ENTRIES} ({ENTRIES_PER_CLUSTER} for each of at most \
+                     {MAX_AUTO_CLUSTERS} clusters)"
                 ));
                 Ok(Choice { value: n, auto: true })
             }
@@ -986,16 +1001,16 @@ impl Planner<'_> {
             (None, Some(v)) => v.clusters.min(entries),
             (None, None) => {
                 let texels_per_pane = self.texels(draft.atlas.size);
-                let wanted = (entries / ENTRIES_PER_CLUSTER)
-                    .clamp(MIN_AUTO_CLUSTERS, MAX_AUTO_CLUSTERS)
-                    .min(entries);
+                let per_entries = entries / ENTRIES_PER_CLUSTER;
+                let wanted = per_entries.clamp(MIN_AUTO_CLUSTERS, MAX_AUTO_CLUSTERS).min(entries);
                 let (by_memory, by_archive) = (
                     self.budgets.by_memory(texels_per_pane),
                     self.budgets.by_archive(texels_per_pane),
                 );
                 let c = wanted.min(self.budgets.clusters_allowed(texels_per_pane));
                 reasons.push(format!(
-                    "{c} clusters: entries/{ENTRIES_PER_CLUSTER} = {wanted}, memory budget allows {by_memory}, archive budget {by_archive}"
+                    "{c} clusters: entries/{ENTRIES_PER_CLUSTER} = {per_entries} ({MIN_AUTO_CLUSTERS}..{MAX_AUTO_CLUSTERS}), \
+                     memory budget allows {by_memory}, archive budget {by_archive}"
                 ));
                 c
             }
@@ -1117,9 +1132,9 @@ impl BakeParams {
     /// - atlas: the atlas's own automatic size (about 12 texels per triangle or 64 per chart,
     ///   128 to 4096 a side),
     ///   shrunk until `AUTO_ATLAS_PANES` (256) panes fit the run-time memory budget;
-    /// - entries: 4 per chart (charts are the scene's distinct flat pieces), 1024 to 16384, a
-    ///   multiple of 256, and no more than 16 per cluster the bake can have (`--clusters`, or the
-    ///   most the memory and archive budgets allow; not below 1024), applied after the time
+    /// - entries: 4 per chart (charts are the scene's distinct flat pieces), 1024 to 8192 (8 for
+    ///   each of at most 1024 clusters, `MAX_CHART_ENTRIES`), a multiple of 256, and no more
+    ///   than 16 per cluster the bake can have (`--clusters`, or the most the memory and archive budgets allow; not below 1024), applied after the time
     ///   budget below, at the atlas it leaves, the walks per entry then rising towards twice
     ///   `WALKS_IN_ALL`, at most `CAPPED_WALKS` (32) each, as far as the budget allows. Where the
     ///   budgets cap the clusters, more entry points only crowd them: Sibenik's own error estimate

@@ -277,13 +277,12 @@ fn the_top_k_reason_adds_up() {
 /// A scene of many small charts under a tight memory budget: the automatic atlas stops
 /// shrinking at the size that holds every chart, so the bake can build the atlas the plan
 /// promises.
-#[test]
-fn the_planned_atlas_holds_every_chart() {
-    let dir = std::env::temp_dir().join(format!("prm-bake-charts-{}", std::process::id()));
+/// `count` separate triangles (one chart each), 200 to a row 5 cm apart.
+fn separate_triangles(count: usize) -> Scene {
+    let dir = std::env::temp_dir().join(format!("prm-bake-charts-{}-{count}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    // 40,000 separate triangles (one chart each) over a 10 m square.
     let mut obj = String::new();
-    for i in 0..40_000 {
+    for i in 0..count {
         let (x, z) = ((i % 200) as f32 * 0.05, (i / 200) as f32 * 0.05);
         obj.push_str(&format!("v {x} 0 {z}\nv {} 0 {z}\nv {x} 0 {}\n", x + 0.03, z + 0.03));
         obj.push_str(&format!("f {} {} {}\n", 3 * i + 1, 3 * i + 3, 3 * i + 2));
@@ -291,6 +290,28 @@ fn the_planned_atlas_holds_every_chart() {
     let path = dir.join("charts.obj");
     std::fs::write(&path, obj).unwrap();
     let scene = prm_scene::load(&path).unwrap();
+    std::fs::remove_dir_all(&dir).unwrap();
+    scene
+}
+
+#[test]
+fn many_charts_keep_eight_entries_per_cluster() {
+    // 3000 charts ask 12000 entry points; the chart rule takes 8 for each of the 1024 clusters.
+    let scene = separate_triangles(3000);
+    let p = resolve(&BakeConfig::default(), &scene, probe(&scene)).unwrap();
+    assert_eq!(
+        (p.entries, p.clusters),
+        (MAX_CHART_ENTRIES, MAX_AUTO_CLUSTERS),
+        "{:?}",
+        p.reasons
+    );
+    assert_eq!(p.entries, ENTRIES_PER_CLUSTER * p.clusters);
+}
+
+#[test]
+fn the_planned_atlas_holds_every_chart() {
+    // 40,000 separate triangles over a 10 m square.
+    let scene = separate_triangles(40_000);
     let cfg = BakeConfig {
         memory_budget_mib: Some(128.0),
         ..Default::default()
@@ -301,5 +322,4 @@ fn the_planned_atlas_holds_every_chart() {
     };
     let sizing = prm_scene::AtlasParams::with_sizing(prm_scene::Sizing::Resolution(r));
     Atlas::build(&scene, &sizing).unwrap_or_else(|e| panic!("the plan's {r}² atlas: {e}"));
-    std::fs::remove_dir_all(&dir).unwrap();
 }
