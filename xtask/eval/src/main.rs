@@ -18,6 +18,7 @@ mod charts;
 mod compare;
 mod emitters;
 mod experiments;
+mod lamps;
 mod measure;
 mod plan;
 mod probes;
@@ -118,11 +119,11 @@ impl Row {
 }
 
 /// The studies besides the sweep, by flag name (`--budget` …): each writes `NAME.md`.
-const STUDIES: [&str; 5] = ["budget", "targets", "emitters", "sky", "probes"];
+const STUDIES: [&str; 6] = ["budget", "targets", "lamps", "emitters", "sky", "probes"];
 
 fn usage() -> ! {
     eprintln!(
-        "usage: cargo xtask eval [--quick|--full|--budget|--targets|--emitters|--sky|--probes] [--out DIR] [--only CASE]\n       cargo xtask eval compare TEST.exr REFERENCE.exr [--diff OUT.png]   (error, energy, shape and local error as ../shared/notes/metrics.md defines them)\n       cargo xtask eval experiment NAME [ARGS]   (the experiments the crates' docs cite; without NAME, the list)\n\n  --quick   Cornell box, a handful of settings, small references (CI; dev-profile binaries); default\n  --full    all scenes and sweeps (release binaries; the README's charts)\n  --budget  the error budget of the default bake, one idealised stage at a time (release; the README's budget table)\n  --targets the accuracy targets as ../shared/notes/metrics.md measures them: default bakes of McGuire's boxes, chairs and the fireplace room against the reference in image space, bake time and the gi/direct frame ratio (release)\n  --emitters emissive surfaces (McGuire's CornellBox-Original by its own lamp, two lamps in our Cornell box) against the reference, and the frame cost of a scale change (release)\n  --sky     the sky and a sun (our courtyard; Sponza) against the reference, and the frame cost of turning the sky (release)\n  --probes  irradiance probes (our Cornell box, two rooms) against the reference at the probe positions, and their cost (release)\n  --only CASE  with --targets: only the cases whose name contains CASE (\"modern hall\", \"fireplace\")\n  --out DIR output directory (default target/eval-quick, eval-full, eval-budget, eval-targets, eval-emitters, eval-sky or eval-probes)\n\nBakes and references are cached under target/eval/ (delete it to start over)."
+        "usage: cargo xtask eval [--quick|--full|--budget|--targets|--lamps|--emitters|--sky|--probes] [--out DIR] [--only CASE]\n       cargo xtask eval compare TEST.exr REFERENCE.exr [--diff OUT.png]   (error, energy, shape and local error as ../shared/notes/metrics.md defines them)\n       cargo xtask eval experiment NAME [ARGS]   (the experiments the crates' docs cite; without NAME, the list)\n\n  --quick   Cornell box, a handful of settings, small references (CI; dev-profile binaries); default\n  --full    all scenes and sweeps (release binaries; the README's charts)\n  --budget  the error budget of the default bake, one idealised stage at a time (release; the README's budget table)\n  --targets the accuracy targets as ../shared/notes/metrics.md measures them: default bakes of McGuire's boxes, chairs and the fireplace room against the reference in image space, bake time and the gi/direct frame ratio (release)\n  --lamps   the large scenes' lamps of --targets, each at six positions a fifth of a metre apart along its surface: the mean error and the energy's range (release; 256-path references)\n  --emitters emissive surfaces (McGuire's CornellBox-Original by its own lamp, two lamps in our Cornell box) against the reference, and the frame cost of a scale change (release)\n  --sky     the sky and a sun (our courtyard; Sponza) against the reference, and the frame cost of turning the sky (release)\n  --probes  irradiance probes (our Cornell box, two rooms) against the reference at the probe positions, and their cost (release)\n  --only CASE  with --targets or --lamps: only the cases whose name contains CASE (\"modern hall\", \"fireplace\")\n  --out DIR output directory (default target/eval-quick, eval-full, eval-budget, eval-targets, eval-lamps, eval-emitters, eval-sky or eval-probes)\n\nBakes and references are cached under target/eval/ (delete it to start over)."
     );
     std::process::exit(2);
 }
@@ -230,6 +231,7 @@ fn run(args: &[String]) -> Result<()> {
             "sky" => sky::run(&bin, &cache, &root, &out)?,
             "probes" => probes::run(&bin, &cache, &root)?,
             "targets" => targets::run(&bin, &cache, &root, &out, only.as_deref())?,
+            "lamps" => lamps::run(&bin, &cache, &root, &out, only.as_deref())?,
             _ => budget::run(&bin, &cache, &root)?,
         };
         return table(study, markdown);

@@ -191,19 +191,12 @@ fn cases(root: &Path, cache: &Path, only: Option<&str>) -> Result<Vec<Case>> {
     } else {
         println!("targets: {} is absent: the fireplace room skipped", fireplace.display());
     }
-    // The large scenes, each lit by a lamp under a ceiling and one by a wall.
-    let large = [
-        (
-            "modern hall",
-            "modern-hall/modern_hall.obj",
-            HALL_CAMERA,
-            HALL_LAMP_BASES,
-        ),
-        ("sponza", "sponza-dabrovic/sponza.obj", SPONZA_CAMERA, SPONZA_LAMP_BASES),
-        ("sibenik", "sibenik/sibenik.obj", SIBENIK_CAMERA, SIBENIK_LAMP_BASES),
-    ];
-    // Their lamps are found by loading the scene: only for the cases that run.
-    for (name, file, camera, bases) in large.into_iter().filter(|l| only.is_none_or(|o| l.0.contains(o))) {
+    // The large scenes, each lit by a lamp under a ceiling and one by a wall. Their lamps are
+    // found by loading the scene: only for the cases that run.
+    for (name, file, camera, bases) in LARGE_SCENES
+        .into_iter()
+        .filter(|l| only.is_none_or(|o| l.0.contains(o)))
+    {
         let scene = shared.join(file);
         if !scene.is_file() {
             println!("targets: {} is absent: {name} skipped", scene.display());
@@ -211,7 +204,10 @@ fn cases(root: &Path, cache: &Path, only: Option<&str>) -> Result<Vec<Case>> {
         }
         out.push(Case {
             name: name.into(),
-            lights: near_surface_lamps(&scene, bases)?,
+            lights: near_surface_lamps(&scene, bases)?
+                .iter()
+                .map(|l| (l.label.clone(), l.spec(glam::Vec3::ZERO)))
+                .collect(),
             scene,
             camera: Some(camera.into()),
             size: "256x192",
@@ -231,6 +227,19 @@ const LARGE: Target = Target {
     energy: Some(0.03),
     bake_s: Some(600.0),
 };
+
+/// The large scenes: name, file under `../shared/scenes`, camera and the points whose ceiling
+/// and nearest wall get the lamps ([`near_surface_lamps`]).
+pub(crate) const LARGE_SCENES: [(&str, &str, &str, [[f32; 3]; 2]); 3] = [
+    (
+        "modern hall",
+        "modern-hall/modern_hall.obj",
+        HALL_CAMERA,
+        HALL_LAMP_BASES,
+    ),
+    ("sponza", "sponza-dabrovic/sponza.obj", SPONZA_CAMERA, SPONZA_LAMP_BASES),
+    ("sibenik", "sibenik/sibenik.obj", SIBENIK_CAMERA, SIBENIK_LAMP_BASES),
+];
 
 /// The modern hall's camera, the `.scene`'s own (its FOV of 1.3 rad, vertical), and the point
 /// 5 m in front of it whose ceiling and nearest wall get the lamps.
@@ -252,10 +261,28 @@ const SIBENIK_LAMP_BASES: [[f32; 3]; 2] = [[-6.0, -10.0, 5.5], [-6.0, -10.0, 0.0
 /// within half a metre of a ceiling or a wall.
 const LAMP_GAP: f32 = 0.4;
 
+/// A point light [`LAMP_GAP`] from a surface.
+pub(crate) struct Lamp {
+    /// Where it is, for tables.
+    pub label: String,
+    pub position: glam::Vec3,
+    pub intensity: glam::Vec3,
+    /// The unit direction from the lamp to its surface.
+    pub towards: glam::Vec3,
+}
+
+impl Lamp {
+    /// Its `--light` spec, moved by `offset`.
+    pub fn spec(&self, offset: glam::Vec3) -> String {
+        let (p, i) = (self.position + offset, self.intensity);
+        format!("point:{},{},{}:{},{},{}", p.x, p.y, p.z, i.x, i.y, i.z)
+    }
+}
+
 /// Two point lights [`LAMP_GAP`] from a surface in `scene`: under the ceiling above `bases[0]`,
 /// and before the nearest wall along ±x or ±z from `bases[1]`. Their intensity is the eval's
 /// warm white scaled by the bounds' diagonal squared ([`plan::light_intensity`]).
-fn near_surface_lamps(scene: &Path, bases: [[f32; 3]; 2]) -> Result<Vec<(String, String)>> {
+pub(crate) fn near_surface_lamps(scene: &Path, bases: [[f32; 3]; 2]) -> Result<Vec<Lamp>> {
     use glam::Vec3;
     let loaded = prm_scene::load(scene).with_context(|| format!("loading {}", scene.display()))?;
     let bvh = prm_trace::Bvh::build(&loaded, &prm_trace::BvhParams::DEFAULT)?;
@@ -274,14 +301,21 @@ fn near_surface_lamps(scene: &Path, bases: [[f32; 3]; 2]) -> Result<Vec<(String,
             "{what} {t} m from {p}: no room for a lamp {LAMP_GAP} m from it"
         );
         let at = p + dir * (t - LAMP_GAP);
-        Ok((
-            format!("({:.2}, {:.2}, {:.2}), {LAMP_GAP} m from the {what}", at.x, at.y, at.z),
-            format!("point:{},{},{}:{},{},{}", at.x, at.y, at.z, i.x, i.y, i.z),
-        ))
+        Ok(Lamp {
+            label: format!("({:.2}, {:.2}, {:.2}), {LAMP_GAP} m from the {what}", at.x, at.y, at.z),
+            position: at,
+            intensity: i,
+            towards: dir,
+        })
     };
     let lamps = vec![lamp(ceiling, "ceiling")?, lamp(wall, "wall")?];
-    for (label, spec) in &lamps {
-        println!("targets: {}: a lamp at {label} (--light {spec})", scene.display());
+    for l in &lamps {
+        println!(
+            "targets: {}: a lamp at {} (--light {})",
+            scene.display(),
+            l.label,
+            l.spec(Vec3::ZERO)
+        );
     }
     Ok(lamps)
 }
@@ -354,7 +388,7 @@ fn check_under(bake_bin: &Path, scene: &Path, archive: &Path, light: &str) -> Re
 }
 
 /// `value` formatted, with "(target: met)" or "(target: **not met**)" when `ok` says.
-fn against(value: String, ok: Option<bool>, target: String) -> String {
+pub(crate) fn against(value: String, ok: Option<bool>, target: String) -> String {
     match ok {
         Some(ok) => format!("{value} ({target}: {})", if ok { "met" } else { "**not met**" }),
         None => value,
