@@ -1134,8 +1134,8 @@ impl BakeParams {
     ///   shrunk until `AUTO_ATLAS_PANES` (256) panes fit the run-time memory budget;
     /// - entries: 4 per chart (charts are the scene's distinct flat pieces), 1024 to 8192 (8 for
     ///   each of at most 1024 clusters, `MAX_CHART_ENTRIES`), a multiple of 256, and no more
-    ///   than 16 per cluster the bake can have (`--clusters`, or the most the memory and archive budgets allow; not below 1024), applied after the time
-    ///   budget below, at the atlas it leaves, the walks per entry then rising towards twice
+    ///   than 16 per cluster the bake can have (`--clusters`, or the most the memory and
+    ///   archive budgets allow; not below 1024), applied after the time budget below, at the atlas it leaves, the walks per entry then rising towards twice
     ///   `WALKS_IN_ALL`, at most `CAPPED_WALKS` (32) each, as far as the budget allows. Where the
     ///   budgets cap the clusters, more entry points only crowd them: Sibenik's own error estimate
     ///   (`--accuracy-points`, three lights) is the same at 2048 and 16384 entries, for three

@@ -49,7 +49,7 @@ pub fn run(bake_bin: &Path, cache: &Path, root: &Path, out: &Path, only: Option<
             let _ = writeln!(md, "| {name} | absent ({}): skipped | | | | |", scene.display());
             continue;
         }
-        let (baked, _) = plan::bake_case(bake_bin, cache, &format!("targets-{name}"), &scene, &[])?;
+        let (baked, _) = plan::bake_case(bake_bin, cache, &targets::bake_name(name), &scene, &[])?;
         let bench = Bench::new(bake_bin, cache, "lamps", ("256x192", SPP));
         let playback = Playback::new(bench, &baked.archive, &scene, Some(camera));
         for (row, lamp) in targets::near_surface_lamps(&scene, bases)?.iter().enumerate() {
@@ -68,14 +68,24 @@ pub fn run(bake_bin: &Path, cache: &Path, root: &Path, out: &Path, only: Option<
             let energy = measured.iter().map(|m| m.energy).sum::<f64>() / n;
             let low = measured.iter().map(|m| m.energy).fold(f64::INFINITY, f64::min);
             let high = measured.iter().map(|m| m.energy).fold(0.0, f64::max);
+            let target = targets::LARGE;
+            let most = target.energy.unwrap_or(f64::INFINITY);
             let _ = writeln!(
                 md,
                 "| {name} | {} | {} | {} | {:.1}% | {} ({low:.3}..{high:.3}) |",
                 lamp.label,
                 measured.len(),
-                targets::against(format!("{:.1}%", 100.0 * error), Some(error <= 0.08), "≤ 8%".into()),
+                targets::against(
+                    format!("{:.1}%", 100.0 * error),
+                    Some(error <= target.error),
+                    format!("≤ {:.0}%", 100.0 * target.error)
+                ),
                 100.0 * worst,
-                targets::against(format!("{energy:.3}"), Some((energy - 1.0).abs() <= 0.03), "±3%".into()),
+                targets::against(
+                    format!("{energy:.3}"),
+                    Some((energy - 1.0).abs() <= most),
+                    format!("±{:.0}%", 100.0 * most)
+                ),
             );
             println!(
                 "lamps: {name} {}: mean {:.2}% (4x4), energy {energy:.3}",

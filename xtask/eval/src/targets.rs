@@ -48,11 +48,11 @@ const BOX_CAMERA: &str = "0,1,3.6:0,1,0:40";
 
 /// What one case must reach (`None`: no target).
 #[derive(Clone, Copy, Default)]
-struct Target {
-    error: f64,
+pub(crate) struct Target {
+    pub error: f64,
     full: Option<f64>,
     /// Largest |energy − 1|.
-    energy: Option<f64>,
+    pub energy: Option<f64>,
     bake_s: Option<f64>,
 }
 
@@ -221,7 +221,7 @@ fn cases(root: &Path, cache: &Path, only: Option<&str>) -> Result<Vec<Case>> {
 
 /// The large scenes' targets: 8% with lamps near a surface, energy within 3%, a bake within
 /// the default budget.
-const LARGE: Target = Target {
+pub(crate) const LARGE: Target = Target {
     error: 0.08,
     full: None,
     energy: Some(0.03),
@@ -395,6 +395,11 @@ pub(crate) fn against(value: String, ok: Option<bool>, target: String) -> String
     }
 }
 
+/// The name a case's bake is cached under (`--lamps` plays the large scenes' bakes).
+pub(crate) fn bake_name(case: &str) -> String {
+    format!("targets-{case}")
+}
+
 /// Runs the cases (those whose name contains `only`, when given); returns the Markdown table.
 pub fn run(bake_bin: &Path, cache: &Path, root: &Path, out: &Path, only: Option<&str>) -> Result<String> {
     let mut md = String::from(
@@ -403,7 +408,7 @@ pub fn run(bake_bin: &Path, cache: &Path, root: &Path, out: &Path, only: Option<
     let cases = cases(root, cache, only)?;
     let chosen = cases.into_iter().filter(|c| only.is_none_or(|o| c.name.contains(o)));
     for case in chosen {
-        let name = format!("targets-{}", case.name);
+        let name = bake_name(&case.name);
         let (baked, bake_s) = plan::bake_case(bake_bin, cache, &name, &case.scene, &case.bake_args)?;
         println!("targets: {}: baked ({bake_s:.1} s)", case.name);
         let estimate = prm_format::Archive::open(&baked.archive)

@@ -274,9 +274,6 @@ fn the_top_k_reason_adds_up() {
     assert!(r.contains("every cluster"), "{r}");
 }
 
-/// A scene of many small charts under a tight memory budget: the automatic atlas stops
-/// shrinking at the size that holds every chart, so the bake can build the atlas the plan
-/// promises.
 /// `count` separate triangles (one chart each), 200 to a row 5 cm apart.
 fn separate_triangles(count: usize) -> Scene {
     let dir = std::env::temp_dir().join(format!("prm-bake-charts-{}-{count}", std::process::id()));
@@ -308,6 +305,9 @@ fn many_charts_keep_eight_entries_per_cluster() {
     assert_eq!(p.entries, ENTRIES_PER_CLUSTER * p.clusters);
 }
 
+/// A scene of many small charts under a tight memory budget: the automatic atlas stops
+/// shrinking at the size that holds every chart, so the bake can build the atlas the plan
+/// promises.
 #[test]
 fn the_planned_atlas_holds_every_chart() {
     // 40,000 separate triangles over a 10 m square.
