@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Independent reader of .prm archives (format 2.0), written from formats/prm.md.
+"""Independent reader of .prm archives (format 2.1), written from formats/prm.md.
 
 Usage: read_prm.py [--pane N] [--no-verify] ARCHIVE
 
@@ -26,11 +26,11 @@ import sys
 
 MAGIC = b"\x89PRM\r\n\x1a\n"
 SUPPORTED_MAJOR = 2
-SUPPORTED_MINOR = 0
+SUPPORTED_MINOR = 1
 KINDS = {1: "metadata", 2: "atlas", 3: "entries", 4: "clusters", 5: "panes", 6: "entry_energy",
          7: "emitters", 8: "sky", 9: "probes", 10: "probe_rays",
-         11: "near_field"}
-OPTIONAL = {6, 7, 8, 9, 10, 11}
+         11: "near_field", 12: "entry_cells"}
+OPTIONAL = {6, 7, 8, 9, 10, 11, 12}
 RAY_SKY = 0xFFFFFFFF
 RAY_BLOCKED = 0xFFFFFFFE
 SH_COEFFS = 9
@@ -398,7 +398,35 @@ class Reader:
         self.near_field = None
         if 11 in by_kind:
             self.parse_near_field(by_kind[11])
+        self.entry_cells = None
+        if 12 in by_kind:
+            self.parse_entry_cells(by_kind[12])
         self.parse_panes(by_kind[5])
+
+    def parse_entry_cells(self, s):
+        # 16-byte header (entries N, points M, two reserved words 0), N ends (u32, entry i's
+        # points are [end[i-1], end[i]), non-decreasing, the last M), then M points of 8 bytes:
+        # the offset from the entry point as three f16, the unit normal octahedral in two u8.
+        n_entries = len(self.entries)
+        raw = self.load(s, 16 + 4 * n_entries + 8 * (1 << 32))
+        if len(raw) < 16:
+            raise InvalidArchive("entry_cells: shorter than its header")
+        n, m, r0, r1 = struct.unpack_from("<4I", raw, 0)
+        if n != n_entries or r0 or r1:
+            raise InvalidArchive("entry_cells: not one cell per entry, or reserved words not 0")
+        if len(raw) != 16 + 4 * n + 8 * m:
+            raise InvalidArchive("entry_cells: raw size differs from what the header gives")
+        ends = list(struct.unpack_from(f"<{n}I", raw, 16))
+        if any(b < a for a, b in zip([0] + ends, ends)) or (ends[-1] if ends else 0) != m:
+            raise InvalidArchive("entry_cells: ends out of order or not covering the points")
+        points = []
+        for i in range(m):
+            x, y, z = struct.unpack_from("<3e", raw, 16 + 4 * n + 8 * i)
+            u, v = struct.unpack_from("<2B", raw, 16 + 4 * n + 8 * i + 6)
+            if not all(abs(c) != float("inf") and c == c for c in (x, y, z)):
+                raise InvalidArchive("entry_cells: a point's offset is not finite")
+            points.append(dict(offset=[x, y, z], octahedral=[u, v]))
+        self.entry_cells = dict(ends=ends, points=points)
 
     def parse_near_field(self, s):
         # 32-byte header (exits E, rays per exit M, gather points G, flags (bit 0: the weights
@@ -771,6 +799,7 @@ class Reader:
             probes=self.probes,
             probe_rays=self.probe_rays,
             near_field=self.near_field,
+            entry_cells=self.entry_cells,
             accuracy=self.accuracy,
             clusters=self.clusters,
             panes=dict(tiles=self.tps * self.tps, ranks=self.ranks, max_rank=max(self.ranks, default=0),

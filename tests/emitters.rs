@@ -67,7 +67,7 @@ fn two_emitter_groups_bake_scale_and_match_the_reference() {
     without_traced_indirect(&traced_path, &panes_path);
 
     let mut traced = Archive::open(&traced_path).unwrap();
-    assert_eq!((traced.info().major, traced.info().minor), (2, 0));
+    assert_eq!((traced.info().major, traced.info().minor), (2, 1));
     let names: Vec<&str> = traced.emitters().iter().map(|g| g.name.as_str()).collect();
     assert_eq!(names, ["lamp_warm", "lamp_blue"]);
     let groups = traced.emitters().to_vec();

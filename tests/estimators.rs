@@ -34,6 +34,7 @@
 
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
+use prm_format::{CellPoint, EntryCells};
 use prm_gpu::pane_gather::{VplBoundKind, VPL_WGSL};
 use prm_gpu::vpl_depth::{GpuVpl, HEMICUBE_WGSL};
 use prm_gpu_kit::pipeline::{buffer_init, storage};
@@ -583,21 +584,21 @@ fn the_weights_pass_agrees_with_the_cpu_weights() {
         normals: vec![Vec3::Y; members.len()],
         members,
     };
-    let irradiance = entry_irradiance(&bvh, &lights, &entries);
-    let cpu = clustering.weights_by_energy(&irradiance, &energy);
-
+    // Each entry's cell: 0 to 5 points around it, off its plane a little and tilted.
+    let mut cells = EntryCells::default();
+    for (k, e) in entries.iter().enumerate() {
+        let (t, b) = e.normal.any_orthonormal_pair();
+        for j in 0..k % 6 {
+            let a = j as f32 * 2.1 + k as f32;
+            let offset = (t * a.cos() + b * a.sin()) * (0.02 + 0.01 * j as f32) + e.normal * 0.001;
+            let normal = (e.normal + t * (0.1 * j as f32)).normalize();
+            cells
+                .points
+                .push(CellPoint::new(offset.to_array(), normal.to_array()).unwrap());
+        }
+        cells.ends.push(cells.points.len() as u32);
+    }
     let b = light_bindings(&ctx, &lights);
-    let gpu_entries: Vec<GpuEntry> = entries
-        .iter()
-        .zip(&energy)
-        .map(|(e, en)| GpuEntry {
-            position: e.position.to_array(),
-            disk: ENTRY_DISK * e.weight / std::f32::consts::PI,
-            normal: e.normal.to_array(),
-            energy: en.to_array(),
-            ..Default::default()
-        })
-        .collect();
     let clusters: Vec<GpuCluster> = clustering
         .members
         .iter()
@@ -625,54 +626,90 @@ fn the_weights_pass_agrees_with_the_cpu_weights() {
         bytemuck::cast_slice(&clusters),
         wgpu::BufferUsages::STORAGE,
     );
-    let entry_buffer = buffer_init(
+    let packed: Vec<[u32; 2]> = cells.points.iter().map(|p| p.packed()).collect();
+    let points_buffer = buffer_init(
         d,
-        "entries",
-        bytemuck::cast_slice(&gpu_entries),
+        "cell points",
+        bytemuck::cast_slice(&packed),
         wgpu::BufferUsages::STORAGE,
     );
-    let out = storage(
-        d,
-        "weights",
-        (clusters.len() * std::mem::size_of::<GpuWeight>()) as u64,
-        wgpu::BufferUsages::COPY_SRC,
-    );
-    // The kernel is the pass itself, one workgroup per cluster (run_kernel dispatches count / 64).
-    let bytes = run_kernel(
-        &ctx,
-        "weights pass",
-        &[
-            SHARED_WGSL,
-            LIGHTS_WGSL,
-            include_str!("../shaders/runtime/weights.wgsl"),
-        ],
-        &[
-            frame.as_entire_binding(),
-            b.lights.as_entire_binding(),
-            b.views.as_entire_binding(),
-            wgpu::BindingResource::TextureView(&b.shadow_maps),
-            cluster_buffer.as_entire_binding(),
-            entry_buffer.as_entire_binding(),
-            out.as_entire_binding(),
-        ],
-        clusters.len() as u32 * 64,
-        &out,
-    );
-    let weights: &[GpuWeight] = bytemuck::cast_slice(&bytes);
-    let mut agreement = Agreement::default();
-    for (c, m) in clustering.members.iter().enumerate() {
-        // Scale: the largest member irradiance (a weight is a weighted mean of them).
-        let scale = m
+    for with_cells in [false, true] {
+        let irradiance = if with_cells {
+            let positions: Vec<Vec3> = entries.iter().map(|e| e.position).collect();
+            prm_trace::cell_irradiance(&bvh, &lights, &positions, &cells)
+        } else {
+            entry_irradiance(&bvh, &lights, &entries)
+        };
+        let cpu = clustering.weights_by_energy(&irradiance, &energy);
+        let gpu_entries: Vec<GpuEntry> = entries
             .iter()
-            .map(|&k| irradiance[k as usize].max_element())
-            .fold(1e-30f32, f32::max);
-        agreement.check(cpu[c], Vec3::from(weights[c].weight), scale, || {
-            format!("cluster {c} ({} members from {})", m.len(), m[0])
-        });
-        let score = cpu[c].dot(Vec3::new(1.0, 0.5, 0.25));
-        agreement.check(Vec3::splat(score), Vec3::splat(weights[c].score), scale, || {
-            format!("score of cluster {c}")
+            .zip(&energy)
+            .enumerate()
+            .map(|(k, (e, en))| GpuEntry {
+                position: e.position.to_array(),
+                disk: ENTRY_DISK * e.weight / std::f32::consts::PI,
+                normal: e.normal.to_array(),
+                energy: en.to_array(),
+                cell_first: if k == 0 { 0 } else { cells.ends[k - 1] },
+                cell_count: cells.points_of(k).len() as u32,
+                cell_weight: if with_cells { cells.point_weight() } else { 0.0 },
+                ..Default::default()
+            })
+            .collect();
+        let entry_buffer = buffer_init(
+            d,
+            "entries",
+            bytemuck::cast_slice(&gpu_entries),
+            wgpu::BufferUsages::STORAGE,
+        );
+        let out = storage(
+            d,
+            "weights",
+            (clusters.len() * std::mem::size_of::<GpuWeight>()) as u64,
+            wgpu::BufferUsages::COPY_SRC,
+        );
+        // The kernel is the pass itself, one workgroup per cluster (run_kernel dispatches count / 64).
+        let bytes = run_kernel(
+            &ctx,
+            "weights pass",
+            &[
+                SHARED_WGSL,
+                LIGHTS_WGSL,
+                include_str!("../shaders/runtime/weights.wgsl"),
+            ],
+            &[
+                frame.as_entire_binding(),
+                b.lights.as_entire_binding(),
+                b.views.as_entire_binding(),
+                wgpu::BindingResource::TextureView(&b.shadow_maps),
+                cluster_buffer.as_entire_binding(),
+                entry_buffer.as_entire_binding(),
+                points_buffer.as_entire_binding(),
+                out.as_entire_binding(),
+            ],
+            clusters.len() as u32 * 64,
+            &out,
+        );
+        let weights: &[GpuWeight] = bytemuck::cast_slice(&bytes);
+        let mut agreement = Agreement::default();
+        for (c, m) in clustering.members.iter().enumerate() {
+            // Scale: the largest member irradiance (a weight is a weighted mean of them).
+            let scale = m
+                .iter()
+                .map(|&k| irradiance[k as usize].max_element())
+                .fold(1e-30f32, f32::max);
+            agreement.check(cpu[c], Vec3::from(weights[c].weight), scale, || {
+                format!("cluster {c} ({} members from {}), cells {with_cells}", m.len(), m[0])
+            });
+            let score = cpu[c].dot(Vec3::new(1.0, 0.5, 0.25));
+            agreement.check(Vec3::splat(score), Vec3::splat(weights[c].score), scale, || {
+                format!("score of cluster {c}, cells {with_cells}")
+            });
+        }
+        agreement.assert(if with_cells {
+            "weights.wgsl vs Clustering::weights_by_energy over the entry cells"
+        } else {
+            "weights.wgsl vs Clustering::weights_by_energy"
         });
     }
-    agreement.assert("weights.wgsl vs Clustering::weights_by_energy");
 }

@@ -23,7 +23,7 @@ fn the_near_field_brings_the_edges_to_the_reference() {
     };
     let (scene, path) = baked("near-field", "scenes/cornell-box/cornell-box.obj", "box.prm", &config);
     let archive = Archive::open(&path).unwrap();
-    assert_eq!((archive.info().major, archive.info().minor), (2, 0));
+    assert_eq!((archive.info().major, archive.info().minor), (2, 1));
     let near = archive.near_field().expect("the bake traced the near field").clone();
     assert_eq!(near.rays_per_exit, prm_trace::NEAR_RAYS);
     assert_eq!(

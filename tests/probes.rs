@@ -35,7 +35,7 @@ fn probes_bake_play_and_match_the_reference() {
     };
     let (scene, path) = baked("probes", "scenes/cornell-box/cornell-box.obj", "box.prm", &config);
     let archive = Archive::open(&path).unwrap();
-    assert_eq!((archive.info().major, archive.info().minor), (2, 0));
+    assert_eq!((archive.info().major, archive.info().minor), (2, 1));
     let probes = archive.probes().expect("the bake placed probes").clone();
     let rays = archive.probe_rays().expect("the bake traced the probes' rays").clone();
     assert_eq!(rays.rays_per_probe, prm_bake::PROBE_RAYS);

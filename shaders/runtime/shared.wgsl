@@ -75,16 +75,18 @@ struct Cluster {
 struct Entry {
     position: vec3<f32>,
     // r² of the disk the entry stands for (area A/N over π, times ENTRY_DISK): the bound of its
-    // irradiance, see light_irradiance_disk
+    // irradiance where the archive has no entry cells, see light_irradiance_disk
     disk: f32,
     normal: vec3<f32>,
-    _pad0: f32,
+    // its cell's points in the cell points buffer (weights.wgsl)
+    cell_first: u32,
     // pane energy e_i the cluster weight weighs this member by (1 without an entry-energy section)
     energy: vec3<f32>,
-    _pad1: f32,
+    cell_count: u32,
     // irradiance from the emitters at their current scales, added to the lights' (baked.rs)
     emitted: vec3<f32>,
-    _pad2: f32,
+    // what each cell point's irradiance counts for, N/M; 0: no cells, the disk bound instead
+    cell_weight: f32,
 };
 
 // A cluster's weight (RGB) and score = Σ_rgb weight × pane energy.

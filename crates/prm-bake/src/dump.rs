@@ -75,7 +75,7 @@ pub fn run(args: &DumpArgs) -> Result<()> {
 /// coefficients with the residual groups' (per pane and tile a scale and four `f16` ranks a
 /// word, 8 bytes each), and
 /// the near field's exit records (8 bytes) and merged hits (4 bytes; twice where the deeper
-/// share's disk differs from the direct share's).
+/// share's disk differs from the direct share's), and the entry cells' points (8 bytes).
 fn resident_line<R: Read + Seek>(archive: &Archive<R>) -> String {
     use prm_scene::MergeNearHits;
     let mib = |b: u64| b as f64 / (1024.0 * 1024.0);
@@ -97,14 +97,16 @@ fn resident_line<R: Read + Seek>(archive: &Archive<R>) -> String {
         };
         (8 * n.exits.len() + 4 * sets * merged.len()) as u64
     });
+    let cells = archive.entry_cells().map_or(0, |c| 8 * c.points.len() as u64);
     format!(
         "{:.1} MiB on the GPU: panes {:.1} MiB (basis {:.1} MiB, coefficients of {clusters} clusters + {groups} \
-         residual groups {:.1} MiB), near field {:.1} MiB",
-        mib(rows + coefficients + near),
+         residual groups {:.1} MiB), near field {:.1} MiB, entry cells {:.1} MiB",
+        mib(rows + coefficients + near + cells),
         mib(rows + coefficients),
         mib(rows),
         mib(coefficients),
-        mib(near)
+        mib(near),
+        mib(cells)
     )
 }
 
@@ -199,6 +201,7 @@ pub fn summary_json<R: Read + Seek>(archive: &Archive<R>, file: &Path, report: O
         "covered_texels": atlas.covered_texels(),
         "entries": archive.entries().len(),
         "entry_energy": archive.entry_energy().is_some(),
+        "entry_cell_points": archive.entry_cells().map(|c| c.points.len()),
         "emitters": archive.emitters().iter().map(|g| json!({
             "name": g.name,
             "material": g.material,
@@ -340,12 +343,16 @@ pub fn write_summary<W: Write, R: Read + Seek>(
     writeln!(out, "resident     {}", resident_line(archive))?;
     writeln!(
         out,
-        "entries      {}{}",
+        "entries      {}{}{}",
         archive.entries().len(),
         if archive.entry_energy().is_some() {
             " (with pane energies: cluster weights weigh members by them)"
         } else {
-            " (no pane energies: cluster weights are the members' mean; re-bake for 1.1)"
+            " (no pane energies: cluster weights are the members' mean; re-bake to weigh them)"
+        },
+        match archive.entry_cells() {
+            Some(c) => format!(", lit over their cells' {} points", c.points.len()),
+            None => ", each lit at its own point (no entry cells: re-bake to light them over their cells)".to_string(),
         }
     )?;
     write_contents(out, archive)?;

@@ -29,6 +29,8 @@ pub(crate) struct CheckInputs<'a> {
     pub bvh: &'a Bvh,
     pub atlas: &'a Atlas,
     pub entries: &'a [SurfaceSample],
+    /// Every entry point's cell in sampling order (`None`: the archive has none).
+    pub cells: Option<&'a prm_format::EntryCells>,
     pub clustering: &'a Clustering,
     /// Every entry's pane energy in sampling order (`None`: the archive has none).
     pub entry_energy: Option<&'a [Vec3]>,
@@ -63,6 +65,7 @@ pub(crate) fn check(
 ) -> Result<Accuracy, BakeError> {
     let archive = prm_trace::CheckedArchive {
         entries: inputs.entries,
+        cells: inputs.cells,
         members: &inputs.clustering.members,
         entry_energy: inputs.entry_energy,
         cluster_energy: inputs.pane_energy,
@@ -149,6 +152,14 @@ pub fn estimate_accuracy(
         archive.clusters(),
         prm_format::residual_group_count(archive.clusters().len(), prm_format::RESIDUAL_GROUPS),
     );
+    let cells = archive.entry_cells().map(|c| {
+        // Archive order back to sampling order: archive entry k is sampled entry order[k].
+        let mut inverse = vec![0u32; order.len()];
+        for (k, &i) in order.iter().enumerate() {
+            inverse[i as usize] = k as u32;
+        }
+        prm_trace::reorder_cells(c, &inverse)
+    });
     let checked = prm_trace::check_exits(atlas.exits.len(), params.exit_points, params.seed);
     let near_field = archive.near_field().cloned();
     let near = near_field.as_ref().map(|n| {
@@ -161,6 +172,7 @@ pub fn estimate_accuracy(
         bvh: &remade.bvh,
         atlas,
         entries: &remade.entries,
+        cells: cells.as_ref(),
         clustering: &remade.clustering,
         entry_energy: entry_energy.as_deref(),
         pane_energy: &pane_energy,

@@ -509,6 +509,21 @@ pub(crate) fn sample_entries(scene: &Scene, count: usize, seed: u64) -> Result<V
     prm_trace::sample_surface(scene, &EntryParams { count, seed }).map_err(trace("sampling entry points"))
 }
 
+/// The cells of the entry points `entries` on `scene` ([`prm_trace::entry_cells`]), with a
+/// stream of `seed` apart from the entry points'.
+pub(crate) fn sample_entry_cells(
+    scene: &Scene,
+    entries: &[SurfaceSample],
+    seed: u64,
+) -> Result<prm_format::EntryCells, BakeError> {
+    let positions: Vec<glam::Vec3> = entries.iter().map(|e| e.position).collect();
+    let normals: Vec<glam::Vec3> = entries.iter().map(|e| e.normal).collect();
+    prm_trace::entry_cells(scene, &positions, &normals, seed ^ CELL_SEED).map_err(trace("sampling the entry cells"))
+}
+
+/// Keys the entry cells' points apart from the entry points of the same seed.
+const CELL_SEED: u64 = 0xCE11_5EED_0000_0001;
+
 /// Wraps a transport error with the step that failed.
 pub(crate) fn trace(what: &'static str) -> impl FnOnce(prm_trace::TraceError) -> BakeError {
     move |source| BakeError::Trace { what, source }
@@ -544,6 +559,8 @@ struct Traced<'s> {
     bvh: Bvh,
     /// The entry points in sampling order.
     entries: Vec<SurfaceSample>,
+    /// Their cells, in sampling order.
+    cells: prm_format::EntryCells,
     /// The walks' VPLs (a shard's own clusters' only).
     vpls: VplSet,
     clustering: Clustering,
@@ -569,6 +586,7 @@ pub fn bake(job: &BakeJob<'_>, renderer: Renderer<'_>, progress: &mut dyn Progre
     let mut atlas = build_atlas(job, &mut steps)?;
     let bvh = build_bvh(scene, &mut atlas, &mut steps)?;
     let (entries, mut vpls) = trace_walks(scene, &bvh, params, &mut steps)?;
+    let cells = sample_entry_cells(scene, &entries, params.seed)?;
     let clustering = cluster_vpls(job, &bvh, &entries, &mut vpls, &mut steps)?;
     let order: Vec<u32> = clustering.members.iter().flatten().copied().collect();
     let traced = Traced {
@@ -577,6 +595,7 @@ pub fn bake(job: &BakeJob<'_>, renderer: Renderer<'_>, progress: &mut dyn Progre
         atlas,
         bvh,
         entries,
+        cells,
         vpls,
         clustering,
         order,
@@ -585,6 +604,9 @@ pub fn bake(job: &BakeJob<'_>, renderer: Renderer<'_>, progress: &mut dyn Progre
     let emitter_groups = trace_emitters(&traced, &mut steps)?;
     let sky = trace_sky(&traced, &mut steps)?;
     let (mut writer, made, residual_groups) = start_archive(job, &destination, &traced, &backend_name)?;
+    writer
+        .set_entry_cells(prm_trace::reorder_cells(&traced.cells, &traced.order))
+        .map_err(archive_error("recording the entry cells"))?;
 
     // The accuracy check's exit points: a whole bake only (a shard holds some panes).
     let checked_exits = if params.accuracy_points > 0 && job.shard.is_none() {
@@ -1249,6 +1271,7 @@ fn check_accuracy(
         bvh: &traced.bvh,
         atlas: &traced.atlas,
         entries: &traced.entries,
+        cells: Some(&traced.cells),
         clustering: &traced.clustering,
         entry_energy: sampled_energy.as_deref(),
         pane_energy: &recorder.pane_energy,

@@ -403,6 +403,11 @@ fn copy_shared_sections<R: Read + Seek>(first: &Archive<R>, writer: &mut Archive
             .set_sky(sky.clone())
             .map_err(archive_error("recording the sky"))?;
     }
+    if let Some(cells) = first.entry_cells() {
+        writer
+            .set_entry_cells(cells.clone())
+            .map_err(archive_error("merging the entry cells"))?;
+    }
     if let Some(near) = first.near_field() {
         writer
             .set_near_field(near.clone())

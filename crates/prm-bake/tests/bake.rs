@@ -232,8 +232,10 @@ fn bake_writes_a_valid_archive_and_report() {
     // The accuracy check: three test lights free in the box and one close under its ceiling, a
     // plausible estimate, the same in the report and the archive.
     let accuracy = meta.accuracy.as_ref().expect("the bake estimates its accuracy");
-    assert_eq!((archive.info().major, archive.info().minor), (2, 0));
+    assert_eq!((archive.info().major, archive.info().minor), (2, 1));
     assert!(archive.near_field().is_some());
+    let cells = archive.entry_cells().expect("the bake writes the entry cells");
+    assert_eq!(cells.points.len(), 256 * prm_trace::CELL_POINTS_PER_ENTRY);
     assert_eq!(
         accuracy.lights.len(),
         prm_trace::check::CHECK_LIGHTS + 1,
@@ -768,8 +770,8 @@ fn destinations_are_checked_before_work_and_symlinks_written_through() {
 
 /// The accuracy check sees what a bake gets wrong: the same panes blended with K = 1 of 16
 /// clusters are estimated worse than with all of them, and their K = all estimate is the same
-/// number. `--accuracy-points 0` skips it, `--near-rays 0` the near field: the archive is then
-/// of minor 1 (entry energies, nothing later).
+/// number. `--accuracy-points 0` skips it, `--near-rays 0` the near field: the archive is still
+/// 2.1, for its entry cells.
 #[test]
 fn the_accuracy_check_sees_a_worse_bake() {
     let dir = temp_dir("accuracy");
@@ -799,8 +801,8 @@ fn the_accuracy_check_sees_a_worse_bake() {
         &["--quiet", "--accuracy-points", "0", "--near-rays", "0"],
     );
     let a = Archive::open(&path).unwrap();
-    assert!(a.metadata().accuracy.is_none());
-    assert_eq!((a.info().major, a.info().minor), (2, 0));
+    assert!(a.metadata().accuracy.is_none() && a.near_field().is_none());
+    assert_eq!((a.info().major, a.info().minor), (2, 1));
 }
 
 /// `prm-bake check` estimates an archive as the bake's last step did: the same estimate to the

@@ -13,7 +13,7 @@ pub const MAGIC: [u8; 8] = *b"\x89PRM\r\n\x1a\n";
 pub const VERSION_MAJOR: u16 = 2;
 /// Minor version this library writes, and the highest it knows; a reader accepts every minor of
 /// its major (a later minor only adds what this reader may ignore, formats/prm.md §2.1).
-pub const VERSION_MINOR: u16 = 0;
+pub const VERSION_MINOR: u16 = 1;
 
 /// Size of the fixed file header.
 pub const HEADER_SIZE: usize = 64;
@@ -54,6 +54,9 @@ pub mod kind {
     /// Where every exit point's near rays end, to gather back what the VPL bound removes
     /// (optional).
     pub const NEAR_FIELD: u32 = 11;
+    /// Points of the surface every entry point stands for, to weigh it by the light its whole
+    /// cell receives (optional).
+    pub const ENTRY_CELLS: u32 = 12;
     /// First kind reserved for private extensions (never assigned by the spec).
     pub const PRIVATE_FIRST: u32 = 0x8000_0000;
 
@@ -66,6 +69,7 @@ pub mod kind {
             CLUSTERS => Some("clusters"),
             PANES => Some("panes"),
             ENTRY_ENERGY => Some("entry_energy"),
+            ENTRY_CELLS => Some("entry_cells"),
             EMITTERS => Some("emitters"),
             SKY => Some("sky"),
             PROBES => Some("probes"),

@@ -1,4 +1,4 @@
-//! Reader and writer of `.prm` Precomputed Radiance Map archives (format 2.0).
+//! Reader and writer of `.prm` Precomputed Radiance Map archives (format 2.1).
 //!
 //! An archive holds the lightmap atlas of a scene, its entry points and
 //! their clusters, and one *pane* per cluster: the indirect irradiance at
@@ -26,6 +26,8 @@
 //!   scene, so a run time gathers the probes' light from the surfaces' radiance instead.
 //! * [`NearField`]: the optional near field section, where short cosine rays from the exit
 //!   points end, so a run time gathers back the light the panes' VPL bound removes.
+//! * [`EntryCells`]: the optional entry cells section (format 2.1), points of the surface every
+//!   entry point stands for, so a run time weighs it by the light its whole cell receives.
 //! * [`residual_groups`]: the clusters' spatial groups whose summed panes carry the light of the
 //!   clusters a run time drops from its top K.
 //! * [`encode_rgb9e5`] / [`decode_rgb9e5`] implement the RGB9E5 texel encoding,
@@ -35,6 +37,7 @@
 
 mod basis;
 mod emitters;
+mod entry_cells;
 mod error;
 mod groups;
 mod layout;
@@ -54,6 +57,7 @@ mod writer;
 
 pub use basis::{PaneBasis, MAX_PANE_RANK, PANE_TOLERANCE};
 pub use emitters::{EmitterGroup, EMITTER_NAME_BYTES};
+pub use entry_cells::{CellPoint, EntryCells};
 pub use error::{Error, Result};
 pub use groups::{residual_group_count, residual_groups, CLUSTERS_PER_GROUP, RESIDUAL_GROUPS};
 pub use layout::{checksum, compression, kind, limits, MAGIC, VERSION_MAJOR, VERSION_MINOR};

@@ -234,6 +234,7 @@ struct SectionRecords {
     probes: Option<SectionRecord>,
     probe_rays: Option<SectionRecord>,
     near_field: Option<SectionRecord>,
+    entry_cells: Option<SectionRecord>,
 }
 
 impl SectionRecords {
@@ -255,6 +256,7 @@ impl SectionRecords {
             probes: optional_section(records, kind::PROBES)?,
             probe_rays: optional_section(records, kind::PROBE_RAYS)?,
             near_field: optional_section(records, kind::NEAR_FIELD)?,
+            entry_cells: optional_section(records, kind::ENTRY_CELLS)?,
         })
     }
 }
@@ -391,6 +393,7 @@ struct OptionalSections {
     probes: Option<Probes>,
     probe_rays: Option<crate::ProbeRays>,
     near_field: Option<crate::NearField>,
+    entry_cells: Option<crate::EntryCells>,
 }
 
 /// What the header and the required sections fix, against which the optional sections'
@@ -449,6 +452,10 @@ fn read_optional_sections<R: Read + Seek>(
     let near_field = (found.near_field.as_ref())
         .map(|rec| read_near_field(src, rec, fixed, emitters.len()))
         .transpose()?;
+    // Entry cells: sizes fixed by its header and the entry count.
+    let entry_cells = (found.entry_cells.as_ref())
+        .map(|rec| read_entry_cells(src, rec, fixed))
+        .transpose()?;
     Ok(OptionalSections {
         entry_energy,
         emitters,
@@ -456,6 +463,7 @@ fn read_optional_sections<R: Read + Seek>(
         probes,
         probe_rays,
         near_field,
+        entry_cells,
     })
 }
 
@@ -575,6 +583,11 @@ impl<R: Read + Seek> Archive<R> {
     /// a run time gathers back with them what the panes' VPL bound removes.
     pub fn near_field(&self) -> Option<&crate::NearField> {
         self.optional.near_field.as_ref()
+    }
+
+    /// The points of every entry point's cell (formats/prm.md §5.7), if the archive has them.
+    pub fn entry_cells(&self) -> Option<&crate::EntryCells> {
+        self.optional.entry_cells.as_ref()
     }
 
     /// Every entry's pane energy (RGB, the sum over the atlas of the indirect irradiance its
@@ -1058,6 +1071,27 @@ fn read_probe_rays<R: Read + Seek>(
 
 /// Reads the near field section: its 32-byte header first, whose counts (each bounded by the
 /// atlas's texels and the rays per exit) fix the raw size.
+fn read_entry_cells<R: Read + Seek>(src: &mut R, rec: &SectionRecord, fixed: &Fixed) -> Result<crate::EntryCells> {
+    use crate::entry_cells::{self, CELL_POINT_SIZE, ENTRY_CELLS_HEADER_SIZE};
+    let entry_count = fixed.entry_count;
+    let header = |head: &[u8; ENTRY_CELLS_HEADER_SIZE]| entry_cells::decode_header(head);
+    let out = read_headed_section(src, rec, header, |section, raw, (n, m)| {
+        if u64::from(n) != entry_count {
+            return Err(Error::inconsistent(format!(
+                "entry_cells section is for {n} entries, the archive has {entry_count}"
+            )));
+        }
+        let expected = entry_cells::raw_size_for(u64::from(n), u64::from(m)).unwrap_or(u64::MAX);
+        section.expect_raw_size(expected, || format!("{n} entries, {m} points"))?;
+        Ok(crate::EntryCells {
+            ends: raw.records(n as usize, 4, entry_cells::decode_ends)?,
+            points: raw.records(m as usize, CELL_POINT_SIZE, entry_cells::decode_points)?,
+        })
+    })?;
+    entry_cells::validate(&out, entry_count as usize).map_err(Error::inconsistent)?;
+    Ok(out)
+}
+
 fn read_near_field<R: Read + Seek>(
     src: &mut R,
     rec: &SectionRecord,

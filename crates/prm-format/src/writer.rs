@@ -378,6 +378,7 @@ pub struct ArchiveWriter {
     probes: Option<crate::Probes>,
     probe_rays: Option<crate::ProbeRays>,
     near_field: Option<crate::NearField>,
+    entry_cells: Option<crate::EntryCells>,
     custom: Vec<(u32, Vec<u8>)>,
     records: Vec<SectionRecord>,
     resolution: u32,
@@ -475,6 +476,7 @@ impl ArchiveWriter {
             probes: None,
             probe_rays: None,
             near_field: None,
+            entry_cells: None,
             custom: Vec::new(),
             records: Vec::new(),
             resolution: atlas.resolution,
@@ -625,6 +627,14 @@ impl ArchiveWriter {
         Ok(())
     }
 
+    /// Records the points of every entry point's cell (formats/prm.md §5.7), entry by entry in
+    /// the entries' order.
+    pub fn set_entry_cells(&mut self, cells: crate::EntryCells) -> Result<()> {
+        crate::entry_cells::validate(&cells, self.entry_count).map_err(Error::InvalidInput)?;
+        self.entry_cells = Some(cells);
+        Ok(())
+    }
+
     /// Queues an extension section of a kind the format does not define (not 0 and not
     /// one of [`kind`](crate::kind)'s); readers that do not know it skip it.
     pub fn add_custom_section(&mut self, kind: u32, data: Vec<u8>) -> Result<()> {
@@ -736,6 +746,9 @@ impl ArchiveWriter {
         if let Some(near) = self.near_field.take() {
             self.write_section(kind::NEAR_FIELD, &crate::near_field::encode(&near, self.resolution))?;
         }
+        if let Some(cells) = self.entry_cells.take() {
+            self.write_section(kind::ENTRY_CELLS, &crate::entry_cells::encode(&cells))?;
+        }
         Ok(())
     }
 
@@ -750,7 +763,12 @@ impl ArchiveWriter {
         self.write_all(&table)?;
         let header = Header {
             major: VERSION_MAJOR,
-            minor: VERSION_MINOR,
+            // The lowest minor whose features the archive uses (formats/prm.md §2.1).
+            minor: if self.records.iter().any(|r| r.kind == kind::ENTRY_CELLS) {
+                VERSION_MINOR
+            } else {
+                0
+            },
             section_count: self.records.len() as u32,
             table_offset,
             file_length: self.pos,

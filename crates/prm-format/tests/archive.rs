@@ -703,6 +703,7 @@ fn format_1_archives_are_refused_with_the_re_bake_message() {
     let dir = test_dir("format-1-file");
     let mut old = bytes.clone();
     put_u16(&mut old, 8, 1);
+    put_u16(&mut old, 10, 0);
     resign(&mut old);
     std::fs::write(dir.join("old.prm"), &old).unwrap();
     let err = Archive::open(dir.join("old.prm")).err().unwrap();
@@ -1836,6 +1837,75 @@ fn entry_energy_round_trips_and_is_validated() {
     damaged[at..at + 4].copy_from_slice(&(-1.0f32).to_le_bytes());
     resign(&mut damaged);
     assert!(matches!(Archive::from_bytes(&damaged), Err(Error::Inconsistent { .. })));
+}
+
+/// The entry cells round-trip at their stored precision and make the archive 2.1; the Python
+/// reader reads them the same; a reader refuses ends out of order and another entry count.
+#[test]
+fn entry_cells_round_trip_as_format_2_1() {
+    let dir = test_dir("entry-cells");
+    let s = scene(16, 8, 3, 7);
+    let n = s.entries.len();
+    let mut cells = EntryCells::default();
+    for i in 0..n {
+        for j in 0..i % 4 + 1 {
+            let offset = [0.25 * j as f32, -0.5, i as f32 * 0.125];
+            cells.points.push(CellPoint::new(offset, [0.0, 0.6, 0.8]).unwrap());
+        }
+        cells.ends.push(cells.points.len() as u32);
+    }
+    let stored = WriterOptions {
+        compress_sections: false,
+        ..WriterOptions::default()
+    };
+    let path = dir.join("cells.prm");
+    let mut w = start_writer_with(&path, &s, stored).unwrap();
+    assert!(w
+        .set_entry_cells(EntryCells {
+            ends: cells.ends[1..].to_vec(),
+            points: cells.points.clone()
+        })
+        .is_err());
+    w.set_entry_cells(cells.clone()).unwrap();
+    add_panes_and_finish(w, &s);
+    let bytes = std::fs::read(&path).unwrap();
+    let a = Archive::from_bytes(&bytes).unwrap();
+    assert_eq!(a.entry_cells(), Some(&cells));
+    assert_eq!((a.info().major, a.info().minor), (2, 1));
+    let last = a.entry_cells().unwrap().points_of(n - 1);
+    assert_eq!(last.len(), (n - 1) % 4 + 1);
+    assert_eq!(last[0].offset(), [0.0, -0.5, (n - 1) as f32 * 0.125]);
+
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../formats/read_prm.py");
+    let out = Command::new("python3").arg(&script).arg(&path).output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(j["version"], "2.1");
+    let ends: Vec<u64> = cells.ends.iter().map(|&e| u64::from(e)).collect();
+    assert_eq!(j["entry_cells"]["ends"], serde_json::json!(ends));
+    let p = cells.points.len() - 1;
+    assert_eq!(
+        j["entry_cells"]["points"][p]["offset"],
+        serde_json::json!(cells.points[p].offset())
+    );
+
+    // Damaged: the first end past the second, then a header for another entry count.
+    let rec = a
+        .info()
+        .sections
+        .iter()
+        .find(|x| x.name == "entry_cells")
+        .unwrap()
+        .clone();
+    let at = rec.offset as usize;
+    let mut damaged = bytes.clone();
+    damaged[at + 16..at + 20].copy_from_slice(&1000u32.to_le_bytes());
+    resign(&mut damaged);
+    assert!(matches!(Archive::from_bytes(&damaged), Err(Error::Inconsistent { .. })));
+    let mut damaged = bytes.clone();
+    damaged[at..at + 4].copy_from_slice(&(n as u32 + 1).to_le_bytes());
+    resign(&mut damaged);
+    assert!(Archive::from_bytes(&damaged).is_err());
 }
 
 // ---------------------------------------------------------------- emitters

@@ -6,7 +6,7 @@
 //! - **Direct light**: shadow rays to the punctual lights (exact, where the GPU player filters
 //!   shadow maps).
 //! - **Indirect light**: the run time's model on the CPU, the one the bake's accuracy check
-//!   plays: the entry points' irradiance (shadow rays, bounded by the entry disk), each
+//!   plays: the entry points' irradiance (shadow rays, from their cells or bounded by the entry disk), each
 //!   cluster's weight by its members' pane energy, the top K clusters with the faded rest
 //!   through the residual groups, blended from the panes' basis as the run time blends them
 //!   ([`prm_format::PaneBasis::blend`]), then the near field's direct share and the
@@ -32,6 +32,8 @@ pub struct CpuArchive {
     entry_disk: f32,
     /// Every entry's pane energy (ones where the archive has none).
     entry_energy: Vec<Vec3>,
+    /// Every entry's cell, if the archive has them.
+    cells: Option<prm_format::EntryCells>,
     /// Every cluster, its entries a range into `entries`.
     clusters: Vec<prm_format::Cluster>,
     /// Every pane's energy.
@@ -94,6 +96,7 @@ impl CpuArchive {
             entry_disk: scene.entry_disk(entries.len()),
             entries,
             entry_energy,
+            cells: archive.entry_cells().cloned(),
             clusters,
             cluster_energy,
             panes: archive.pane_basis().clone(),
@@ -149,6 +152,7 @@ impl<'a> CpuPlayer<'a> {
             &a.entry_energy,
             &a.clusters,
             a.entry_disk,
+            a.cells.as_ref(),
         );
         let top_k = self.options.top_k as usize;
         let fade = self.options.fade_band;

@@ -171,6 +171,8 @@ pub(crate) struct Buffers {
     views: wgpu::Buffer,
     clusters: wgpu::Buffer,
     entries: wgpu::Buffer,
+    /// Every entry point's cell points (`setup::gpu_cell_points`).
+    cell_points: wgpu::Buffer,
     weights: wgpu::Buffer,
     ranks: wgpu::Buffer,
     threshold: wgpu::Buffer,
@@ -252,7 +254,13 @@ impl Runtime {
         let clusters = setup::gpu_clusters(archive, &group_of);
         let mut emitters = baked::BakedLights::new(device, archive.emitters(), archive.sky(), atlas.resolution);
         emitters.apply(queue, &mut entries);
-        let buffers = Buffers::new(device, &clusters, &entries, group_count);
+        let buffers = Buffers::new(
+            device,
+            &clusters,
+            &entries,
+            &setup::gpu_cell_points(archive),
+            group_count,
+        );
         let (mut panes, mut lit) =
             setup::upload_panes(device, queue, archive, &buffers, &group_of, group_count, &options)?;
         let res = atlas.resolution;

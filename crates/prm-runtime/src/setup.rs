@@ -84,23 +84,41 @@ impl SceneGeometry {
     }
 }
 
-/// The archive's entry points as the weights pass reads them, each standing for a disk of area
-/// A/N (its irradiance bound, see `weights.wgsl`), before the emitters' irradiance is added.
+/// The archive's entry points as the weights pass reads them, each weighed by the points of its
+/// cell or, in an archive without cells, standing for a disk of area A/N (its irradiance bound,
+/// see `weights.wgsl`), before the emitters' irradiance is added.
 pub(crate) fn gpu_entries<R: Read + Seek>(archive: &Archive<R>, scene: &Scene) -> Vec<GpuEntry> {
     let disk = scene.entry_disk(archive.entries().len());
     let energy = archive.entry_energy();
+    let cells = archive.entry_cells();
+    let cell_weight = cells.map_or(0.0, |c| c.point_weight());
     archive
         .entries()
         .iter()
         .enumerate()
-        .map(|(i, e)| GpuEntry {
-            position: e.position,
-            disk,
-            normal: e.normal,
-            energy: energy.map_or([1.0; 3], |en| en[i]),
-            ..Default::default()
+        .map(|(i, e)| {
+            let (first, end) = cells.map_or((0, 0), |c| (if i == 0 { 0 } else { c.ends[i - 1] }, c.ends[i]));
+            GpuEntry {
+                position: e.position,
+                disk,
+                normal: e.normal,
+                energy: energy.map_or([1.0; 3], |en| en[i]),
+                cell_first: first,
+                cell_count: end - first,
+                cell_weight,
+                ..Default::default()
+            }
         })
         .collect()
+}
+
+/// The cell points of `archive`'s entry points as the weights pass reads them (prm-format's
+/// `CellPoint::packed`); one zero point where it has none, for the binding.
+pub(crate) fn gpu_cell_points<R: Read + Seek>(archive: &Archive<R>) -> Vec<[u32; 2]> {
+    match archive.entry_cells() {
+        Some(c) if !c.points.is_empty() => c.points.iter().map(|p| p.packed()).collect(),
+        _ => vec![[0; 2]],
+    }
 }
 
 /// The archive's clusters with their residual groups `group_of`.
@@ -127,6 +145,7 @@ impl Buffers {
         device: &wgpu::Device,
         clusters: &[GpuCluster],
         entries: &[GpuEntry],
+        cell_points: &[[u32; 2]],
         group_count: u32,
     ) -> Buffers {
         let cluster_count = clusters.len() as u32;
@@ -155,6 +174,7 @@ impl Buffers {
                 bytemuck::cast_slice(entries),
                 st | wgpu::BufferUsages::COPY_DST,
             ),
+            cell_points: pipeline::buffer_init(device, "prm cell points", bytemuck::cast_slice(cell_points), st),
             weights: pipeline::storage(device, "prm weights", per_cluster, src),
             ranks: pipeline::storage(device, "prm ranks", cluster_count.max(1) as u64 * 4, src),
             threshold: pipeline::storage(device, "prm threshold", 16, src),

@@ -321,21 +321,24 @@ pub struct GpuCluster {
 pub struct GpuEntry {
     /// Position.
     pub position: [f32; 3],
-    /// r² of the disk the entry stands for: the bound of its irradiance.
+    /// r² of the disk the entry stands for: the bound of its irradiance where the archive has
+    /// no entry cells.
     pub disk: f32,
     /// Unit normal.
     pub normal: [f32; 3],
-    /// Padding.
-    pub _pad0: f32,
+    /// Its cell's first point in the cell points buffer.
+    pub cell_first: u32,
     /// Pane energy the cluster weight weighs this member by (1 for archives without an entry
     /// energy section, which makes the weight the plain mean).
     pub energy: [f32; 3],
-    /// Padding.
-    pub _pad1: f32,
+    /// Its cell's points.
+    pub cell_count: u32,
     /// Irradiance from the emitters at their current scales (RGB, W/m²), added to the lights'.
     pub emitted: [f32; 3],
-    /// Padding.
-    pub _pad2: f32,
+    /// What each cell point's irradiance counts for, `N/M` (prm-format's
+    /// `EntryCells::point_weight`); 0: the archive has no cells, and the entry's own irradiance
+    /// bounded by `disk` stands for it.
+    pub cell_weight: f32,
 }
 
 /// A cluster's weight and score; `Weight` in the shaders.
@@ -449,7 +452,16 @@ mod tests {
             s,
             GpuEntry,
             "Entry",
-            [position, disk, normal, _pad0, energy, _pad1, emitted, _pad2]
+            [
+                position,
+                disk,
+                normal,
+                cell_first,
+                energy,
+                cell_count,
+                emitted,
+                cell_weight
+            ]
         )
         .unwrap();
         wgsl_layout!(s, GpuWeight, "Weight", [weight, score]).unwrap();

@@ -8,8 +8,8 @@ use crate::Buffers;
 /// Computes the cluster weights.
 pub(crate) struct WeightsPass(LitPass<WeightsBindings>);
 
-/// The pass's bindings after the direct light's: the clusters, the entries and the weights,
-/// all shared buffers.
+/// The pass's bindings after the direct light's: the clusters, the entries, their cell points
+/// and the weights, all shared buffers.
 pub(crate) struct WeightsBindings;
 
 impl LitBindings for WeightsBindings {
@@ -17,6 +17,7 @@ impl LitBindings for WeightsBindings {
         vec![
             b.clusters.as_entire_binding(),
             b.entries.as_entire_binding(),
+            b.cell_points.as_entire_binding(),
             b.weights.as_entire_binding(),
         ]
     }

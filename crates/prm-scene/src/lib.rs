@@ -43,7 +43,8 @@ pub use texture::Texture;
 /// area): an entry point stands for a small disk, so a point or spot light at distance `r` gives
 /// it `I cos θ / (r² + ENTRY_DISK · A/(Nπ))`. Shared by the CPU estimator
 /// (`prm_trace::entry_irradiance`, which records the measurement behind the value) and the
-/// run-time weights pass (`prm-runtime`).
+/// run-time weights pass (`prm-runtime`) for archives without entry cells, whose entry points
+/// take the light of their whole cell instead (`prm_trace::cells`).
 pub const ENTRY_DISK: f32 = 0.25;
 
 use std::path::Path;

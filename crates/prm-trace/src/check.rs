@@ -235,6 +235,9 @@ pub fn select_with_residuals(
 pub struct CheckedArchive<'a> {
     /// Entry points, in sampling order.
     pub entries: &'a [SurfaceSample],
+    /// Every entry point's cell, in sampling order (`None`: each entry point's own irradiance,
+    /// bounded by the entry disk, as the player does with archives without them).
+    pub cells: Option<&'a prm_format::EntryCells>,
     /// Entry points of every cluster (indices into `entries`).
     pub members: &'a [Vec<u32>],
     /// Every entry's pane energy, in sampling order (`None`: members weigh equally, as the
@@ -261,7 +264,13 @@ pub struct CheckedArchive<'a> {
 /// The archive's indirect light at `exits` (the checked exit points) under `light`, for the
 /// player's K (first) and for every cluster (second).
 pub fn played_indirect(bvh: &Bvh, archive: &CheckedArchive<'_>, light: Light) -> (Vec<Vec3>, Vec<Vec3>) {
-    let e = entry_irradiance(bvh, &[light], archive.entries);
+    let e = match archive.cells {
+        Some(cells) => {
+            let positions: Vec<Vec3> = archive.entries.iter().map(|e| e.position).collect();
+            crate::cell_irradiance(bvh, &[light], &positions, cells)
+        }
+        None => entry_irradiance(bvh, &[light], archive.entries),
+    };
     let ones;
     let energy = match archive.entry_energy {
         Some(en) => en,

@@ -330,9 +330,10 @@ pub fn energy_weight(
 }
 
 /// Every cluster of an archive weighed as the player weighs it under `lights`: each entry
-/// point's direct irradiance bounded by the entry disk of radius² `disk`
-/// ([`crate::bounded_irradiance`]), then [`energy_weight`] over each cluster's members with the
-/// entries' pane energies `entry_energy`.
+/// point's irradiance from its cell where the archive has `cells` ([`crate::cell_irradiance`]),
+/// else its own bounded by the entry disk of radius² `disk` ([`crate::bounded_irradiance`]),
+/// then [`energy_weight`] over each cluster's members with the entries' pane energies
+/// `entry_energy`.
 pub fn archive_weights(
     bvh: &Bvh,
     lights: &[Light],
@@ -340,14 +341,21 @@ pub fn archive_weights(
     entry_energy: &[Vec3],
     clusters: &[prm_format::Cluster],
     disk: f32,
+    cells: Option<&prm_format::EntryCells>,
 ) -> Vec<Vec3> {
-    let irradiance: Vec<Vec3> = entries
-        .par_iter()
-        .map(|en| {
-            let (p, n) = (Vec3::from(en.position), Vec3::from(en.normal));
-            crate::bounded_irradiance(bvh, lights, p, n, n, u32::MAX, disk)
-        })
-        .collect();
+    let irradiance: Vec<Vec3> = match cells {
+        Some(cells) => {
+            let positions: Vec<Vec3> = entries.iter().map(|e| Vec3::from(e.position)).collect();
+            crate::cell_irradiance(bvh, lights, &positions, cells)
+        }
+        None => entries
+            .par_iter()
+            .map(|en| {
+                let (p, n) = (Vec3::from(en.position), Vec3::from(en.normal));
+                crate::bounded_irradiance(bvh, lights, p, n, n, u32::MAX, disk)
+            })
+            .collect(),
+    };
     clusters
         .iter()
         .map(|c| energy_weight(c.members(), &irradiance, entry_energy))

@@ -78,7 +78,8 @@ pub fn bounded_irradiance(bvh: &Bvh, lights: &[Light], p: Vec3, ng: Vec3, n: Vec
 /// 102% (relative RMSE; the reference's own noise 28%). The bound trades that variance for a
 /// bias near lights: the disk of the whole area (`ENTRY_DISK` = 1) gave 47% there but raised
 /// the error with a light 5 cm from a wall from 24% to 27%; a quarter of it gives 45% and 25%.
-/// The run time computes the same bound on the GPU (prm-runtime's `weights.wgsl`).
+/// The run time computes the same bound on the GPU (prm-runtime's `weights.wgsl`) for archives
+/// without entry cells; with them it takes each cell's light ([`crate::cell_irradiance`]).
 pub fn entry_irradiance(bvh: &Bvh, lights: &[Light], entries: &[SurfaceSample]) -> Vec<Vec3> {
     entries
         .par_iter()

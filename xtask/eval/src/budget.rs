@@ -223,7 +223,15 @@ fn cpu_blend(archive: &Path, tracer: &Tracer, light: Light, texels: &[u32], entr
     let area: f32 = tracer.scene.triangles.iter().map(|t| t.area()).sum();
     let disk = entry_disk * area / (entries.len() as f32 * std::f32::consts::PI);
     let lights = [light];
-    let weights = prm_trace::archive_weights(&tracer.bvh, &lights, &entries, &energy, &clusters, disk);
+    let weights = prm_trace::archive_weights(
+        &tracer.bvh,
+        &lights,
+        &entries,
+        &energy,
+        &clusters,
+        disk,
+        a.entry_cells(),
+    );
     // The near field as the player sums it (`prm_trace::NearPlay`, over the atlas's texels),
     // with ray-cast direct light: each pane with its deeper share's series.
     let near = a.near_field().cloned();

@@ -62,7 +62,15 @@ pub fn run(args: Vec<String>) {
     };
     let lights = [light];
     // Played, K = all: every texel's indirect and direct irradiance.
-    let weights = prm_trace::archive_weights(&bvh, &lights, &entries, &entry_energy, &clusters, disk);
+    let weights = prm_trace::archive_weights(
+        &bvh,
+        &lights,
+        &entries,
+        &entry_energy,
+        &clusters,
+        disk,
+        archive.entry_cells(),
+    );
     let exits = &atlas.exits;
     let played: Vec<Vec3> = exits
         .iter()

@@ -219,7 +219,15 @@ pub fn run(args: Vec<String>) {
             position,
             intensity: Vec3::splat(d * d),
         }];
-        let w = prm_trace::archive_weights(&bvh, &lights, &entries, &entry_energy, &clusters, disk);
+        let w = prm_trace::archive_weights(
+            &bvh,
+            &lights,
+            &entries,
+            &entry_energy,
+            &clusters,
+            disk,
+            archive.entry_cells(),
+        );
         let mut dense = vec![Vec3::ZERO; res * res];
         for (wc, pane) in w.iter().zip(&panes) {
             for (o, v) in dense.iter_mut().zip(pane) {

@@ -103,7 +103,15 @@ pub fn run(args: Vec<String>) {
             ..ReferenceParams::with_spp(refspp)
         };
         let r = tracer.indirect_at_exits(&exits, &reference, &mut |_, _| {}).unwrap();
-        let weights = prm_trace::archive_weights(&bvh, &lights, &entries, &entry_energy, &clusters, disk);
+        let weights = prm_trace::archive_weights(
+            &bvh,
+            &lights,
+            &entries,
+            &entry_energy,
+            &clusters,
+            disk,
+            archive.entry_cells(),
+        );
         let mut rows: Vec<(String, Vec<Vec3>)> = vec![
             (
                 format!("top-{k}"),
