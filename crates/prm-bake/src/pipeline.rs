@@ -509,16 +509,15 @@ pub(crate) fn sample_entries(scene: &Scene, count: usize, seed: u64) -> Result<V
     prm_trace::sample_surface(scene, &EntryParams { count, seed }).map_err(trace("sampling entry points"))
 }
 
-/// The cells of the entry points `entries` on `scene` ([`prm_trace::entry_cells`]), with a
-/// stream of `seed` apart from the entry points'.
+/// The cells of the entry points `entries` on `scene` (its BVH `bvh`, [`prm_trace::entry_cells`]),
+/// with a stream of `seed` apart from the entry points'.
 pub(crate) fn sample_entry_cells(
     scene: &Scene,
+    bvh: &Bvh,
     entries: &[SurfaceSample],
     seed: u64,
 ) -> Result<prm_format::EntryCells, BakeError> {
-    let positions: Vec<glam::Vec3> = entries.iter().map(|e| e.position).collect();
-    let normals: Vec<glam::Vec3> = entries.iter().map(|e| e.normal).collect();
-    prm_trace::entry_cells(scene, &positions, &normals, seed ^ CELL_SEED).map_err(trace("sampling the entry cells"))
+    prm_trace::entry_cells(scene, bvh, entries, seed ^ CELL_SEED).map_err(trace("sampling the entry cells"))
 }
 
 /// Keys the entry cells' points apart from the entry points of the same seed.
@@ -586,7 +585,7 @@ pub fn bake(job: &BakeJob<'_>, renderer: Renderer<'_>, progress: &mut dyn Progre
     let mut atlas = build_atlas(job, &mut steps)?;
     let bvh = build_bvh(scene, &mut atlas, &mut steps)?;
     let (entries, mut vpls) = trace_walks(scene, &bvh, params, &mut steps)?;
-    let cells = sample_entry_cells(scene, &entries, params.seed)?;
+    let cells = sample_entry_cells(scene, &bvh, &entries, params.seed)?;
     let clustering = cluster_vpls(job, &bvh, &entries, &mut vpls, &mut steps)?;
     let order: Vec<u32> = clustering.members.iter().flatten().copied().collect();
     let traced = Traced {

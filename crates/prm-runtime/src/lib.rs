@@ -657,7 +657,7 @@ impl Runtime {
     }
 
     /// Bytes the indirect light's passes read on every update, by part, from the sizes of what
-    /// they bind: `weights`, every entry and cluster; `panes`, the mix's coefficients of the
+    /// they bind: `weights`, every entry, its cell points and every cluster; `panes`, the mix's coefficients of the
     /// kept clusters (and of the residual groups when K drops clusters) in every tile and the
     /// blend's basis rows of the lit texels; `near field`, its exit records and hits once per
     /// gather (one, plus [`RuntimeOptions::near_bounces`] for the deeper share). Texture reads
@@ -678,7 +678,7 @@ impl Runtime {
         [
             MemoryPart {
                 name: "weights",
-                bytes: self.buffers.entries.size() + self.buffers.clusters.size(),
+                bytes: self.buffers.entries.size() + self.buffers.cell_points.size() + self.buffers.clusters.size(),
             },
             MemoryPart {
                 name: "panes",

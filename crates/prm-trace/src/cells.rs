@@ -14,7 +14,7 @@ use rayon::prelude::*;
 
 use crate::bvh::Bvh;
 use crate::error::TraceError;
-use crate::sampling::{sample_surface, EntryParams};
+use crate::sampling::{sample_surface, EntryParams, SurfaceSample};
 
 /// Points sampled per entry point for the cells.
 ///
@@ -31,25 +31,28 @@ pub const CELL_POINTS_PER_ENTRY: usize = 32;
 /// (Sponza's ceiling lamp 23.9% against 17.9%); 16 gave what 4 gives within 0.2 points.
 pub const CELL_NORMAL_COST: f32 = 4.0;
 
-/// The cells of the entry points at `positions` with unit normals `normals` on `scene`: `N ×`
-/// [`CELL_POINTS_PER_ENTRY`] area-uniform points of seed `seed`, each given to its nearest
-/// entry point (by [`CELL_NORMAL_COST`]), in the entries' order.
-pub fn entry_cells(scene: &Scene, positions: &[Vec3], normals: &[Vec3], seed: u64) -> Result<EntryCells, TraceError> {
-    let n = positions.len();
-    if n == 0 || normals.len() != n {
-        return Err(TraceError::InvalidParameter(format!(
-            "entry cells need one normal per entry point ({} positions, {} normals)",
-            n,
-            normals.len()
-        )));
+/// The cells of the entry points `entries` on `scene` (its BVH `bvh`): `N ×`
+/// [`CELL_POINTS_PER_ENTRY`] area-uniform points of seed `seed`, each given to the nearest
+/// entry point (by [`CELL_NORMAL_COST`]) that it sees from the front of its surface, in the
+/// entries' order. A point sees none of its [`CELL_CANDIDATES`] nearest where it lies behind
+/// other geometry (under a lamp's shade flush with a ceiling, inside a wall); it then goes to
+/// the nearest, which such geometry shades as it shades the point.
+pub fn entry_cells(scene: &Scene, bvh: &Bvh, entries: &[SurfaceSample], seed: u64) -> Result<EntryCells, TraceError> {
+    let n = entries.len();
+    if n == 0 {
+        return Err(TraceError::InvalidParameter("entry cells need entry points".into()));
     }
     let count = n * CELL_POINTS_PER_ENTRY;
     let samples = sample_surface(scene, &EntryParams { count, seed })?;
     let radius2 = (scene.area() / n as f64 / std::f64::consts::PI) as f32;
-    let grid = EntryGrid::new(positions, 2.0 * radius2.sqrt());
+    let grid = EntryGrid::new(entries, 2.0 * radius2.sqrt());
     let owners: Vec<u32> = samples
         .par_iter()
-        .map(|s| grid.nearest(positions, normals, s.position, s.normal, CELL_NORMAL_COST * radius2))
+        .map(|s| {
+            let near = grid.nearest(entries, s, CELL_NORMAL_COST * radius2);
+            let sees = |&i: &u32| front_visible(bvh, s, &entries[i as usize]);
+            near.iter().copied().find(|i| sees(i)).unwrap_or(near[0])
+        })
         .collect();
     // Counting sort by owner, keeping the sampling order within a cell.
     let mut ends = vec![0u32; n];
@@ -65,7 +68,7 @@ pub fn entry_cells(scene: &Scene, positions: &[Vec3], normals: &[Vec3], seed: u6
     }
     let mut points = vec![CellPoint::default(); count];
     for (s, &o) in samples.iter().zip(&owners) {
-        let offset = (s.position - positions[o as usize]).to_array();
+        let offset = (s.position - entries[o as usize].position).to_array();
         let p = CellPoint::new(offset, s.normal.to_array()).ok_or_else(|| {
             TraceError::InvalidParameter(format!(
                 "a cell point {offset:?} from its entry point is beyond f16's range"
@@ -75,6 +78,24 @@ pub fn entry_cells(scene: &Scene, positions: &[Vec3], normals: &[Vec3], seed: u6
         next[o as usize] += 1;
     }
     Ok(EntryCells { ends, points })
+}
+
+/// Nearest entry points a cell point tries, in order, for one it sees.
+pub const CELL_CANDIDATES: usize = 8;
+
+/// Whether the point `s` and the entry point `e` see each other from the front of their
+/// surfaces: the segment between them, each lifted off its surface along its own normal, meets
+/// nothing, their own triangles included. A point on a ceiling hidden behind a shade flush with
+/// it does not see the shade's entry points, nor a point of the shade the ceiling's hidden ones.
+fn front_visible(bvh: &Bvh, s: &SurfaceSample, e: &SurfaceSample) -> bool {
+    let eps = bvh.epsilon();
+    let o = s.position + s.normal * eps;
+    let v = (e.position + e.normal * eps) - o;
+    let len = v.length();
+    if len.is_nan() || len <= 0.0 {
+        return true;
+    }
+    !bvh.occluded(o, v / len, len, [u32::MAX, u32::MAX])
 }
 
 /// The cells of [`entry_cells`] with the entries reordered: entry `k` of the result is entry
@@ -112,20 +133,20 @@ pub fn cell_irradiance(bvh: &Bvh, lights: &[Light], positions: &[Vec3], cells: &
         .collect()
 }
 
-/// Entry points in a uniform grid, for the nearest one to a point.
+/// Entry points in a uniform grid, for the nearest ones to a point.
 struct EntryGrid {
     cell: f32,
     cells: std::collections::HashMap<[i32; 3], Vec<u32>>,
 }
 
 impl EntryGrid {
-    fn new(positions: &[Vec3], cell: f32) -> EntryGrid {
+    fn new(entries: &[SurfaceSample], cell: f32) -> EntryGrid {
         let mut grid = EntryGrid {
             cell: cell.max(f32::MIN_POSITIVE),
             cells: Default::default(),
         };
-        for (i, p) in positions.iter().enumerate() {
-            grid.cells.entry(grid.key(*p)).or_default().push(i as u32);
+        for (i, e) in entries.iter().enumerate() {
+            grid.cells.entry(grid.key(e.position)).or_default().push(i as u32);
         }
         grid
     }
@@ -134,12 +155,24 @@ impl EntryGrid {
         (p / self.cell).floor().as_ivec3().to_array()
     }
 
-    /// The entry point nearest to `p` (normal `n`) by `d² + cost · (1 − n·nₑ)`: ring by ring
-    /// of grid cells until a ring cannot hold a nearer one, then over every entry point.
-    fn nearest(&self, positions: &[Vec3], normals: &[Vec3], p: Vec3, n: Vec3, cost: f32) -> u32 {
-        let score = |i: u32| (p - positions[i as usize]).length_squared() + cost * (1.0 - n.dot(normals[i as usize]));
-        let k = self.key(p);
-        let mut best = (f32::INFINITY, u32::MAX);
+    /// The [`CELL_CANDIDATES`] entry points nearest to `s` by `d² + cost · (1 − n·nₑ)`, nearest
+    /// first (at least one): ring by ring of grid cells until a ring cannot hold a nearer one,
+    /// else over every entry point.
+    fn nearest(&self, entries: &[SurfaceSample], s: &SurfaceSample, cost: f32) -> Vec<u32> {
+        let score = |i: u32| {
+            let e = &entries[i as usize];
+            (s.position - e.position).length_squared() + cost * (1.0 - s.normal.dot(e.normal))
+        };
+        let mut best: Vec<(f32, u32)> = Vec::with_capacity(CELL_CANDIDATES + 1);
+        let offer = |best: &mut Vec<(f32, u32)>, i: u32| {
+            let c = (score(i), i);
+            let at = best.partition_point(|b| b.0 < c.0 || (b.0 == c.0 && b.1 < c.1));
+            if at < CELL_CANDIDATES {
+                best.insert(at, c);
+                best.truncate(CELL_CANDIDATES);
+            }
+        };
+        let k = self.key(s.position);
         for ring in 0..8i32 {
             for dx in -ring..=ring {
                 for dy in -ring..=ring {
@@ -148,23 +181,20 @@ impl EntryGrid {
                             continue;
                         }
                         for &i in self.cells.get(&[k[0] + dx, k[1] + dy, k[2] + dz]).into_iter().flatten() {
-                            let s = score(i);
-                            if s < best.0 || (s == best.0 && i < best.1) {
-                                best = (s, i);
-                            }
+                            offer(&mut best, i);
                         }
                     }
                 }
             }
             // Every entry point outside rings 0..=ring is farther than `ring` cells.
             let reach = ring as f32 * self.cell;
-            if best.1 != u32::MAX && best.0 <= reach * reach {
-                return best.1;
+            if best.len() == CELL_CANDIDATES && best[CELL_CANDIDATES - 1].0 <= reach * reach {
+                return best.iter().map(|b| b.1).collect();
             }
         }
-        (0..positions.len() as u32)
-            .min_by(|&a, &b| score(a).total_cmp(&score(b)).then(a.cmp(&b)))
-            .unwrap_or(0)
+        best.clear();
+        (0..entries.len() as u32).for_each(|i| offer(&mut best, i));
+        best.iter().map(|b| b.1).collect()
     }
 }
 
@@ -197,7 +227,7 @@ mod tests {
         let entries = sample_surface(&scene, &EntryParams { count: 150, seed: 3 }).unwrap();
         let positions: Vec<Vec3> = entries.iter().map(|e| e.position).collect();
         let normals: Vec<Vec3> = entries.iter().map(|e| e.normal).collect();
-        let cells = entry_cells(&scene, &positions, &normals, 7).unwrap();
+        let cells = entry_cells(&scene, &bvh, &entries, 7).unwrap();
         assert_eq!(cells.points.len(), 150 * CELL_POINTS_PER_ENTRY);
         // Each cell keeps to its own face.
         for (i, nrm) in normals.iter().enumerate() {
@@ -250,13 +280,49 @@ mod tests {
         );
     }
 
+    /// A shade 1 cm under a ceiling, both facing down: the ceiling hidden behind the shade and
+    /// the shade itself never share a cell, so the shade's lit points cannot go to the hidden
+    /// entry points, whose panes carry nothing.
+    #[test]
+    fn a_shade_flush_with_a_ceiling_keeps_its_own_cells() {
+        let quad = |y: f32, h: f32| {
+            [
+                Vec3::new(-h, y, -h),
+                Vec3::new(h, y, -h),
+                Vec3::new(h, y, h),
+                Vec3::new(-h, y, h),
+            ]
+        };
+        let scene = crate::grey_quads(&[quad(2.0, 2.0), quad(1.99, 0.5)]);
+        let bvh = Bvh::build(&scene, &BvhParams::DEFAULT).unwrap();
+        for n in scene.triangles.iter().map(|t| t.normal()) {
+            assert!(n.y < -0.99, "both face down");
+        }
+        let entries = sample_surface(&scene, &EntryParams { count: 400, seed: 5 }).unwrap();
+        let cells = entry_cells(&scene, &bvh, &entries, 9).unwrap();
+        let on_shade = |p: Vec3| p.y < 1.995;
+        let hidden = |p: Vec3| !on_shade(p) && p.x.abs() < 0.49 && p.z.abs() < 0.49;
+        let mut checked = 0;
+        for (i, e) in entries.iter().enumerate() {
+            for p in cells.points_of(i) {
+                let at = e.position + Vec3::from(p.offset());
+                if on_shade(e.position) {
+                    assert!(!hidden(at), "shade entry {i} holds a hidden ceiling point {at}");
+                } else if hidden(e.position) {
+                    assert!(!on_shade(at), "hidden entry {i} holds a shade point {at}");
+                }
+                checked += 1;
+            }
+        }
+        assert_eq!(checked, 400 * CELL_POINTS_PER_ENTRY);
+    }
+
     #[test]
     fn reordered_cells_follow_their_entries() {
         let scene = room();
+        let bvh = Bvh::build(&scene, &BvhParams::DEFAULT).unwrap();
         let entries = sample_surface(&scene, &EntryParams { count: 20, seed: 1 }).unwrap();
-        let positions: Vec<Vec3> = entries.iter().map(|e| e.position).collect();
-        let normals: Vec<Vec3> = entries.iter().map(|e| e.normal).collect();
-        let cells = entry_cells(&scene, &positions, &normals, 2).unwrap();
+        let cells = entry_cells(&scene, &bvh, &entries, 2).unwrap();
         let order: Vec<u32> = (0..20).rev().collect();
         let back = reorder_cells(&cells, &order);
         for (k, &i) in order.iter().enumerate() {
