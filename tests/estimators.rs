@@ -633,12 +633,17 @@ fn the_weights_pass_agrees_with_the_cpu_weights() {
         bytemuck::cast_slice(&packed),
         wgpu::BufferUsages::STORAGE,
     );
-    for with_cells in [false, true] {
-        let irradiance = if with_cells {
-            let positions: Vec<Vec3> = entries.iter().map(|e| e.position).collect();
-            prm_trace::cell_irradiance(&bvh, &lights, &positions, &cells)
-        } else {
-            entry_irradiance(&bvh, &lights, &entries)
+    // Without cells; with cells and every light far (each at the entry point times the cell's
+    // area); with cells and every light near (over the cell's points).
+    for reach2 in [None, Some(0.0), Some(f32::MAX)] {
+        let with_cells = reach2.is_some();
+        let irradiance = match reach2 {
+            Some(reach2) => {
+                let positions: Vec<Vec3> = entries.iter().map(|e| e.position).collect();
+                let normals: Vec<Vec3> = entries.iter().map(|e| e.normal).collect();
+                prm_trace::cell_irradiance(&bvh, &lights, &positions, &normals, &cells, reach2)
+            }
+            None => entry_irradiance(&bvh, &lights, &entries),
         };
         let cpu = clustering.weights_by_energy(&irradiance, &energy);
         let gpu_entries: Vec<GpuEntry> = entries
@@ -647,7 +652,7 @@ fn the_weights_pass_agrees_with_the_cpu_weights() {
             .enumerate()
             .map(|(k, (e, en))| GpuEntry {
                 position: e.position.to_array(),
-                disk: ENTRY_DISK * e.weight / std::f32::consts::PI,
+                disk: reach2.unwrap_or(ENTRY_DISK * e.weight / std::f32::consts::PI),
                 normal: e.normal.to_array(),
                 energy: en.to_array(),
                 cell_first: if k == 0 { 0 } else { cells.ends[k - 1] },
@@ -699,11 +704,11 @@ fn the_weights_pass_agrees_with_the_cpu_weights() {
                 .map(|&k| irradiance[k as usize].max_element())
                 .fold(1e-30f32, f32::max);
             agreement.check(cpu[c], Vec3::from(weights[c].weight), scale, || {
-                format!("cluster {c} ({} members from {}), cells {with_cells}", m.len(), m[0])
+                format!("cluster {c} ({} members from {}), reach² {reach2:?}", m.len(), m[0])
             });
             let score = cpu[c].dot(Vec3::new(1.0, 0.5, 0.25));
             agreement.check(Vec3::splat(score), Vec3::splat(weights[c].score), scale, || {
-                format!("score of cluster {c}, cells {with_cells}")
+                format!("score of cluster {c}, reach² {reach2:?}")
             });
         }
         agreement.assert(if with_cells {

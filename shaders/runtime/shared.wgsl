@@ -74,8 +74,9 @@ struct Cluster {
 
 struct Entry {
     position: vec3<f32>,
-    // r² of the disk the entry stands for (area A/N over π, times ENTRY_DISK): the bound of its
-    // irradiance where the archive has no entry cells, see light_irradiance_disk
+    // without entry cells, r² of the disk the entry stands for (area A/N over π, times
+    // ENTRY_DISK): the bound of its irradiance, see light_irradiance_disk; with them, the squared
+    // distance within which a point or spot light is summed over the cell's points (weights.wgsl)
     disk: f32,
     normal: vec3<f32>,
     // its cell's points in the cell points buffer (weights.wgsl)

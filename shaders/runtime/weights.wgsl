@@ -32,21 +32,33 @@ fn octahedral_u8(q: u32) -> vec3<f32> {
     return normalize(n);
 }
 
-// Part `part` (of CELL_LANES) of entry e's irradiance from the lights: over its cell points
-// part, part + CELL_LANES, …, N/M times their sum; without cells, part 0 takes the entry's own,
+// Part `part` (of CELL_LANES) of entry e's irradiance from the lights. With cells, a point or
+// spot light within √e.disk sums over the cell points part, part + CELL_LANES, …, times N/M;
+// part 0 takes every other light at the entry point times its cell's area, cell_count · N/M
+// (prm_trace::cell_irradiance). Without cells, part 0 takes the entry's own irradiance,
 // bounded by its disk (light_irradiance_disk).
 fn entry_irradiance(e: Entry, part: u32) -> vec3<f32> {
     if e.cell_weight == 0.0 {
         return select(vec3<f32>(0.0), direct_irradiance_disk(e.position, e.normal, e.disk), part == 0u);
     }
     var sum = vec3<f32>(0.0);
-    for (var k = part; k < e.cell_count; k += CELL_LANES) {
-        let q = cell_points[e.cell_first + k];
-        let offset = vec3<f32>(unpack2x16float(q.x), unpack2x16float(q.y & 0xFFFFu).x);
-        let n = octahedral_u8(q.y >> 16u);
-        sum += direct_irradiance(e.position + offset, n);
+    // Bounded by the lights buffer's length too, as direct_irradiance_ng (lights.wgsl) says.
+    let count = min(frame.light_count, arrayLength(&lights));
+    for (var i = 0u; i < count; i++) {
+        let l = lights[i];
+        let d = l.position - e.position;
+        if l.kind != LIGHT_DIRECTIONAL && dot(d, d) < e.disk {
+            for (var k = part; k < e.cell_count; k += CELL_LANES) {
+                let q = cell_points[e.cell_first + k];
+                let offset = vec3<f32>(unpack2x16float(q.x), unpack2x16float(q.y & 0xFFFFu).x);
+                let n = octahedral_u8(q.y >> 16u);
+                sum += light_irradiance_ng(i, e.position + offset, n, n, 0.0) * e.cell_weight;
+            }
+        } else if part == 0u {
+            sum += light_irradiance_ng(i, e.position, e.normal, e.normal, 0.0) * (f32(e.cell_count) * e.cell_weight);
+        }
     }
-    return sum * e.cell_weight;
+    return sum;
 }
 
 // One workgroup per cluster (x + 65535·y), its invocations sharing the members: with one

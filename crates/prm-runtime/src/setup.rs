@@ -85,13 +85,15 @@ impl SceneGeometry {
 }
 
 /// The archive's entry points as the weights pass reads them, each weighed by the points of its
-/// cell or, in an archive without cells, standing for a disk of area A/N (its irradiance bound,
-/// see `weights.wgsl`), before the emitters' irradiance is added.
+/// cell for the lights within `prm_scene::cell_reach2` of it or, in an archive without cells,
+/// standing for a disk of area A/N (its irradiance bound, see `weights.wgsl`), before the
+/// emitters' irradiance is added.
 pub(crate) fn gpu_entries<R: Read + Seek>(archive: &Archive<R>, scene: &Scene) -> Vec<GpuEntry> {
     let disk = scene.entry_disk(archive.entries().len());
     let energy = archive.entry_energy();
     let cells = archive.entry_cells();
     let cell_weight = cells.map_or(0.0, |c| c.point_weight());
+    let reach2 = prm_scene::cell_reach2((scene.area() / archive.entries().len().max(1) as f64) as f32);
     archive
         .entries()
         .iter()
@@ -100,7 +102,7 @@ pub(crate) fn gpu_entries<R: Read + Seek>(archive: &Archive<R>, scene: &Scene) -
             let (first, end) = cells.map_or((0, 0), |c| (if i == 0 { 0 } else { c.ends[i - 1] }, c.ends[i]));
             GpuEntry {
                 position: e.position,
-                disk,
+                disk: if cells.is_some() { reach2 } else { disk },
                 normal: e.normal,
                 energy: energy.map_or([1.0; 3], |en| en[i]),
                 cell_first: first,

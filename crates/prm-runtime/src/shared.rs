@@ -321,8 +321,9 @@ pub struct GpuCluster {
 pub struct GpuEntry {
     /// Position.
     pub position: [f32; 3],
-    /// r² of the disk the entry stands for: the bound of its irradiance where the archive has
-    /// no entry cells.
+    /// Without entry cells, r² of the disk the entry stands for: the bound of its irradiance.
+    /// With them, the squared distance within which a point or spot light is summed over the
+    /// cell's points (`prm_scene::cell_reach2`).
     pub disk: f32,
     /// Unit normal.
     pub normal: [f32; 3],

@@ -112,25 +112,48 @@ pub fn reorder_cells(cells: &EntryCells, order: &[u32]) -> EntryCells {
     out
 }
 
-/// Every entry point's irradiance from its cell under `lights`: `N/M` times the sum of its
-/// points' direct irradiance (shadow rays), the entry points at `positions`.
-pub fn cell_irradiance(bvh: &Bvh, lights: &[Light], positions: &[Vec3], cells: &EntryCells) -> Vec<Vec3> {
+/// Every entry point's irradiance from its cell under `lights`, the entry points at
+/// `positions` with unit normals `normals`: a point or spot light within `√reach2`
+/// ([`prm_scene::cell_reach2`]) summed over the cell's points (shadow rays), `N/M · Σ E(p)`; any other
+/// light at the entry point, times the cell's area, `|cell| · N/M · E(entry)`.
+pub fn cell_irradiance(
+    bvh: &Bvh,
+    lights: &[Light],
+    positions: &[Vec3],
+    normals: &[Vec3],
+    cells: &EntryCells,
+    reach2: f32,
+) -> Vec<Vec3> {
     let w = cells.point_weight();
     (0..positions.len())
         .into_par_iter()
         .map(|i| {
-            let at = positions[i];
-            let sum: Vec3 = cells
-                .points_of(i)
-                .iter()
-                .map(|p| {
-                    let n = Vec3::from(p.normal());
-                    crate::direct_irradiance(bvh, lights, at + Vec3::from(p.offset()), n, n, u32::MAX)
-                })
-                .sum();
-            sum * w
+            let (at, n) = (positions[i], normals[i]);
+            let points = cells.points_of(i);
+            let mut sum = Vec3::ZERO;
+            for light in lights {
+                let near = light_position(light).is_some_and(|p| p.distance_squared(at) < reach2);
+                let one = std::slice::from_ref(light);
+                if near {
+                    for p in points {
+                        let pn = Vec3::from(p.normal());
+                        sum += crate::direct_irradiance(bvh, one, at + Vec3::from(p.offset()), pn, pn, u32::MAX) * w;
+                    }
+                } else {
+                    sum += crate::direct_irradiance(bvh, one, at, n, n, u32::MAX) * (points.len() as f32 * w);
+                }
+            }
+            sum
         })
         .collect()
+}
+
+/// Where a point, spot or rectangular spot light is (None for a directional one).
+fn light_position(light: &Light) -> Option<Vec3> {
+    match *light {
+        Light::Point { position, .. } | Light::Spot { position, .. } | Light::Rect { position, .. } => Some(position),
+        Light::Directional { .. } => None,
+    }
 }
 
 /// Entry points in a uniform grid, for the nearest ones to a point.
@@ -247,7 +270,8 @@ mod tests {
                 position: Vec3::new(x, 0.2, z),
                 intensity: Vec3::ONE,
             };
-            let at_cells: f32 = cell_irradiance(&bvh, &[light], &positions, &cells)
+            let reach2 = prm_scene::cell_reach2(per);
+            let at_cells: f32 = cell_irradiance(&bvh, &[light], &positions, &normals, &cells, reach2)
                 .iter()
                 .zip(&normals)
                 .filter(|(_, n)| n.y > 0.5)

@@ -267,7 +267,9 @@ pub fn played_indirect(bvh: &Bvh, archive: &CheckedArchive<'_>, light: Light) ->
     let e = match archive.cells {
         Some(cells) => {
             let positions: Vec<Vec3> = archive.entries.iter().map(|e| e.position).collect();
-            crate::cell_irradiance(bvh, &[light], &positions, cells)
+            let normals: Vec<Vec3> = archive.entries.iter().map(|e| e.normal).collect();
+            let reach2 = crate::cell_reach2(archive.entries.first().map_or(0.0, |e| e.weight));
+            crate::cell_irradiance(bvh, &[light], &positions, &normals, cells, reach2)
         }
         None => entry_irradiance(bvh, &[light], archive.entries),
     };

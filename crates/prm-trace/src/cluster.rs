@@ -346,7 +346,10 @@ pub fn archive_weights(
     let irradiance: Vec<Vec3> = match cells {
         Some(cells) => {
             let positions: Vec<Vec3> = entries.iter().map(|e| Vec3::from(e.position)).collect();
-            crate::cell_irradiance(bvh, lights, &positions, cells)
+            let normals: Vec<Vec3> = entries.iter().map(|e| Vec3::from(e.normal)).collect();
+            // `disk` is ENTRY_DISK · A/(Nπ).
+            let reach2 = crate::cell_reach2(disk / prm_scene::ENTRY_DISK * std::f32::consts::PI);
+            crate::cell_irradiance(bvh, lights, &positions, &normals, cells, reach2)
         }
         None => entries
             .par_iter()

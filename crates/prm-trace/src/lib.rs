@@ -46,7 +46,7 @@ pub use error::TraceError;
 pub use near::{near_disk, near_field, NEAR_RAYS};
 pub use near_play::{NearPlay, NEAR_GATHERS};
 pub use pane::{evaluate_atlas_panes, evaluate_panes, Lattice, PaneParams, Panes};
-pub use prm_scene::{parse_camera, parse_light, parse_size, SpecError, ENTRY_DISK};
+pub use prm_scene::{cell_reach2, parse_camera, parse_light, parse_size, SpecError, CELL_NEAR_RADII, ENTRY_DISK};
 pub use probes::{place_probes, probe_rays, probe_transfer, ProbeLayout};
 pub use reference::{Estimate, ImageMode, Lighting, ReferenceParams, ReferenceTracer, SKY_DIRECT_SAMPLES};
 pub use rng::Rng;
