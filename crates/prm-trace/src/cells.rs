@@ -6,6 +6,8 @@
 //! column where it stands for 3.7. Weighed by their own irradiance, the entry points then carry
 //! 45% too little of the light within 1 m of the first lamp and 10% too much by the second.
 //! Weighed by their cells, they carry what the surface receives, whatever their spacing.
+//! A light farther than [`prm_scene::CELL_NEAR_RADII`] varies too little over a cell to need
+//! its points, and is taken at the entry point times the cell's area ([`cell_irradiance`]).
 
 use glam::Vec3;
 use prm_format::{CellPoint, EntryCells};
