@@ -4,7 +4,7 @@
 //! The entry points are area-uniform but not evenly spaced: a lamp 0.4 m under Sponza's arcade
 //! ceiling finds 3 entry points within 1 m where the area there stands for 5 of them, and 6 by a
 //! column where it stands for 3.7. Weighed by their own irradiance, the entry points then carry
-//! 45% too little of the light within 1 m of the first lamp and 10% too much by the second.
+//! 45% too little of the light within 1 m of the first lamp and 11% too much by the second.
 //! Weighed by their cells, they carry what the surface receives, whatever their spacing.
 //! A light farther than [`prm_scene::CELL_NEAR_RADII`] varies too little over a cell to need
 //! its points, and is taken at the entry point times the cell's area ([`cell_irradiance`]).
@@ -22,7 +22,8 @@ use crate::sampling::{sample_surface, EntryParams, SurfaceSample};
 ///
 /// Measured on the lamps of `cargo xtask eval --lamps` (6 lamps near a ceiling or wall in
 /// Sponza, Sibenik and the modern hall, 6 positions each, the default bakes played by the CPU
-/// player): each lamp's mean energy lay within 0.920–1.145 at 8 points, 0.945–1.070 at 16,
+/// player, each point given to its nearest entry point and every light summed over the cells):
+/// each lamp's mean energy lay within 0.920–1.145 at 8 points, 0.945–1.070 at 16,
 /// 0.965–1.034 at 32 and 0.962–1.046 at 64, and the errors at 32 and 64 within 0.2 points.
 pub const CELL_POINTS_PER_ENTRY: usize = 32;
 
