@@ -4,7 +4,7 @@
 //! visibility and shadow maps).
 
 use glam::Vec3;
-use prm_play::cpu::{CpuArchive, CpuOptions, CpuPlayer};
+use prm_play::cpu::{CpuArchive, CpuOptions, CpuPlayer, Lightmap};
 use prm_play::{FrameInput, Mode, PlayOptions, Renderer, RuntimeOptions};
 use prm_scene::Light;
 use prm_tests::{baked, channel_sum as sum, rel_error, sized};
@@ -25,6 +25,13 @@ fn cpu_frames_match_the_gpu_player() {
         &sized(1024, 64, 48, 3),
     );
     let (mut archive, scene) = prm_play::open(&path, None).unwrap();
+    let resolution = archive.atlas().resolution as usize;
+    let uvs: Vec<[glam::Vec2; 3]> = archive
+        .atlas()
+        .triangle_uvs
+        .iter()
+        .map(|t| t.map(glam::Vec2::from_array))
+        .collect();
     let defaults = RuntimeOptions::for_archive(&archive);
     let options = CpuOptions {
         top_k: defaults.top_k,
@@ -79,5 +86,26 @@ fn cpu_frames_match_the_gpu_player() {
             assert!((energy - 1.0).abs() < 0.005, "lightmap energy {energy:.4}");
             assert!(error < 0.01, "lightmap error {error:.4}");
         }
+    }
+    // Another lightmap through the same reconstruction: the player's own gives its frame, and
+    // the frame is linear in it.
+    let input = FrameInput {
+        camera,
+        lights: &lights,
+        mode: Mode::Indirect,
+    };
+    let frame = vec3s(&cpu.render(&input, WIDTH, HEIGHT).rgb);
+    let own = cpu.indirect_lightmap(&lights);
+    let doubled: Vec<Vec3> = own.iter().map(|v| *v * 2.0).collect();
+    for (texels, scale) in [(&own, 1.0), (&doubled, 2.0)] {
+        let lightmap = Lightmap {
+            texels,
+            resolution,
+            uvs: &uvs,
+        };
+        let given = vec3s(&cpu.render_with(&input, WIDTH, HEIGHT, &lightmap).rgb);
+        let expected: Vec<Vec3> = frame.iter().map(|v| *v * scale).collect();
+        let error = rel_error(&given, &expected);
+        assert!(error < 1e-5, "a given lightmap ×{scale}: error {error:.2e}");
     }
 }

@@ -14,7 +14,8 @@
 //!   at the triangles' lightmap UVs.
 //!
 //! It plays punctual lights only: an archive's emitter groups, sky and probes need the GPU
-//! player.
+//! player. [`CpuPlayer::render_with`] shades with another lightmap of the scene through the
+//! same lookup (`cargo xtask eval experiment lightmap_floor` shows a converged one with it).
 
 use glam::{Vec2, Vec3};
 use prm_format::Archive;
@@ -191,10 +192,22 @@ impl<'a> CpuPlayer<'a> {
 
     /// Renders one frame of `width × height` pixels: linear radiance, top row first.
     pub fn render(&self, input: &FrameInput, width: u32, height: u32) -> Image {
-        let lightmap = match input.mode {
-            Mode::Direct => None,
-            _ => Some(self.indirect_lightmap(input.lights)),
+        let texels = match input.mode {
+            Mode::Direct => Vec::new(),
+            _ => self.indirect_lightmap(input.lights),
         };
+        let lightmap = Lightmap {
+            texels: &texels,
+            resolution: self.archive.resolution,
+            uvs: &self.archive.triangle_uvs,
+        };
+        self.render_with(input, width, height, &lightmap)
+    }
+
+    /// Renders as [`CpuPlayer::render`] does, with `lightmap` for the indirect light: another
+    /// lightmap of the scene (a converged reference at the exit points, say) seen through the
+    /// player's reconstruction.
+    pub fn render_with(&self, input: &FrameInput, width: u32, height: u32, lightmap: &Lightmap) -> Image {
         let rays = CameraRays::new(&input.camera, width, height);
         let rgb = (0..width * height)
             .into_par_iter()
@@ -205,7 +218,7 @@ impl<'a> CpuPlayer<'a> {
                     Mode::Split => Mode::Gi,
                     m => m,
                 };
-                let lightmap = lightmap.as_deref().filter(|_| mode != Mode::Direct);
+                let lightmap = Some(lightmap).filter(|_| mode != Mode::Direct);
                 self.shade(&rays, x, y, input.lights, mode, lightmap).to_array()
             })
             .collect();
@@ -220,7 +233,7 @@ impl<'a> CpuPlayer<'a> {
         y: u32,
         lights: &[Light],
         mode: Mode,
-        lightmap: Option<&[Vec3]>,
+        lightmap: Option<&Lightmap>,
     ) -> Vec3 {
         let dir = rays.direction(x, y);
         let Some(hit) = self.bvh.closest_hit(rays.eye, dir, f32::INFINITY, u32::MAX) else {
@@ -245,12 +258,23 @@ impl<'a> CpuPlayer<'a> {
             e += prm_trace::direct_irradiance(&self.bvh, lights, p, ng, n, hit.triangle);
         }
         if let Some(map) = lightmap {
-            let uv = self.archive.triangle_uvs[hit.triangle as usize];
+            let uv = map.uvs[hit.triangle as usize];
             let uv = uv[0] * b0 + uv[1] * b1 + uv[2] * b2;
-            e += bilinear(map, self.archive.resolution, uv);
+            e += bilinear(map.texels, map.resolution, uv);
         }
         self.scene.albedo(hit.triangle as usize, b1, b2) / std::f32::consts::PI * e
     }
+}
+
+/// Indirect irradiance over a square atlas, as [`CpuPlayer::render_with`] shades it.
+#[derive(Clone, Copy, Debug)]
+pub struct Lightmap<'a> {
+    /// Irradiance of every texel, row by row (`resolution²`).
+    pub texels: &'a [Vec3],
+    /// Texels on a side.
+    pub resolution: usize,
+    /// Every scene triangle's UVs in the atlas.
+    pub uvs: &'a [[Vec2; 3]],
 }
 
 /// Bilinear lookup of a square `side × side` map at `uv`, clamped at its edges (as the GPU

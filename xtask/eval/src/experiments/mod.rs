@@ -5,6 +5,7 @@ mod bench_trace;
 mod cluster_weights;
 mod common;
 mod lattice;
+mod lightmap_floor;
 mod near_field;
 mod pane_rank;
 mod probe_split;
@@ -13,7 +14,7 @@ mod residual_panes;
 use anyhow::{anyhow, bail, Result};
 
 /// The experiments by name, with the arguments each takes.
-const EXPERIMENTS: [(&str, &str); 7] = [
+const EXPERIMENTS: [(&str, &str); 8] = [
     (
         "bench_trace",
         "(no arguments) ray throughput of the BVH on the bundled scenes",
@@ -25,6 +26,10 @@ const EXPERIMENTS: [(&str, &str); 7] = [
     (
         "lattice",
         "SCENE ENTRIES CLUSTERS RESOLUTION WALKS  the pane evaluation lattice",
+    ),
+    (
+        "lightmap_floor",
+        "SCENE ARCHIVE.prm LIGHT CAMERA REFERENCE.exr OUT  the atlas's error floor against the method's",
     ),
     (
         "near_field",
@@ -51,6 +56,7 @@ pub fn run(args: &[String]) -> Result<()> {
         "bench_trace" => bench_trace::run(rest),
         "cluster_weights" => cluster_weights::run(rest),
         "lattice" => lattice::run(rest),
+        "lightmap_floor" => lightmap_floor::run(rest)?,
         "near_field" => near_field::run(rest),
         "pane_rank" => pane_rank::run(rest),
         "probe_split" => probe_split::run(rest).map_err(|e| anyhow!("{e}"))?,
