@@ -4,6 +4,7 @@
 mod bench_trace;
 mod cluster_weights;
 mod common;
+mod lamp_distance;
 mod lattice;
 mod lightmap_floor;
 mod near_field;
@@ -14,7 +15,7 @@ mod residual_panes;
 use anyhow::{anyhow, bail, Result};
 
 /// The experiments by name, with the arguments each takes.
-const EXPERIMENTS: [(&str, &str); 8] = [
+const EXPERIMENTS: [(&str, &str); 9] = [
     (
         "bench_trace",
         "(no arguments) ray throughput of the BVH on the bundled scenes",
@@ -22,6 +23,10 @@ const EXPERIMENTS: [(&str, &str); 8] = [
     (
         "cluster_weights",
         "[SCENE] [ENTRIES] [CLUSTERS] [RES]  how a cluster's weight combines its members",
+    ),
+    (
+        "lamp_distance",
+        "SCENE ARCHIVE.prm LIGHT  a lamp's indirect light by distance: panes, near field, reference",
     ),
     (
         "lattice",
@@ -55,6 +60,7 @@ pub fn run(args: &[String]) -> Result<()> {
     match name.as_str() {
         "bench_trace" => bench_trace::run(rest),
         "cluster_weights" => cluster_weights::run(rest),
+        "lamp_distance" => lamp_distance::run(rest)?,
         "lattice" => lattice::run(rest),
         "lightmap_floor" => lightmap_floor::run(rest)?,
         "near_field" => near_field::run(rest),
