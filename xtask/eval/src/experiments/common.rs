@@ -43,3 +43,42 @@ pub fn entry_energy<R: std::io::Read + std::io::Seek>(archive: &prm_format::Arch
     let energy = archive.entry_energy().expect("the archive has no entry energies");
     energy.iter().map(|e| Vec3::from_array(*e)).collect()
 }
+
+/// The CPU player's options for `archive` as the run time plays it by default
+/// (`RuntimeOptions::for_archive`), with or without the near field and its deeper share's
+/// `near_bounces` gathers.
+pub fn cpu_options<R: std::io::Read + std::io::Seek>(
+    archive: &prm_format::Archive<R>,
+    near_field: bool,
+    near_bounces: u32,
+) -> prm_play::cpu::CpuOptions {
+    let defaults = prm_play::RuntimeOptions::for_archive(archive);
+    prm_play::cpu::CpuOptions {
+        top_k: defaults.top_k,
+        residual_groups: defaults.residual_groups,
+        fade_band: defaults.fade_band,
+        near_field,
+        near_bounces,
+    }
+}
+
+/// The default atlas of `scene` at `archive`'s resolution, refused unless its UVs are the
+/// archive's (the exit points are then the archive's texels).
+pub fn archive_atlas<R: std::io::Read + std::io::Seek>(
+    scene: &prm_scene::Scene,
+    archive: &prm_format::Archive<R>,
+) -> anyhow::Result<prm_scene::Atlas> {
+    let resolution = archive.atlas().resolution;
+    let params = prm_scene::AtlasParams::with_sizing(prm_scene::Sizing::Resolution(resolution));
+    let atlas = prm_scene::Atlas::build(scene, &params)?;
+    let stored = &archive.atlas().triangle_uvs;
+    anyhow::ensure!(
+        stored.len() == atlas.uvs.len()
+            && stored
+                .iter()
+                .zip(&atlas.uvs)
+                .all(|(a, b)| a.iter().zip(b).all(|(p, q)| p == &q.to_array())),
+        "the archive's atlas is not the default atlas of this scene at {resolution}²"
+    );
+    Ok(atlas)
+}

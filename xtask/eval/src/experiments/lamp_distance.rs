@@ -9,13 +9,13 @@
 //! player plays it with the panes alone, with the near field's direct share added, and whole
 //! (the deeper share's gathers and series too).
 
-use anyhow::{bail, Result};
+use anyhow::{bail, Context, Result};
 use glam::Vec3;
-use prm_scene::{Atlas, AtlasParams, Light, Sizing};
+use prm_scene::Light;
 use prm_trace::{Bvh, BvhParams, Lighting, ReferenceParams, ReferenceTracer};
 use std::path::Path;
 
-use super::common::env_or;
+use super::common::{archive_atlas, cpu_options, env_or};
 
 /// Bin edges, metres from the light.
 const BINS: [f32; 9] = [0.0, 1.0, 2.0, 3.0, 4.5, 6.0, 9.0, 13.0, f32::INFINITY];
@@ -32,20 +32,11 @@ pub fn run(args: Vec<String>) -> Result<()> {
         bail!("lamp_distance takes a point light");
     };
     let lights = [light];
-    let atlas = Atlas::build(
-        &scene,
-        &AtlasParams::with_sizing(Sizing::Resolution(archive.atlas().resolution)),
-    )?;
+    let atlas = archive_atlas(&scene, &archive).with_context(|| archive_path.clone())?;
     // Panes alone; with the near field's direct share; whole.
     let mut played = Vec::new();
     for (near_field, near_bounces) in [(false, 0), (true, 0), (true, prm_trace::NEAR_GATHERS)] {
-        let options = prm_play::cpu::CpuOptions {
-            top_k: prm_play::archive_top_k(&archive),
-            residual_groups: prm_format::RESIDUAL_GROUPS,
-            fade_band: prm_trace::check::FADE_BAND,
-            near_field,
-            near_bounces,
-        };
+        let options = cpu_options(&archive, near_field, near_bounces);
         let model = prm_play::cpu::CpuArchive::load(&mut archive, &scene, &options)?;
         let player = prm_play::cpu::CpuPlayer::new(&scene, &model, options)?;
         played.push(player.indirect_lightmap(&lights));

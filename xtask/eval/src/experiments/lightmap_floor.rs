@@ -8,20 +8,19 @@
 //! experiment renders two images on the CPU player ([`prm_play::cpu`]) into `OUT`:
 //! `played.exr`, the archive as `prm-play --backend cpu` plays it, and `exact.exr`, the
 //! reference path tracer's indirect irradiance at every exit point of the same atlas (`SPP`
-//! paths each, default 1024, seeded by `SEED`; gutter texels copied from their sources) seen through the same
-//! bilinear lookup. `exact` against the reference is the floor any lightmap of this atlas
+//! paths each, default 1024, seeded by `SEED`; gutter texels copied from their sources) seen
+//! through the same bilinear lookup. `exact` against the reference is the floor any lightmap of this atlas
 //! reaches at this view (with its own paths' noise and the reference's); `played` against
 //! `exact` is the method's own error, the atlas's resolution left out. The exact map is the
 //! mean of two halves of the paths (`exact-a.exr`, `exact-b.exr`): half their difference is its
 //! own noise, which the last line removes from the method's error.
 
-use anyhow::{ensure, Context, Result};
+use anyhow::{Context, Result};
 use glam::Vec3;
-use prm_scene::{Atlas, AtlasParams, Sizing};
 use prm_trace::{Bvh, BvhParams, Lighting, ReferenceParams, ReferenceTracer};
 use std::path::Path;
 
-use super::common::env_or;
+use super::common::{archive_atlas, cpu_options, env_or};
 use crate::compare::compare_files;
 
 pub fn run(args: Vec<String>) -> Result<()> {
@@ -34,20 +33,10 @@ pub fn run(args: Vec<String>) -> Result<()> {
     let size = prm_play::output::read_exr(Path::new(reference))?;
     let (width, height) = (size.width, size.height);
 
-    let resolution = archive.atlas().resolution;
-    let atlas = Atlas::build(&scene, &AtlasParams::with_sizing(Sizing::Resolution(resolution)))?;
-    let stored = &archive.atlas().triangle_uvs;
-    ensure!(
-        stored.len() == atlas.uvs.len()
-            && stored
-                .iter()
-                .zip(&atlas.uvs)
-                .all(|(a, b)| a.iter().zip(b).all(|(p, q)| p == &q.to_array())),
-        "{archive_path}: its atlas is not the default atlas of this scene at {resolution}²"
-    );
+    let atlas = archive_atlas(&scene, &archive).with_context(|| archive_path.clone())?;
     let bvh = Bvh::build(&scene, &BvhParams::DEFAULT)?;
     let tracer = ReferenceTracer::new(&scene, &bvh, Lighting::Lights(&lights));
-    let side = resolution as usize;
+    let side = atlas.resolution as usize;
     // Two halves of the paths with their own seeds: their difference is the exact map's noise.
     let halves: Vec<Vec<Vec3>> = (0..2u64)
         .map(|half| -> Result<Vec<Vec3>> {
@@ -68,13 +57,7 @@ pub fn run(args: Vec<String>) -> Result<()> {
         .collect::<Result<_>>()?;
     let texels: Vec<Vec3> = halves[0].iter().zip(&halves[1]).map(|(a, b)| (*a + *b) * 0.5).collect();
 
-    let options = prm_play::cpu::CpuOptions {
-        top_k: prm_play::archive_top_k(&archive),
-        residual_groups: prm_format::RESIDUAL_GROUPS,
-        fade_band: prm_trace::check::FADE_BAND,
-        near_field: true,
-        near_bounces: prm_trace::NEAR_GATHERS,
-    };
+    let options = cpu_options(&archive, true, prm_trace::NEAR_GATHERS);
     let model = prm_play::cpu::CpuArchive::load(&mut archive, &scene, &options)?;
     let player = prm_play::cpu::CpuPlayer::new(&scene, &model, options)?;
     let input = prm_play::FrameInput {
@@ -102,6 +85,7 @@ pub fn run(args: Vec<String>) -> Result<()> {
 
     println!("4x4 error, full resolution, energy, shape (metrics.md)");
     let reference = Path::new(reference);
+    let mut against_exact = None;
     for (what, test, against) in [
         ("played against the reference", path("played"), reference),
         ("exact lightmap against the reference", path("exact"), reference),
@@ -115,8 +99,9 @@ pub fn run(args: Vec<String>) -> Result<()> {
             m.energy,
             100.0 * m.shape
         );
+        against_exact = Some(m);
     }
-    let m = compare_files(&path("played"), &path("exact"))?;
+    let m = against_exact.expect("three comparisons");
     println!(
         "  the exact lightmap's own noise           {:5.1}% {:5.1}%\n  played against it, that noise removed    {:5.1}% {:5.1}%",
         100.0 * noise,
