@@ -208,11 +208,15 @@ impl Bvh {
     }
 
     /// The ray `origin + t·dir`, `tmin ≤ t ≤ tmax`, in the BVH's units.
+    ///
+    /// A `-0.0` component of `dir` (`-Vec3::Y` has two) becomes `+0.0`: obvhs inverts it to a
+    /// negative slope but orders the node's slabs as for a positive one, and the ray then misses
+    /// every box.
     #[inline(always)]
     fn scaled_ray(&self, origin: Vec3, dir: Vec3, tmin: f32, tmax: f32) -> Ray {
         Ray::new(
             (origin * self.scale).into(),
-            dir.into(),
+            (dir + Vec3::ZERO).into(),
             tmin * self.scale,
             tmax * self.scale,
         )
@@ -549,6 +553,11 @@ mod tests {
             ));
             assert!(bvh.occluded(Vec3::new(0.5, -1.0, 0.5), Vec3::Y, 10.0, [u32::MAX; 2]));
             assert!(!bvh.occluded(Vec3::new(0.5, -1.0, 0.5), Vec3::Y, 0.9, [u32::MAX; 2]));
+            // Straight down, `-Vec3::Y` is (-0, -1, -0): it meets the ceiling's back, then the floor.
+            let h = bvh.closest_hit(Vec3::new(0.3, 1.5, 0.6), -Vec3::Y, f32::INFINITY, u32::MAX);
+            assert!(h.is_some_and(|h| (h.t - 0.5).abs() < 1e-6 && !h.front), "{h:?}");
+            assert!(bvh.occluded(Vec3::new(0.3, 0.5, 0.6), -Vec3::Y, 1.0, [u32::MAX; 2]));
+            assert!(bvh.occluded(Vec3::new(0.3, 0.5, 0.6), Vec3::new(-0.0, 1.0, 0.0), 1.0, [u32::MAX; 2]));
             // Grazing shots along the floor do not hit it from a spawned origin.
             let o = bvh.spawn(Vec3::new(0.5, 0.0, 0.5), Vec3::Y, Vec3::X);
             assert!(bvh.closest_hit(o, Vec3::X, f32::INFINITY, u32::MAX).is_none());
