@@ -110,8 +110,8 @@ struct Selected {
 
 // One atlas tile of the panes' basis (blend.rs): its basis rows' length (four f16 per
 // vec2<u32>, zero beyond the rank; each lit texel names its row, blend.wgsl), its rank, and
-// where pane p's block of coefficients starts in its chunk's coefficients,
-// `coefficients + p·(1 + 3·stride)` (mix.wgsl).
+// where its coefficients start in its chunk's coefficients: an index of its panes' blocks, then
+// the blocks (blend.rs's tile_blocks, mix.wgsl).
 struct PaneTile {
     stride: u32,
     rank: u32,

@@ -72,8 +72,8 @@ pub fn run(args: &DumpArgs) -> Result<()> {
 
 /// What an archive needs resident on the GPU as the run time loads it by default: the panes'
 /// basis rows that are not zero (`f16`, each tile's rank rounded up to four) and their
-/// coefficients with the residual groups' (per pane and tile a scale and four `f16` ranks a
-/// word, 8 bytes each), and
+/// coefficients with the residual groups' (per tile a `u32` index entry per pane, and per pane
+/// that is not zero there a scale and four `f16` ranks a word, 8 bytes each), and
 /// the near field's exit records (8 bytes) and merged hits (4 bytes; twice where the deeper
 /// share's disk differs from the direct share's), and the entry cells' points (8 bytes).
 fn resident_line<R: Read + Seek>(archive: &Archive<R>) -> String {
@@ -86,8 +86,22 @@ fn resident_line<R: Read + Seek>(archive: &Archive<R>) -> String {
     let rows: u64 = (0..basis.tile_count())
         .map(|t| basis.nonzero_rows(t).count() as u64 * quads(basis.ranks()[t]) * 8)
         .sum();
-    let block = |r: u32| if r == 0 { 0 } else { 8 * (1 + 3 * quads(r)) };
-    let coefficients = (clusters + groups) as u64 * basis.ranks().iter().map(|&r| block(r)).sum::<u64>();
+    let group_of = prm_format::residual_groups(archive.clusters(), groups as u32);
+    let coefficients: u64 = (0..basis.tile_count())
+        .filter(|&t| basis.ranks()[t] > 0)
+        .map(|t| {
+            let mut lit = vec![false; clusters + groups];
+            for c in (0..clusters).filter(|&c| !basis.block_is_zero(c, t)) {
+                lit[c] = true;
+                match group_of.get(c) {
+                    Some(&g) if (g as usize) < groups => lit[clusters + g as usize] = true,
+                    _ => {}
+                }
+            }
+            let blocks = lit.iter().filter(|&&l| l).count() as u64;
+            8 * (clusters + groups).div_ceil(2) as u64 + blocks * 8 * (1 + 3 * quads(basis.ranks()[t]))
+        })
+        .sum();
     let near = archive.near_field().map_or(0, |n| {
         let (_, merged) = n.merged_hits();
         let sets = if n.indirect_disk > 0.0 && n.indirect_disk != n.disk {

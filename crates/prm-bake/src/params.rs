@@ -403,7 +403,9 @@ const MIX_BYTES: f64 = 32.0 * 1024.0 * 1024.0;
 
 /// Coefficient bytes per texel of a pane at the largest rank in 64² tiles, the bound
 /// [`MIX_BYTES`] counts with: a scale and three channels of 128 `f16` per pane and tile, in
-/// 8-byte words (`8·(1 + 3·128/4) / 64²`, about 0.19).
+/// 8-byte words (`8·(1 + 3·128/4) / 64²`, about 0.19). It leaves out the run time's index of a
+/// tile's blocks (4 bytes a pane, 8 read), 1% of a block at that rank; real bakes keep far
+/// lower ranks, and the run time does not keep the blocks that are zero.
 const MIX_BYTES_PER_TEXEL: f64 = 8.0 * (1.0 + 3.0 * prm_format::MAX_PANE_RANK as f64 / 4.0) / 4096.0;
 
 /// The automatic top K at least, however large the atlas.

@@ -379,6 +379,16 @@ impl PaneBasis {
             .collect()
     }
 
+    /// Whether pane `pane`'s coefficients in tile `tile` are all zero: it lights nothing there
+    /// (true for a tile of rank 0). Panics if `tile` is out of range, or `pane` where the rank
+    /// is not 0.
+    pub fn block_is_zero(&self, pane: usize, tile: usize) -> bool {
+        let r = self.ranks[tile] as usize;
+        self.coefficients[tile][3 * pane * r..3 * (pane + 1) * r]
+            .iter()
+            .all(|&c| c == 0.0)
+    }
+
     /// Bytes of the basis values of every tile (`2·T²·Σ r_t`).
     pub fn basis_bytes(&self) -> u64 {
         2 * u64::from(self.tile_size).pow(2) * self.rank_sum()

@@ -13,11 +13,11 @@
 //! grouped in *chunks* whose basis and coefficients each fit the device's storage binding (128
 //! MiB on lavapipe); each pass dispatches once per chunk.
 //!
-//! On the bundled Cornell box's automatic bake (512 clusters + 64 residual groups, a 256² atlas,
-//! 16 tiles of mean rank 42.6) the panes take 7.4 MiB of GPU memory this way, against 144 MiB
-//! as one RGB9E5 buffer per pane, and an update that blends every cluster reads 7.1 MB of them
-//! (`prm-play --timings`, `gpu_memory` and `gi_bytes_read_by_part`; RGB9E5 buffers read 48 MB
-//! for 192 panes).
+//! On the bundled Cornell box's automatic bake (512 clusters + 64 residual groups, a 128² atlas,
+//! 4 tiles of mean rank 107) the panes take 4.1 MiB of GPU memory this way, against 32 MiB as
+//! one RGB9E5 buffer per pane, and an update that blends every cluster reads 4.0 MB of them
+//! (`prm-play --timings`, `gpu_memory` and `gi_bytes_read_by_part`). A tile keeps only the
+//! blocks of the panes that light it ([`tile_blocks`]).
 //! On lavapipe the frame bench (`cargo bench -p prm-play --bench frame`,
 //! `PRM_BENCH_PRESET=default`) puts the 504 clusters beyond the first 8 at 0.6–2.6 ms of a
 //! frame whose lights move (two runs; RGB9E5 buffers: 13.7 ms for 120 panes and 64 groups).
@@ -47,6 +47,9 @@ pub(crate) struct Panes {
     pub mixed: wgpu::Buffer,
     /// Each tile's chunk.
     tile_chunk: Vec<usize>,
+    /// Bytes the mix reads a frame per kept pane, on average: its blocks that are not zero and
+    /// its index word in every tile.
+    coefficient_bytes_per_pane: u64,
     /// Each tile's rank.
     ranks: Vec<u32>,
     /// Every atlas texel's basis row in its chunk's basis buffer (in `vec2<u32>`), [`NO_ROW`]
@@ -75,12 +78,14 @@ impl Panes {
             .min(limits.max_buffer_size)
             .min(cap.unwrap_or(u64::MAX));
         let panes = basis.pane_count() + group_count as usize;
+        let blocks: Vec<Vec<[u32; 2]>> = (0..basis.tile_count())
+            .map(|t| tile_blocks(basis, t, group_of, group_count))
+            .collect();
         let sizes: Vec<(u64, u64)> = (0..basis.tile_count())
             .map(|t| {
-                let r = basis.ranks()[t];
-                let stride = u64::from(r).div_ceil(LANES as u64);
+                let stride = u64::from(basis.ranks()[t]).div_ceil(LANES as u64);
                 let rows = basis.nonzero_rows(t).count() as u64;
-                (rows * stride * 8, panes as u64 * PaneBlock::bytes(r))
+                (rows * stride * 8, blocks[t].len() as u64 * 8)
             })
             .collect();
         if let Some(&(b, c)) = sizes.iter().find(|&&(b, c)| b.max(c) > binding) {
@@ -111,12 +116,16 @@ impl Panes {
             .enumerate()
             .map(|(c, w)| {
                 let tiles = w[0]..w[1];
-                let chunk = upload_chunk(device, basis, (group_of, group_count), tiles, &mut gpu_tiles, &mut rows);
+                let chunk = upload_chunk(device, basis, &blocks, tiles, &mut gpu_tiles, &mut rows);
                 tile_chunk.extend(std::iter::repeat_n(c, w[1] - w[0]));
                 chunk
             })
             .collect();
         let mixed_stride = basis.max_rank().div_ceil(LANES as u32) * LANES as u32;
+        // Per kept pane, its index word in every tile of rank > 0 and its blocks on average.
+        let ranked = (0..basis.tile_count()).filter(|&t| basis.ranks()[t] > 0).count() as u64;
+        let index_bytes = ranked * 8 * (panes as u64).div_ceil(2);
+        let block_bytes = sizes.iter().map(|s| s.1).sum::<u64>() - index_bytes;
         Ok(Panes {
             chunks,
             tiles: pipeline::buffer_init(
@@ -132,6 +141,7 @@ impl Panes {
                 wgpu::BufferUsages::empty(),
             ),
             tile_chunk,
+            coefficient_bytes_per_pane: block_bytes / panes.max(1) as u64 + 8 * ranked,
             ranks: basis.ranks().to_vec(),
             rows,
             mixed_stride,
@@ -161,9 +171,10 @@ impl Panes {
         self.mixed_stride
     }
 
-    /// Bytes the mix pass reads a frame for each kept pane: its [`PaneBlock`] in every tile.
+    /// Bytes the mix pass reads a frame for each kept pane, on average: its index word and,
+    /// where it is not zero, its [`PaneBlock`] in every tile.
     pub fn coefficient_bytes_per_pane(&self) -> u64 {
-        self.ranks.iter().map(|&r| PaneBlock::bytes(r)).sum()
+        self.coefficient_bytes_per_pane
     }
 }
 
@@ -176,20 +187,6 @@ impl Panes {
 pub(crate) struct PaneBlock;
 
 impl PaneBlock {
-    /// Words of a pane's block in a tile of rank `r`: the scale and three channels.
-    pub fn words(r: u32) -> u64 {
-        if r == 0 {
-            0
-        } else {
-            1 + 3 * u64::from(r).div_ceil(LANES as u64)
-        }
-    }
-
-    /// Bytes of a pane's block in a tile of rank `r`.
-    pub fn bytes(r: u32) -> u64 {
-        8 * Self::words(r)
-    }
-
     /// Appends the block of one pane's coefficients `v` (three channels of `r` each) to `out`.
     fn push(v: &[f32], r: usize, out: &mut Vec<[u32; 2]>) {
         let scale = v.iter().fold(0.0f32, |m, x| m.max(x.abs()));
@@ -212,13 +209,55 @@ impl PaneBlock {
 /// A texel without a basis row (zero there), in [`Panes`]'s rows and the blend's texels.
 const NO_ROW: u32 = u32::MAX;
 
-/// Chunk `tiles` of `basis` in two buffers, with each residual group's coefficients (its
-/// members' by `group_of`, of `group_count` groups); its tiles' entries appended to
-/// `gpu_tiles`, its texels' rows written to `rows`.
+/// A pane without a block in a tile (zero there), in the tile's block index.
+const NO_BLOCK: u32 = u32::MAX;
+
+/// Tile `tile`'s coefficients as the mix reads them, in `vec2<u32>` words: first an index with
+/// one `u32` per pane (two a word; the clusters', then the `group_count` residual groups'),
+/// each the word where the pane's [`PaneBlock`] starts, counted from the tile's first word, or
+/// [`NO_BLOCK`]; then the blocks. A cluster has a block where its coefficients are not all
+/// zero (in a large scene most clusters light few tiles: 27% of the blocks of Sponza's default
+/// bake are zero), a residual group (its members' coefficients summed by `group_of`) where one
+/// of its members has. Empty for a tile of rank 0.
+fn tile_blocks(basis: &PaneBasis, tile: usize, group_of: &[u32], group_count: u32) -> Vec<[u32; 2]> {
+    let r = basis.ranks()[tile] as usize;
+    if r == 0 {
+        return Vec::new();
+    }
+    let own = basis.coefficients(tile);
+    let (clusters, groups) = (basis.pane_count(), group_count as usize);
+    let mut sums = vec![0.0f32; 3 * r * groups];
+    let mut kept = vec![false; clusters + groups];
+    for (pane, v) in own.chunks_exact(3 * r).enumerate() {
+        kept[pane] = !basis.block_is_zero(pane, tile);
+        let g = group_of.get(pane).map_or(groups, |&g| g as usize);
+        if g < groups && kept[pane] {
+            kept[clusters + g] = true;
+            let sum = &mut sums[3 * r * g..3 * r * (g + 1)];
+            sum.iter_mut().zip(v).for_each(|(s, v)| *s += v);
+        }
+    }
+    let mut index = vec![NO_BLOCK; clusters + groups];
+    let mut out = vec![[0u32; 2]; (clusters + groups).div_ceil(2)];
+    for (pane, v) in own.chunks_exact(3 * r).chain(sums.chunks_exact(3 * r)).enumerate() {
+        if kept[pane] {
+            index[pane] = out.len() as u32;
+            PaneBlock::push(v, r, &mut out);
+        }
+    }
+    for (word, pair) in out.iter_mut().zip(index.chunks(2)) {
+        *word = [pair[0], pair.get(1).copied().unwrap_or(NO_BLOCK)];
+    }
+    out
+}
+
+/// Chunk `tiles` of `basis` in two buffers, each tile's coefficients as [`tile_blocks`]
+/// encoded them in `blocks`; its tiles' entries appended to `gpu_tiles`, its texels' rows
+/// written to `rows`.
 fn upload_chunk(
     device: &wgpu::Device,
     basis: &PaneBasis,
-    (group_of, group_count): (&[u32], u32),
+    blocks: &[Vec<[u32; 2]>],
     tiles: std::ops::Range<usize>,
     gpu_tiles: &mut Vec<GpuPaneTile>,
     rows: &mut [u32],
@@ -245,19 +284,7 @@ fn upload_chunk(
             let half = |k: usize| row.get(k).map_or(0, |&u| u32::from(half::f16::from_f32(u).to_bits()));
             words.extend((0..2 * stride).map(|p| half(2 * p) | half(2 * p + 1) << 16));
         }
-        // Each pane's block, the residual groups' (their members' summed) after the clusters'.
-        let own = basis.coefficients(tile);
-        let mut groups = vec![0.0f32; 3 * r * group_count as usize];
-        for (pane, v) in own.chunks_exact(3 * r).enumerate() {
-            let g = group_of.get(pane).map_or(group_count, |&g| g) as usize;
-            if g < group_count as usize {
-                let sum = &mut groups[3 * r * g..3 * r * (g + 1)];
-                sum.iter_mut().zip(v).for_each(|(s, v)| *s += v);
-            }
-        }
-        for v in own.chunks_exact(3 * r).chain(groups.chunks_exact(3 * r)) {
-            PaneBlock::push(v, r, &mut coefficients);
-        }
+        coefficients.extend_from_slice(&blocks[tile]);
     }
     PaneChunk {
         constants: GpuBlendChunk {
@@ -392,5 +419,91 @@ impl BlendPass {
     pub fn encode(&self, encoder: &mut wgpu::CommandEncoder, timer: Option<&PassTimer>) {
         self.mix.encode(encoder, timer);
         self.pass.encode_groups(encoder, &self.chunks, timer);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Decodes pane `pane`'s block from a tile's words as the mix does: `None` where its index
+    /// says there is none.
+    fn block(words: &[[u32; 2]], pane: usize, r: usize) -> Option<Vec<f32>> {
+        let at = words[pane / 2][pane % 2];
+        if at == NO_BLOCK {
+            return None;
+        }
+        let b = &words[at as usize..];
+        let scale = f32::from_bits(b[0][0]);
+        let stride = r.div_ceil(LANES);
+        let f = |w: u32, hi: bool| half::f16::from_bits((if hi { w >> 16 } else { w & 0xffff }) as u16).to_f32();
+        Some(
+            (0..3)
+                .flat_map(|ch| (0..r).map(move |k| (ch, k)))
+                .map(|(ch, k)| {
+                    let w = b[1 + ch * stride + k / LANES];
+                    scale * f(w[(k % LANES) / 2], k % 2 == 1)
+                })
+                .collect(),
+        )
+    }
+
+    /// Panes that are zero in a tile have no block there, the others and the residual groups
+    /// (their members' sums) decode to their coefficients, and a group whose members are all
+    /// zero in a tile has none either.
+    #[test]
+    fn tiles_keep_the_blocks_of_the_panes_that_light_them() {
+        let (res, tile) = (16usize, 8usize);
+        let panes: Vec<Vec<[f32; 3]>> = (0..5)
+            .map(|p| {
+                (0..res * res)
+                    .map(|i| {
+                        let (x, y) = (i % res, i / res);
+                        let t = (y / tile) * (res / tile) + x / tile;
+                        if (p + t) % 3 == 0 {
+                            [0.0; 3]
+                        } else {
+                            let v = 1.0 + (p as f32) * 0.3 + (x as f32 * 0.1 + y as f32 * 0.07).sin();
+                            [v, 0.5 * v, 0.25 * v + 0.1]
+                        }
+                    })
+                    .collect()
+            })
+            .collect();
+        let basis = PaneBasis::compress(&panes, res as u32, tile as u32, 0.0, 64).unwrap();
+        let group_of = [0, 0, 1, 1, 2];
+        let mut absent = 0;
+        for t in 0..basis.tile_count() {
+            let r = basis.ranks()[t] as usize;
+            let words = tile_blocks(&basis, t, &group_of, 3);
+            let own = basis.coefficients(t);
+            for p in 0..5 {
+                match block(&words, p, r) {
+                    None => {
+                        assert!(basis.block_is_zero(p, t), "pane {p} tile {t}");
+                        absent += 1;
+                    }
+                    Some(decoded) => {
+                        let want = &own[3 * p * r..3 * (p + 1) * r];
+                        let scale = want.iter().fold(0f32, |m, c| m.max(c.abs()));
+                        for (d, w) in decoded.iter().zip(want) {
+                            assert!((d - w).abs() <= 1e-3 * scale, "pane {p} tile {t}: {d} for {w}");
+                        }
+                    }
+                }
+            }
+            for g in 0..3 {
+                let members: Vec<usize> = (0..5).filter(|&p| group_of[p] == g).collect();
+                let decoded = block(&words, 5 + g as usize, r);
+                assert_eq!(decoded.is_none(), members.iter().all(|&p| basis.block_is_zero(p, t)));
+                if let Some(decoded) = decoded {
+                    for (k, d) in decoded.iter().enumerate() {
+                        let sum: f32 = members.iter().map(|&p| own[3 * p * r + k]).sum();
+                        assert!((d - sum).abs() <= 1e-3 * (1.0 + sum.abs()), "group {g} tile {t}");
+                    }
+                }
+            }
+        }
+        assert!(absent >= 5, "{absent} panes absent from their tiles");
     }
 }

@@ -382,7 +382,7 @@ pub struct GpuPaneTile {
     /// The tile's rank `r` (0: every pane is zero there).
     pub rank: u32,
     /// Where the tile's coefficients start in its chunk's coefficient buffer, in `vec2<u32>`:
-    /// pane `p`'s block (`blend.rs`, `PaneBlock`) at `coefficients + p·(1 + 3·stride)`.
+    /// its block index, then its panes' blocks (`blend.rs`, `tile_blocks`).
     pub coefficients: u32,
     /// Padding.
     pub _pad0: u32,

@@ -228,14 +228,32 @@ fn bad_input_is_refused_naming_it() {
 }
 
 /// Bytes of tile `t`'s basis rows that are not zero (four `f16` per eight bytes, the rank
-/// rounded up to four) and of its coefficients with the residual groups' (per pane a scale word
-/// and three channels of four `f16` a word, likewise rounded), as the run time uploads them.
-fn tile_bytes(basis: &prm_format::PaneBasis, panes: u64, t: usize) -> (u64, u64) {
+/// rounded up to four) and of its coefficients as the run time uploads them: a `u32` index
+/// entry per pane (the clusters and the `groups` residual groups), then a block (a scale word and
+/// three channels of four `f16` a word, likewise rounded) per cluster that is not zero there and
+/// per group with such a member.
+fn tile_bytes(archive: &FileArchive, groups: u32, t: usize) -> (u64, u64) {
+    let basis = archive.pane_basis();
     let r = basis.ranks()[t] as usize;
     let quads = r.div_ceil(4) as u64;
-    let block = if quads == 0 { 0 } else { 8 * (1 + 3 * quads) };
     let rows = basis.nonzero_rows(t).count() as u64;
-    (rows * quads * 8, panes * block)
+    if quads == 0 {
+        return (0, 0);
+    }
+    let group_of = prm_format::residual_groups(archive.clusters(), groups);
+    let clusters = basis.pane_count();
+    let mut lit = vec![false; clusters + groups as usize];
+    for c in (0..clusters).filter(|&c| !basis.block_is_zero(c, t)) {
+        lit[c] = true;
+        if groups > 0 {
+            lit[clusters + group_of[c] as usize] = true;
+        }
+    }
+    let blocks = lit.iter().filter(|&&l| l).count() as u64;
+    (
+        rows * quads * 8,
+        8 * lit.len().div_ceil(2) as u64 + blocks * 8 * (1 + 3 * quads),
+    )
 }
 
 /// Tiles of the panes grouped in many small chunks (a basis and a coefficient buffer each, and
@@ -255,14 +273,14 @@ fn panes_in_small_chunks_blend_the_same_lightmap() {
     let expected = frame(&ctx, &mut whole, &lights, Shadows::Own);
     assert!(expected.iter().flatten().any(|&v| v > 0.0));
     let panes = u64::from(whole.cluster_count() + whole.group_count());
-    let basis = a.pane_basis();
-    let largest = (0..basis.tile_count())
+    let largest = (0..a.pane_basis().tile_count())
         .map(|t| {
-            let (b, c) = tile_bytes(basis, panes, t);
+            let (b, c) = tile_bytes(&a, whole.group_count(), t);
             b.max(c)
         })
         .max()
         .unwrap();
+    let basis = a.pane_basis();
     assert!(
         basis.ranks().iter().filter(|&&r| r > 0).count() > 4,
         "too few tiles: {:?}",
@@ -334,10 +352,9 @@ fn gpu_memory_is_reported_by_part() {
     let parts = rt.gpu_memory().expect("Vulkan reports its allocations");
     assert_eq!(parts.len(), prm_runtime::MEMORY_PARTS.len());
     let part = |name: &str| parts.iter().find(|p| p.name == name).unwrap().bytes;
-    let basis = a.pane_basis();
     let all = u64::from(rt.cluster_count() + rt.group_count());
-    let (rows, coefficients) = (0..basis.tile_count())
-        .map(|t| tile_bytes(basis, all, t))
+    let (rows, coefficients) = (0..a.pane_basis().tile_count())
+        .map(|t| tile_bytes(&a, rt.group_count(), t))
         .fold((0, 0), |(b, c), (tb, tc)| (b + tb, c + tc));
     let panes = rows + coefficients;
     assert!(
@@ -352,7 +369,10 @@ fn gpu_memory_is_reported_by_part() {
     let (clusters, top_k) = (rt.cluster_count(), rt.options().top_k);
     let groups = if clusters > top_k { rt.group_count() } else { 0 };
     let k = u64::from(top_k.min(clusters) + groups);
-    let per_pane = coefficients / all;
+    // A kept pane's blocks on average, and its index word in every tile.
+    let ranked = a.pane_basis().ranks().iter().filter(|&&r| r > 0).count() as u64;
+    let index = ranked * 8 * all.div_ceil(2);
+    let per_pane = (coefficients - index) / all + 8 * ranked;
     let panes = read.iter().find(|p| p.name == "panes").unwrap().bytes;
     assert!(panes > k * per_pane && panes <= k * per_pane + rows, "{read:?}");
 }

@@ -11,11 +11,12 @@ mod near_field;
 mod pane_rank;
 mod probe_split;
 mod residual_panes;
+mod tile_sparsity;
 
 use anyhow::{anyhow, bail, Result};
 
 /// The experiments by name, with the arguments each takes.
-const EXPERIMENTS: [(&str, &str); 9] = [
+const EXPERIMENTS: [(&str, &str); 10] = [
     (
         "bench_trace",
         "(no arguments) ray throughput of the BVH on the bundled scenes",
@@ -49,6 +50,10 @@ const EXPERIMENTS: [(&str, &str); 9] = [
         "SCENE ENTRIES WALKS DISK  the probes' split between VPLs and rays",
     ),
     ("residual_panes", "SCENE ARCHIVE.prm [K] [GROUPS]  residual pane groups"),
+    (
+        "tile_sparsity",
+        "SCENE ARCHIVE.prm LIGHT...  the panes with only their largest coefficient blocks",
+    ),
 ];
 
 /// Runs the experiment named by `args[0]` with the rest of `args`.
@@ -67,6 +72,7 @@ pub fn run(args: &[String]) -> Result<()> {
         "pane_rank" => pane_rank::run(rest),
         "probe_split" => probe_split::run(rest).map_err(|e| anyhow!("{e}"))?,
         "residual_panes" => residual_panes::run(rest),
+        "tile_sparsity" => tile_sparsity::run(rest)?,
         other => bail!("no experiment named {other:?}\n{}", listing()),
     }
     Ok(())
