@@ -188,6 +188,8 @@ fn run(args: &[String]) -> Result<()> {
         }
     });
     std::env::set_current_dir(&root)?;
+    // Before the run writes anything: its own output would count as a change to the tree.
+    let measured = provenance();
     let out = out.unwrap_or_else(|| {
         target.join(match (study, mode) {
             (Some(study), _) => format!("eval-{study}"),
@@ -254,7 +256,7 @@ fn run(args: &[String]) -> Result<()> {
     }
     let mut written = vec![csv.clone()];
     written.extend(charts::write_all(&rows, &out)?);
-    let summary = summary(&rows, mode, started.elapsed().as_secs_f64());
+    let summary = summary(&rows, mode, started.elapsed().as_secs_f64(), &measured);
     let summary_path = out.join("summary.md");
     std::fs::write(&summary_path, &summary)?;
     written.push(summary_path);
@@ -515,8 +517,8 @@ fn evaluate_scene(mode: Mode, bin: &Path, cache: &Path, spec: &SceneSpec) -> Res
     Ok(rows)
 }
 
-/// The commit and the machine the figures were measured on, for the summary's head: the
-/// commit (with `+changes` when the tree differs from it), the CPU and its cores.
+/// The commit and the machine the figures are measured on, for the summary's head: the commit
+/// (with `+changes` when the tree differs from it as the run starts), the CPU and its cores.
 fn provenance() -> String {
     let git = |args: &[&str]| {
         std::process::Command::new("git")
@@ -545,7 +547,7 @@ fn provenance() -> String {
 }
 
 /// The README material: presets table and the automatic choice against the Pareto fronts.
-fn summary(rows: &[Row], mode: Mode, seconds: f64) -> String {
+fn summary(rows: &[Row], mode: Mode, seconds: f64, measured: &str) -> String {
     let mut s = String::new();
     let _ = writeln!(
         s,
@@ -553,7 +555,7 @@ fn summary(rows: &[Row], mode: Mode, seconds: f64) -> String {
         if mode == Mode::Full { "full" } else { "quick" },
         seconds
     );
-    let _ = writeln!(s, "{}\n", provenance());
+    let _ = writeln!(s, "{measured}\n");
     let mut scenes: Vec<&str> = Vec::new();
     for r in rows {
         if !scenes.contains(&r.scene.as_str()) {
