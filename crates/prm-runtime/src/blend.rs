@@ -183,7 +183,7 @@ impl Panes {
 /// each channel's coefficients over `s` as `f16`, four ranks a word, zero-padded. Under its
 /// own scale a pane keeps 11 significant bits wherever it is bright, however dim beside the
 /// tile's brightest pane. On the bundled Cornell box's automatic bake the coefficients take
-/// 2.4 MiB instead of 4.7 as `f32`.
+/// 1.4 MiB (`prm-bake dump`), about half what `f32` would.
 pub(crate) struct PaneBlock;
 
 impl PaneBlock {
