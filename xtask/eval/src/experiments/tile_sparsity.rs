@@ -166,7 +166,7 @@ fn kept_blocks(basis: &PaneBasis, light: &[f64], loss: f64) -> Vec<bool> {
         let mut spent = 0.0;
         for tile in order {
             spent += own[tile];
-            keep[pane * tiles + tile] = spent > budget;
+            keep[pane * tiles + tile] = loss == 0.0 || spent > budget;
         }
     }
     keep
