@@ -5,9 +5,9 @@
 // u32 per pane, two a word: where pane p's block starts after `coefficients`, or NO_BLOCK where
 // the pane is zero in the tile (blend.rs's tile_blocks). A block is its scale (f32 bits in x),
 // then each channel's coefficients over the scale as f16, four ranks a word (zero-padded beyond
-// the rank; blend.rs's PaneBlock). One invocation per tile of the chunk and group of four ranks, up to
-// mixed_stride/4; beyond the tile's rank it writes zeros, which the blend's padded basis rows
-// multiply.
+// the rank; blend.rs's PaneBlock). One invocation per tile of the chunk and group of four
+// ranks, up to mixed_stride/4; beyond the tile's rank it writes zeros, which the blend's padded
+// basis rows multiply.
 
 @group(0) @binding(0) var<uniform> frame: Frame;
 @group(0) @binding(1) var<storage, read> selected: array<Selected>;

@@ -78,7 +78,7 @@ impl Panes {
             .min(limits.max_buffer_size)
             .min(cap.unwrap_or(u64::MAX));
         let panes = basis.pane_count() + group_count as usize;
-        let blocks: Vec<Vec<[u32; 2]>> = (0..basis.tile_count())
+        let mut blocks: Vec<Vec<[u32; 2]>> = (0..basis.tile_count())
             .map(|t| tile_blocks(basis, t, group_of, group_count))
             .collect();
         let sizes: Vec<(u64, u64)> = (0..basis.tile_count())
@@ -116,7 +116,7 @@ impl Panes {
             .enumerate()
             .map(|(c, w)| {
                 let tiles = w[0]..w[1];
-                let chunk = upload_chunk(device, basis, &blocks, tiles, &mut gpu_tiles, &mut rows);
+                let chunk = upload_chunk(device, basis, &mut blocks, tiles, &mut gpu_tiles, &mut rows);
                 tile_chunk.extend(std::iter::repeat_n(c, w[1] - w[0]));
                 chunk
             })
@@ -252,12 +252,12 @@ fn tile_blocks(basis: &PaneBasis, tile: usize, group_of: &[u32], group_count: u3
 }
 
 /// Chunk `tiles` of `basis` in two buffers, each tile's coefficients as [`tile_blocks`]
-/// encoded them in `blocks`; its tiles' entries appended to `gpu_tiles`, its texels' rows
-/// written to `rows`.
+/// encoded them in `blocks` (moved out of it); its tiles' entries appended to `gpu_tiles`, its
+/// texels' rows written to `rows`.
 fn upload_chunk(
     device: &wgpu::Device,
     basis: &PaneBasis,
-    blocks: &[Vec<[u32; 2]>],
+    blocks: &mut [Vec<[u32; 2]>],
     tiles: std::ops::Range<usize>,
     gpu_tiles: &mut Vec<GpuPaneTile>,
     rows: &mut [u32],
@@ -284,7 +284,7 @@ fn upload_chunk(
             let half = |k: usize| row.get(k).map_or(0, |&u| u32::from(half::f16::from_f32(u).to_bits()));
             words.extend((0..2 * stride).map(|p| half(2 * p) | half(2 * p + 1) << 16));
         }
-        coefficients.extend_from_slice(&blocks[tile]);
+        coefficients.append(&mut blocks[tile]);
     }
     PaneChunk {
         constants: GpuBlendChunk {
