@@ -4,10 +4,10 @@
 // of the tile is Σ_k U[i][k]·a_k (blend.wgsl). A tile's coefficients start with an index, one
 // u32 per pane, two a word: where pane p's block starts after `coefficients`, or NO_BLOCK where
 // the pane is zero in the tile (blend.rs's tile_blocks). A block is its scale (f32 bits in x),
-// then each channel's coefficients over the scale as f16, four ranks a word (zero-padded beyond
-// the rank; blend.rs's PaneBlock). One invocation per tile of the chunk and group of four
-// ranks, up to mixed_stride/4; beyond the tile's rank it writes zeros, which the blend's padded
-// basis rows multiply.
+// then per rank its three channels over the scale as one shared-exponent word, two ranks a
+// vec2 (zero-padded to a multiple of four ranks; blend.rs's PaneBlock). One invocation per tile
+// of the chunk and group of four ranks, up to mixed_stride/4; beyond the tile's rank it writes
+// zeros, which the blend's padded basis rows multiply.
 
 @group(0) @binding(0) var<uniform> frame: Frame;
 @group(0) @binding(1) var<storage, read> selected: array<Selected>;
@@ -19,10 +19,11 @@
 // A pane without a block in a tile (blend.rs's NO_BLOCK).
 const NO_BLOCK: u32 = 0xffffffffu;
 
-// Four f16 coefficients of word `c`.
-fn quad(c: u32) -> vec4<f32> {
-    let q = coefficients[c];
-    return vec4<f32>(unpack2x16float(q.x), unpack2x16float(q.y));
+// One rank's three channels (blend.rs's PaneBlock::triple): 9-bit two's-complement mantissas
+// in bits 0-8, 9-17 and 18-26 over 2^(n+7), n in bits 27-31 (the power built exactly).
+fn triple(w: u32) -> vec3<f32> {
+    let m = vec3<i32>(bitcast<i32>(w << 23u), bitcast<i32>(w << 14u), bitcast<i32>(w << 5u)) >> vec3<u32>(23u);
+    return vec3<f32>(m) * bitcast<f32>((120u - (w >> 27u)) << 23u);
 }
 
 @compute @workgroup_size(64)
@@ -35,9 +36,10 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     let t = chunk.first_tile + i / quads;
     let k4 = i % quads;
     let tile = tiles[t];
-    var r = vec4<f32>(0.0);
-    var g = vec4<f32>(0.0);
-    var b = vec4<f32>(0.0);
+    var a0 = vec3<f32>(0.0);
+    var a1 = vec3<f32>(0.0);
+    var a2 = vec3<f32>(0.0);
+    var a3 = vec3<f32>(0.0);
     if k4 < tile.stride {
         let kept = min(frame.cluster_count, frame.top_k) +
             select(0u, frame.group_count, frame.cluster_count > frame.top_k);
@@ -50,14 +52,17 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
             }
             let block = tile.coefficients + at;
             let w = s.weight * bitcast<f32>(coefficients[block].x);
-            let c = block + 1u + k4;
-            r += w.r * quad(c);
-            g += w.g * quad(c + tile.stride);
-            b += w.b * quad(c + 2u * tile.stride);
+            let lo = coefficients[block + 1u + 2u * k4];
+            let hi = coefficients[block + 2u + 2u * k4];
+            a0 += w * triple(lo.x);
+            a1 += w * triple(lo.y);
+            a2 += w * triple(hi.x);
+            a3 += w * triple(hi.y);
         }
     }
     let m = t * chunk.mixed_stride + 4u * k4;
-    for (var k = 0u; k < 4u; k++) {
-        mixed[m + k] = vec4<f32>(r[k], g[k], b[k], 0.0);
-    }
+    mixed[m] = vec4<f32>(a0, 0.0);
+    mixed[m + 1u] = vec4<f32>(a1, 0.0);
+    mixed[m + 2u] = vec4<f32>(a2, 0.0);
+    mixed[m + 3u] = vec4<f32>(a3, 0.0);
 }

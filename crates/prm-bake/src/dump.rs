@@ -73,7 +73,7 @@ pub fn run(args: &DumpArgs) -> Result<()> {
 /// What an archive needs resident on the GPU as the run time loads it by default: the panes'
 /// basis rows that are not zero (`f16`, each tile's rank rounded up to four) and their
 /// coefficients with the residual groups' (per tile a `u32` index entry per pane, and per pane
-/// that is not zero there a scale and four `f16` ranks a word, 8 bytes each), and
+/// that is not zero there a scale word and a 4-byte word a rank, 8 bytes a word), and
 /// the near field's exit records (8 bytes) and merged hits (4 bytes; twice where the deeper
 /// share's disk differs from the direct share's), and the entry cells' points (8 bytes).
 fn resident_line<R: Read + Seek>(archive: &Archive<R>) -> String {
@@ -99,7 +99,7 @@ fn resident_line<R: Read + Seek>(archive: &Archive<R>) -> String {
                 }
             }
             let blocks = lit.iter().filter(|&&l| l).count() as u64;
-            8 * (clusters + groups).div_ceil(2) as u64 + blocks * 8 * (1 + 3 * quads(basis.ranks()[t]))
+            8 * (clusters + groups).div_ceil(2) as u64 + blocks * 8 * (1 + 2 * quads(basis.ranks()[t]))
         })
         .sum();
     let near = archive.near_field().map_or(0, |n| {

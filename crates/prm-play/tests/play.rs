@@ -133,14 +133,15 @@ fn lightmap_equals_cpu_blend_with_all_clusters() {
     let (mut diff2, mut norm2) = (0f64, 0f64);
     for ((g, b), c) in gpu.iter().zip(&blended).zip(&cpu) {
         for k in 0..3 {
-            // 1 % of the value, with a floor of 1e-4 of the peak for near-black texels.
-            let floor = c[k].abs().max(peak * 1e-4);
-            worst = worst.max((g[k] as f64 - b[k] as f64).abs() / floor);
+            // The tolerance of `assert_matches_cpu_sum`: 1% of the value, at least 2·10⁻³ of
+            // the peak.
+            let tolerance = (0.01 * c[k].abs()).max(peak * 2e-3);
+            worst = worst.max((g[k] as f64 - b[k] as f64).abs() / tolerance);
             diff2 += (g[k] as f64 - c[k]).powi(2);
             norm2 += c[k].powi(2);
         }
     }
-    assert!(worst < 0.01, "GPU lightmap vs CPU blend: worst relative error {worst}");
+    assert!(worst < 1.0, "GPU lightmap vs CPU blend: {worst} times the tolerance");
     // Against the decoded panes, which the decoder clamps one by one where the approximation
     // dips below zero: close as a whole (relative RMSE).
     let rmse = (diff2 / norm2).sqrt();
@@ -351,15 +352,16 @@ fn top_k_keeps_the_strongest_clusters() {
     assert_matches_cpu_sum(&gpu, &cpu);
 }
 
-/// Every texel of the GPU's lightmap `gpu` within 1% of the CPU's sum `cpu`, or within 10⁻⁴ of
-/// the sum's peak where that is larger: the GPU mixes the coefficients in `f16` (11 significant
-/// bits of each pane's largest in a tile), which leaves texels that its brighter ones cancel
-/// to almost nothing a few 10⁻⁵ of the peak off, and the CPU in `f32`.
+/// Every texel of the GPU's lightmap `gpu` within 1% of the CPU's sum `cpu`, or within 2·10⁻³
+/// of the sum's peak where that is larger: the GPU mixes each rank's three coefficients with 8
+/// significant bits of the largest (a shared exponent), and the CPU in `f32`, so a texel whose
+/// rank terms mostly cancel keeps the terms' absolute error, up to 8·10⁻⁴ of the peak on the
+/// Cornell box (a wrong block or index is off by its whole value).
 fn assert_matches_cpu_sum(gpu: &[[f32; 3]], cpu: &[[f32; 3]]) {
     let peak = cpu.iter().flatten().fold(0f32, |a, b| a.max(*b));
     for (g, c) in gpu.iter().zip(cpu) {
         for ch in 0..3 {
-            let tolerance = (0.01 * c[ch].abs()).max(1e-4 * peak);
+            let tolerance = (0.01 * c[ch].abs()).max(2e-3 * peak);
             assert!((g[ch] - c[ch]).abs() <= tolerance, "{g:?} against {c:?}, peak {peak}");
         }
     }

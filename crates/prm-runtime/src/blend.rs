@@ -5,8 +5,8 @@
 //! The panes stay on the GPU as the archive holds them, a low-rank basis per atlas tile
 //! (`prm_format::PaneBasis`), not expanded to one texture per pane: the basis rows that are not
 //! zero as `f16` (rounded up to four per texel, zero-padded; a texel outside every chart has a
-//! zero row, a third of the Cornell box's atlas) and the coefficients as `f16` under a scale per
-//! pane and tile ([`PaneBlock`]), with every residual group's coefficients (its members'
+//! zero row, a third of the Cornell box's atlas) and the coefficients under a scale per pane and
+//! tile, a shared-exponent word per rank ([`PaneBlock`]), with every residual group's coefficients (its members'
 //! summed) after the clusters'. Since blending is linear, the
 //! frame's `Σ_c w_c·pane_c` is `U·(Σ_c w_c·C_c)` per tile: the mix pass forms the bracket, a few
 //! hundred values per tile, and this pass one dot product of rank length per texel. Tiles are
@@ -14,13 +14,14 @@
 //! MiB on lavapipe); each pass dispatches once per chunk.
 //!
 //! On the bundled Cornell box's automatic bake (512 clusters + 64 residual groups, a 128² atlas,
-//! 4 tiles of mean rank 107) the panes take 4.1 MiB of GPU memory this way, against 32 MiB as
-//! one RGB9E5 buffer per pane, and an update that blends every cluster reads 4.0 MB of them
+//! 4 tiles of mean rank 107) the panes take 3.6 MiB of GPU memory this way, against 32 MiB as
+//! one RGB9E5 buffer per pane, and an update that blends every cluster reads 3.6 MB of them
 //! (`prm-play --timings`, `gpu_memory` and `gi_bytes_read_by_part`). A tile keeps only the
 //! blocks of the panes that light it ([`tile_blocks`]).
 //! On lavapipe the frame bench (`cargo bench -p prm-play --bench frame`,
-//! `PRM_BENCH_PRESET=default`) puts the 504 clusters beyond the first 8 at 0.6–2.6 ms of a
-//! frame whose lights move (two runs; RGB9E5 buffers: 13.7 ms for 120 panes and 64 groups).
+//! `PRM_BENCH_PRESET=default`) puts the 504 clusters beyond the first 8 at −3.0 to 4.1 ms of a
+//! frame whose lights move (two runs, within their noise; RGB9E5 buffers: 13.7 ms for 120 panes
+//! and 64 groups).
 
 use prm_format::PaneBasis;
 use prm_gpu_kit::{linear_workgroups, pipeline, ComputePass, PassTimer};
@@ -180,10 +181,14 @@ impl Panes {
 
 /// A pane's coefficients in one tile of rank `r` as the mix reads them, in `vec2<u32>` words:
 /// first its scale `s`, the largest magnitude of its coefficients there (f32 bits in `x`), then
-/// each channel's coefficients over `s` as `f16`, four ranks a word, zero-padded. Under its
-/// own scale a pane keeps 11 significant bits wherever it is bright, however dim beside the
-/// tile's brightest pane. On the bundled Cornell box's automatic bake the coefficients take
-/// 1.4 MiB (`prm-bake dump`), about half what `f32` would.
+/// per rank one [`PaneBlock::triple`] of its three channels over `s`, two ranks a word and
+/// zero-padded to a multiple of four ranks. Under its own scale a pane keeps its precision
+/// wherever it is bright, however dim beside the tile's brightest pane; a shared exponent per
+/// rank keeps it for the small coefficients of the high ranks. Four bytes a rank instead of
+/// three `f16` take a third off the coefficients: 23.1 MiB instead of 34.3 for Sponza baked in
+/// 1024 clusters (`prm-bake dump`), whose GPU frame under its ceiling lamp then lies 0.20% from
+/// the CPU player's (`f32` coefficients; 0.19% with `f16`; `prm-play --backend cpu`, compared
+/// by `cargo xtask eval compare`).
 pub(crate) struct PaneBlock;
 
 impl PaneBlock {
@@ -192,17 +197,33 @@ impl PaneBlock {
         let scale = v.iter().fold(0.0f32, |m, x| m.max(x.abs()));
         let inv = if scale > 0.0 { 1.0 / scale } else { 0.0 };
         out.push([scale.to_bits(), 0]);
-        for channel in v.chunks_exact(r) {
-            let half = |k: usize| {
-                channel
-                    .get(k)
-                    .map_or(0, |&c| u32::from(half::f16::from_f32(c * inv).to_bits()))
-            };
-            out.extend((0..r.div_ceil(LANES)).map(|q| {
-                let k = LANES * q;
-                [half(k) | half(k + 1) << 16, half(k + 2) | half(k + 3) << 16]
-            }));
+        let word = |k: usize| {
+            if k < r {
+                Self::triple([v[k] * inv, v[r + k] * inv, v[2 * r + k] * inv])
+            } else {
+                0
+            }
+        };
+        out.extend((0..r.div_ceil(LANES) * 2).map(|q| [word(2 * q), word(2 * q + 1)]));
+    }
+
+    /// Three values within ±1 as one word: each a 9-bit two's-complement mantissa `m` (bits
+    /// 0–8, 9–17, 18–26) under a shared exponent `n` (bits 27–31), the value being
+    /// `m·2^-(n+7)`. `n` is the largest (up to 31) that keeps the largest magnitude's mantissa
+    /// within 255, so that one has 8 significant bits (within 0.4%) and the others the same
+    /// step.
+    pub(crate) fn triple(c: [f32; 3]) -> u32 {
+        let a = c.iter().fold(0.0f32, |m, x| m.max(x.abs()));
+        if a == 0.0 {
+            return 0;
         }
+        let mut n = ((255.5 / a).log2().floor() as i32 - 7).clamp(0, 31);
+        while n > 0 && (a * 2f32.powi(n + 7)).round() > 255.0 {
+            n -= 1;
+        }
+        let s = 2f32.powi(n + 7);
+        let m = |x: f32| ((x * s).round().clamp(-255.0, 255.0) as i32 & 0x1ff) as u32;
+        m(c[0]) | m(c[1]) << 9 | m(c[2]) << 18 | (n as u32) << 27
     }
 }
 
@@ -426,6 +447,13 @@ impl BlendPass {
 mod tests {
     use super::*;
 
+    /// Decodes a [`PaneBlock::triple`] as the mix does.
+    fn triple(w: u32) -> [f32; 3] {
+        let m = |shift: u32| ((w << shift) as i32 >> 23) as f32;
+        let s = f32::from_bits((120 - (w >> 27)) << 23);
+        [m(23) * s, m(14) * s, m(5) * s]
+    }
+
     /// Decodes pane `pane`'s block from a tile's words as the mix does: `None` where its index
     /// says there is none.
     fn block(words: &[[u32; 2]], pane: usize, r: usize) -> Option<Vec<f32>> {
@@ -435,17 +463,29 @@ mod tests {
         }
         let b = &words[at as usize..];
         let scale = f32::from_bits(b[0][0]);
-        let stride = r.div_ceil(LANES);
-        let f = |w: u32, hi: bool| half::f16::from_bits((if hi { w >> 16 } else { w & 0xffff }) as u16).to_f32();
-        Some(
-            (0..3)
-                .flat_map(|ch| (0..r).map(move |k| (ch, k)))
-                .map(|(ch, k)| {
-                    let w = b[1 + ch * stride + k / LANES];
-                    scale * f(w[(k % LANES) / 2], k % 2 == 1)
-                })
-                .collect(),
-        )
+        let ranks: Vec<[f32; 3]> = (0..r).map(|k| triple(b[1 + k / 2][k % 2])).collect();
+        Some((0..3).flat_map(|ch| ranks.iter().map(move |t| scale * t[ch])).collect())
+    }
+
+    /// A triple keeps its largest magnitude to 8 significant bits and the others to the same
+    /// step, signs included, from ±1 down to values far below the coefficients' range.
+    #[test]
+    fn triples_keep_eight_bits_of_the_largest_channel() {
+        let cases = [
+            [1.0, -1.0, 0.5],
+            [-0.999, 0.3, -0.001],
+            [0.37, 0.0, -0.2],
+            [1e-6, -3e-7, 2e-8],
+            [0.0, 0.0, 0.0],
+            [-0.5, 0.49, 0.001],
+        ];
+        for c in cases {
+            let d = triple(PaneBlock::triple(c));
+            let a = c.iter().fold(0f32, |m, x| m.max(x.abs()));
+            for (d, c) in d.iter().zip(c) {
+                assert!((d - c).abs() <= a / 250.0, "{c} decoded as {d}");
+            }
+        }
     }
 
     /// Panes that are zero in a tile have no block there, the others and the residual groups
@@ -487,7 +527,7 @@ mod tests {
                         let want = &own[3 * p * r..3 * (p + 1) * r];
                         let scale = want.iter().fold(0f32, |m, c| m.max(c.abs()));
                         for (d, w) in decoded.iter().zip(want) {
-                            assert!((d - w).abs() <= 1e-3 * scale, "pane {p} tile {t}: {d} for {w}");
+                            assert!((d - w).abs() <= scale / 250.0, "pane {p} tile {t}: {d} for {w}");
                         }
                     }
                 }
@@ -497,9 +537,12 @@ mod tests {
                 let decoded = block(&words, 5 + g as usize, r);
                 assert_eq!(decoded.is_none(), members.iter().all(|&p| basis.block_is_zero(p, t)));
                 if let Some(decoded) = decoded {
-                    for (k, d) in decoded.iter().enumerate() {
-                        let sum: f32 = members.iter().map(|&p| own[3 * p * r + k]).sum();
-                        assert!((d - sum).abs() <= 1e-3 * (1.0 + sum.abs()), "group {g} tile {t}");
+                    let sums: Vec<f32> = (0..3 * r)
+                        .map(|k| members.iter().map(|&p| own[3 * p * r + k]).sum())
+                        .collect();
+                    let scale = sums.iter().fold(0f32, |m, c| m.max(c.abs()));
+                    for (d, sum) in decoded.iter().zip(&sums) {
+                        assert!((d - sum).abs() <= scale / 250.0, "group {g} tile {t}: {d} for {sum}");
                     }
                 }
             }

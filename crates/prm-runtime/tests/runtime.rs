@@ -230,8 +230,8 @@ fn bad_input_is_refused_naming_it() {
 /// Bytes of tile `t`'s basis rows that are not zero (four `f16` per eight bytes, the rank
 /// rounded up to four) and of its coefficients as the run time uploads them: a `u32` index
 /// entry per pane (the clusters and the `groups` residual groups), then a block (a scale word and
-/// three channels of four `f16` a word, likewise rounded) per cluster that is not zero there and
-/// per group with such a member.
+/// a 4-byte word for each rank's three channels, likewise rounded) per cluster that is not zero
+/// there and per group with such a member.
 fn tile_bytes(archive: &FileArchive, groups: u32, t: usize) -> (u64, u64) {
     let basis = archive.pane_basis();
     let r = basis.ranks()[t] as usize;
@@ -252,7 +252,7 @@ fn tile_bytes(archive: &FileArchive, groups: u32, t: usize) -> (u64, u64) {
     let blocks = lit.iter().filter(|&&l| l).count() as u64;
     (
         rows * quads * 8,
-        8 * lit.len().div_ceil(2) as u64 + blocks * 8 * (1 + 3 * quads),
+        8 * lit.len().div_ceil(2) as u64 + blocks * 8 * (1 + 2 * quads),
     )
 }
 

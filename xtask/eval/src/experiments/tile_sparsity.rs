@@ -118,9 +118,10 @@ fn mib(bytes: u64) -> f64 {
     bytes as f64 / (1024.0 * 1024.0)
 }
 
-/// GPU bytes of one pane's block in tile `tile`: its scale and `⌈r/4⌉` words a channel.
+/// GPU bytes of one pane's block in tile `tile`: its scale word and a 4-byte word a rank, the
+/// rank rounded up to four.
 fn block_bytes(basis: &PaneBasis, tile: usize) -> u64 {
-    8 * (1 + 3 * u64::from(basis.ranks()[tile]).div_ceil(4))
+    8 * (1 + 2 * u64::from(basis.ranks()[tile]).div_ceil(4))
 }
 
 /// Every pane's light in every tile, index `pane·tiles + tile`: `Σ_ch max(0, Σ_k s_k C[3p + ch][k])`
