@@ -352,18 +352,21 @@ impl CostModel {
 /// Most entry points the doublings reach, but for the lamps' ([`MAX_DOUBLED_ENTRIES`]).
 const MAX_AUTO_ENTRIES: usize = 16384;
 
-/// Most entry points the chart rule ([`ENTRIES_PER_CHART`]) asks for: [`ENTRIES_PER_CLUSTER`]
-/// for each of the [`MAX_AUTO_CLUSTERS`], so that scenes of many charts keep the clusters'
-/// spacing the automatic cluster count was chosen at (only the doublings, where the time budget
-/// allows, go beyond it). A cluster's pane spreads its members' light over the area they
-/// cover, which a lamp close to a surface shows most. Measured under six lamp positions 0.4 m
+/// Most entry points the chart rule ([`ENTRIES_PER_CHART`]) asks for:
+/// [`MANY_CHARTS_ENTRIES_PER_CLUSTER`] for each of the [`MAX_AUTO_CLUSTERS`], so that scenes of many charts keep the clusters'
+/// spacing the automatic cluster count was chosen at; where the charts ask this many the
+/// doublings ([`MAX_DOUBLINGS`]) add none. A cluster's pane spreads its members' light over the
+/// area they cover, which a lamp close to a surface shows most, and more entry points share
+/// the same walks. In 2048 clusters (the `--lamps` eval as below) Sponza under its ceiling lamp
+/// and by its column reads 15.3% / 18.2% at 16384 entry points, energy 1.04 / 0.92, against
+/// the figures of `cargo xtask eval --lamps` at 8192. Measured under six lamp positions 0.4 m
 /// from a ceiling and six 0.4 m from a wall in each scene (the `cargo xtask eval --targets`
 /// lamps and views, moved by 0.2–0.4 m; 4×4 image error against 256-path references, mean
 /// over positions, 1024 clusters, 512² atlas, 65536 walks): Sponza 20.7% / 18.9% at 8192
 /// entry points against 24.5% / 18.5% at 16384 (28.8% / 18.7% at 32768, 28.1% / 26.8% at
 /// 4096), Sibenik 21.8% / 21.6% against 31.4% / 21.6%, the ceiling lamps' energy 0.92 / 0.91
 /// against 0.86 / 0.75.
-const MAX_CHART_ENTRIES: usize = ENTRIES_PER_CLUSTER * MAX_AUTO_CLUSTERS;
+const MAX_CHART_ENTRIES: usize = MANY_CHARTS_ENTRIES_PER_CLUSTER * MAX_AUTO_CLUSTERS;
 
 /// Most paths per texel the time budget gives the sky's transfer (from [`crate::SKY_PATHS`],
 /// doubled). Measured on Dabrovic Sponza (`cargo xtask eval --sky`, its default plan of about
@@ -390,23 +393,24 @@ const AUTO_ATLAS_PANES: usize = 256;
 /// Bytes of coefficients the run time's mix pass may read a frame, at the largest rank in every
 /// tile ([`MIX_BYTES_PER_TEXEL`]; real bakes keep a third to nearly all of that rank), from
 /// which the automatic top K follows (less the residual groups, `prm_format::RESIDUAL_GROUPS`):
-/// every cluster of a 256² atlas (2702 panes), 675 panes at 512², 168 at 1024². The more
+/// every cluster of a 256² atlas (4002 panes), 1000 panes at 512², 250 at 1024². The more
 /// clusters a frame blends the better: on McGuire's box baked with 4096 entry points and 16
 /// walks each (512 clusters; `cargo xtask eval --targets`'s lights, 4×4 error, ceiling light /
 /// red wall light), K = 32 with 16 groups 8.1% / 6.5%, K = 64 with 32 groups 6.2% / 5.0%, K =
-/// 128 with 64 groups 4.3% / 4.6%, every cluster 3.4% / 4.7%. The mix reads 6 bytes per rank
+/// 128 with 64 groups 4.3% / 4.6%, every cluster 3.4% / 4.7%. The mix reads 4 bytes per rank
 /// and tile of a kept pane, and the blend's work per texel does not grow with K: on lavapipe
 /// at 1024×768 the frame bench (`cargo bench -p prm-play --bench frame`,
-/// `PRM_BENCH_PRESET=default`) puts the Cornell box's 504 clusters beyond the first 8 at 0.6–2.6
-/// ms of a frame whose lights move (two runs).
+/// `PRM_BENCH_PRESET=default`) puts the Cornell box's 504 clusters beyond the first 8 at −3.0
+/// to 4.1 ms of a frame whose lights move (two runs, within their noise), chairs' 1912 at
+/// 12.3–17.1 ms.
 const MIX_BYTES: f64 = 32.0 * 1024.0 * 1024.0;
 
 /// Coefficient bytes per texel of a pane at the largest rank in 64² tiles, the bound
-/// [`MIX_BYTES`] counts with: a scale and three channels of 128 `f16` per pane and tile, in
-/// 8-byte words (`8·(1 + 3·128/4) / 64²`, about 0.19). It leaves out the run time's index of a
-/// tile's blocks (4 bytes a pane, 8 read), 1% of a block at that rank; real bakes keep far
-/// lower ranks, and the run time does not keep the blocks that are zero.
-const MIX_BYTES_PER_TEXEL: f64 = 8.0 * (1.0 + 3.0 * prm_format::MAX_PANE_RANK as f64 / 4.0) / 4096.0;
+/// [`MIX_BYTES`] counts with: a pane's block in a tile (an 8-byte scale word and 4 bytes a rank
+/// for its three channels) and its 4-byte entry in the tile's index
+/// (`(8·(1 + 2·128/4) + 4) / 64²`, about 0.13). Real bakes keep far lower ranks, and the run
+/// time does not keep the blocks that are zero.
+const MIX_BYTES_PER_TEXEL: f64 = (8.0 * (1.0 + 2.0 * prm_format::MAX_PANE_RANK as f64 / 4.0) + 4.0) / 4096.0;
 
 /// The automatic top K at least, however large the atlas.
 const MIN_AUTO_TOP_K: usize = 32;
@@ -469,9 +473,19 @@ pub const NEAR_HIT_BUDGET: u64 = 1 << 24;
 /// --targets` (4×4 error, every cluster blended): McGuire's box with 2048 entry points, light
 /// under the ceiling / low near the red wall, 6.9% / 21.3% at 32 per cluster (a cluster's lit and
 /// shadowed members share one weight), 5.2% / 9.2% at 8 and 5.4% / 7.1% at 2. The bake's time
-/// follows the VPL count, not the clusters; the panes' memory and archive follow the clusters
-/// (the budgets cap them).
+/// follows the VPL count, not the clusters; the panes' memory and archive and the bytes a
+/// frame reads follow the clusters (the budgets cap them): the Cornell box's default bake in
+/// 1024 clusters instead of 512 reads 2.6% / 2.1% instead of 2.7% / 2.6% against the reference,
+/// but its GI passes read 9.0 MB an update instead of 7.8 (`prm-play --timings`).
 const ENTRIES_PER_CLUSTER: usize = 8;
+
+/// Entry points per cluster where the chart rule asks the most automatic entry points
+/// ([`MAX_CHART_ENTRIES`]): such a scene's entry points do not double, so its clusters take the
+/// bytes instead. Measured by `cargo xtask eval --lamps` (six positions of a lamp 0.4 m under a
+/// ceiling / from a wall, 4×4 error, mean): Sponza's 8192 entry points in 2048 clusters read
+/// 15.6% / 17.1% (energy 0.976 / 1.042) against 17.6% / 17.3% (1.051 / 1.042) in 1024,
+/// Sibenik's 18.3% / 16.3% (1.036 / 0.980) against 19.3% / 18.4% (0.993 / 0.969).
+const MANY_CHARTS_ENTRIES_PER_CLUSTER: usize = 4;
 
 /// Walks in all that the automatic walks per entry point aim at. Measured by `cargo xtask eval
 /// --targets` (4×4 error, every cluster blended, 8 entry points per cluster): McGuire's box under
@@ -495,18 +509,20 @@ const BASIS_BYTES_PER_TEXEL: f64 = 2.0 * prm_format::MAX_PANE_RANK as f64;
 
 /// The most bytes the run time keeps resident for `panes` panes (clusters and residual groups)
 /// of `texels` texels: every 64² tile at the largest rank, its basis rows and every pane's
-/// coefficients in `f16`. Real bakes keep from a third of that rank to nearly all of it
-/// (`prm-bake dump`): 7.1 MiB of the 22.8 MiB bound on the Cornell box's default bake, 97.5
-/// of 115.5 MiB on Sibenik's. The memory budget counts with it.
+/// coefficients. Real bakes keep from a third of that rank to nearly all of it
+/// (`prm-bake dump`): 3.5 MiB of the 5.2 MiB bound on the Cornell box's default bake, 97.2
+/// of 131.5 MiB on Sibenik's. The memory budget counts with it.
 fn pane_memory_bound(panes: f64, texels: f64) -> f64 {
     texels * (BASIS_BYTES_PER_TEXEL + panes * MIX_BYTES_PER_TEXEL)
 }
 
-/// Bytes a covered texel of a pane takes in the archive budget's estimate. The panes' basis
-/// (2% tolerance) takes 0.44 bytes per covered texel and pane on the Cornell box's default bake
-/// and 0.68 on the modern hall's (`cargo xtask eval experiment pane_rank`); 1.5 leaves a margin
-/// for scenes whose panes are less alike.
-const ARCHIVE_BYTES_PER_TEXEL: f64 = 1.5;
+/// Bytes an atlas texel of a pane takes in the archive budget's estimate: the whole archive
+/// over its atlas's texels and its clusters. Measured on the default bakes of the `cargo xtask
+/// eval --targets` cases (`prm-bake dump`): 0.56 on the Cornell box (128², 512 clusters), where
+/// the fixed sections weigh most, 0.41 on CornellBox-Sphere, 0.35 on chairs, 0.22–0.32 on the
+/// fireplace room, 0.24 on Sponza, 0.26 on Sibenik and 0.15 on the modern hall (512², 1024
+/// clusters), 0.18 on Sponza in 2048 clusters; 1.0 leaves a margin for panes less alike.
+const ARCHIVE_BYTES_PER_TEXEL: f64 = 1.0;
 
 /// The smallest side, texels, the time budget shrinks an automatic atlas to (more where its
 /// charts need more).
@@ -540,8 +556,11 @@ const MAX_AUTO_WALKS: usize = 16;
 /// Fewest automatic clusters (fewer where there are fewer entry points).
 const MIN_AUTO_CLUSTERS: usize = 32;
 
-/// Most automatic clusters before the memory and archive budgets cap them.
-const MAX_AUTO_CLUSTERS: usize = 1024;
+/// Most automatic clusters before the memory and archive budgets cap them: the 8192 entry
+/// points of a large scene ([`MAX_CHART_ENTRIES`]) at [`MANY_CHARTS_ENTRIES_PER_CLUSTER`] each. Sponza baked
+/// so (512² atlas) keeps 107.2 MiB resident on the GPU (`prm-bake dump`), within the 128 MiB a
+/// large scene may take, and bakes in 301 s.
+const MAX_AUTO_CLUSTERS: usize = 2048;
 
 /// Share of an atlas given by resolution or texel size that the first time estimate takes to be
 /// exit points, before that atlas is built ([`Plan::for_renderer`](crate::Plan) then builds it
@@ -553,7 +572,7 @@ const DEFAULT_FACE_RESOLUTION: u32 = 128;
 
 /// The most bytes the run time keeps resident for the panes of `clusters` clusters and their
 /// residual groups in a `resolution`² atlas: every 64² tile at the largest rank, 256 bytes of
-/// `f16` basis per texel and about 0.19 bytes of `f16` coefficients per texel and pane. Bakes keep
+/// `f16` basis per texel and about 0.13 bytes of coefficients per texel and pane. Bakes keep
 /// well under it (the tolerance sets the ranks): `prm-bake dump` prints an archive's own.
 pub fn resident_pane_bytes(clusters: usize, resolution: u32) -> u64 {
     let groups = prm_format::residual_group_count(clusters, prm_format::RESIDUAL_GROUPS) as usize;
@@ -702,6 +721,9 @@ struct Draft {
     estimated_seconds: f64,
     /// Whether the cluster cap cut the entry points.
     capped: bool,
+    /// Whether the chart rule asked the most automatic entry points, [`MAX_CHART_ENTRIES`]: the
+    /// doublings add none and the clusters take [`MANY_CHARTS_ENTRIES_PER_CLUSTER`].
+    many_charts: bool,
 }
 
 /// What the planner's rules read: the config, its preset's values, the scene, the budgets and
@@ -804,7 +826,7 @@ impl Planner<'_> {
                     * ENTRY_STEP;
                 reasons.push(format!(
                     "{n} entry points: 4 per chart of the scene's {charts} charts, \
-                     {MIN_AUTO_ENTRIES}..{MAX_CHART_ENTRIES} ({ENTRIES_PER_CLUSTER} for each of at most \
+                     {MIN_AUTO_ENTRIES}..{MAX_CHART_ENTRIES} ({MANY_CHARTS_ENTRIES_PER_CLUSTER} for each of at most \
                      {MAX_AUTO_CLUSTERS} clusters)"
                 ));
                 Ok(Choice { value: n, auto: true })
@@ -852,6 +874,7 @@ impl Planner<'_> {
             planned_seconds,
             estimated_seconds: planned_seconds,
             capped: false,
+            many_charts: entries.auto && entries.value >= MAX_CHART_ENTRIES,
         })
     }
 
@@ -948,14 +971,15 @@ impl Planner<'_> {
     }
 
     /// Twice the automatic entry points (and so clusters), up to [`MAX_DOUBLINGS`] times (once
-    /// more while they are over [`LAMP_ENTRY_SPACING`] apart), where
-    /// neither the time budget nor the cluster cap cut anything and the time budget allows it: at
+    /// more while they are over [`LAMP_ENTRY_SPACING`] apart), where the charts asked fewer
+    /// than [`MAX_CHART_ENTRIES`], neither the time budget nor the cluster cap cut anything and
+    /// the time budget allows it: at
     /// most [`MAX_DOUBLED_ENTRIES`] and [`MAX_ENTRIES_PER_CLUSTER`] per cluster the budgets allow
     /// (beyond, more entry points only crowd the clusters), the automatic walks per entry falling
     /// to keep about [`WALKS_IN_ALL`].
     fn double_entries(&self, draft: &mut Draft, reasons: &mut Vec<String>) {
         let uncut = draft.estimated_seconds >= draft.planned_seconds && !draft.capped;
-        if !(draft.entries.auto && uncut) {
+        if !(draft.entries.auto && uncut) || draft.many_charts {
             return;
         }
         let atlas = draft.atlas.size;
@@ -994,7 +1018,8 @@ impl Planner<'_> {
     }
 
     /// The clusters: given (a preset's at most one per entry point), else entries /
-    /// [`ENTRIES_PER_CLUSTER`], [`MIN_AUTO_CLUSTERS`] to [`MAX_AUTO_CLUSTERS`], then as many as
+    /// [`ENTRIES_PER_CLUSTER`] ([`MANY_CHARTS_ENTRIES_PER_CLUSTER`] where the chart rule asked
+    /// the most), [`MIN_AUTO_CLUSTERS`] to [`MAX_AUTO_CLUSTERS`], then as many as
     /// the memory and archive budgets allow.
     fn clusters_rule(&self, draft: &Draft, reasons: &mut Vec<String>) -> usize {
         let entries = draft.entries.value;
@@ -1003,7 +1028,11 @@ impl Planner<'_> {
             (None, Some(v)) => v.clusters.min(entries),
             (None, None) => {
                 let texels_per_pane = self.texels(draft.atlas.size);
-                let per_entries = entries / ENTRIES_PER_CLUSTER;
+                let per = match draft.many_charts {
+                    true => MANY_CHARTS_ENTRIES_PER_CLUSTER,
+                    false => ENTRIES_PER_CLUSTER,
+                };
+                let per_entries = entries / per;
                 let wanted = per_entries.clamp(MIN_AUTO_CLUSTERS, MAX_AUTO_CLUSTERS).min(entries);
                 let (by_memory, by_archive) = (
                     self.budgets.by_memory(texels_per_pane),
@@ -1011,7 +1040,7 @@ impl Planner<'_> {
                 );
                 let c = wanted.min(self.budgets.clusters_allowed(texels_per_pane));
                 reasons.push(format!(
-                    "{c} clusters: entries/{ENTRIES_PER_CLUSTER} = {per_entries} ({MIN_AUTO_CLUSTERS}..{MAX_AUTO_CLUSTERS}), \
+                    "{c} clusters: entries/{per} = {per_entries} ({MIN_AUTO_CLUSTERS}..{MAX_AUTO_CLUSTERS}), \
                      memory budget allows {by_memory}, archive budget {by_archive}"
                 ));
                 c
@@ -1134,8 +1163,8 @@ impl BakeParams {
     /// - atlas: the atlas's own automatic size (about 12 texels per triangle or 64 per chart,
     ///   128 to 4096 a side),
     ///   shrunk until `AUTO_ATLAS_PANES` (256) panes fit the run-time memory budget;
-    /// - entries: 4 per chart (charts are the scene's distinct flat pieces), 1024 to 8192 (8 for
-    ///   each of at most 1024 clusters, `MAX_CHART_ENTRIES`), a multiple of 256, and no more
+    /// - entries: 4 per chart (charts are the scene's distinct flat pieces), 1024 to 8192 (4 for
+    ///   each of at most 2048 clusters, `MAX_CHART_ENTRIES`), a multiple of 256, and no more
     ///   than 16 per cluster the bake can have (`--clusters`, or the most the memory and
     ///   archive budgets allow; not below 1024), applied after the time budget below, at the atlas it leaves, the walks per entry then rising towards twice
     ///   `WALKS_IN_ALL`, at most `CAPPED_WALKS` (32) each, as far as the budget allows. Where the
@@ -1148,7 +1177,8 @@ impl BakeParams {
     /// - then, while `cost` expects the bake to take longer than the time budget,
     ///   fewer walks, fewer entries (down to 1024) or a smaller atlas (down to 128²), whichever is
     ///   furthest above its floor;
-    /// - then, where neither the time budget nor the cap cut anything and the budget allows it,
+    /// - then, where the charts asked fewer than 8192, neither the time budget nor the cap cut
+    ///   anything and the budget allows it,
     ///   twice the entry points, up to `MAX_DOUBLINGS` (2) times and once more while they are
     ///   over `LAMP_ENTRY_SPACING` (0.2 m) apart, at most 32768 and at most
     ///   `MAX_ENTRIES_PER_CLUSTER` (16) per cluster the budgets allow, the walks per entry falling to
@@ -1157,10 +1187,11 @@ impl BakeParams {
     ///   lights): the Cornell box 0.111 for a bake of 4.4 s (0.131, 2.7 s undoubled),
     ///   CornellBox-Sphere 0.114, 13.7 s (0.125, 9.5 s), chairs 0.107, 24.3 s (0.120, 13.6 s);
     ///   where the budgets cap the clusters more entries only crowd them (above);
-    /// - clusters: entries / `ENTRIES_PER_CLUSTER` (8), 32 to 1024, then as many as the
+    /// - clusters: entries / `ENTRIES_PER_CLUSTER` (8; 4 where the charts asked 8192), 32 to
+    ///   2048, then as many as the
     ///   memory budget (the clusters' panes and the residual groups' summed ones, up to one per
-    ///   4 clusters, at most `prm_format::RESIDUAL_GROUPS`) and the archive budget allow (archive estimate: 1.5 bytes per covered texel
-    ///   per pane, the measured RGB9E5 + filter + zstd rate on smooth panes, doubled for safety).
+    ///   4 clusters, at most `prm_format::RESIDUAL_GROUPS`) and the archive budget allow (archive estimate: 1.0 byte per atlas texel
+    ///   per pane, `ARCHIVE_BYTES_PER_TEXEL`, about twice the most measured).
     pub fn resolve(
         config: &BakeConfig,
         scene: &Scene,

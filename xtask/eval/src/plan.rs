@@ -340,7 +340,7 @@ fn file_stamp(path: &Path) -> String {
 
 /// Part of every cached bake's key: bump it when what a bake writes for the same arguments
 /// changes, so cached bakes are redone and the eval never measures a stale archive.
-const CACHE_VERSION: u32 = 28;
+const CACHE_VERSION: u32 = 29;
 
 /// A case's label as a file name: spaces and punctuation as dashes.
 pub fn case_name(label: &str) -> String {

@@ -160,7 +160,7 @@ fn impossible_parameters_are_refused() {
 }
 
 /// Automatic entry points stop at 16 per cluster the bake can have: chairs' 913 charts want
-/// 3840 (15360, in 1024 clusters, where nothing cuts them; doubled once in nine tenths of that
+/// 3840 (15360, in 1920 clusters, where nothing cuts them; doubled once in nine tenths of that
 /// plan's time), 100 clusters take 1536 (16 × 100, a multiple of 256, not doubled), and a
 /// memory budget that allows fewer clusters lowers them too, never below 1024.
 #[test]
@@ -168,9 +168,9 @@ fn automatic_entries_follow_the_clusters() {
     let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/chairs/chairs.obj");
     let scene = prm_scene::load(&p).unwrap();
     let free = resolve(&BakeConfig::default(), &scene, probe(&scene)).unwrap();
-    // Doubled twice where nothing cuts them: 15360 in 1024 clusters (the most automatic
-    // clusters, 15 entry points each), 5 walks each (about 65536 in all).
-    assert_eq!((free.entries, free.clusters, free.paths_per_entry), (15360, 1024, 5));
+    // Doubled twice where nothing cuts them: 15360 in 1920 clusters (8 entry points each), 5
+    // walks each (about 65536 in all).
+    assert_eq!((free.entries, free.clusters, free.paths_per_entry), (15360, 1920, 5));
     let hurried = BakeConfig {
         time_budget_s: Some(free.estimated_seconds * 0.9),
         ..Default::default()
@@ -292,8 +292,9 @@ fn separate_triangles(count: usize) -> Scene {
 }
 
 #[test]
-fn many_charts_keep_eight_entries_per_cluster() {
-    // 3000 charts ask 12000 entry points; the chart rule takes 8 for each of the 1024 clusters.
+fn many_charts_fill_the_most_clusters() {
+    // 3000 charts ask 12000 entry points; the chart rule takes 4 for each of the 2048 clusters,
+    // and the doublings add none, though this scene of separate triangles bakes fast.
     let scene = separate_triangles(3000);
     let p = resolve(&BakeConfig::default(), &scene, probe(&scene)).unwrap();
     assert_eq!(
@@ -302,7 +303,7 @@ fn many_charts_keep_eight_entries_per_cluster() {
         "{:?}",
         p.reasons
     );
-    assert_eq!(p.entries, ENTRIES_PER_CLUSTER * p.clusters);
+    assert_eq!(p.entries, MANY_CHARTS_ENTRIES_PER_CLUSTER * p.clusters);
 }
 
 /// A scene of many small charts under a tight memory budget: the automatic atlas stops
