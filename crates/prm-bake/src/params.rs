@@ -353,19 +353,18 @@ impl CostModel {
 const MAX_AUTO_ENTRIES: usize = 16384;
 
 /// Most entry points the chart rule ([`ENTRIES_PER_CHART`]) asks for:
-/// [`MANY_CHARTS_ENTRIES_PER_CLUSTER`] for each of the [`MAX_AUTO_CLUSTERS`], so that scenes of many charts keep the clusters'
-/// spacing the automatic cluster count was chosen at; where the charts ask this many the
-/// doublings ([`MAX_DOUBLINGS`]) add none. A cluster's pane spreads its members' light over the
-/// area they cover, which a lamp close to a surface shows most, and more entry points share
-/// the same walks. In 2048 clusters (the `--lamps` eval as below) Sponza under its ceiling lamp
-/// and by its column reads 15.3% / 18.2% at 16384 entry points, energy 1.04 / 0.92, against
-/// the figures of `cargo xtask eval --lamps` at 8192. Measured under six lamp positions 0.4 m
-/// from a ceiling and six 0.4 m from a wall in each scene (the `cargo xtask eval --targets`
-/// lamps and views, moved by 0.2–0.4 m; 4×4 image error against 256-path references, mean
-/// over positions, 1024 clusters, 512² atlas, 65536 walks): Sponza 20.7% / 18.9% at 8192
-/// entry points against 24.5% / 18.5% at 16384 (28.8% / 18.7% at 32768, 28.1% / 26.8% at
-/// 4096), Sibenik 21.8% / 21.6% against 31.4% / 21.6%, the ceiling lamps' energy 0.92 / 0.91
-/// against 0.86 / 0.75.
+/// [`MANY_CHARTS_ENTRIES_PER_CLUSTER`] for each of the [`MAX_AUTO_CLUSTERS`]. Where the charts
+/// ask this many, the doublings ([`MAX_DOUBLINGS`]) add none: a cluster's pane spreads its
+/// members' light over the area they cover, which a lamp close to a surface shows most, and
+/// more entry points share the same walks. Measured under six lamp positions 0.4 m from a
+/// ceiling and six 0.4 m from a wall in each scene (`cargo xtask eval --lamps`: the `--targets`
+/// lamps and views, moved by 0.2–0.4 m; 4×4 image error against 256-path references, mean over
+/// positions, 512² atlas, 65536 walks). In 2048 clusters: Sponza 15.6% / 17.1% at 8192 entry
+/// points (energy 0.98 / 1.04) against 15.3% / 18.2% at 16384 (1.04 / 0.92), Sibenik 18.3% /
+/// 16.3% (1.04 / 0.98) against 17.8% / 16.1% (0.91 / 0.96). In 1024 clusters, played by the
+/// entry points' own irradiance: Sponza 20.7% / 18.9% at 8192 against 24.5% / 18.5% at 16384
+/// (28.8% / 18.7% at 32768, 28.1% / 26.8% at 4096), Sibenik 21.8% / 21.6% against 31.4% /
+/// 21.6%, the ceiling lamps' energy 0.92 / 0.91 against 0.86 / 0.75.
 const MAX_CHART_ENTRIES: usize = MANY_CHARTS_ENTRIES_PER_CLUSTER * MAX_AUTO_CLUSTERS;
 
 /// Most paths per texel the time budget gives the sky's transfer (from [`crate::SKY_PATHS`],
@@ -557,9 +556,10 @@ const MAX_AUTO_WALKS: usize = 16;
 const MIN_AUTO_CLUSTERS: usize = 32;
 
 /// Most automatic clusters before the memory and archive budgets cap them: the 8192 entry
-/// points of a large scene ([`MAX_CHART_ENTRIES`]) at [`MANY_CHARTS_ENTRIES_PER_CLUSTER`] each. Sponza baked
-/// so (512² atlas) keeps 107.2 MiB resident on the GPU (`prm-bake dump`), within the 128 MiB a
-/// large scene may take, and bakes in 301 s.
+/// points of a large scene ([`MAX_CHART_ENTRIES`]) at [`MANY_CHARTS_ENTRIES_PER_CLUSTER`] each.
+/// Baked so (512² atlas), Sponza keeps 107.2 MiB resident on the GPU and Sibenik 115.5 MiB
+/// (`prm-bake dump`), within the 128 MiB a large scene may take, in bakes of 285 s and 296 s
+/// (`cargo xtask eval --targets`).
 const MAX_AUTO_CLUSTERS: usize = 2048;
 
 /// Share of an atlas given by resolution or texel size that the first time estimate takes to be
@@ -1190,8 +1190,9 @@ impl BakeParams {
     /// - clusters: entries / `ENTRIES_PER_CLUSTER` (8; 4 where the charts asked 8192), 32 to
     ///   2048, then as many as the
     ///   memory budget (the clusters' panes and the residual groups' summed ones, up to one per
-    ///   4 clusters, at most `prm_format::RESIDUAL_GROUPS`) and the archive budget allow (archive estimate: 1.0 byte per atlas texel
-    ///   per pane, `ARCHIVE_BYTES_PER_TEXEL`, about twice the most measured).
+    ///   4 clusters, at most `prm_format::RESIDUAL_GROUPS`) and the archive budget allow
+    ///   (archive estimate: 1.0 byte per atlas texel per pane, `ARCHIVE_BYTES_PER_TEXEL`, about
+    ///   twice the most measured).
     pub fn resolve(
         config: &BakeConfig,
         scene: &Scene,

@@ -6,8 +6,8 @@
 //! (`prm_format::PaneBasis`), not expanded to one texture per pane: the basis rows that are not
 //! zero as `f16` (rounded up to four per texel, zero-padded; a texel outside every chart has a
 //! zero row, a third of the Cornell box's atlas) and the coefficients under a scale per pane and
-//! tile, a shared-exponent word per rank ([`PaneBlock`]), with every residual group's coefficients (its members'
-//! summed) after the clusters'. Since blending is linear, the
+//! tile, a shared-exponent word per rank ([`PaneBlock`]), with every residual group's
+//! coefficients (its members' summed) after the clusters'. Since blending is linear, the
 //! frame's `Σ_c w_c·pane_c` is `U·(Σ_c w_c·C_c)` per tile: the mix pass forms the bracket, a few
 //! hundred values per tile, and this pass one dot product of rank length per texel. Tiles are
 //! grouped in *chunks* whose basis and coefficients each fit the device's storage binding (128
