@@ -20,8 +20,10 @@
 //!
 //! Archives: `target/prm-bench/NAME-PRESET.prm`, baked once with `prm-bake bake SCENE -o OUT
 //! --preset PRESET` (`PRM_BENCH_PRESET`, `preview` by default; `cargo run --release -p prm-bake`,
-//! or the binary `$PRM_BAKE` names) and reused while they open and match their scene. Scenes without lights (the OBJ Cornell box: its lamp is an
-//! emissive quad) get a point light just below the middle of the ceiling.
+//! or the binary `$PRM_BAKE` names) and reused while they open, match their scene and the plan
+//! `prm-bake bake --plan` prints now (kept beside each as `NAME-PRESET.plan`). Scenes without
+//! lights (the OBJ Cornell box: its lamp is an emissive quad) get a point light just below the
+//! middle of the ceiling.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -100,8 +102,8 @@ fn preset() -> String {
     std::env::var("PRM_BENCH_PRESET").unwrap_or_else(|_| "preview".into())
 }
 
-/// Bakes `scene` into `archive` with [`preset`].
-fn bake(scene: &Path, archive: &Path) -> Result<()> {
+/// `prm-bake bake SCENE -o ARCHIVE --preset PRESET` ([`preset`]), to which the caller adds.
+fn prm_bake(scene: &Path, archive: &Path) -> Command {
     let mut cmd = match std::env::var_os("PRM_BAKE") {
         Some(bin) => Command::new(bin),
         None => {
@@ -115,20 +117,45 @@ fn bake(scene: &Path, archive: &Path) -> Result<()> {
         .arg(scene)
         .arg("-o")
         .arg(archive)
-        .args(["--preset", &preset(), "--quiet"]);
+        .args(["--preset", &preset()]);
+    cmd
+}
+
+/// The sizes the planner chooses for `scene` now: the `bake:` line of `prm-bake bake --plan`.
+fn plan(scene: &Path, archive: &Path) -> Result<String> {
+    let out = prm_bake(scene, archive).arg("--plan").output()?;
+    if !out.status.success() {
+        return Err(format!("prm-bake bake {} --plan failed ({})", scene.display(), out.status).into());
+    }
+    let text = String::from_utf8_lossy(&out.stderr);
+    Ok(text
+        .lines()
+        .find(|l| l.starts_with("bake:"))
+        .unwrap_or_default()
+        .to_string())
+}
+
+/// Bakes `scene` into `archive` with [`preset`].
+fn bake(scene: &Path, archive: &Path) -> Result<()> {
     println!("baking {} -> {} ...", scene.display(), archive.display());
-    let status = cmd.status()?;
+    let status = prm_bake(scene, archive).arg("--quiet").status()?;
     if !status.success() {
         return Err(format!("prm-bake bake {} failed ({status})", scene.display()).into());
     }
     Ok(())
 }
 
-/// The scene and its archive, baked unless a matching one exists.
+/// The scene and its archive, baked unless one exists that opens, matches its scene and was
+/// baked to the plan the planner chooses now (kept beside it as `.plan`).
 fn open(scene_path: &Path, archive: &Path) -> Result<(prm_play::FileArchive, Scene)> {
+    let planned = plan(scene_path, archive)?;
+    let plan_file = archive.with_extension("plan");
     if archive.exists() {
+        let baked = std::fs::read_to_string(&plan_file).unwrap_or_default();
         match prm_play::open(archive, Some(scene_path)) {
-            Ok(r) => return Ok(r),
+            Ok(r) if baked == planned => return Ok(r),
+            Ok(_) if baked.is_empty() => println!("re-baking: no plan beside the archive"),
+            Ok(_) => println!("re-baking: the plan is now `{planned}`, the archive's `{baked}`"),
             Err(e) => println!("re-baking: {e}"),
         }
     }
@@ -136,6 +163,7 @@ fn open(scene_path: &Path, archive: &Path) -> Result<(prm_play::FileArchive, Sce
         std::fs::create_dir_all(dir)?;
     }
     bake(scene_path, archive)?;
+    std::fs::write(&plan_file, &planned)?;
     Ok(prm_play::open(archive, Some(scene_path))?)
 }
 
