@@ -14,11 +14,12 @@ pub struct CheckArgs {
     pub scene: PathBuf,
     /// The archive to check.
     pub archive: PathBuf,
-    /// Exit points compared with the reference, drawn at random with the bake's seed.
+    /// Points compared with the reference, drawn at random with the bake's seed: each the mean
+    /// of the 3×3 texels around it.
     #[arg(long, value_name = "N", default_value_t = EstimateSize::DEFAULT.exit_points)]
     pub accuracy_points: u32,
-    /// Reference paths per exit point and light: the reference's noise is removed from the
-    /// estimate, more paths only narrow its spread.
+    /// Reference paths per point and light, shared by its texels: the reference's noise is
+    /// removed from the estimate, more paths only narrow its spread.
     #[arg(long, value_name = "PATHS", default_value_t = EstimateSize::DEFAULT.paths)]
     pub accuracy_paths: u32,
     /// A test light instead of the check's own, repeatable: `point:X,Y,Z:R,G,B` (as `prm-play

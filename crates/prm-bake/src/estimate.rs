@@ -12,7 +12,7 @@
 use glam::Vec3;
 use prm_format::{Accuracy, Archive, Metadata};
 use prm_scene::{Atlas, Scene, Sizing};
-use prm_trace::{Bvh, CheckParams, Clustering, NearPlay, ReferenceParams, SurfaceSample};
+use prm_trace::{Bvh, CheckParams, CheckPoints, Clustering, NearPlay, SurfaceSample};
 use rayon::prelude::*;
 use std::io::{Read, Seek};
 use std::path::Path;
@@ -57,13 +57,14 @@ pub(crate) fn checked_pane(near: Option<&NearPlay>, checked: &[usize], pane: &[V
 /// check's own, [`prm_trace::check_lights`]).
 pub(crate) fn check(
     inputs: &CheckInputs,
-    checked: &[usize],
+    checked: &CheckPoints,
     panes: &[Vec<Vec3>],
     params: &CheckParams,
     lights: Option<&[Vec3]>,
     progress: &mut dyn ProgressSink,
 ) -> Result<Accuracy, BakeError> {
     let archive = prm_trace::CheckedArchive {
+        points: checked,
         entries: inputs.entries,
         cells: inputs.cells,
         members: &inputs.clustering.members,
@@ -75,12 +76,12 @@ pub(crate) fn check(
         fade_band: prm_trace::check::FADE_BAND,
         near: inputs.near,
     };
-    let exits: Vec<_> = checked.iter().map(|&i| inputs.atlas.exits[i]).collect();
+    let exits: Vec<_> = checked.exits.iter().map(|&i| inputs.atlas.exits[i]).collect();
     let lights = match lights {
         Some(given) => given.to_vec(),
         None => prm_trace::check_lights(inputs.scene, inputs.bvh),
     };
-    let passes = ReferenceParams::with_spp(params.paths).passes;
+    let passes = prm_trace::check::reference_params(checked, params).passes;
     progress.phase_start(Phase::AccuracyCheck, lights.len() as u64 * u64::from(passes));
     prm_trace::check_accuracy(
         inputs.scene,
@@ -160,13 +161,13 @@ pub fn estimate_accuracy(
         }
         prm_trace::reorder_cells(c, &inverse)
     });
-    let checked = prm_trace::check_exits(atlas.exits.len(), params.exit_points, params.seed);
+    let checked = CheckPoints::draw(atlas, params.exit_points, params.seed);
     let near_field = archive.near_field().cloned();
     let near = near_field.as_ref().map(|n| {
-        let texels: Vec<u32> = checked.iter().map(|&i| atlas.exits[i].texel).collect();
+        let texels: Vec<u32> = checked.exits.iter().map(|&i| atlas.exits[i].texel).collect();
         NearPlay::new(n, &atlas.texel_exit, &texels, prm_trace::NEAR_GATHERS)
     });
-    let panes = read_checked_panes(&mut archive, archive_path, atlas, near.as_ref(), &checked)?;
+    let panes = read_checked_panes(&mut archive, archive_path, atlas, near.as_ref(), &checked.exits)?;
     let inputs = CheckInputs {
         scene,
         bvh: &remade.bvh,

@@ -82,7 +82,7 @@ pub struct BakeConfig {
     /// Near rays per exit point that gather back what the VPL bound removes (0: none;
     /// default [`prm_trace::NEAR_RAYS`]).
     pub near_rays: Option<u32>,
-    /// Exit points of the bake's accuracy check (0: no check; default
+    /// Points (3×3-texel patches) of the bake's accuracy check (0: no check; default
     /// [`crate::ACCURACY_POINTS`]).
     pub accuracy_points: Option<u32>,
     /// Reference paths per checked exit point and light (default [`crate::ACCURACY_PATHS`]).
@@ -186,7 +186,8 @@ pub struct BakeParams {
     pub probe_rays: u32,
     /// Near rays per exit point of the near field section (0: none).
     pub near_rays: u32,
-    /// Exit points of the accuracy check after the panes (0: none; a shard never checks).
+    /// Points (3×3-texel patches) of the accuracy check after the panes (0: none; a shard never
+    /// checks).
     /// Not in the archive's `params`: the check changes no pane, and its own record (the
     /// metadata's `accuracy`) says how large it was, so a merge of shards is the single bake's
     /// archive whatever the shards were told.

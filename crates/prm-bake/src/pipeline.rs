@@ -77,15 +77,13 @@ pub const PROBE_SKY_PATHS: u32 = 4096;
 /// stay about 42,000 either way.
 pub const PROBE_RAYS: u32 = 1024;
 
-/// Exit points of the bake's accuracy check by default (`--accuracy-points`), each traced with
-/// [`ACCURACY_PATHS`] reference paths for each test light: three clear of surfaces and one close
-/// under the ceiling ([`prm_trace::check`]).
-/// Measured (see `prm_trace::check`): 1.2–1.3% of a default bake on the boxes and under 1% on
-/// chairs and the fireplace room, within one or two standard errors of a 4096-point × 1024-path
-/// measurement of the same archive but where a light's error lies in a few points.
+/// Points of the bake's accuracy check by default (`--accuracy-points`), each a patch of 3×3
+/// texels traced with [`ACCURACY_PATHS`] reference paths in all for each test light: three clear
+/// of surfaces and one close under the ceiling ([`prm_trace::check`], which gives the
+/// measurements: at 512 points the estimate moved by a factor of three between draws).
 pub const ACCURACY_POINTS: u32 = prm_trace::CheckParams::DEFAULT.exit_points;
 
-/// Reference paths per checked exit point and light.
+/// Reference paths per checked point (shared by its patch's texels) and light.
 pub const ACCURACY_PATHS: u32 = prm_trace::CheckParams::DEFAULT.paths;
 
 /// Where the panes are rendered.
@@ -608,21 +606,21 @@ pub fn bake(job: &BakeJob<'_>, renderer: Renderer<'_>, progress: &mut dyn Progre
         .map_err(archive_error("recording the entry cells"))?;
 
     // The accuracy check's exit points: a whole bake only (a shard holds some panes).
-    let checked_exits = if params.accuracy_points > 0 && job.shard.is_none() {
-        prm_trace::check_exits(traced.atlas.exits.len(), params.accuracy_points, params.seed)
+    let checked = if params.accuracy_points > 0 && job.shard.is_none() {
+        prm_trace::CheckPoints::draw(&traced.atlas, params.accuracy_points, params.seed)
     } else {
-        Vec::new()
+        prm_trace::CheckPoints::default()
     };
     // Traced before the panes, so the accuracy check plays each pane's share of its series as it
     // comes.
     let near_field = trace_near_field(&traced, &mut steps);
     // The accuracy check's model of the player's near field, over the whole atlas.
-    let near_play = near_field.as_ref().filter(|_| !checked_exits.is_empty()).map(|n| {
-        let texels: Vec<u32> = checked_exits.iter().map(|&i| traced.atlas.exits[i].texel).collect();
+    let near_play = near_field.as_ref().filter(|_| !checked.is_empty()).map(|n| {
+        let texels: Vec<u32> = checked.exits.iter().map(|&i| traced.atlas.exits[i].texel).collect();
         prm_trace::NearPlay::new(n, &traced.atlas.texel_exit, &texels, prm_trace::NEAR_GATHERS)
     });
     let mut recorder = PaneRecorder {
-        checked_exits: &checked_exits,
+        checked: &checked,
         near_play: near_play.as_ref(),
         image: vec![[0f32; 3]; texel_count(&traced.atlas)],
         words: Vec::new(),
@@ -912,7 +910,7 @@ fn trace_near_field(traced: &Traced<'_>, steps: &mut Steps<'_>) -> Option<prm_fo
 /// Appends panes to the archive, and keeps what the accuracy check reads of them once compressed.
 struct PaneRecorder<'a> {
     /// The accuracy check's exit points (none: no check).
-    checked_exits: &'a [usize],
+    checked: &'a prm_trace::CheckPoints,
     /// The accuracy check's model of the player's near field.
     near_play: Option<&'a prm_trace::NearPlay<'a>>,
     /// The atlas image a pane is placed in, and its RGB9E5 words.
@@ -975,8 +973,8 @@ impl PaneRecorder<'_> {
             basis.tile_size(),
             basis.byte_size() as f64 / f64::from(1 << 20)
         ));
-        if !self.checked_exits.is_empty() {
-            let (near, checked) = (self.near_play, self.checked_exits);
+        if !self.checked.is_empty() {
+            let (near, checked) = (self.near_play, &self.checked.exits);
             self.checked_panes = (0..basis.pane_count())
                 .into_par_iter()
                 .map(|c| {
@@ -1260,7 +1258,7 @@ fn check_accuracy(
     sampled_energy: Option<Vec<Vec3>>,
     steps: &mut Steps<'_>,
 ) -> Result<Option<prm_format::Accuracy>, BakeError> {
-    if recorder.checked_exits.is_empty() {
+    if recorder.checked.is_empty() {
         return Ok(None);
     }
     let params = traced.params;
@@ -1285,7 +1283,7 @@ fn check_accuracy(
     };
     let accuracy = crate::estimate::check(
         &inputs,
-        recorder.checked_exits,
+        recorder.checked,
         &recorder.checked_panes,
         &check,
         None,

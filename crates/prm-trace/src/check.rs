@@ -1,6 +1,6 @@
 //! The bake's estimate of its own accuracy: the archive's indirect light, blended as the player
-//! blends it, against [`ReferenceTracer`] at a sample of exit points, for a few point lights the
-//! check places itself.
+//! blends it, against [`ReferenceTracer`] over a sample of small surface patches, for a few
+//! point lights the check places itself.
 //!
 //! **Lights** ([`check_lights`]): the first [`CHECK_LIGHTS`] of [`CANDIDATES`] (fractions of the
 //! scene's bounds, as a user would first try) neither inside geometry
@@ -8,6 +8,10 @@
 //! surface; then one hard light ([`hard_light`]): a lamp [`HARD_DISTANCE`] under the ceiling
 //! above the first (or by a wall beside it), where the entry points' spacing decides the light
 //! next to it and the method is weakest.
+//!
+//! **Where** ([`CheckPoints`]): points drawn evenly over the atlas ([`check_exits`]), each
+//! compared as the mean of the 3×3 texels around it in its chart, as an image's error is
+//! measured after a 4×4 downsample.
 //!
 //! **The archive's side** ([`check_accuracy`]): entries' direct irradiance ray-cast with the run
 //! time's disk bound ([`entry_irradiance`]), clusters weighed by pane energy ([`energy_weight`]),
@@ -17,19 +21,28 @@
 //! agree within 0.1 points on the boxes and 2 points on chairs (`cargo xtask eval --budget`).
 //!
 //! **The reference** is [`ReferenceTracer::indirect_at_exits`] with [`CheckParams::paths`] paths
-//! per point, its streams keyed by the bake's seed, [`CHECK_STREAM`] and the light. Its own noise
-//! `Σ var` is removed from both sums: `(Σ|p − r̂|² − Σ var) / (Σ|r̂|² − Σ var)` estimates the
-//! squared error without the noise's bias.
+//! a patch, shared by its texels ([`reference_params`]), its streams keyed by the bake's seed,
+//! [`CHECK_STREAM`] and the light. Its own noise `Σ var` is removed from both sums:
+//! `(Σ|p − r̂|² − Σ var) / (Σ|r̂|² − Σ var)` estimates the squared error without the noise's
+//! bias.
 //!
-//! **How much** ([`CheckParams::DEFAULT`], 512 points × 512 paths × 3 lights): against the same
-//! check at 4096 × 1024 (`prm-bake bake SCENE --accuracy-points 4096 --accuracy-paths 1024`) it
-//! reads the boxes' 2.3–2.4% within about a point, for 1.2–1.3% of their bake time. A sample of
-//! 512 rarely meets the few points that carry most of one light's error (the fireplace room's
-//! 14.9% reads 10.5–11.2%); `cargo xtask eval --budget` measures the bakes as played on the GPU.
+//! **How much** ([`CheckParams::DEFAULT`], 2048 points × 512 paths × 4 lights): a few seconds of
+//! a bake. Fewer points do not hold still: McGuire's box under its ceiling light read 2.5%, 7.4%
+//! and 2.7% at three draws of 512 single exit points (4096 paths each), and 2.6–3.1% at 4096
+//! points of 512 paths (`cargo xtask eval experiment check_weights`).
+//!
+//! **What it does not see.** It measures every surface evenly, an image one view: on the
+//! fireplace room, the patches the camera of `cargo xtask eval --targets` sees read 4.8–5.7%
+//! against the image's 4.8%, all patches 8.5–9.0% (`check_weights`, 2048 points). It compares
+//! texel centres, where an image also shows the lightmap's bilinear lookup between them: under
+//! the modern hall's wall lamp the seen patches read 3.3% against the image's 9.9%. Weighing
+//! the patches by their solid angle from random places in the scene, as a viewer's image
+//! would, was tried and left out: under the hall's ceiling lamp it read 5.7%, 13.0% and 16.2%
+//! with three sets of viewpoints, against the image's 4.5%.
 
 use glam::Vec3;
 use prm_format::{Accuracy, LightAccuracy};
-use prm_scene::{ExitPoint, Light, Scene};
+use prm_scene::{Atlas, ExitPoint, Light, Scene};
 
 use crate::bvh::Bvh;
 use crate::cluster::energy_weight;
@@ -84,9 +97,9 @@ pub struct CheckParams {
 }
 
 impl CheckParams {
-    /// 512 exit points × 512 paths (see the module's *How much*).
+    /// 2048 points × 512 paths (see the module's *How much*).
     pub const DEFAULT: CheckParams = CheckParams {
-        exit_points: 512,
+        exit_points: 2048,
         paths: 512,
         seed: 0,
     };
@@ -159,6 +172,63 @@ pub fn check_exits(count: usize, sample: u32, seed: u64) -> Vec<usize> {
 /// The random streams of [`check_exits`] and of the check's reference (apart from every other
 /// use of the bake's seed).
 pub const CHECK_STREAM: u64 = 0x636865636b;
+
+/// The check's exit points: around each point [`check_exits`] draws, a patch of the texels
+/// next to it, compared as their mean.
+///
+/// An image's error is measured after a 4×4 downsample, which averages out what changes from
+/// texel to texel (the near field's gathers, the panes' detail); a texel alone keeps it all.
+/// With 2048 points (`cargo xtask eval experiment check_weights`), McGuire's box under its
+/// ceiling light read 3.7–5.1% at single exit points and 2.2% over patches, against 2.7% in
+/// the image; the fireplace room 9.6–10.3% and 8.5–9.0%.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct CheckPoints {
+    /// Exit point indices, patch after patch, each patch's drawn point first.
+    pub exits: Vec<usize>,
+    /// One past each patch's last entry in `exits`.
+    pub ends: Vec<usize>,
+}
+
+impl CheckPoints {
+    /// [`check_exits`]`(atlas's exit count, sample, seed)`, each with the exit points of the
+    /// eight texels around it that lie in its chart.
+    pub fn draw(atlas: &Atlas, sample: u32, seed: u64) -> CheckPoints {
+        let side = i64::from(atlas.resolution);
+        let mut points = CheckPoints::default();
+        for centre in check_exits(atlas.exits.len(), sample, seed) {
+            let texel = atlas.exits[centre].texel as usize;
+            let (x, y) = (texel as i64 % side, texel as i64 / side);
+            points.exits.push(centre);
+            for (dx, dy) in (-1..=1).flat_map(|dy| (-1..=1).map(move |dx| (dx, dy))) {
+                let (u, v) = (x + dx, y + dy);
+                if (dx, dy) == (0, 0) || !(0..side).contains(&u) || !(0..side).contains(&v) {
+                    continue;
+                }
+                let next = (v * side + u) as usize;
+                let exit = atlas.texel_exit[next];
+                if exit != prm_scene::EMPTY_TEXEL && atlas.texel_chart[next] == atlas.texel_chart[texel] {
+                    points.exits.push(exit as usize);
+                }
+            }
+            points.ends.push(points.exits.len());
+        }
+        points
+    }
+
+    /// Whether nothing is checked.
+    pub fn is_empty(&self) -> bool {
+        self.ends.is_empty()
+    }
+
+    /// Each patch's range in [`CheckPoints::exits`].
+    pub fn patches(&self) -> impl Iterator<Item = std::ops::Range<usize>> + '_ {
+        self.ends.iter().scan(0, |start, &end| {
+            let range = *start..end;
+            *start = end;
+            Some(range)
+        })
+    }
+}
 
 /// The run time's fade of every cluster (prm-runtime's rank pass and the select pass's fade):
 /// with `score_c = Σ_rgb weight_c · energy_c`, the `top_k` clusters of highest score (ties to
@@ -233,6 +303,9 @@ pub fn select_with_residuals(
 /// What an archive holds, at the checked exit points.
 #[derive(Clone, Copy, Debug)]
 pub struct CheckedArchive<'a> {
+    /// The checked patches; [`CheckedArchive::panes`] and the near field are given at their
+    /// exit points, in their order.
+    pub points: &'a CheckPoints,
     /// Entry points, in sampling order.
     pub entries: &'a [SurfaceSample],
     /// Every entry point's cell, in sampling order (`None`: each entry point's own irradiance,
@@ -341,9 +414,10 @@ pub fn played_indirect(bvh: &Bvh, archive: &CheckedArchive<'_>, light: Light) ->
     (played, all)
 }
 
-/// Compares the archive's indirect light with the reference's at `exits` for a point light at
-/// each of `lights`. `progress(done)` is called with the reference passes done so far, out of
-/// `lights.len() × ReferenceParams::with_spp(params.paths).passes`.
+/// Compares the archive's indirect light with the reference's over its checked patches (their
+/// exit points are `exits`, in that order) for a point light at each of `lights`. The
+/// patches' texels share `params.paths` paths a patch. `progress(done)` is called with the
+/// reference passes done so far, out of `lights.len() × `[`reference_params`]`.passes`.
 pub fn check_accuracy(
     scene: &Scene,
     bvh: &Bvh,
@@ -353,14 +427,61 @@ pub fn check_accuracy(
     params: &CheckParams,
     progress: &mut dyn FnMut(u64),
 ) -> Result<Accuracy, TraceError> {
+    let points = archive.points;
+    validate_inputs(points, exits, archive)?;
+    let d = scene.bounds().diagonal();
+    let texel_params = reference_params(points, params);
+    let mut done = 0u64;
+    let mut out = Vec::with_capacity(lights.len());
+    for (i, &position) in lights.iter().enumerate() {
+        let reference = ReferenceParams {
+            seed: crate::rng::hash3(params.seed, CHECK_STREAM, i as u64),
+            ..texel_params
+        };
+        let light = Light::Point {
+            position,
+            intensity: Vec3::splat(d * d),
+        };
+        let lighting = [light];
+        let tracer = ReferenceTracer::new(scene, bvh, Lighting::Lights(&lighting));
+        let r = tracer.indirect_at_exits(exits, &reference, &mut |pass, _| progress(done + u64::from(pass)))?;
+        done += u64::from(reference.passes);
+        let (played, all) = played_indirect(bvh, archive, light);
+        let patch = Patches::new(points, &r.mean, &r.variance);
+        let (played, all) = (patch.means(&played), patch.means(&all));
+        out.push(patch.compare(position.to_array(), &played, &all));
+    }
+    let texel_paths = texel_params.passes * texel_params.samples_per_pass;
+    Ok(Accuracy {
+        exit_points: points.ends.len() as u32,
+        paths: (texel_paths as usize * exits.len()).div_ceil(points.ends.len().max(1)) as u32,
+        residual_groups: archive.groups.iter().max().map_or(0, |g| g + 1),
+        top_k: archive.top_k as u32,
+        lights: out,
+    })
+}
+
+/// The reference's paths at every texel of the check: `params.paths` a patch, shared evenly
+/// by the patches' texels (at least one each).
+pub fn reference_params(points: &CheckPoints, params: &CheckParams) -> ReferenceParams {
+    let texels = points.exits.len().max(1) as u64;
+    let per_texel = (u64::from(params.paths) * points.ends.len() as u64).div_ceil(texels);
+    ReferenceParams::with_spp(per_texel.clamp(1, u64::from(u32::MAX)) as u32)
+}
+
+/// Refuses inputs whose lengths disagree.
+fn validate_inputs(points: &CheckPoints, exits: &[ExitPoint], archive: &CheckedArchive<'_>) -> Result<(), TraceError> {
     if archive.panes.iter().any(|p| p.len() != exits.len())
+        || points.exits.len() != exits.len()
+        || points.ends.last().copied().unwrap_or(0) != exits.len()
+        || points.patches().any(|r| r.is_empty())
         || archive.panes.len() != archive.members.len()
         || archive.cluster_energy.len() != archive.members.len()
         || !(archive.groups.is_empty() || archive.groups.len() == archive.members.len())
         || archive.near.is_some_and(|n| n.checked() != exits.len())
     {
         return Err(TraceError::InvalidParameter(
-            "every cluster needs a pane energy and one pane value per checked exit point".into(),
+            "every cluster needs a pane energy and one pane value per checked exit point, in whole patches".into(),
         ));
     }
     let entries = archive.entries.len();
@@ -371,36 +492,59 @@ pub fn check_accuracy(
             "every cluster member needs an entry point (and its energy)".into(),
         ));
     }
-    let d = scene.bounds().diagonal();
-    let mut done = 0u64;
-    let mut out = Vec::with_capacity(lights.len());
-    let mut paths = 0;
-    for (i, &position) in lights.iter().enumerate() {
-        let reference = ReferenceParams {
-            seed: crate::rng::hash3(params.seed, CHECK_STREAM, i as u64),
-            ..ReferenceParams::with_spp(params.paths)
+    Ok(())
+}
+
+/// The reference over the check's patches: each patch's mean and the variance of that mean.
+struct Patches<'a> {
+    points: &'a CheckPoints,
+    mean: Vec<Vec3>,
+    variance: Vec<Vec3>,
+}
+
+impl<'a> Patches<'a> {
+    /// The patches of `points` over the reference's per-texel `mean` and `variance`.
+    fn new(points: &'a CheckPoints, mean: &[Vec3], variance: &[Vec3]) -> Patches<'a> {
+        let mut patches = Patches {
+            points,
+            mean: Vec::new(),
+            variance: Vec::new(),
         };
-        paths = reference.passes * reference.samples_per_pass;
-        let light = Light::Point {
-            position,
-            intensity: Vec3::splat(d * d),
-        };
-        let lighting = [light];
-        let tracer = ReferenceTracer::new(scene, bvh, Lighting::Lights(&lighting));
-        let r = tracer.indirect_at_exits(exits, &reference, &mut |pass, _| progress(done + u64::from(pass)))?;
-        done += u64::from(reference.passes);
-        let (played, all) = played_indirect(bvh, archive, light);
-        let norm2: f64 = r.mean.iter().map(|v| f64::from(v.length_squared())).sum();
-        let noise2: f64 = r.variance.iter().map(|v| f64::from(v.element_sum())).sum();
+        patches.mean = patches.means(mean);
+        patches.variance = points
+            .patches()
+            .map(|r| {
+                let n = r.len() as f32;
+                variance[r].iter().sum::<Vec3>() / (n * n)
+            })
+            .collect();
+        patches
+    }
+
+    /// Each patch's mean of the per-texel `values`.
+    fn means(&self, values: &[Vec3]) -> Vec<Vec3> {
+        self.points
+            .patches()
+            .map(|r| {
+                let n = r.len() as f32;
+                values[r].iter().sum::<Vec3>() / n
+            })
+            .collect()
+    }
+
+    /// The light at `position`'s accuracy: `played` (the player's K) and `all` (every cluster)
+    /// against the reference, patch by patch.
+    fn compare(&self, position: [f32; 3], played: &[Vec3], all: &[Vec3]) -> LightAccuracy {
+        let (reference, variance) = (&self.mean, &self.variance);
+        let norm2: f64 = reference.iter().map(|v| f64::from(v.length_squared())).sum();
+        let noise2: f64 = variance.iter().map(|v| f64::from(v.element_sum())).sum();
         let err2 = |t: &[Vec3]| -> f64 {
             t.iter()
-                .zip(&r.mean)
+                .zip(reference)
                 .map(|(a, b)| f64::from((*a - *b).length_squared()))
                 .sum()
         };
         let rel = |x: f64| if norm2 > 0.0 { (x / norm2).sqrt() } else { 0.0 };
-        let measured = rel(err2(&played));
-        let reference_noise = rel(noise2);
         // Both sums without the reference's noise (see the module's *The reference*).
         let corrected = |e2: f64| {
             let n2 = norm2 - noise2;
@@ -410,26 +554,19 @@ pub fn check_accuracy(
                 0.0
             }
         };
-        let sum_ref: f64 = r.mean.iter().map(|v| f64::from(v.element_sum())).sum();
-        let sum_played: f64 = played.iter().map(|v| f64::from(v.element_sum())).sum();
-        let error = corrected(err2(&played));
-        out.push(LightAccuracy {
-            position: position.to_array(),
+        let sum = |v: &[Vec3]| -> f64 { v.iter().map(|x| f64::from(x.element_sum())).sum() };
+        let (sum_ref, sum_played) = (sum(reference), sum(played));
+        let error = corrected(err2(played));
+        LightAccuracy {
+            position,
             error,
-            measured,
-            reference_noise,
+            measured: rel(err2(played)),
+            reference_noise: rel(noise2),
             energy: if sum_ref > 0.0 { sum_played / sum_ref } else { 0.0 },
-            error_all_clusters: corrected(err2(&all)),
-            standard_error: standard_error(&played, &r.mean, &r.variance, error),
-        });
+            error_all_clusters: corrected(err2(all)),
+            standard_error: standard_error(played, reference, variance, error),
+        }
     }
-    Ok(Accuracy {
-        exit_points: exits.len() as u32,
-        paths,
-        residual_groups: archive.groups.iter().max().map_or(0, |g| g + 1),
-        top_k: archive.top_k as u32,
-        lights: out,
-    })
 }
 
 /// The standard error of `error`, the noise-corrected `√(Σ t_i / Σ q_i)` with per point
@@ -530,6 +667,41 @@ mod tests {
         let (kept, groups) = select_with_residuals(&w, &e, 4, FADE_BAND, &[0, 1, 0, 1], &[Vec3::splat(2.0); 2]);
         assert_eq!(kept, w);
         assert_eq!(groups, vec![Vec3::ZERO; 2]);
+    }
+
+    #[test]
+    fn patches_hold_their_point_and_its_chart_neighbours() {
+        let scene = prm_scene::analytic::furnace_box(1, 0.5);
+        let params = prm_scene::AtlasParams::with_sizing(prm_scene::Sizing::Resolution(32));
+        let atlas = Atlas::build(&scene, &params).unwrap();
+        let points = CheckPoints::draw(&atlas, 40, 3);
+        let drawn = check_exits(atlas.exits.len(), 40, 3);
+        assert_eq!(points.ends.len(), drawn.len());
+        let side = atlas.resolution as i64;
+        let xy = |k: usize| {
+            let t = i64::from(atlas.exits[k].texel);
+            (t % side, t / side)
+        };
+        let mut sizes = Vec::new();
+        for (range, &centre) in points.patches().zip(&drawn) {
+            let patch = &points.exits[range];
+            assert_eq!(patch[0], centre);
+            let (cx, cy) = xy(centre);
+            let chart = atlas.texel_chart[atlas.exits[centre].texel as usize];
+            for (n, &k) in patch.iter().enumerate() {
+                let (x, y) = xy(k);
+                assert!((x - cx).abs() <= 1 && (y - cy).abs() <= 1);
+                assert_eq!(atlas.texel_chart[atlas.exits[k].texel as usize], chart);
+                assert!(!patch[..n].contains(&k), "an exit point twice in {patch:?}");
+            }
+            sizes.push(patch.len());
+        }
+        assert!(sizes.iter().all(|&n| (1..=9).contains(&n)));
+        assert!(sizes.contains(&9), "an inner texel's patch is whole: {sizes:?}");
+        // The reference's paths a patch stay about `paths`.
+        let texel = reference_params(&points, &CheckParams::DEFAULT);
+        let per_patch = (texel.passes * texel.samples_per_pass) as f64 * points.exits.len() as f64 / 40.0;
+        assert!((per_patch / 512.0 - 1.0).abs() < 0.1, "{per_patch}");
     }
 
     #[test]

@@ -12,7 +12,7 @@
 //! against the image's, see [`compare`]), the reference's own noise after the downsample (from a
 //! second reference with another seed, [`NOISE_SPP`]), the bake's seconds (its report), the
 //! bake's own estimate of its accuracy (`prm_trace::check`: its own four lights, one close to
-//! a surface, at exit points, without the downsample; recorded in the archive), the same check
+//! a surface, over 3×3-texel patches of the whole atlas; recorded in the archive), the same check
 //! under the case's own light (`prm-bake check --light`) over the error measured in the image,
 //! and the `gi`/`direct` frame-time ratio at 1024×768 (median of interleaved frames on one
 //! renderer, as `cargo bench -p prm-play --bench frame` does). Each cell names its target and whether it is
@@ -362,12 +362,13 @@ fn frame_ratio(archive: &Path, scene_path: &Path, camera: Option<&str>, light: &
 /// How far the check's error may lie from the measured one, as a share of it.
 const ESTIMATE: f64 = 0.30;
 
-/// Reference paths per exit point of the check under a case's light: at the bake's 512, the
-/// reference's own noise (2.6–2.8% on McGuire's box) hides errors of 2–3%.
+/// Reference paths per point (a 3×3-texel patch) of the check under a case's light: at the
+/// bake's 512 a point, the reference's own noise (2.6–2.8% on McGuire's box) hides errors of
+/// 2–3%.
 const CHECK_PATHS: u32 = 4096;
 
 /// The bake's check of `archive` under the point light `light` alone (`prm-bake check --light`,
-/// [`CHECK_PATHS`] paths): its error and standard error at the exit points.
+/// [`CHECK_PATHS`] paths): its error and standard error over its texel patches.
 fn check_under(bake_bin: &Path, scene: &Path, archive: &Path, light: &str) -> Result<(f64, f64)> {
     let output = std::process::Command::new(bake_bin)
         .arg("check")
@@ -403,7 +404,7 @@ pub(crate) fn bake_name(case: &str) -> String {
 /// Runs the cases (those whose name contains `only`, when given); returns the Markdown table.
 pub fn run(bake_bin: &Path, cache: &Path, root: &Path, out: &Path, only: Option<&str>) -> Result<String> {
     let mut md = String::from(
-        "| case | light | indirect error (4×4) | full res. | energy | shape | local (worst 8×8 window's corner, its reference's RMS over the image's) | ref. noise | bake s | bake's own estimate (its 4 lights, exit points) | the check under this light (exit points), over the measured error | gi / direct frame |\n| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n",
+        "| case | light | indirect error (4×4) | full res. | energy | shape | local (worst 8×8 window's corner, its reference's RMS over the image's) | ref. noise | bake s | bake's own estimate (its 4 lights, texel patches) | the check under this light (texel patches), over the measured error | gi / direct frame |\n| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n",
     );
     let cases = cases(root, cache, only)?;
     let chosen = cases.into_iter().filter(|c| only.is_none_or(|o| c.name.contains(o)));

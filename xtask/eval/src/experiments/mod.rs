@@ -2,6 +2,7 @@
 //! the doc quotes. They run in release: `cargo xtask eval experiment NAME [ARGS]`.
 
 mod bench_trace;
+mod check_weights;
 mod cluster_weights;
 mod common;
 mod lamp_distance;
@@ -16,10 +17,14 @@ mod tile_sparsity;
 use anyhow::{anyhow, bail, Result};
 
 /// The experiments by name, with the arguments each takes.
-const EXPERIMENTS: [(&str, &str); 10] = [
+const EXPERIMENTS: [(&str, &str); 11] = [
     (
         "bench_trace",
         "(no arguments) ray throughput of the BVH on the bundled scenes",
+    ),
+    (
+        "check_weights",
+        "SCENE ARCHIVE.prm LIGHT CAMERA WxH  the check's exit points weighed as an image weighs them",
     ),
     (
         "cluster_weights",
@@ -64,6 +69,7 @@ pub fn run(args: &[String]) -> Result<()> {
     let rest = args[1..].to_vec();
     match name.as_str() {
         "bench_trace" => bench_trace::run(rest),
+        "check_weights" => check_weights::run(rest)?,
         "cluster_weights" => cluster_weights::run(rest),
         "lamp_distance" => lamp_distance::run(rest)?,
         "lattice" => lattice::run(rest),
