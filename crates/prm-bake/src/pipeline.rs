@@ -1326,7 +1326,7 @@ fn finish_archive(
 /// One line for an accuracy estimate: the mean over its lights.
 pub fn accuracy_line(a: &prm_format::Accuracy) -> String {
     format!(
-        "indirect light {:.1}% ± {:.1} off the reference (K = all: {:.1}%), energy {:.3}; {} light{} × {} exit points × {} paths, reference noise {:.1}% removed",
+        "indirect light {:.1}% ± {:.1} off the reference (K = all: {:.1}%), energy {:.3}; {} light{} × {} patches of 3×3 texels × {} paths, reference noise {:.1}% removed",
         100.0 * a.mean_error(),
         100.0 * a.mean_standard_error(),
         100.0 * a.mean_error_all_clusters(),
