@@ -220,6 +220,16 @@ impl CheckPoints {
         self.ends.is_empty()
     }
 
+    /// Each patch's mean of the per-texel `values` (given at [`CheckPoints::exits`]).
+    pub fn means(&self, values: &[Vec3]) -> Vec<Vec3> {
+        self.patches()
+            .map(|r| {
+                let n = r.len() as f32;
+                values[r].iter().sum::<Vec3>() / n
+            })
+            .collect()
+    }
+
     /// Each patch's range in [`CheckPoints::exits`].
     pub fn patches(&self) -> impl Iterator<Item = std::ops::Range<usize>> + '_ {
         self.ends.iter().scan(0, |start, &end| {
@@ -448,7 +458,7 @@ pub fn check_accuracy(
         done += u64::from(reference.passes);
         let (played, all) = played_indirect(bvh, archive, light);
         let patch = Patches::new(points, &r.mean, &r.variance);
-        let (played, all) = (patch.means(&played), patch.means(&all));
+        let (played, all) = (points.means(&played), points.means(&all));
         out.push(patch.compare(position.to_array(), &played, &all));
     }
     let texel_paths = texel_params.passes * texel_params.samples_per_pass;
@@ -496,40 +506,24 @@ fn validate_inputs(points: &CheckPoints, exits: &[ExitPoint], archive: &CheckedA
 }
 
 /// The reference over the check's patches: each patch's mean and the variance of that mean.
-struct Patches<'a> {
-    points: &'a CheckPoints,
+struct Patches {
     mean: Vec<Vec3>,
     variance: Vec<Vec3>,
 }
 
-impl<'a> Patches<'a> {
+impl Patches {
     /// The patches of `points` over the reference's per-texel `mean` and `variance`.
-    fn new(points: &'a CheckPoints, mean: &[Vec3], variance: &[Vec3]) -> Patches<'a> {
-        let mut patches = Patches {
-            points,
-            mean: Vec::new(),
-            variance: Vec::new(),
-        };
-        patches.mean = patches.means(mean);
-        patches.variance = points
-            .patches()
-            .map(|r| {
-                let n = r.len() as f32;
-                variance[r].iter().sum::<Vec3>() / (n * n)
-            })
-            .collect();
-        patches
-    }
-
-    /// Each patch's mean of the per-texel `values`.
-    fn means(&self, values: &[Vec3]) -> Vec<Vec3> {
-        self.points
-            .patches()
-            .map(|r| {
-                let n = r.len() as f32;
-                values[r].iter().sum::<Vec3>() / n
-            })
-            .collect()
+    fn new(points: &CheckPoints, mean: &[Vec3], variance: &[Vec3]) -> Patches {
+        Patches {
+            mean: points.means(mean),
+            variance: points
+                .patches()
+                .map(|r| {
+                    let n = r.len() as f32;
+                    variance[r].iter().sum::<Vec3>() / (n * n)
+                })
+                .collect(),
+        }
     }
 
     /// The light at `position`'s accuracy: `played` (the player's K) and `all` (every cluster)
