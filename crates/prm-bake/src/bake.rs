@@ -118,10 +118,11 @@ pub struct BakeArgs {
     #[arg(long, value_name = "RAYS")]
     pub near_rays: Option<u32>,
     /// After the panes, estimate the archive's accuracy: its indirect light against a
-    /// reference path tracer over N patches of 3×3 texels (default 2048) for four point
-    /// lights placed in the scene (one close to a surface), played as prm-play plays it (top
-    /// K, residual groups, the near field's gathers), printed, recorded in the archive and
-    /// shown by `dump`. 0 skips it. A few seconds of a default bake; shards skip it.
+    /// reference path tracer over N patches of 3×3 texels (default 2048, drawn by surface
+    /// area) for four point lights placed in the scene (one close to a surface), played as
+    /// prm-play plays it (top K, residual groups, the near field's gathers), printed, recorded
+    /// in the archive and shown by `dump`. 0 skips it. A few seconds of a default bake; shards
+    /// skip it.
     #[arg(long, value_name = "N")]
     pub accuracy_points: Option<u32>,
     /// Reference paths per checked point and light (default 512), shared by its texels: the

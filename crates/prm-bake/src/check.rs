@@ -14,8 +14,8 @@ pub struct CheckArgs {
     pub scene: PathBuf,
     /// The archive to check.
     pub archive: PathBuf,
-    /// Points compared with the reference, drawn at random with the bake's seed: each the mean
-    /// of the 3×3 texels around it.
+    /// Points compared with the reference, drawn at random by surface area with the bake's
+    /// seed: each the mean of the 3×3 texels around it.
     #[arg(long, value_name = "N", default_value_t = EstimateSize::DEFAULT.exit_points)]
     pub accuracy_points: u32,
     /// Reference paths per point and light, shared by its texels: the reference's noise is

@@ -161,7 +161,7 @@ pub fn estimate_accuracy(
         }
         prm_trace::reorder_cells(c, &inverse)
     });
-    let checked = CheckPoints::draw(atlas, params.exit_points, params.seed);
+    let checked = CheckPoints::draw(scene, atlas, params.exit_points, params.seed);
     let near_field = archive.near_field().cloned();
     let near = near_field.as_ref().map(|n| {
         let texels: Vec<u32> = checked.exits.iter().map(|&i| atlas.exits[i].texel).collect();

@@ -607,7 +607,7 @@ pub fn bake(job: &BakeJob<'_>, renderer: Renderer<'_>, progress: &mut dyn Progre
 
     // The accuracy check's exit points: a whole bake only (a shard holds some panes).
     let checked = if params.accuracy_points > 0 && job.shard.is_none() {
-        prm_trace::CheckPoints::draw(&traced.atlas, params.accuracy_points, params.seed)
+        prm_trace::CheckPoints::draw(traced.scene, &traced.atlas, params.accuracy_points, params.seed)
     } else {
         prm_trace::CheckPoints::default()
     };

@@ -160,6 +160,24 @@ impl Atlas {
         })
     }
 
+    /// The surface area each exit point stands for, in scene units squared: the covered
+    /// fraction of its texel at its owning triangle's scale (area over texels spanned).
+    pub fn exit_areas(&self, scene: &Scene) -> Vec<f32> {
+        let texels = (self.resolution as f32).powi(2);
+        self.exits
+            .iter()
+            .map(|e| {
+                let [a, b, c] = self.uvs[e.triangle as usize];
+                let spanned = 0.5 * (b - a).perp_dot(c - a).abs() * texels;
+                if spanned > 0.0 {
+                    e.coverage * scene.triangles[e.triangle as usize].area() / spanned
+                } else {
+                    0.0
+                }
+            })
+            .collect()
+    }
+
     /// Builds the atlas of `scene`.
     pub fn build(scene: &Scene, params: &AtlasParams) -> Result<Atlas, SceneError> {
         if params.gutter > 64 {
@@ -1005,6 +1023,19 @@ mod tests {
         assert!((b1 - 0.25).abs() < 1e-6 && (b2 - 0.25).abs() < 1e-6);
         let (b1, b2, d) = nearest_on_triangle(&t, Vec2::new(0.5, -1.0));
         assert!((d - 1.0).abs() < 1e-6 && (b1 - 0.5).abs() < 1e-6 && b2 == 0.0);
+    }
+
+    #[test]
+    fn exit_areas_sum_to_the_surface() {
+        let scene = crate::analytic::furnace_box(2, 0.5);
+        for resolution in [32, 75] {
+            let atlas = Atlas::build(&scene, &AtlasParams::with_sizing(Sizing::Resolution(resolution))).unwrap();
+            let areas = atlas.exit_areas(&scene);
+            assert_eq!(areas.len(), atlas.exits.len());
+            let sum: f64 = areas.iter().map(|&a| f64::from(a)).sum();
+            let ratio = sum / scene.area();
+            assert!((ratio - 1.0).abs() < 0.02, "{resolution}²: {ratio}");
+        }
     }
 
     #[test]

@@ -38,7 +38,7 @@ pub mod walk;
 pub use buried::{bake_atlas, is_buried, unbury_exits, Unburied};
 pub use bvh::{BuildQuality, Bvh, BvhKind, BvhParams, Hit, NO_OCCLUDER};
 pub use cells::{cell_irradiance, entry_cells, reorder_cells, CELL_CANDIDATES, CELL_POINTS_PER_ENTRY};
-pub use check::{check_accuracy, check_exits, check_lights, CheckParams, CheckPoints, CheckedArchive};
+pub use check::{area_exits, check_accuracy, check_exits, check_lights, CheckParams, CheckPoints, CheckedArchive};
 pub use cluster::{archive_weights, energy_weight, ClusterParams, Clustering};
 pub use direct::{bounded_irradiance, direct_irradiance, entry_irradiance};
 pub use emitters::{EmitterGroup, Emitters, Receiver};

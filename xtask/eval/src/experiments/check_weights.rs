@@ -3,11 +3,11 @@
 //! `cargo xtask eval experiment check_weights SCENE ARCHIVE.prm LIGHT CAMERA WxH`
 //!
 //! The check (`prm_trace::check`) compares the played indirect irradiance with the reference at
-//! exit points spread evenly over the atlas; an image weighs surfaces by the pixels they cover
+//! exit points drawn by surface area; an image weighs surfaces by the pixels they cover
 //! and shows outgoing radiance. This plays the archive's lightmap on the CPU player, traces the
-//! reference at `POINTS` exit points (default 2048) drawn as the check draws them (`SPP` paths
+//! reference at `POINTS` exit points (default 2048) drawn evenly over the texels (`SPP` paths
 //! each, default 1024), and gives the noise-corrected error under each weighting: even (the
-//! check's), albedo² (radiance), the camera's pixels (in its frustum, seen, `cos θ / d²` over
+//! draw's), albedo² (radiance), the area each texel stands for (the check's), the camera's pixels (in its frustum, seen, `cos θ / d²` over
 //! `cos³` of the angle off its axis), and `VIEWS` (default 32) random viewpoints clear of every
 //! surface by the check's clearance (`cos θ / d²` summed where seen). The last table splits the
 //! even and the camera's squared error and squared reference by distance from the light.
@@ -33,7 +33,10 @@ pub fn run(args: Vec<String>) -> Result<()> {
     let Light::Point { position: lamp, .. } = light else {
         bail!("check_weights takes a point light");
     };
-    let camera = prm_scene::parse_camera(camera)?;
+    let camera = match camera.as_str() {
+        "-" => prm_play::default_camera(&scene),
+        c => prm_scene::parse_camera(c)?,
+    };
     let (w, h) = size.split_once('x').context("size as WxH")?;
     let aspect = w.parse::<f32>()? / h.parse::<f32>()?;
     let lights = [light];
@@ -55,6 +58,7 @@ pub fn run(args: Vec<String>) -> Result<()> {
     let even = vec![1.0f32; exits.len()];
     let albedo: Vec<f32> = exits.iter().map(|e| e.albedo.length_squared() / 3.0).collect();
     let seen = camera_weights(&bvh, &camera, aspect, &exits);
+    let area: Vec<f32> = exits.iter().map(|e| texel_area(&scene, &atlas, e)).collect();
     let views = viewpoints(&scene, &bvh, env_or("VIEWS", 32));
     let viewed = viewpoint_weights(&bvh, &views, &exits);
     let error = |wt: &[f32], only: &dyn Fn(usize) -> bool| {
@@ -69,8 +73,9 @@ pub fn run(args: Vec<String>) -> Result<()> {
         views.len()
     );
     for (name, wt) in [
-        ("even (the check)", &even),
+        ("even", &even),
         ("albedo²", &albedo),
+        ("texel area (the check)", &area),
         ("camera", &seen),
         ("viewpoints", &viewed),
     ] {
@@ -90,7 +95,7 @@ pub fn run(args: Vec<String>) -> Result<()> {
         &checked,
         &tracer,
         &played_map,
-        &[("camera", &seen), ("viewpoints", &viewed)],
+        &[("camera", &seen), ("viewpoints", &viewed), ("texel area", &area)],
     )?;
     Ok(())
 }
@@ -186,6 +191,14 @@ fn patches(
         println!("3×3 patches, {name}: error {:6.2}%", 100.0 * e);
     }
     Ok(())
+}
+
+/// The surface area an exit point's texel stands for: its triangle's area over the texels the
+/// triangle spans in the atlas.
+fn texel_area(scene: &prm_scene::Scene, atlas: &prm_scene::Atlas, e: &ExitPoint) -> f32 {
+    let [a, b, c] = atlas.uvs[e.triangle as usize];
+    let texels = 0.5 * (b - a).perp_dot(c - a).abs() * (atlas.resolution as f32).powi(2);
+    scene.triangles[e.triangle as usize].area() / texels.max(1e-6)
 }
 
 /// Each exit point's share of the camera's pixels: in its frustum, facing it and unoccluded,
