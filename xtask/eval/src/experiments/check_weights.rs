@@ -58,7 +58,8 @@ pub fn run(args: Vec<String>) -> Result<()> {
     let even = vec![1.0f32; exits.len()];
     let albedo: Vec<f32> = exits.iter().map(|e| e.albedo.length_squared() / 3.0).collect();
     let seen = camera_weights(&bvh, &camera, aspect, &exits);
-    let area: Vec<f32> = exits.iter().map(|e| texel_area(&scene, &atlas, e)).collect();
+    let exit_areas = atlas.exit_areas(&scene);
+    let area: Vec<f32> = checked.iter().map(|&i| exit_areas[i]).collect();
     let views = viewpoints(&scene, &bvh, env_or("VIEWS", 32));
     let viewed = viewpoint_weights(&bvh, &views, &exits);
     let error = |wt: &[f32], only: &dyn Fn(usize) -> bool| {
@@ -191,14 +192,6 @@ fn patches(
         println!("3×3 patches, {name}: error {:6.2}%", 100.0 * e);
     }
     Ok(())
-}
-
-/// The surface area an exit point's texel stands for: its triangle's area over the texels the
-/// triangle spans in the atlas.
-fn texel_area(scene: &prm_scene::Scene, atlas: &prm_scene::Atlas, e: &ExitPoint) -> f32 {
-    let [a, b, c] = atlas.uvs[e.triangle as usize];
-    let texels = 0.5 * (b - a).perp_dot(c - a).abs() * (atlas.resolution as f32).powi(2);
-    scene.triangles[e.triangle as usize].area() / texels.max(1e-6)
 }
 
 /// Each exit point's share of the camera's pixels: in its frustum, facing it and unoccluded,
